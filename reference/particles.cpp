@@ -1,0 +1,726 @@
+#include "reference/particles.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <random>
+
+#include <omp.h>
+
+namespace monolith {
+
+namespace {
+
+/// Particles never rest closer than this to a solid surface (in units of dx).
+constexpr double kSolidMargin = 0.05;
+/// Particles stay at least this far inside a wall (in units of dx).
+constexpr double kWallMargin = 0.01;
+/// Seeding jitter: width of the jitter window as a fraction of the sub-cell width, so the
+/// stratified sub-lattice keeps a minimum spacing of half a sub-cell.
+constexpr double kSeedJitter = 0.5;
+/// Position correction: relaxation time (s) and the per-step under-relaxation of the Jacobi
+/// projection of the minimum-distance constraints (docs/particles.md).
+constexpr double kCorrectionTime = 0.02;
+constexpr double kCorrectionRelaxation = 0.5;
+/// Zhu & Bridson surface: kernel support in units of the particle spacing.
+constexpr double kSurfaceSupport = 2.0;
+
+/// What differs between 2D and 3D for the particles: the rigid rotation of a seeded liquid, and
+/// the calibrated particle radius of the surface reconstruction.
+template <int Dim>
+struct ParticleTraits;
+
+template <>
+struct ParticleTraits<2> {
+  /// omega x r in the plane: omega (-r_y, r_x).
+  static Vec<2> rotation_velocity(const std::vector<double>& w, const Vec<2>& r) {
+    const double om = w.empty() ? 0.0 : w[0];
+    return Vec<2>(-om * r[1], om * r[0]);
+  }
+  /// Gradient of that velocity: row a is grad v_a.
+  static Mat<2> rotation_gradient(const std::vector<double>& w) {
+    const double om = w.empty() ? 0.0 : w[0];
+    Mat<2> c;
+    c << 0.0, -om, om, 0.0;
+    return c;
+  }
+  /// Particle radius / particle spacing, calibrated so a uniform block's zero level set lies on
+  /// the block boundary (docs/particles.md).
+  static constexpr double surface_radius = 0.9;
+};
+
+template <>
+struct ParticleTraits<3> {
+  static Vec<3> rotation_velocity(const std::vector<double>& w, const Vec<3>& r) {
+    const Vec<3> om = w.size() == 3 ? Vec<3>(w[0], w[1], w[2]) : Vec<3>::Zero();
+    return om.cross(r);
+  }
+  /// The cross-product matrix [omega]_x: row a is grad (omega x r)_a.
+  static Mat<3> rotation_gradient(const std::vector<double>& w) {
+    const Vec<3> om = w.size() == 3 ? Vec<3>(w[0], w[1], w[2]) : Vec<3>::Zero();
+    Mat<3> c;
+    c << 0.0, -om[2], om[1], om[2], 0.0, -om[0], -om[1], om[0], 0.0;
+    return c;
+  }
+  static constexpr double surface_radius = 0.9;
+};
+
+/// Uniform double in (0, 1) from a 32-bit Mersenne twister draw (portable across standard
+/// libraries, unlike std::uniform_real_distribution).
+double unit_draw(std::mt19937& rng) { return (static_cast<double>(rng()) + 0.5) / 4294967296.0; }
+
+int int_pow(int base, int exponent) {
+  int r = 1;
+  for (int i = 0; i < exponent; ++i) r *= base;
+  return r;
+}
+
+/// Rest spacing of a particle: the side of the cube (square) holding its volume m / rho.
+template <int Dim>
+double particle_spacing(const Particles<Dim>& particles, std::size_t p, double dx) {
+  const double rho = particles.density[p];
+  if (!(rho > 0.0) || !(particles.mass[p] > 0.0)) return 0.5 * dx;
+  return std::pow(particles.mass[p] / rho, 1.0 / Dim);
+}
+
+/// Moves a point inside a solid out along the solid's gradient to distance kSolidMargin dx.
+template <int Dim>
+void push_out_of_solids(const SolidField<Dim>& solids, double dx, Vec<Dim>& x) {
+  if (solids.empty()) return;
+  double d = solids.distance(x);
+  if (d >= 0.0) return;
+  const double target = kSolidMargin * dx;
+  // a couple of projection steps (the gradient of a min/max SDF is only piecewise exact)
+  for (int it = 0; it < 3 && d < 0.5 * target; ++it) {
+    Vec<Dim> n = solids.gradient(x);
+    const double len = n.norm();
+    if (!(len > 0.0)) break;
+    x += (target - d) * (n / len);
+    d = solids.distance(x);
+  }
+}
+
+/// Wraps periodic axes, pushes out of solids and keeps the point inside walls. Returns false
+/// when the point left through an open face and removal is allowed.
+template <int Dim>
+bool settle_position(const MacGrid<Dim>& grid, const SolidField<Dim>& solids,
+                     const std::array<BoundaryType, 2 * Dim>& boundary, bool allow_removal,
+                     Vec<Dim>& x) {
+  const double dx = grid.dx();
+  x = grid.wrap_position(x);
+  push_out_of_solids(solids, dx, x);
+  const Box<Dim> box = grid.domain_box();
+  const double m = kWallMargin * dx;
+  for (int a = 0; a < Dim; ++a) {
+    if (grid.periodic(a)) continue;
+    const double lo = box.min()[a], hi = box.max()[a];
+    // lower face
+    if (boundary[2 * a] == BoundaryType::open) {
+      if (x[a] < lo) {
+        if (allow_removal) return false;
+        x[a] = lo + m;
+      }
+    } else if (x[a] < lo + m) {
+      x[a] = lo + m;
+    }
+    // upper face
+    if (boundary[2 * a + 1] == BoundaryType::open) {
+      if (x[a] > hi) {
+        if (allow_removal) return false;
+        x[a] = hi - m;
+      }
+    } else if (x[a] > hi - m) {
+      x[a] = hi - m;
+    }
+  }
+  x = grid.wrap_position(x);
+  return true;
+}
+
+/// Minimum-image difference on periodic axes of the grid.
+template <int Dim>
+Vec<Dim> periodic_difference(const MacGrid<Dim>& grid, Vec<Dim> d) {
+  for (int a = 0; a < Dim; ++a) {
+    if (!grid.periodic(a)) continue;
+    const double length = grid.cells()[a] * grid.dx();
+    d[a] -= length * std::round(d[a] / length);
+  }
+  return d;
+}
+
+/// Lattice coordinate of a linear index (x fastest).
+template <int Dim>
+VecI<Dim> decode_index(int index, const VecI<Dim>& dims) {
+  VecI<Dim> c;
+  for (int a = 0; a < Dim; ++a) {
+    c[a] = index % dims[a];
+    index /= dims[a];
+  }
+  return c;
+}
+
+}  // namespace
+
+// --- particles container -------------------------------------------------------------------------
+
+template <int Dim>
+void Particles<Dim>::remove_flagged(const std::vector<char>& flag) {
+  std::size_t out = 0;
+  for (std::size_t p = 0; p < x.size(); ++p) {
+    if (p < flag.size() && flag[p]) continue;
+    if (out != p) {
+      x[out] = x[p];
+      v[out] = v[p];
+      c[out] = c[p];
+      mass[out] = mass[p];
+      density[out] = density[p];
+      liquid[out] = liquid[p];
+    }
+    ++out;
+  }
+  x.resize(out);
+  v.resize(out);
+  c.resize(out);
+  mass.resize(out);
+  density.resize(out);
+  liquid.resize(out);
+}
+
+// --- seeding -------------------------------------------------------------------------------------
+
+template <int Dim>
+Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<LiquidSpec>& liquids,
+                              const std::vector<ShapePtr<Dim>>& liquid_shapes,
+                              const SolidField<Dim>& solids, int per_cell, unsigned seed) {
+  Particles<Dim> particles;
+  if (per_cell <= 0) return particles;
+  const double dx = grid.dx();
+  const Box<Dim> domain = grid.domain_box();
+
+  // stratified sub-lattice: n^Dim sub-cells per cell, per_cell of them used
+  int n = 1;
+  while (int_pow(n, Dim) < per_cell) ++n;
+  const int sub_count = int_pow(n, Dim);
+  std::vector<int> sub_order(sub_count);
+
+  std::mt19937 rng(seed);
+  const std::size_t count = std::min(liquids.size(), liquid_shapes.size());
+  for (std::size_t l = 0; l < count; ++l) {
+    const LiquidSpec& spec = liquids[l];
+    const Shape<Dim>& shape = *liquid_shapes[l];
+    const double mass = spec.density * grid.cell_volume() / per_cell;
+
+    // cells covered by the shape's bounds clipped to the domain
+    Box<Dim> bounds = shape.bounds().intersection(domain);
+    if (bounds.isEmpty()) continue;
+    VecI<Dim> c0, c1;
+    for (int a = 0; a < Dim; ++a) {
+      c0[a] = std::max(0, static_cast<int>(std::floor((bounds.min()[a] - domain.min()[a]) / dx)));
+      c1[a] = std::min(grid.cells()[a] - 1,
+                       static_cast<int>(std::ceil((bounds.max()[a] - domain.min()[a]) / dx)));
+    }
+
+    // rotation centre: the shape's centre, else the centre of its clipped bounds
+    Vec<Dim> centre = bounds.center();
+    if (static_cast<int>(spec.shape.center.size()) == Dim)
+      for (int a = 0; a < Dim; ++a) centre[a] = spec.shape.center[a];
+    Vec<Dim> v0 = Vec<Dim>::Zero();
+    if (static_cast<int>(spec.velocity.size()) == Dim)
+      for (int a = 0; a < Dim; ++a) v0[a] = spec.velocity[a];
+    const Mat<Dim> grad_v = ParticleTraits<Dim>::rotation_gradient(spec.angular_velocity);
+
+    // visit the cells (x fastest), one jittered particle per chosen sub-cell
+    VecI<Dim> cell = c0;
+    bool done = false;
+    while (!done) {
+      // choose per_cell of the sub-cells (all of them when per_cell is a perfect power)
+      for (int s = 0; s < sub_count; ++s) sub_order[s] = s;
+      if (per_cell < sub_count)
+        for (int s = 0; s < per_cell; ++s) {
+          const int pick = s + static_cast<int>(rng() % static_cast<unsigned>(sub_count - s));
+          std::swap(sub_order[s], sub_order[pick]);
+        }
+      for (int k = 0; k < per_cell; ++k) {
+        const VecI<Dim> sub = decode_index<Dim>(sub_order[k], VecI<Dim>::Constant(n));
+        Vec<Dim> x;
+        for (int a = 0; a < Dim; ++a) {
+          const double jitter = kSeedJitter * (unit_draw(rng) - 0.5);
+          x[a] = domain.min()[a] + (cell[a] + (sub[a] + 0.5 + jitter) / n) * dx;
+        }
+        // keep: inside this liquid, not claimed by an earlier liquid, clear of solids
+        if (!(shape.distance(x) < 0.0)) continue;
+        bool claimed = false;
+        for (std::size_t e = 0; e < l && !claimed; ++e)
+          claimed = liquid_shapes[e]->distance(x) < 0.0;
+        if (claimed) continue;
+        if (!solids.empty() && !(solids.distance(x) > kSolidMargin * dx)) continue;
+        if (!domain.contains(x)) continue;
+        particles.x.push_back(x);
+        particles.v.push_back(v0 + ParticleTraits<Dim>::rotation_velocity(spec.angular_velocity,
+                                                                          x - centre));
+        particles.c.push_back(grad_v);
+        particles.mass.push_back(mass);
+        particles.density.push_back(spec.density);
+        particles.liquid.push_back(static_cast<int>(l));
+      }
+      // next cell
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++cell[a] <= c1[a]) break;
+        cell[a] = c0[a];
+      }
+      done = a == Dim;
+    }
+  }
+  return particles;
+}
+
+// --- APIC transfers ------------------------------------------------------------------------------
+
+/// APIC particle-to-grid (Jiang et al. 2015, on the faces of each component a):
+///   m_f = sum_p w_fp m_p,  (m u)_f = sum_p w_fp m_p (v_pa + c_pa . (x_f - x_p)),
+///   rho_f = sum_p w_fp m_p rho_p / m_f,
+/// with w_fp the multilinear weights of face lattice a. Deterministic for a fixed thread count:
+/// each thread accumulates a contiguous block of particles into its own buffers, which are then
+/// summed in thread order.
+template <int Dim>
+void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
+                       VectorX& face_mass, VectorX& face_density) {
+  constexpr int kCorners = 1 << Dim;
+  const int nf = grid.num_faces();
+  const long np = static_cast<long>(particles.size());
+  const int max_threads = std::max(1, omp_get_max_threads());
+  std::vector<VectorX> buf_m(max_threads), buf_mu(max_threads), buf_mr(max_threads);
+  int used_threads = 1;
+
+#pragma omp parallel num_threads(max_threads)
+  {
+    const int t = omp_get_thread_num();
+    const int nt = omp_get_num_threads();
+#pragma omp single
+    used_threads = nt;
+    VectorX& m = buf_m[t];
+    VectorX& mu = buf_mu[t];
+    VectorX& mr = buf_mr[t];
+    m = VectorX::Zero(nf);
+    mu = VectorX::Zero(nf);
+    mr = VectorX::Zero(nf);
+    const long begin = np * t / nt, end = np * (t + 1) / nt;
+    std::array<int, kCorners> idx;
+    std::array<double, kCorners> w;
+    for (long p = begin; p < end; ++p) {
+      const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+      const double mp = particles.mass[p];
+      for (int a = 0; a < Dim; ++a) {
+        const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
+        const VecI<Dim> dims = grid.face_dims(a);
+        const int offset = grid.face_offset(a);
+        grid.stencil(xp, shift, dims, idx, w);
+        for (int k = 0; k < kCorners; ++k) {
+          if (w[k] == 0.0) continue;
+          // affine velocity at the face sample (minimum image on periodic axes)
+          const Vec<Dim> xf = grid.face_center(a, decode_index<Dim>(idx[k], dims));
+          const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
+          const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
+          const int f = offset + idx[k];
+          m[f] += w[k] * mp;
+          mu[f] += w[k] * mp * vel;
+          mr[f] += w[k] * mp * particles.density[p];
+        }
+      }
+    }
+  }
+
+  // reduce the thread buffers in a fixed order
+  u.setZero(nf);
+  face_mass.setZero(nf);
+  face_density.setZero(nf);
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < nf; ++f) {
+    double m = 0.0, mu = 0.0, mr = 0.0;
+    for (int t = 0; t < used_threads; ++t) {
+      m += buf_m[t][f];
+      mu += buf_mu[t][f];
+      mr += buf_mr[t][f];
+    }
+    face_mass[f] = m;
+    if (m > 0.0) {
+      u[f] = mu / m;
+      face_density[f] = mr / m;
+    }
+  }
+}
+
+/// APIC grid-to-particle (Jiang et al. 2015): v_pa = sum_f w_fp u_f, c_pa = sum_f grad w_fp u_f
+/// (row a of c is the gradient of component a; exact for affine fields away from walls).
+template <int Dim>
+void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u) {
+  constexpr int kCorners = 1 << Dim;
+  const long np = static_cast<long>(particles.size());
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < np; ++p) {
+    std::array<int, kCorners> idx;
+    std::array<double, kCorners> w;
+    std::array<Vec<Dim>, kCorners> g;
+    const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+    Vec<Dim> v = Vec<Dim>::Zero();
+    Mat<Dim> c = Mat<Dim>::Zero();
+    for (int a = 0; a < Dim; ++a) {
+      const int offset = grid.face_offset(a);
+      grid.stencil(xp, MacGrid<Dim>::face_shift(a), grid.face_dims(a), idx, w, &g);
+      for (int k = 0; k < kCorners; ++k) {
+        const double uf = u[offset + idx[k]];
+        v[a] += w[k] * uf;
+        c.row(a) += uf * g[k].transpose();
+      }
+    }
+    particles.v[p] = v;
+    particles.c[p] = c;
+  }
+}
+
+// --- extrapolation -------------------------------------------------------------------------------
+
+template <int Dim>
+void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
+                          int layers) {
+  const int nf = grid.num_faces();
+  valid.resize(nf, 0);
+  for (int layer = 0; layer < layers; ++layer) {
+    const std::vector<char> old = valid;
+    int filled = 0;
+    // each invalid face takes the average of its valid same-axis neighbours of the last layer
+#pragma omp parallel for schedule(static) reduction(+ : filled)
+    for (int f = 0; f < nf; ++f) {
+      if (old[f]) continue;
+      const auto [axis, coord] = grid.face_coord(f);
+      const VecI<Dim> dims = grid.face_dims(axis);
+      double sum = 0.0;
+      int count = 0;
+      for (int b = 0; b < Dim; ++b)
+        for (int s = -1; s <= 1; s += 2) {
+          VecI<Dim> nb = coord;
+          nb[b] += s;
+          if (grid.periodic(b))
+            nb[b] = (nb[b] + dims[b]) % dims[b];
+          else if (nb[b] < 0 || nb[b] >= dims[b])
+            continue;
+          const int g = grid.face_index(axis, nb);
+          if (g == f || !old[g]) continue;
+          sum += u[g];
+          ++count;
+        }
+      if (count > 0) {
+        u[f] = sum / count;
+        valid[f] = 1;
+        ++filled;
+      }
+    }
+    if (filled == 0) break;
+  }
+}
+
+// --- advection -----------------------------------------------------------------------------------
+
+template <int Dim>
+long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
+                      double dt, const SolidField<Dim>& solids,
+                      const std::array<BoundaryType, 2 * Dim>& boundary) {
+  const long np = static_cast<long>(particles.size());
+  std::vector<char> remove(np, 0);
+  long removed = 0;
+#pragma omp parallel for schedule(static) reduction(+ : removed)
+  for (long p = 0; p < np; ++p) {
+    // midpoint rule (RK2)
+    Vec<Dim> x = particles.x[p];
+    const Vec<Dim> v1 = grid.interpolate_velocity(u, x);
+    const Vec<Dim> xm = x + 0.5 * dt * v1;
+    const Vec<Dim> v2 = grid.interpolate_velocity(u, xm);
+    x += dt * v2;
+    // solids, walls, periodic wrap, open faces
+    if (!settle_position(grid, solids, boundary, true, x)) {
+      remove[p] = 1;
+      ++removed;
+    }
+    particles.x[p] = x;
+  }
+  if (removed > 0) particles.remove_flagged(remove);
+  return removed;
+}
+
+// --- position correction -------------------------------------------------------------------------
+
+/// Jacobi projection of pairwise minimum-distance constraints |x_i - x_j| >= (s_i + s_j) / 2
+/// (s = (m / rho)^(1/Dim), the rest spacing), relaxed by min(1, dt / T) (docs/particles.md).
+template <int Dim>
+void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
+                       const SolidField<Dim>& solids,
+                       const std::array<BoundaryType, 2 * Dim>& boundary) {
+  const long np = static_cast<long>(particles.size());
+  if (np < 2 || !(dt > 0.0)) return;
+  const double dx = grid.dx();
+  const double alpha = kCorrectionRelaxation * std::min(1.0, dt / kCorrectionTime);
+
+  // rest spacings
+  std::vector<double> spacing(np);
+  double max_spacing = 0.0;
+  for (long p = 0; p < np; ++p) {
+    spacing[p] = particle_spacing(particles, p, dx);
+    max_spacing = std::max(max_spacing, spacing[p]);
+  }
+
+  // spatial hash: particles bucketed by grid cell (counting sort, stable in particle order)
+  const int nc = grid.num_cells();
+  std::vector<int> bucket(np), start(nc + 1, 0), order(np);
+  for (long p = 0; p < np; ++p) {
+    bucket[p] = grid.cell_index(grid.cell_containing(grid.wrap_position(particles.x[p])));
+    ++start[bucket[p] + 1];
+  }
+  for (int c = 0; c < nc; ++c) start[c + 1] += start[c];
+  {
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (long p = 0; p < np; ++p) order[fill[bucket[p]]++] = static_cast<int>(p);
+  }
+  const int ring = std::max(1, static_cast<int>(std::ceil(max_spacing / dx)));
+  const int side = 2 * ring + 1;
+  const int neighbour_cells = int_pow(side, Dim);
+
+  // displacements from the old positions (Jacobi, so the result is order independent)
+  std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
+#pragma omp parallel for schedule(dynamic, 256)
+  for (long p = 0; p < np; ++p) {
+    const Vec<Dim> xi = grid.wrap_position(particles.x[p]);
+    const VecI<Dim> ci = grid.cell_containing(xi);
+    std::vector<int> visited;
+    visited.reserve(neighbour_cells);
+    Vec<Dim> push = Vec<Dim>::Zero();
+    for (int k = 0; k < neighbour_cells; ++k) {
+      const VecI<Dim> off = decode_index<Dim>(k, VecI<Dim>::Constant(side));
+      const VecI<Dim> cj = ci + off - VecI<Dim>::Constant(ring);
+      const int cell = grid.cell_index_or_outside(cj);
+      if (cell < 0) continue;
+      // a small periodic domain can map two offsets to one cell
+      if (std::find(visited.begin(), visited.end(), cell) != visited.end()) continue;
+      visited.push_back(cell);
+      for (int s = start[cell]; s < start[cell + 1]; ++s) {
+        const int j = order[s];
+        if (j == p) continue;
+        const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xi - particles.x[j]));
+        const double rest = 0.5 * (spacing[p] + spacing[j]);
+        const double r = d.norm();
+        if (r >= rest) continue;
+        Vec<Dim> dir;
+        if (r > 1e-9 * rest) {
+          dir = d / r;
+        } else {
+          // coincident pair: separate along x, the lower index to the minus side
+          dir = Vec<Dim>::Zero();
+          dir[0] = p < j ? -1.0 : 1.0;
+        }
+        // each particle of a violating pair takes half of the overlap
+        push += 0.5 * (rest - r) * dir;
+      }
+    }
+    push *= alpha;
+    // never more than half a spacing per step
+    const double len = push.norm();
+    if (len > 0.5 * spacing[p]) push *= 0.5 * spacing[p] / len;
+    delta[p] = push;
+  }
+
+  // apply, then keep clear of solids and walls
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < np; ++p) {
+    if (delta[p].squaredNorm() == 0.0) continue;
+    Vec<Dim> x = particles.x[p] + delta[p];
+    settle_position(grid, solids, boundary, false, x);
+    particles.x[p] = x;
+  }
+}
+
+// --- liquid surface ------------------------------------------------------------------------------
+
+/// Zhu & Bridson (2005): phi(x) = |x - x_bar(x)| - r_bar(x), with x_bar and r_bar the kernel-
+/// weighted averages of the particle positions and radii, k(s) = max(0, 1 - s^2)^3, s = |x - x_p|
+/// / R. Particles splat onto the lattice points within R; slabs of the last axis wider than 2 R
+/// are processed even/odd in parallel, so no two threads touch the same point and every point
+/// sums its contributions in particle order (deterministic for any thread count).
+template <int Dim>
+VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                              const SampleLattice<Dim>& lattice) {
+  const int nl = lattice.size();
+  const long np = static_cast<long>(particles.size());
+  const double h = lattice.spacing;
+  const double dx = grid.dx();
+  if (np == 0) return VectorX::Constant(nl, 3.0 * dx);
+
+  // per-particle support and radius
+  std::vector<double> support(np), radius(np);
+  double max_support = 0.0;
+  for (long p = 0; p < np; ++p) {
+    const double s = particle_spacing(particles, p, dx);
+    support[p] = kSurfaceSupport * s;
+    radius[p] = ParticleTraits<Dim>::surface_radius * s;
+    max_support = std::max(max_support, support[p]);
+  }
+
+  // slabs along the last axis, width > 2 R in lattice points
+  constexpr int kLast = Dim - 1;
+  const int width = static_cast<int>(std::ceil(2.0 * max_support / h)) + 2;
+  const int slabs = std::max(1, (lattice.dims[kLast] + width - 1) / width);
+  std::vector<int> slab_of(np), slab_start(slabs + 1, 0), order(np);
+  for (long p = 0; p < np; ++p) {
+    const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
+    const int k = static_cast<int>(std::floor(s / width));
+    slab_of[p] = std::clamp(k, 0, slabs - 1);
+    ++slab_start[slab_of[p] + 1];
+  }
+  for (int k = 0; k < slabs; ++k) slab_start[k + 1] += slab_start[k];
+  {
+    std::vector<int> fill(slab_start.begin(), slab_start.end() - 1);
+    for (long p = 0; p < np; ++p) order[fill[slab_of[p]]++] = static_cast<int>(p);
+  }
+
+  // periodic images: shift by +-L on periodic axes
+  std::array<double, Dim> period{};
+  for (int a = 0; a < Dim; ++a) period[a] = grid.periodic(a) ? grid.cells()[a] * dx : 0.0;
+
+  VectorX wsum = VectorX::Zero(nl), rsum = VectorX::Zero(nl);
+  Eigen::Matrix<double, Dim, Eigen::Dynamic> xsum =
+      Eigen::Matrix<double, Dim, Eigen::Dynamic>::Zero(Dim, nl);
+
+  // splat one particle (all its periodic images) onto the lattice
+  auto splat = [&](int p) {
+    const Vec<Dim> xp = particles.x[p];
+    const double R = support[p];
+    const double inv_r2 = 1.0 / (R * R);
+    // per axis up to three image segments: (image coordinate, first index, last index)
+    std::array<std::array<double, 3>, Dim> img;
+    std::array<std::array<int, 3>, Dim> lo, hi;
+    std::array<int, Dim> nseg;
+    for (int a = 0; a < Dim; ++a) {
+      nseg[a] = 0;
+      for (int k = -1; k <= 1; ++k) {
+        if (k != 0 && period[a] == 0.0) continue;
+        const double xa = xp[a] + k * period[a];
+        const int i0 = std::max(0, static_cast<int>(std::ceil((xa - R - lattice.origin[a]) / h)));
+        const int i1 = std::min(lattice.dims[a] - 1,
+                                static_cast<int>(std::floor((xa + R - lattice.origin[a]) / h)));
+        if (i0 > i1) continue;
+        img[a][nseg[a]] = xa;
+        lo[a][nseg[a]] = i0;
+        hi[a][nseg[a]] = i1;
+        ++nseg[a];
+      }
+      if (nseg[a] == 0) return;
+    }
+    // every combination of image segments
+    std::array<int, Dim> seg{};
+    while (true) {
+      Vec<Dim> xi;
+      VecI<Dim> i0, i1;
+      for (int a = 0; a < Dim; ++a) {
+        xi[a] = img[a][seg[a]];
+        i0[a] = lo[a][seg[a]];
+        i1[a] = hi[a][seg[a]];
+      }
+      VecI<Dim> i = i0;
+      while (true) {
+        const Vec<Dim> d = lattice.position(i) - xi;
+        const double q2 = d.squaredNorm() * inv_r2;
+        if (q2 < 1.0) {
+          const double t = 1.0 - q2;
+          const double k = t * t * t;
+          const int li = lattice.index(i);
+          wsum[li] += k;
+          rsum[li] += k * radius[p];
+          xsum.col(li) += k * xi;
+        }
+        int a = 0;
+        for (; a < Dim; ++a) {
+          if (++i[a] <= i1[a]) break;
+          i[a] = i0[a];
+        }
+        if (a == Dim) break;
+      }
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++seg[a] < nseg[a]) break;
+        seg[a] = 0;
+      }
+      if (a == Dim) break;
+    }
+  };
+
+  // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
+  const bool wrap_last = grid.periodic(kLast);
+  const bool serial = wrap_last && slabs < 5;
+  std::vector<int> phase_slabs[3];
+  for (int k = 0; k < slabs; ++k) {
+    if (serial || (wrap_last && (k == 0 || k == slabs - 1)))
+      phase_slabs[2].push_back(k);
+    else
+      phase_slabs[k % 2].push_back(k);
+  }
+  for (int phase = 0; phase < 3; ++phase) {
+    const std::vector<int>& list = phase_slabs[phase];
+    const int count = static_cast<int>(list.size());
+    if (phase == 2) {
+      for (int s = 0; s < count; ++s)
+        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
+    } else {
+#pragma omp parallel for schedule(dynamic, 1)
+      for (int s = 0; s < count; ++s)
+        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
+    }
+  }
+
+  // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
+  VectorX phi(nl);
+#pragma omp parallel for schedule(static)
+  for (int li = 0; li < nl; ++li) {
+    if (wsum[li] > 0.0) {
+      const Vec<Dim> xbar = xsum.col(li) / wsum[li];
+      phi[li] = (lattice.position(lattice.coord(li)) - xbar).norm() - rsum[li] / wsum[li];
+    } else {
+      phi[li] = max_support;
+    }
+  }
+  return phi;
+}
+
+template <int Dim>
+double max_particle_speed(const Particles<Dim>& particles) {
+  const long np = static_cast<long>(particles.size());
+  double vmax = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : vmax)
+  for (long p = 0; p < np; ++p) vmax = std::max(vmax, particles.v[p].norm());
+  return vmax;
+}
+
+// --- explicit instantiations ---------------------------------------------------------------------
+
+#define MONOLITH_INSTANTIATE_PARTICLES(D)                                                        \
+  template struct Particles<D>;                                                                  \
+  template Particles<D> seed_particles(const MacGrid<D>&, const std::vector<LiquidSpec>&,        \
+                                       const std::vector<ShapePtr<D>>&, const SolidField<D>&,    \
+                                       int, unsigned);                                           \
+  template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,    \
+                                  VectorX&);                                                     \
+  template void grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&);             \
+  template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);      \
+  template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,       \
+                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);  \
+  template void correct_positions(Particles<D>&, const MacGrid<D>&, double,                      \
+                                  const SolidField<D>&,                                          \
+                                  const std::array<BoundaryType, 2 * D>&);                       \
+  template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                 \
+                                         const SampleLattice<D>&);                               \
+  template double max_particle_speed(const Particles<D>&);
+
+MONOLITH_INSTANTIATE_PARTICLES(2)
+MONOLITH_INSTANTIATE_PARTICLES(3)
+
+#undef MONOLITH_INSTANTIATE_PARTICLES
+
+}  // namespace monolith
