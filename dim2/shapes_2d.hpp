@@ -1,0 +1,45 @@
+#pragma once
+/// \file shapes_2d.hpp
+/// Shapes that exist only in 2D: simple polygons (exact SDF, sign by winding number) and the
+/// bunny's silhouette (a polygon read from the embedded asset bunny_silhouette.txt).
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "reference/common.hpp"
+#include "reference/shape.hpp"
+
+namespace monolith {
+
+/// A closed polygon given by its vertices (either orientation; the last vertex connects to the
+/// first). distance = +-(exact distance to the nearest edge), negative where the winding number
+/// of the boundary around x is non-zero, so both orientations give the same sign.
+class PolygonShape : public Shape<2> {
+ public:
+  explicit PolygonShape(std::vector<Vec<2>> points);
+  double distance(const Vec<2>& x) const override;
+  Vec<2> gradient(const Vec<2>& x) const override;
+  Box<2> bounds() const override { return bounds_; }
+  const std::vector<Vec<2>>& points() const { return points_; }
+  /// Signed area (shoelace formula): positive for counter-clockwise vertices.
+  double signed_area() const;
+  /// Winding number of the boundary around x (0 outside, +-1 inside a simple polygon).
+  int winding_number(const Vec<2>& x) const;
+
+ private:
+  /// Unsigned distance and the nearest boundary point.
+  double nearest(const Vec<2>& x, Vec<2>* point) const;
+  std::vector<Vec<2>> points_;
+  Box<2> bounds_;
+};
+
+/// Parses "x y" lines (blank lines and lines starting with # skipped) into points; throws
+/// InputError naming `label`, the line and `key_path` on a malformed line.
+std::vector<Vec<2>> parse_point_list(std::string_view text, const std::string& label,
+                                     const std::string& key_path);
+
+/// The bunny silhouette outline in the mesh's units (x right, y up), from the embedded asset.
+const std::vector<Vec<2>>& bunny_silhouette_points();
+
+}  // namespace monolith

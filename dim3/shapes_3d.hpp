@@ -1,0 +1,34 @@
+#pragma once
+/// \file shapes_3d.hpp
+/// Shapes that exist only in 3D: triangle meshes from OBJ files and the built-in bunny.
+
+#include <memory>
+
+#include "dim3/mesh.hpp"
+#include "dim3/mesh_sdf.hpp"
+#include "reference/shape.hpp"
+
+namespace monolith {
+
+/// The SDF of a closed triangle mesh, in the frame its vertices are given in: distance() is the
+/// cached look-up of MeshSdf, gradient() the exact one.
+class MeshShape : public Shape<3> {
+ public:
+  explicit MeshShape(std::shared_ptr<const MeshSdf> sdf) : sdf_(std::move(sdf)) {}
+  double distance(const Vec<3>& x) const override { return sdf_->distance(x); }
+  Vec<3> gradient(const Vec<3>& x) const override { return sdf_->exact(x).normal; }
+  Box<3> bounds() const override { return sdf_->bounds(); }
+  const MeshSdf& sdf() const { return *sdf_; }
+
+ private:
+  std::shared_ptr<const MeshSdf> sdf_;
+};
+
+/// The embedded bunny mesh (npm "bunny" 1.0.1, 1839 vertices, 3674 triangles), as read.
+const TriangleMesh& bunny_mesh();
+
+/// The bunny placed like the scene's `bunny {center, size}`: scaled so that the longest
+/// bounding-box extent equals `size`, bounding-box centre moved to `center`.
+TriangleMesh placed_bunny_mesh(const Vec<3>& center, double size);
+
+}  // namespace monolith
