@@ -1,0 +1,78 @@
+#pragma once
+/// \file linear_operator.hpp
+/// The interface every system operator implements (explicit sparse matrix or matrix-free
+/// stencil), so the solvers (pcg.hpp) are written once for both back ends (section 4.3).
+
+#include <vector>
+
+#include "reference/common.hpp"
+
+namespace monolith {
+
+/// A symmetric positive (semi-)definite operator A of size n x n.
+class LinearOperator {
+ public:
+  virtual ~LinearOperator() = default;
+  /// n.
+  virtual int size() const = 0;
+  /// y = A x (y is resized to n).
+  virtual void apply(const VectorX& x, VectorX& y) const = 0;
+  /// The diagonal of A.
+  virtual VectorX diagonal() const = 0;
+  /// One forward SOR sweep on A x = rhs, in place on x, relaxation omega: for every row i in the
+  /// operator's sweep order, x_i <- (1 - omega) x_i + omega (rhs_i - sum_{j != i} A_ij x_j) / A_ii.
+  /// Rows with A_ii = 0 are left unchanged.
+  virtual void forward_sweep(const VectorX& rhs, VectorX& x, double omega) const = 0;
+  /// The same sweep in the reverse order (so forward then backward is symmetric SOR).
+  virtual void backward_sweep(const VectorX& rhs, VectorX& x, double omega) const = 0;
+  /// Orthonormal basis of the null space of A (empty when A is definite). Solvers project it out
+  /// of the right-hand side and of every iterate.
+  virtual const std::vector<VectorX>& null_space() const { return no_null_space_; }
+
+ private:
+  std::vector<VectorX> no_null_space_;
+};
+
+/// An explicit sparse matrix as a LinearOperator: sweeps run over the rows in index order.
+class SparseMatrixOperator : public LinearOperator {
+ public:
+  explicit SparseMatrixOperator(SparseMatrix a, std::vector<VectorX> null_space = {})
+      : a_(std::move(a)), null_space_(std::move(null_space)) {
+    a_.makeCompressed();
+    diagonal_ = a_.diagonal();
+  }
+  int size() const override { return static_cast<int>(a_.rows()); }
+  void apply(const VectorX& x, VectorX& y) const override {
+    y.resize(a_.rows());
+    // row-parallel product (row-major storage: every row is written by one thread)
+#pragma omp parallel for schedule(static)
+    for (int i = 0; i < a_.rows(); ++i) {
+      double s = 0.0;
+      for (SparseMatrix::InnerIterator it(a_, i); it; ++it) s += it.value() * x[it.col()];
+      y[i] = s;
+    }
+  }
+  VectorX diagonal() const override { return diagonal_; }
+  void forward_sweep(const VectorX& rhs, VectorX& x, double omega) const override {
+    for (int i = 0; i < a_.rows(); ++i) relax_row(i, rhs, x, omega);
+  }
+  void backward_sweep(const VectorX& rhs, VectorX& x, double omega) const override {
+    for (int i = static_cast<int>(a_.rows()) - 1; i >= 0; --i) relax_row(i, rhs, x, omega);
+  }
+  const std::vector<VectorX>& null_space() const override { return null_space_; }
+  const SparseMatrix& matrix() const { return a_; }
+
+ private:
+  void relax_row(int i, const VectorX& rhs, VectorX& x, double omega) const {
+    if (diagonal_[i] == 0.0) return;
+    double off = 0.0;
+    for (SparseMatrix::InnerIterator it(a_, i); it; ++it)
+      if (it.col() != i) off += it.value() * x[it.col()];
+    x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
+  }
+  SparseMatrix a_;
+  VectorX diagonal_;
+  std::vector<VectorX> null_space_;
+};
+
+}  // namespace monolith

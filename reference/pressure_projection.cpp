@@ -1,0 +1,347 @@
+#include "reference/pressure_projection.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "reference/gradient.hpp"
+
+namespace monolith {
+
+namespace {
+
+/// Diagonal sparse matrix from its diagonal.
+SparseMatrix diagonal_matrix(const VectorX& d) {
+  SparseMatrix m(d.size(), d.size());
+  std::vector<Triplet> t;
+  t.reserve(d.size());
+  for (int i = 0; i < d.size(); ++i) t.emplace_back(i, i, d[i]);
+  m.setFromTriplets(t.begin(), t.end());
+  return m;
+}
+
+/// (W_L^u)^-1 entry: 0 where W_L^u = 0 (such faces have no liquid cell beside them, so the
+/// matching row of G W_L^p is zero anyway).
+double inverse_or_zero(double v) { return v > 0.0 ? 1.0 / v : 0.0; }
+
+/// Per-face coefficient dt W_F^u P^-1 (W_L^u)^-1 / dx^2 of the stencil form of A.
+VectorX face_coefficients(const PressureWeights& w, double dt, double dx) {
+  VectorX k(w.fluid_face.size());
+  for (int f = 0; f < k.size(); ++f) {
+    const double wf = w.fluid_face[f];
+    k[f] = wf > 0.0 && w.face_density[f] > 0.0
+               ? dt * wf * inverse_or_zero(w.liquid_face[f]) / (w.face_density[f] * dx * dx)
+               : 0.0;
+  }
+  return k;
+}
+
+/// The 2 Dim faces of a cell with the other cell across each (-1 outside), and the sign of the
+/// cell in that face's row of G.
+template <int Dim>
+struct CellFaces {
+  std::array<int, 2 * Dim> face, other;
+  std::array<double, 2 * Dim> sign;
+};
+
+template <int Dim>
+CellFaces<Dim> cell_faces(const MacGrid<Dim>& grid, int cell) {
+  CellFaces<Dim> cf;
+  const VecI<Dim> c = grid.cell_coord(cell);
+  for (int a = 0; a < Dim; ++a) {
+    // lower face: the cell is its plus cell
+    cf.face[2 * a] = grid.face_index(a, c);
+    cf.other[2 * a] = grid.face_cell_minus(a, c);
+    cf.sign[2 * a] = 1.0;
+    // upper face: the cell is its minus cell
+    VecI<Dim> upper = c;
+    upper[a] += 1;
+    const VecI<Dim> upper_face = grid.periodic(a) ? grid.wrap_cell(upper) : upper;
+    cf.face[2 * a + 1] = grid.face_index(a, upper_face);
+    cf.other[2 * a + 1] = grid.cell_index_or_outside(upper);
+    cf.sign[2 * a + 1] = -1.0;
+  }
+  return cf;
+}
+
+}  // namespace
+
+template <int Dim>
+VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
+                         double fallback_density) {
+  VectorX rho = face_density;
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    if (face_density[f] > 0.0) continue;
+    // mean of the known densities on the faces of the two cells beside f
+    const auto [axis, coord] = grid.face_coord(f);
+    double sum = 0.0;
+    int count = 0;
+    for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
+      if (cell < 0) continue;
+      const auto cf = cell_faces<Dim>(grid, cell);
+      for (int g : cf.face)
+        if (face_density[g] > 0.0) {
+          sum += face_density[g];
+          ++count;
+        }
+    }
+    rho[f] = count > 0 ? sum / count : fallback_density;
+  }
+  return rho;
+}
+
+template <int Dim>
+PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeights& w, double dt) {
+  PressureDofs dofs;
+  dofs.dof_of_cell.assign(grid.num_cells(), -1);
+  // active: liquid in the cell and at least one face open to fluid
+  for (int c = 0; c < grid.num_cells(); ++c) {
+    if (!(w.liquid_cell[c] > 0.0)) continue;
+    const auto cf = cell_faces<Dim>(grid, c);
+    bool open = false;
+    for (int f : cf.face) open = open || w.fluid_face[f] > 0.0;
+    if (!open) continue;
+    dofs.dof_of_cell[c] = dofs.size();
+    dofs.cell_of_dof.push_back(c);
+  }
+  // connected groups over weighted faces; a group is closed if no weighted face leaves it
+  const VectorX k = face_coefficients(w, dt, grid.dx());
+  const int n = dofs.size();
+  std::vector<int> group(n, -1);
+  std::vector<int> stack;
+  int groups = 0;
+  for (int seed = 0; seed < n; ++seed) {
+    if (group[seed] >= 0) continue;
+    bool closed = true;
+    std::vector<int> members;
+    group[seed] = groups;
+    stack.push_back(seed);
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      members.push_back(i);
+      const int cell = dofs.cell_of_dof[i];
+      const auto cf = cell_faces<Dim>(grid, cell);
+      for (int j = 0; j < 2 * Dim; ++j) {
+        if (!(k[cf.face[j]] > 0.0) || cf.other[j] == cell) continue;
+        const int other = cf.other[j] >= 0 ? dofs.dof_of_cell[cf.other[j]] : -1;
+        if (other < 0) {
+          closed = false;  // pressure is pinned to zero across this face (air, open boundary)
+          continue;
+        }
+        if (group[other] < 0) {
+          group[other] = groups;
+          stack.push_back(other);
+        }
+      }
+    }
+    if (closed) {
+      // null vector: W_L^p p constant on the group
+      VectorX v = VectorX::Zero(n);
+      for (int i : members) v[i] = 1.0 / w.liquid_cell[dofs.cell_of_dof[i]];
+      dofs.null_space.push_back(v / v.norm());
+    }
+    ++groups;
+  }
+  return dofs;
+}
+
+template <int Dim>
+ExplicitPressureSystem assemble_explicit_pressure(const MacGrid<Dim>& grid,
+                                                  const PressureWeights& w,
+                                                  const PressureDofs& dofs, double dt,
+                                                  const VectorX& u_star) {
+  ExplicitPressureSystem sys;
+  // the named matrices of eq. (8)
+  sys.G = gradient_matrix(grid);
+  sys.W_F_u = diagonal_matrix(w.fluid_face);
+  sys.W_L_p = diagonal_matrix(w.liquid_cell);
+  sys.W_L_u_inv = diagonal_matrix(w.liquid_face.unaryExpr(&inverse_or_zero));
+  VectorX p_inv(grid.num_faces());
+  for (int f = 0; f < grid.num_faces(); ++f) p_inv[f] = inverse_or_zero(w.face_density[f]);
+  sys.P_inv = diagonal_matrix(p_inv);
+  // selection of the active DOFs
+  std::vector<Triplet> t;
+  for (int i = 0; i < dofs.size(); ++i) t.emplace_back(i, dofs.cell_of_dof[i], 1.0);
+  sys.S.resize(dofs.size(), grid.num_cells());
+  sys.S.setFromTriplets(t.begin(), t.end());
+  // A = dt W_L^p G^T W_F^u P^-1 (W_L^u)^-1 G W_L^p, restricted by S
+  const SparseMatrix Gt = sys.G.transpose();
+  const SparseMatrix A_full =
+      dt * (sys.W_L_p * Gt * sys.W_F_u * sys.P_inv * sys.W_L_u_inv * sys.G * sys.W_L_p);
+  const SparseMatrix St = sys.S.transpose();
+  sys.A = sys.S * A_full * St;
+  // b = W_L^p G^T W_F^u u*, restricted by S
+  sys.b = sys.S * (sys.W_L_p * (Gt * (sys.W_F_u * u_star)));
+  return sys;
+}
+
+template <int Dim>
+MatrixFreePressureOperator<Dim>::MatrixFreePressureOperator(const MacGrid<Dim>& grid,
+                                                            const PressureWeights& w,
+                                                            const PressureDofs& dofs, double dt)
+    : grid_(&grid), num_dofs_(dofs.size()), cell_of_dof_(dofs.cell_of_dof),
+      fluid_face_(w.fluid_face), null_space_(dofs.null_space) {
+  const VectorX k = face_coefficients(w, dt, grid.dx());
+  liquid_.resize(num_dofs_);
+  neighbour_.assign(num_dofs_ * kNeighbours, -1);
+  coefficient_.assign(num_dofs_ * kNeighbours, 0.0);
+  face_.assign(num_dofs_ * kNeighbours, 0);
+  face_sign_.assign(num_dofs_ * kNeighbours, 0.0);
+  diagonal_.setZero(num_dofs_);
+  for (int i = 0; i < num_dofs_; ++i) liquid_[i] = w.liquid_cell[cell_of_dof_[i]];
+  // stencil of every DOF: face coefficient and neighbour DOF (a face onto the cell itself, on a
+  // periodic axis of one cell, has a zero row in G and is dropped)
+  for (int i = 0; i < num_dofs_; ++i) {
+    const int cell = cell_of_dof_[i];
+    const auto cf = cell_faces<Dim>(grid, cell);
+    double diag = 0.0;
+    for (int j = 0; j < kNeighbours; ++j) {
+      const int s = i * kNeighbours + j;
+      face_[s] = cf.face[j];
+      face_sign_[s] = cf.other[j] == cell ? 0.0 : cf.sign[j];
+      if (cf.other[j] == cell) continue;
+      coefficient_[s] = k[cf.face[j]];
+      neighbour_[s] = cf.other[j] >= 0 ? dofs.dof_of_cell[cf.other[j]] : -1;
+      diag += coefficient_[s];
+    }
+    diagonal_[i] = liquid_[i] * liquid_[i] * diag;
+  }
+  // red-black colours by the parity of the cell coordinates
+  for (int a = 0; a < Dim; ++a)
+    if (grid.periodic(a) && grid.cells()[a] % 2 == 1 && grid.cells()[a] > 1)
+      colouring_valid_ = false;
+  for (int i = 0; i < num_dofs_; ++i)
+    colour_dofs_[grid.cell_coord(cell_of_dof_[i]).sum() % 2].push_back(i);
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
+  y.resize(num_dofs_);
+  // (A x)_i = W_i sum_f k_f (W_i x_i - W_j x_j), the stencil of W G^T K G W
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < num_dofs_; ++i) {
+    const double qi = liquid_[i] * x[i];
+    double sum = 0.0;
+    for (int j = 0; j < kNeighbours; ++j) {
+      const int s = i * kNeighbours + j;
+      const int n = neighbour_[s];
+      sum += coefficient_[s] * (qi - (n >= 0 ? liquid_[n] * x[n] : 0.0));
+    }
+    y[i] = liquid_[i] * sum;
+  }
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::relax_colour(int colour, const VectorX& rhs, VectorX& x,
+                                                   double omega) const {
+  const std::vector<int>& list = colour_dofs_[colour];
+  const int count = static_cast<int>(list.size());
+  // dofs of one colour only couple to the other colour: independent updates
+#pragma omp parallel for schedule(static) if (colouring_valid_)
+  for (int m = 0; m < count; ++m) {
+    const int i = list[m];
+    if (diagonal_[i] == 0.0) continue;
+    double off = 0.0;
+    for (int j = 0; j < kNeighbours; ++j) {
+      const int s = i * kNeighbours + j;
+      const int n = neighbour_[s];
+      if (n >= 0) off -= coefficient_[s] * liquid_[i] * liquid_[n] * x[n];
+    }
+    x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
+  }
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x,
+                                                    double omega) const {
+  relax_colour(0, rhs, x, omega);
+  relax_colour(1, rhs, x, omega);
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x,
+                                                     double omega) const {
+  relax_colour(1, rhs, x, omega);
+  relax_colour(0, rhs, x, omega);
+}
+
+template <int Dim>
+VectorX MatrixFreePressureOperator<Dim>::rhs(const VectorX& u_star) const {
+  VectorX b(num_dofs_);
+  const double inv_dx = 1.0 / grid_->dx();
+  // b_i = W_i sum_f s_if W_F^u_f u*_f / dx  (s = +1 on the cell's lower faces, -1 on upper)
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < num_dofs_; ++i) {
+    double sum = 0.0;
+    for (int j = 0; j < kNeighbours; ++j) {
+      const int s = i * kNeighbours + j;
+      sum += face_sign_[s] * fluid_face_[face_[s]] * u_star[face_[s]];
+    }
+    b[i] = liquid_[i] * sum * inv_dx;
+  }
+  return b;
+}
+
+template <int Dim>
+void apply_pressure_update(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                           const VectorX& pressure, VectorX& u) {
+  // q = W_L^p p, then the face update with G q
+  const VectorX q = w.liquid_cell.cwiseProduct(pressure);
+  const VectorX gq = apply_gradient(grid, q);
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    if (!(w.fluid_face[f] * w.liquid_face[f] > 0.0) || !(w.face_density[f] > 0.0)) continue;
+    u[f] -= dt * gq[f] / (w.face_density[f] * w.liquid_face[f]);
+  }
+}
+
+VectorX scatter_pressure(const PressureDofs& dofs, const VectorX& p_dofs, int num_cells) {
+  VectorX p = VectorX::Zero(num_cells);
+  for (int i = 0; i < dofs.size(); ++i) p[dofs.cell_of_dof[i]] = p_dofs[i];
+  return p;
+}
+
+template <int Dim>
+PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                                   const std::string& backend, const PcgSettings& settings,
+                                   VectorX& u) {
+  PressureSolveResult result;
+  // line 7: active DOFs
+  const PressureDofs dofs = select_pressure_dofs(grid, w, dt);
+  result.dofs = dofs.size();
+  VectorX p = VectorX::Zero(dofs.size());
+  // lines 8-10: assemble (or set up the stencil) and solve
+  if (backend == "explicit") {
+    const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
+    const SparseMatrixOperator op(sys.A, dofs.null_space);
+    result.pcg = pcg_solve(op, sys.b, p, settings);
+  } else if (backend == "matrixfree") {
+    const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
+    result.pcg = pcg_solve(op, op.rhs(u), p, settings);
+  } else {
+    throw std::invalid_argument("solve_pressure: unknown backend '" + backend +
+                                "' (explicit, matrixfree)");
+  }
+  // line 11: velocity update
+  result.pressure = scatter_pressure(dofs, p, grid.num_cells());
+  apply_pressure_update(grid, w, dt, result.pressure, u);
+  return result;
+}
+
+#define MONOLITH_INSTANTIATE(D)                                                                  \
+  template VectorX density_diagonal<D>(const MacGrid<D>&, const VectorX&, double);               \
+  template PressureDofs select_pressure_dofs<D>(const MacGrid<D>&, const PressureWeights&,       \
+                                                double);                                         \
+  template ExplicitPressureSystem assemble_explicit_pressure<D>(                                 \
+      const MacGrid<D>&, const PressureWeights&, const PressureDofs&, double, const VectorX&);   \
+  template class MatrixFreePressureOperator<D>;                                                  \
+  template void apply_pressure_update<D>(const MacGrid<D>&, const PressureWeights&, double,      \
+                                         const VectorX&, VectorX&);                              \
+  template PressureSolveResult solve_pressure<D>(const MacGrid<D>&, const PressureWeights&,      \
+                                                 double, const std::string&, const PcgSettings&, \
+                                                 VectorX&);
+MONOLITH_INSTANTIATE(2)
+MONOLITH_INSTANTIATE(3)
+#undef MONOLITH_INSTANTIATE
+
+}  // namespace monolith
