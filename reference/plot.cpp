@@ -470,16 +470,18 @@ Image plot_lines(const PlotSpec& spec) {
   // grid lines, ticks and tick labels
   const std::vector<Tick> xt = make_ticks(ax.x0, ax.x1, ax.log_x, std::max(3, (ax.right - ax.left) / (60 * s)));
   const std::vector<Tick> yt = make_ticks(ax.y0, ax.y1, ax.log_y, std::max(3, (ax.bottom - ax.top) / (45 * s)));
+  // axis-parallel 1-pixel lines are snapped to pixel centres so that they stay crisp
+  auto snap = [](double v) { return std::floor(v) + 0.5; };
   for (const Tick& t : xt) {
-    const double x = ax.px(t.value);
+    const double x = snap(ax.px(t.value));
     if (spec.grid) draw_line(img, x, ax.top, x, ax.bottom, t.major ? grid : minor_grid, 1.0);
   }
   for (const Tick& t : yt) {
-    const double y = ax.py(t.value);
+    const double y = snap(ax.py(t.value));
     if (spec.grid) draw_line(img, ax.left, y, ax.right, y, t.major ? grid : minor_grid, 1.0);
   }
   for (const Tick& t : xt) {
-    const double x = ax.px(t.value);
+    const double x = snap(ax.px(t.value));
     const double len = (t.major ? 5.0 : 3.0) * s;
     draw_line(img, x, ax.bottom, x, ax.bottom + len, ink, 1.0);
     if (!t.major) continue;
@@ -488,7 +490,7 @@ Image plot_lines(const PlotSpec& spec) {
               label, ink, s);
   }
   for (const Tick& t : yt) {
-    const double y = ax.py(t.value);
+    const double y = snap(ax.py(t.value));
     const double len = (t.major ? 5.0 : 3.0) * s;
     draw_line(img, ax.left - len, y, ax.left, y, ink, 1.0);
     if (!t.major) continue;
