@@ -44,9 +44,9 @@ struct ParticleTraits<2> {
     c << 0.0, -om, om, 0.0;
     return c;
   }
-  /// Particle radius / particle spacing, calibrated so a uniform block's zero level set lies on
-  /// the block boundary (docs/particles.md).
-  static constexpr double surface_radius = 0.9;
+  /// Particle radius / particle spacing, calibrated so a uniformly seeded block's zero level set
+  /// lies on the block boundary and its enclosed area matches (docs/particles.md).
+  static constexpr double surface_radius = 0.59;
 };
 
 template <>
@@ -62,7 +62,8 @@ struct ParticleTraits<3> {
     c << 0.0, -om[2], om[1], om[2], 0.0, -om[0], -om[1], om[0], 0.0;
     return c;
   }
-  static constexpr double surface_radius = 0.9;
+  /// Particle radius / particle spacing (3D calibration, docs/particles.md).
+  static constexpr double surface_radius = 0.58;
 };
 
 /// Uniform double in (0, 1) from a 32-bit Mersenne twister draw (portable across standard
