@@ -1,0 +1,220 @@
+// Volume fractions (section 3.1.2) and the solid shrinkage of section 4.4.6.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+
+#include "reference/volume_fractions.hpp"
+
+using namespace monolith;
+
+namespace {
+
+template <int Dim>
+MacGrid<Dim> unit_grid(int n, bool periodic_x = false) {
+  std::array<bool, Dim> periodic{};
+  periodic[0] = periodic_x;
+  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+}
+
+/// phi sampled on the half lattice from a function of position.
+template <int Dim, class F>
+VectorX sample(const SampleLattice<Dim>& lattice, F f) {
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) phi[k] = f(lattice.position(lattice.coord(k)));
+  return phi;
+}
+
+template <int Dim>
+double ball_volume(double r) {
+  return Dim == 2 ? M_PI * r * r : 4.0 / 3.0 * M_PI * r * r * r;
+}
+
+template <int Dim>
+std::array<BoundaryType, 2 * Dim> all(BoundaryType t) {
+  std::array<BoundaryType, 2 * Dim> b;
+  b.fill(t);
+  return b;
+}
+
+/// A ball SDF off the grid symmetry lines.
+template <int Dim>
+struct Ball {
+  Vec<Dim> centre = Vec<Dim>::Constant(0.5) + Vec<Dim>::LinSpaced(0.013, 0.031);
+  double radius = 0.31;
+  double operator()(const Vec<Dim>& x) const { return (x - centre).norm() - radius; }
+};
+
+}  // namespace
+
+TEST_CASE("simplex fractions: known values and complement", "[unit][property]") {
+  // a triangle with one negative corner at -1, the others at +1: corner triangle of scale 1/2
+  CHECK(simplex_negative_fraction<2>({-1.0, 1.0, 1.0}) == Approx(0.25).epsilon(1e-14));
+  CHECK(simplex_negative_fraction<2>({1.0, -1.0, -1.0}) == Approx(0.75).epsilon(1e-14));
+  // a tetrahedron split through the midpoints of four edges: half by symmetry
+  CHECK(simplex_negative_fraction<3>({-1.0, -1.0, 1.0, 1.0}) == Approx(0.5).epsilon(1e-14));
+  CHECK(simplex_negative_fraction<3>({-1.0, 1.0, 1.0, 1.0}) == Approx(0.125).epsilon(1e-14));
+  // f(phi) + f(-phi) = 1 for every sign pattern
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::array<double, 3> t{u(rng), u(rng), u(rng)};
+    std::array<double, 3> tn{-t[0], -t[1], -t[2]};
+    REQUIRE(simplex_negative_fraction<2>(t) + simplex_negative_fraction<2>(tn) ==
+            Approx(1.0).margin(1e-12));
+    std::array<double, 4> q{u(rng), u(rng), u(rng), u(rng)};
+    std::array<double, 4> qn{-q[0], -q[1], -q[2], -q[3]};
+    const double f = simplex_negative_fraction<3>(q);
+    REQUIRE(f >= -1e-15);
+    REQUIRE(f <= 1.0 + 1e-15);
+    REQUIRE(f + simplex_negative_fraction<3>(qn) == Approx(1.0).margin(1e-12));
+  }
+}
+
+TEST_CASE("tetrahedron fraction matches a fine quadrature of the linear function",
+          "[unit][dense-reference]") {
+  // midpoint rule on a 60^3 lattice of the reference tetrahedron x, y, z >= 0, x + y + z <= 1
+  const std::array<std::array<double, 4>, 3> cases{{{-0.7, -0.2, 0.5, 0.9},
+                                                    {-0.3, 0.8, -0.6, 0.1},
+                                                    {0.4, -0.9, 0.2, -0.1}}};
+  for (const auto& phi : cases) {
+    const int n = 60;
+    long inside = 0, negative = 0;
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j)
+        for (int k = 0; k < n; ++k) {
+          const double x = (i + 0.5) / n, y = (j + 0.5) / n, z = (k + 0.5) / n;
+          if (x + y + z > 1.0) continue;
+          ++inside;
+          const double v = phi[0] * (1 - x - y - z) + phi[1] * x + phi[2] * y + phi[3] * z;
+          negative += v < 0.0;
+        }
+    CHECK(simplex_negative_fraction<3>(phi) ==
+          Approx(double(negative) / inside).margin(0.01));
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("ball fractions converge to the exact volume at second order",
+                       "[convergence]", ((int Dim), Dim), 2, 3) {
+  const Ball<Dim> ball;
+  const double exact = ball_volume<Dim>(ball.radius);
+  const std::vector<int> levels = Dim == 2 ? std::vector<int>{16, 32, 64} : std::vector<int>{8, 16, 32};
+  std::vector<double> cell_err, face_err;
+  for (int n : levels) {
+    const auto grid = unit_grid<Dim>(n);
+    const auto lattice = half_lattice(grid);
+    const VectorX phi = sample<Dim>(lattice, ball);
+    const VectorX wc = cell_negative_fractions(grid, lattice, phi);
+    const VectorX wf = face_negative_fractions(grid, lattice, phi);
+    REQUIRE(wc.minCoeff() >= 0.0);
+    REQUIRE(wc.maxCoeff() <= 1.0);
+    REQUIRE(wf.minCoeff() >= 0.0);
+    REQUIRE(wf.maxCoeff() <= 1.0);
+    cell_err.push_back(std::abs(wc.sum() * grid.cell_volume() - exact));
+    // each axis' face control volumes also tile the domain
+    double worst = 0.0;
+    for (int a = 0; a < Dim; ++a)
+      worst = std::max(worst, std::abs(wf.segment(grid.face_offset(a), grid.num_faces(a)).sum() *
+                                           grid.cell_volume() - exact));
+    face_err.push_back(worst);
+  }
+  const double order_cell = std::log2(cell_err[1] / cell_err[2]);
+  const double order_face = std::log2(face_err[1] / face_err[2]);
+  INFO("cell errors " << cell_err[0] << " " << cell_err[1] << " " << cell_err[2] << " order "
+                      << order_cell);
+  INFO("face errors " << face_err[0] << " " << face_err[1] << " " << face_err[2] << " order "
+                      << order_face);
+  CHECK(order_cell > 1.7);
+  CHECK(order_face > 1.7);
+  CHECK(std::log2(cell_err[0] / cell_err[2]) / 2.0 > 1.7);
+}
+
+TEMPLATE_TEST_CASE_SIG("lattice-aligned box: exact fractions, full and empty cells exact",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  const int n = 8;
+  const auto grid = unit_grid<Dim>(n);
+  const auto lattice = half_lattice(grid);
+  // box [0.25, 0.6875]^Dim: lower side on cell faces, upper side through cell centres; the
+  // sides sit 1e-10 outside the lattice planes so that no lattice triangle has phi = 0 at all
+  // its corners (a zero-measure ambiguity of phi = 0 counted as outside)
+  const Vec<Dim> lo = Vec<Dim>::Constant(0.25 - 1e-10), hi = Vec<Dim>::Constant(0.6875 + 1e-10);
+  const VectorX phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) {
+    return ((lo - x).cwiseMax(x - hi)).maxCoeff();
+  });
+  const VectorX wc = cell_negative_fractions(grid, lattice, phi);
+  CHECK(wc.sum() * grid.cell_volume() == Approx(std::pow(hi[0] - lo[0], Dim)).epsilon(1e-8));
+  for (int c = 0; c < grid.num_cells(); ++c) {
+    const Vec<Dim> centre = grid.cell_center(grid.cell_coord(c));
+    // expected per cell: product over axes of the covered length of the cell
+    double expected = 1.0;
+    for (int a = 0; a < Dim; ++a) {
+      const double l = centre[a] - 0.5 * grid.dx(), h = centre[a] + 0.5 * grid.dx();
+      expected *= std::max(0.0, std::min(h, hi[a]) - std::max(l, lo[a])) / grid.dx();
+    }
+    REQUIRE(wc[c] == Approx(expected).margin(1e-8));
+    if (expected == 0.0 || expected == 1.0) REQUIRE(wc[c] == expected);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("weights: solid shrinkage, walls, open and periodic boundaries, clamp",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  const int n = 6;
+  // no solid: W_F^u is 1 inside, 0 on walls, 1 on open faces
+  {
+    const auto grid = unit_grid<Dim>(n);
+    const auto lattice = half_lattice(grid);
+    const VectorX solid_phi = solid_phi_on_lattice(grid, lattice, {}, 0.01 * grid.dx());
+    REQUIRE(std::isinf(solid_phi[0]));
+    auto boundary = all<Dim>(BoundaryType::wall);
+    boundary[3] = BoundaryType::open;  // y+
+    const VectorX wf = fluid_face_weights(grid, lattice, solid_phi, boundary);
+    const VectorX ws = solid_face_weights(wf);
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      const auto [axis, coord] = grid.face_coord(f);
+      double expected = 1.0;
+      if (grid.is_boundary_face(axis, coord)) expected = axis == 1 && coord[1] == n ? 1.0 : 0.0;
+      REQUIRE(wf[f] == expected);
+      REQUIRE(ws[f] == 1.0 - expected);
+    }
+  }
+  // periodic x: the face at x = 0 sees both ends of the domain; a liquid slab through it
+  {
+    const auto grid = unit_grid<Dim>(n, true);
+    const auto lattice = half_lattice(grid);
+    // liquid where x < 0.25 or x > 0.75 (distance to the periodic slab)
+    const VectorX phi = sample<Dim>(lattice, [](const Vec<Dim>& x) {
+      return std::min(x[0] - 0.25, 0.75 - x[0]) < 0.0 ? -1.0 : 1.0;
+    });
+    const VectorX wlp = liquid_cell_weights(grid, lattice, phi);
+    const VectorX wlu = liquid_face_weights(grid, lattice, phi, wlp);
+    const int face0 = grid.face_index(0, VecI<Dim>::Zero());
+    CHECK(wlu[face0] == Approx(1.0));
+    CHECK(grid.num_faces(0) == grid.num_cells());
+  }
+  // the shrinkage moves a solid's surface inward by zeta, and the clamp applies next to liquid
+  {
+    const auto grid = unit_grid<Dim>(n);
+    const auto lattice = half_lattice(grid);
+    const double zeta = 0.01 * grid.dx();
+    const VectorX plain = sample<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.5; });
+    const VectorX shifted = plain.array() + zeta;
+    const VectorX wf0 = VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, plain);
+    const VectorX wf1 = VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, shifted);
+    CHECK(wf1.sum() > wf0.sum());
+    // a liquid layer that fills only the lower half of the cell row j = 2: faces y = 3 dx have
+    // W_L^u = 0 geometrically but sit beside liquid cells, so they are clamped
+    const double h = 2.5 / n - 1e-9;
+    const VectorX phi = sample<Dim>(lattice, [h](const Vec<Dim>& x) { return x[1] - h; });
+    const VectorX wlp = liquid_cell_weights(grid, lattice, phi);
+    const VectorX raw = face_negative_fractions(grid, lattice, phi);
+    const VectorX wlu = liquid_face_weights(grid, lattice, phi, wlp);
+    VecI<Dim> f = VecI<Dim>::Zero();
+    f[1] = 3;
+    const int face = grid.face_index(1, f);
+    CHECK(raw[face] == Approx(0.0).margin(1e-6));
+    CHECK(wlu[face] == kMinLiquidFaceFraction);
+    f[1] = 5;
+    CHECK(wlu[grid.face_index(1, f)] == 0.0);
+    for (int k = 0; k < wlu.size(); ++k) REQUIRE(wlu[k] >= raw[k]);
+  }
+}
