@@ -317,6 +317,34 @@ int draw_color_bar(Image& img, int x, int y, int w, int h, Rgb (*map)(double), d
   return h + 3 * scale + text_height(scale) + 2 * scale;
 }
 
+ColorScale make_color_scale(const std::string& color_by, const std::vector<double>& values) {
+  ColorScale scale;
+  if (color_by == "speed" || color_by == "viscosity") {
+    scale.active = true;
+    scale.map = colormap_viridis;
+    scale.lo = 0.0;
+    scale.hi = std::max(percentile(values, 0.99), 1e-12);
+    scale.label = color_by == "speed" ? "|u| (m/s)" : "eta (Pa s)";
+  } else if (color_by == "pressure") {
+    scale.active = true;
+    scale.map = colormap_coolwarm;
+    double lo = percentile(values, 0.01), hi = percentile(values, 0.99);
+    if (lo < 0.0 && hi > 0.0) {
+      // a diverging map centred on zero
+      hi = std::max(-lo, hi);
+      lo = -hi;
+    }
+    if (!(hi - lo > 1e-12 * std::max(1.0, std::abs(hi)))) {
+      lo -= 0.5;
+      hi += 0.5;
+    }
+    scale.lo = lo;
+    scale.hi = hi;
+    scale.label = "p (Pa)";
+  }
+  return scale;
+}
+
 // --- line plots -----------------------------------------------------------------------------------
 
 Rgb plot_palette(int index) {

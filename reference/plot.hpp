@@ -52,6 +52,20 @@ double percentile(std::vector<double> values, double q);
 int draw_color_bar(Image& img, int x, int y, int w, int h, Rgb (*map)(double), double lo,
                    double hi, const std::string& label, int scale = 1);
 
+/// How the renderers colour the liquid for RenderSpec::color_by.
+struct ColorScale {
+  bool active = false;            ///< false: the plain liquid colour (color_by none, or no field)
+  Rgb (*map)(double) = nullptr;   ///< colormap_viridis or colormap_coolwarm
+  double lo = 0.0, hi = 1.0;      ///< field values mapped to the ends of the colour map
+  std::string label;              ///< colour bar caption, e.g. "|u| (m/s)"
+  Rgb color(double v) const { return map(hi > lo ? (v - lo) / (hi - lo) : 0.5); }
+};
+/// The colour scale for color_by ("speed", "pressure", "viscosity"; anything else gives an
+/// inactive scale) from the field's values over the liquid: speed and viscosity map [0, p99]
+/// with viridis (p99 = 99th percentile, robust to a few fast spray samples); pressure maps
+/// [p1, p99] with coolwarm, symmetric about zero when the range contains zero.
+ColorScale make_color_scale(const std::string& color_by, const std::vector<double>& values);
+
 // --- line plots -------------------------------------------------------------------------------
 
 enum class Marker { none, circle, square, cross };

@@ -39,5 +39,10 @@ struct RenderView {
 /// Renders one frame at spec.size with colouring spec.color_by.
 template <int Dim>
 Image render_frame(const RenderView<Dim>& view, const RenderSpec& spec);
+/// The two renderers are explicit specialisations (dim2/render_2d.cpp, dim3/render_3d.cpp).
+template <>
+Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec);
+template <>
+Image render_frame<3>(const RenderView<3>& view, const RenderSpec& spec);
 
 }  // namespace monolith

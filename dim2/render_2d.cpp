@@ -1,0 +1,268 @@
+/// \file render_2d.cpp
+/// The 2D frame renderer: the domain fills the picture (aspect ratio kept, y up), the liquid is
+/// an anti-aliased region from its level set, coloured by speed / pressure / viscosity or a plain
+/// water blue, with solids, walls, a colour bar and the time drawn over it. docs/rendering.md
+/// describes the picture.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "reference/plot.hpp"
+#include "reference/render.hpp"
+
+namespace monolith {
+
+namespace {
+
+// palette of the 2D pictures
+const Rgb kMargin{233, 236, 241};
+const Rgb kSkyTop{252, 252, 254};
+const Rgb kSkyBottom{231, 236, 243};
+const Rgb kWater{36, 118, 196};
+const Rgb kWaterDeep{20, 78, 158};
+const Rgb kWall{52, 57, 68};
+const Rgb kPeriodic{120, 126, 138};
+const Rgb kInk{30, 32, 40};
+
+Rgb mix(Rgb a, Rgb b, double t) {
+  t = std::clamp(t, 0.0, 1.0);
+  Rgb c;
+  for (int k = 0; k < 3; ++k) c[k] = static_cast<std::uint8_t>(std::lround((1 - t) * a[k] + t * b[k]));
+  return c;
+}
+
+Rgb scaled(Rgb a, double f) {
+  Rgb c;
+  for (int k = 0; k < 3; ++k)
+    c[k] = static_cast<std::uint8_t>(std::clamp(std::lround(a[k] * f), 0L, 255L));
+  return c;
+}
+
+double smoothstep(double e0, double e1, double x) {
+  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+  return t * t * (3 - 2 * t);
+}
+
+/// World <-> pixel mapping: the domain box scaled uniformly into the picture minus a margin,
+/// centred, y up. Pixel centres are at integer + 1/2.
+struct View2 {
+  Vec<2> lo, hi;
+  double scale = 1.0;  // pixels per metre
+  double ox = 0.0, oy = 0.0;  // pixel position of the domain's top-left corner (lo.x, hi.y)
+
+  double px(double x) const { return ox + (x - lo[0]) * scale; }
+  double py(double y) const { return oy + (hi[1] - y) * scale; }
+  Vec<2> world(double pxc, double pyc) const {
+    return Vec<2>(lo[0] + (pxc - ox) / scale, hi[1] - (pyc - oy) / scale);
+  }
+  /// Fraction of pixel (i, j) inside the domain rectangle (1 inside, ramps over one pixel).
+  double inside(int i, int j) const {
+    const double x = i + 0.5, y = j + 0.5;
+    const double cx = std::clamp(std::min(x - ox, ox + (hi[0] - lo[0]) * scale - x) + 0.5, 0.0, 1.0);
+    const double cy = std::clamp(std::min(y - oy, oy + (hi[1] - lo[1]) * scale - y) + 0.5, 0.0, 1.0);
+    return cx * cy;
+  }
+};
+
+View2 make_view(const Box<2>& domain, int width, int height, int margin) {
+  View2 v;
+  v.lo = domain.min();
+  v.hi = domain.max();
+  const Vec<2> size = v.hi - v.lo;
+  v.scale = std::min((width - 2.0 * margin) / size[0], (height - 2.0 * margin) / size[1]);
+  v.ox = 0.5 * (width - size[0] * v.scale);
+  v.oy = 0.5 * (height - size[1] * v.scale);
+  return v;
+}
+
+/// Values of the colour field over the liquid cells (cell centre inside the liquid), the sample
+/// set of the robust colour range.
+std::vector<double> liquid_field_values(const RenderView<2>& view, const SampleLattice<2>& lattice,
+                                        const std::string& color_by) {
+  std::vector<double> values;
+  const MacGrid<2>& grid = *view.grid;
+  for (int c = 0; c < grid.num_cells(); ++c) {
+    const VecI<2> cc = grid.cell_coord(c);
+    // the cell centre is half-lattice point 2c + 1
+    const VecI<2> li = (2 * cc.array() + 1).matrix();
+    if ((*view.liquid_phi)[lattice.index(li)] >= 0.0) continue;
+    if (color_by == "speed" && view.velocity)
+      values.push_back(grid.interpolate_velocity(*view.velocity, grid.cell_center(cc)).norm());
+    else if (color_by == "pressure" && view.pressure)
+      values.push_back((*view.pressure)[c]);
+    else if (color_by == "viscosity")
+      values.push_back(view.viscosity ? (*view.viscosity)[c] : 0.0);
+  }
+  return values;
+}
+
+/// The colour field at a point (the face velocity's magnitude, or a cell field interpolated).
+double field_at(const RenderView<2>& view, const std::string& color_by, const Vec<2>& x) {
+  const MacGrid<2>& grid = *view.grid;
+  if (color_by == "speed") return grid.interpolate_velocity(*view.velocity, x).norm();
+  if (color_by == "pressure") return grid.interpolate_cell(*view.pressure, x);
+  return view.viscosity ? grid.interpolate_cell(*view.viscosity, x) : 0.0;
+}
+
+/// The time label "t=1.234 s" on a light panel in the top-left corner of the domain.
+void draw_time(Image& img, double time, int x, int y, int s) {
+  char buf[48];
+  std::snprintf(buf, sizeof(buf), "t=%.3f s", time);
+  const std::string text = buf;
+  fill_rect(img, x, y, x + text_width(text, s) + 6 * s, y + text_height(s) + 6 * s, Rgb{255, 255, 255}, 0.78);
+  draw_text(img, x + 3 * s, y + 3 * s, text, kInk, s);
+}
+
+}  // namespace
+
+/// Renders the 2D frame: background, liquid (from liquid_phi on the half lattice, coverage
+/// clamp(1/2 - phi / pixel, 0, 1)), particles where the liquid is thin, solids with outlines,
+/// walls / periodic markers, colour bar and time label.
+template <>
+Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
+  const int width = std::max(1, spec.size[0]), height = std::max(1, spec.size[1]);
+  Image img(width, height, kMargin);
+  const int s = std::max(1, (std::min(width, height) + 200) / 400);  // font magnification
+  if (!view.grid) {
+    draw_time(img, view.time, 4 * s, 4 * s, s);
+    return img;
+  }
+  const MacGrid<2>& grid = *view.grid;
+  const int margin = std::max(4, static_cast<int>(std::lround(0.035 * std::min(width, height))));
+  const View2 v = make_view(grid.domain_box(), width, height, margin);
+  const double pixel = 1.0 / v.scale;  // metres per pixel
+  const double dx = grid.dx();
+  const SampleLattice<2> lattice = half_lattice(grid);
+  const bool has_phi = view.liquid_phi && view.liquid_phi->size() == lattice.size();
+
+  // the colour scale of the liquid (inactive without the field it needs)
+  ColorScale scale;
+  const bool field_ok = (spec.color_by == "speed" && view.velocity) ||
+                        (spec.color_by == "pressure" && view.pressure) || spec.color_by == "viscosity";
+  if (has_phi && field_ok) scale = make_color_scale(spec.color_by, liquid_field_values(view, lattice, spec.color_by));
+
+  // background and liquid, pixel by pixel (rows are independent: deterministic in parallel)
+#pragma omp parallel for schedule(dynamic, 8)
+  for (int j = 0; j < height; ++j) {
+    for (int i = 0; i < width; ++i) {
+      const double in = v.inside(i, j);
+      if (in <= 0.0) continue;
+      const Vec<2> x = v.world(i + 0.5, j + 0.5);
+      const double h = (x[1] - v.lo[1]) / (v.hi[1] - v.lo[1]);
+      Rgb c = mix(kSkyBottom, kSkyTop, h);
+      if (has_phi) {
+        const double phi = lattice.interpolate(*view.liquid_phi, x);
+        const double cover = std::clamp(0.5 - phi / pixel, 0.0, 1.0);
+        if (cover > 0.0) {
+          // body colour: plain water darkening with depth, or the colour field
+          Rgb body = scale.active ? scale.color(field_at(view, spec.color_by, x))
+                                  : mix(kWater, kWaterDeep, smoothstep(0.0, 8.0 * dx, -phi));
+          // a thin darker rim one pixel inside the surface makes the interface crisp
+          const double rim = std::clamp(1.0 - std::abs(-phi / pixel - 0.8) / 0.9, 0.0, 1.0);
+          body = mix(body, scaled(body, 0.62), 0.8 * rim);
+          c = mix(c, body, cover);
+        }
+      }
+      img.set(i, j, mix(kMargin, c, in));
+    }
+  }
+
+  // particles: faint dots where the level set is thin (spray, sheets), none in the bulk
+  if (view.particles && has_phi) {
+    const double r = std::clamp(0.14 * dx * v.scale, 0.6, 3.0);
+    for (const Vec<2>& p : *view.particles) {
+      const double phi = lattice.interpolate(*view.liquid_phi, p);
+      const double a = 0.75 * std::clamp((phi + 1.5 * dx) / (1.5 * dx), 0.0, 1.0);
+      if (a <= 0.0 || !grid.domain_box().contains(p)) continue;
+      fill_disk(img, v.px(p[0]), v.py(p[1]), r, phi > 0.0 ? kWater : Rgb{178, 218, 250}, a);
+    }
+  }
+
+  // solids: anti-aliased fill from the SDF, darker outline just inside the surface
+  for (const RenderSolid<2>& solid : view.solids) {
+    if (!solid.shape) continue;
+    Box<2> b = solid.shape->bounds();
+    b = b.intersection(grid.domain_box());
+    if (b.isEmpty()) continue;
+    const int i0 = std::max(0, static_cast<int>(std::floor(v.px(b.min()[0]))) - 2);
+    const int i1 = std::min(width - 1, static_cast<int>(std::ceil(v.px(b.max()[0]))) + 2);
+    const int j0 = std::max(0, static_cast<int>(std::floor(v.py(b.max()[1]))) - 2);
+    const int j1 = std::min(height - 1, static_cast<int>(std::ceil(v.py(b.min()[1]))) + 2);
+    const Rgb outline = scaled(solid.color, 0.55);
+#pragma omp parallel for schedule(dynamic, 8)
+    for (int j = j0; j <= j1; ++j)
+      for (int i = i0; i <= i1; ++i) {
+        const double in = v.inside(i, j);
+        if (in <= 0.0) continue;
+        const double d = solid.shape->distance(v.world(i + 0.5, j + 0.5)) / pixel;  // in pixels
+        const double cover = std::clamp(0.5 - d, 0.0, 1.0) * in;
+        if (cover <= 0.0) continue;
+        const double edge = std::clamp(1.0 - std::abs(-d - 1.0) / 1.2, 0.0, 1.0);
+        img.blend(i, j, mix(solid.color, outline, edge), cover);
+      }
+  }
+
+  // domain boundary: a dark band outside wall faces, a dashed line on periodic faces
+  const double L = v.ox, R = v.px(v.hi[0]), T = v.oy, B = v.py(v.lo[1]);
+  const double band = std::max(2.0, std::round(0.55 * margin));
+  for (int f = 0; f < 4; ++f) {
+    const int axis = f / 2;
+    const bool upper = f % 2 == 1;
+    const BoundaryType type = view.boundary[f];
+    double x0, y0, x1, y1;  // the face as a pixel segment
+    if (axis == 0) {
+      x0 = x1 = upper ? R : L;
+      y0 = T;
+      y1 = B;
+    } else {
+      y0 = y1 = upper ? T : B;
+      x0 = L;
+      x1 = R;
+    }
+    if (type == BoundaryType::wall) {
+      // a band of `band` pixels outside the face, covering the corners
+      const double ext = band;
+      double bx0, by0, bx1, by1;
+      if (axis == 0) {
+        bx0 = upper ? R : L - band;
+        bx1 = upper ? R + band : L;
+        by0 = T - ext;
+        by1 = B + ext;
+      } else {
+        by0 = upper ? T - band : B;
+        by1 = upper ? T : B + band;
+        bx0 = L - ext;
+        bx1 = R + ext;
+      }
+      for (int j = std::max(0, static_cast<int>(std::floor(by0))); j < std::min(height, static_cast<int>(std::ceil(by1))); ++j)
+        for (int i = std::max(0, static_cast<int>(std::floor(bx0))); i < std::min(width, static_cast<int>(std::ceil(bx1))); ++i) {
+          // fractional coverage at the band's edges
+          const double cx = std::clamp(std::min(i + 1.0, bx1) - std::max(static_cast<double>(i), bx0), 0.0, 1.0);
+          const double cy = std::clamp(std::min(j + 1.0, by1) - std::max(static_cast<double>(j), by0), 0.0, 1.0);
+          img.blend(i, j, kWall, cx * cy);
+        }
+    } else if (type == BoundaryType::periodic) {
+      draw_dashed_line(img, x0, y0, x1, y1, kPeriodic, 1.5, 6.0 * s, 4.0 * s);
+    }
+  }
+
+  // labels: time (top left) and the colour bar (top right), inside the domain
+  const int lx = static_cast<int>(std::ceil(L)) + 4 * s, ly = static_cast<int>(std::ceil(T)) + 4 * s;
+  draw_time(img, view.time, lx, ly, s);
+  if (scale.active) {
+    const int bar_w = std::clamp(static_cast<int>((R - L) / 4), 40, 220), bar_h = 5 * s + 2;
+    const int label_w = text_width(scale.label, s) + 4 * s;
+    const int panel_w = label_w + bar_w + 8 * s, panel_h = bar_h + text_height(s) + 11 * s;
+    const int px0 = static_cast<int>(std::floor(R)) - 4 * s - panel_w;
+    if (px0 > lx + text_width("t=0.000 s", s) + 8 * s) {
+      fill_rect(img, px0, ly, px0 + panel_w, ly + panel_h, Rgb{255, 255, 255}, 0.78);
+      draw_color_bar(img, px0 + 4 * s, ly + 4 * s, bar_w, bar_h, scale.map, scale.lo, scale.hi, scale.label, s);
+    }
+  }
+  return img;
+}
+
+}  // namespace monolith
