@@ -155,4 +155,17 @@ SceneDesc parse_scene(const nlohmann::json& j, const std::string& label,
 /// overrides (dotted paths, e.g. solver.tolerance=1e-8 or liquids.0.density=800), then parses.
 SceneDesc load_scene(const std::string& path_or_name, const std::vector<std::string>& overrides);
 
+/// Applies `KEY=VALUE` overrides to a scene JSON (VALUE as JSON if it parses, else a string;
+/// a path through a missing array index or a non-object throws InputError). `label` prefixes
+/// the messages.
+nlohmann::json apply_overrides(nlohmann::json j, const std::string& label,
+                               const std::vector<std::string>& overrides);
+
+/// Throws InputError listing what the scene asks for that this build does not support yet
+/// (viscous liquids, dynamic and kinematic bodies), each with its key path.
+void require_supported(const SceneDesc& scene);
+
+/// Peak memory estimate in bytes used to refuse scenes up front (docs/scene-format.md).
+double estimate_memory_bytes(int dim, const std::vector<int>& cells, double particles);
+
 }  // namespace monolith
