@@ -1,5 +1,7 @@
 # Writes a C++ source that holds the given files as byte arrays (run with cmake -P).
 # Inputs: OUTPUT (the .cpp to write), SCENES and ASSETS (;-separated lists of files).
+# script mode: quoted strings in if() are not variable references (CMP0054)
+cmake_policy(SET CMP0054 NEW)
 # the lists may arrive joined with | (see CMakeLists.txt)
 string(REPLACE "|" ";" SCENES "${SCENES}")
 string(REPLACE "|" ";" ASSETS "${ASSETS}")
