@@ -288,3 +288,172 @@ TEST_CASE("2D: the time is written in a corner", "[unit][render]") {
   CHECK(diff_label > 5);
   CHECK(diff_elsewhere == 0);
 }
+
+// --- 3D ---------------------------------------------------------------------------------------------
+
+namespace {
+
+int count_solid_pixels(const Image& img) {
+  // pixels in the hue of the solid's colour (170, 140, 110): red > green > blue, clearly brown
+  int n = 0;
+  for (int j = 0; j < img.height; ++j)
+    for (int i = 0; i < img.width; ++i) {
+      const Rgb c = img.get(i, j);
+      if (c[0] > c[1] + 12 && c[1] > c[2] + 12 && c[0] > 60) ++n;
+    }
+  return n;
+}
+
+}  // namespace
+
+TEST_CASE("3D: the liquid ball covers the image centre and is shaded", "[unit][render]") {
+  TestScene<3> scene(24);
+  RenderSpec spec;
+  spec.size = {160, 120};
+  spec.color_by = "none";
+  const Image img = render_frame<3>(scene.view, spec);
+  keep_picture(img, "render3d_none");
+  REQUIRE(img.width == 160);
+  REQUIRE(img.height == 120);
+  const Rgb centre = img.get(80, 60);
+  CHECK(centre[2] > centre[0] + 60);
+  // shading: brightness varies across the ball (a window around the centre)
+  int lo = 1000, hi = 0;
+  for (int j = 45; j < 75; ++j)
+    for (int i = 65; i < 95; ++i) {
+      const Rgb c = img.get(i, j);
+      if (c[2] > c[0] + 40) {
+        lo = std::min(lo, brightness(c));
+        hi = std::max(hi, brightness(c));
+      }
+    }
+  CHECK(hi - lo > 60);
+}
+
+TEST_CASE("3D: a solid is visible, background elsewhere", "[unit][render]") {
+  TestScene<3> scene(24);
+  RenderSpec spec;
+  spec.size = {160, 120};
+  spec.color_by = "none";
+  scene.view.boundary.fill(BoundaryType::open);
+  const Image with = render_frame<3>(scene.view, spec);
+  keep_picture(with, "render3d_open");
+  const int solid_pixels = count_solid_pixels(with);
+  CHECK(solid_pixels > 50);
+  const auto solids = scene.view.solids;
+  scene.view.solids.clear();
+  const Image without = render_frame<3>(scene.view, spec);
+  CHECK(count_solid_pixels(without) < 5);
+  // no walls: the image corners show the light sky
+  for (const auto& [i, j] : {std::pair{3, 116}, std::pair{156, 116}, std::pair{156, 60}}) {
+    const Rgb c = with.get(i, j);
+    CHECK(brightness(c) > 520);
+    CHECK(c[2] >= c[0]);
+  }
+  // with walls, the floor is drawn where the sky was below the ball
+  scene.view.solids = solids;
+  scene.view.boundary.fill(BoundaryType::wall);
+  const Image walls = render_frame<3>(scene.view, spec);
+  keep_picture(walls, "render3d_walls");
+  int changed = 0;
+  for (int j = 100; j < 120; ++j)
+    for (int i = 0; i < 160; ++i) changed += color_distance(walls.get(i, j), with.get(i, j)) > 20;
+  CHECK(changed > 200);
+}
+
+TEST_CASE("3D: color_by speed colours the liquid", "[unit][render]") {
+  TestScene<3> scene(24);
+  RenderSpec spec;
+  spec.size = {160, 120};
+  spec.color_by = "none";
+  const Image plain = render_frame<3>(scene.view, spec);
+  spec.color_by = "speed";
+  const Image speed = render_frame<3>(scene.view, spec);
+  keep_picture(speed, "render3d_speed");
+  // the ball's top is fast (green-yellow in viridis), unlike plain water blue
+  int differ = 0;
+  for (int j = 30; j < 90; ++j)
+    for (int i = 50; i < 110; ++i) differ += color_distance(plain.get(i, j), speed.get(i, j)) > 60;
+  CHECK(differ > 300);
+}
+
+TEST_CASE("3D: deterministic for 1 and 2 threads", "[unit][render]") {
+  TestScene<3> scene(16);
+  RenderSpec spec;
+  spec.size = {96, 72};
+  omp_set_num_threads(1);
+  const Image a = render_frame<3>(scene.view, spec);
+  omp_set_num_threads(2);
+  const Image b = render_frame<3>(scene.view, spec);
+  const Image c = render_frame<3>(scene.view, spec);
+  CHECK(a.rgb == b.rgb);
+  CHECK(b.rgb == c.rgb);
+}
+
+TEST_CASE("3D: 512x512 of a 64^3 scene (timing)", "[.][benchmark][render]") {
+  TestScene<3> scene(64);
+  RenderSpec spec;
+  spec.size = {512, 512};
+  omp_set_num_threads(1);
+  const auto start = std::chrono::steady_clock::now();
+  const Image img = render_frame<3>(scene.view, spec);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  keep_picture(img, "render3d_512");
+  WARN("render_frame<3> 512x512, 64^3, 1 thread: " << seconds << " s");
+  CHECK(img.get(256, 256)[2] > 0);
+}
+
+// --- a gallery for looking at (hidden: run with "[gallery]" and MONOLITH_TEST_PICTURES set) ------
+
+TEST_CASE("gallery: dam-break-like pictures in 2D and 3D", "[.][gallery][render]") {
+  const auto dam = [](const auto& x) {
+    // a column of liquid in the left corner, united with a falling drop
+    using V = std::decay_t<decltype(x)>;
+    V q = x;
+    q[0] -= 0.2;
+    q[1] -= 0.3;
+    V h = V::Constant(0.2);
+    h[1] = 0.3;
+    const V a = q.cwiseAbs() - h;
+    const double column = a.cwiseMax(0.0).norm() + std::min(a.maxCoeff(), 0.0);
+    V c = V::Constant(0.5);
+    c[0] = 0.65;
+    c[1] = 0.55;
+    const double drop = (x - c).norm() - 0.1;
+    return std::min(column, drop);
+  };
+  {
+    TestScene<2> scene(64);
+    const SampleLattice<2> lattice = half_lattice(scene.grid);
+    for (int k = 0; k < lattice.size(); ++k) scene.phi[k] = dam(lattice.position(lattice.coord(k)));
+    for (int k = 0; k < 40; ++k) scene.particles.push_back(Vec<2>(0.5 + 0.004 * k, 0.7 + 0.05 * std::sin(0.5 * k)));
+    scene.view.particles = &scene.particles;
+    scene.view.boundary[3] = BoundaryType::open;
+    RenderSpec spec;
+    spec.size = {640, 480};
+    for (const char* by : {"none", "speed", "pressure"}) {
+      spec.color_by = by;
+      const Image img = render_frame<2>(scene.view, spec);
+      keep_picture(img, std::string("gallery2d_") + by);
+      CHECK(img.width == 640);
+    }
+  }
+  {
+    TestScene<3> scene(64);
+    const SampleLattice<3> lattice = half_lattice(scene.grid);
+    for (int k = 0; k < lattice.size(); ++k) scene.phi[k] = dam(lattice.position(lattice.coord(k)));
+    scene.view.solids[0].shape = std::make_shared<TestBall<3>>(Vec<3>(0.75, 0.15, 0.6), 0.12);
+    scene.view.boundary[3] = BoundaryType::open;
+    RenderSpec spec;
+    spec.size = {640, 480};
+    for (const char* by : {"none", "speed", "pressure"}) {
+      spec.color_by = by;
+      const auto start = std::chrono::steady_clock::now();
+      const Image img = render_frame<3>(scene.view, spec);
+      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      WARN("3D gallery " << by << ": " << seconds << " s");
+      keep_picture(img, std::string("gallery3d_") + by);
+      CHECK(img.width == 640);
+    }
+  }
+}
