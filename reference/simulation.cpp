@@ -1,0 +1,336 @@
+/// \file simulation.cpp
+/// Simulation<Dim>: the time loop of Algorithm 1 for liquids with static solids (pressure only;
+/// every scheme name runs the same variational pressure solve of eq. (8) for now).
+
+#include "reference/simulation.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "reference/errors.hpp"
+#include "reference/particles.hpp"
+#include "reference/pressure_projection.hpp"
+#include "reference/shape.hpp"
+#include "reference/volume_fractions.hpp"
+
+namespace monolith {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+template <int Dim>
+Vec<Dim> to_vec(const std::vector<double>& v, const Vec<Dim>& fallback) {
+  if (static_cast<int>(v.size()) != Dim) return fallback;
+  Vec<Dim> x;
+  for (int a = 0; a < Dim; ++a) x[a] = v[a];
+  return x;
+}
+
+template <int Dim>
+std::vector<double> to_std(const Vec<Dim>& x) {
+  return std::vector<double>(x.data(), x.data() + Dim);
+}
+
+bool all_finite(const VectorX& v) { return v.allFinite(); }
+
+}  // namespace
+
+template <int Dim>
+class Simulation : public AnySimulation {
+ public:
+  explicit Simulation(const SceneDesc& scene);
+  FrameStats current_stats() const override { return stats_; }
+  FrameStats advance_frame() override;
+  Image render(const RenderSpec& spec) const override;
+
+ private:
+  /// One step of Algorithm 1 of length dt (the liquid part; lines 3, 6, 12 and 13 concern
+  /// dynamic bodies, which this build does not simulate).
+  void step(double dt);
+  /// The CFL-limited step size: min(max_dt, cfl dx / max speed).
+  double cfl_dt() const;
+  /// Liquid level set and the liquid weights W_L^p, W_L^u from the particles (lines 4-5).
+  void update_liquid_weights();
+  /// Throws SimulationError if the state holds a non-finite value.
+  void check_finite(const char* after) const;
+  /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
+  void fill_state_stats(FrameStats& s) const;
+
+  SceneDesc scene_;
+  MacGrid<Dim> grid_;
+  SampleLattice<Dim> lattice_;
+  std::array<BoundaryType, 2 * Dim> boundary_{};
+  Vec<Dim> gravity_;
+  double reference_density_ = 1000.0;
+  // static solids: shapes, their SolidField, and W_F^u (fixed for the whole run)
+  std::vector<ShapePtr<Dim>> solid_shapes_;
+  SolidField<Dim> solids_;
+  VectorX solid_phi_;
+  PressureWeights weights_;
+  // liquid state
+  Particles<Dim> particles_;
+  VectorX liquid_phi_;
+  VectorX u_, face_mass_, face_density_, pressure_;
+  PcgSettings pcg_settings_;
+  // time and statistics
+  int frame_ = 0;
+  double time_ = 0.0;
+  FrameStats stats_;
+};
+
+template <int Dim>
+Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
+  // grid and boundary
+  Vec<Dim> lower, upper;
+  VecI<Dim> cells;
+  std::array<bool, Dim> periodic{};
+  for (int a = 0; a < Dim; ++a) {
+    lower[a] = scene.domain.lower[a];
+    upper[a] = scene.domain.upper[a];
+    cells[a] = scene.domain.cells[a];
+    boundary_[2 * a] = scene.domain.boundary[2 * a];
+    boundary_[2 * a + 1] = scene.domain.boundary[2 * a + 1];
+    periodic[a] = boundary_[2 * a] == BoundaryType::periodic;
+  }
+  grid_ = MacGrid<Dim>(lower, scene.dx(), cells, periodic);
+  lattice_ = half_lattice(grid_);
+  gravity_ = to_vec<Dim>(scene.gravity, Vec<Dim>(-9.81 * Vec<Dim>::Unit(1)));
+
+  // static bodies form the solid field (walls are the boundary faces)
+  for (std::size_t i = 0; i < scene.bodies.size(); ++i)
+    if (scene.bodies[i].motion == "static")
+      solid_shapes_.push_back(
+          make_shape<Dim>(scene.bodies[i].shape, "bodies[" + std::to_string(i) + "].shape"));
+  if (!solid_shapes_.empty()) {
+    const auto shapes = solid_shapes_;
+    solids_.distance = [shapes](const Vec<Dim>& x) {
+      double d = std::numeric_limits<double>::infinity();
+      for (const auto& s : shapes) d = std::min(d, s->distance(x));
+      return d;
+    };
+    solids_.gradient = [shapes](const Vec<Dim>& x) {
+      // gradient of the nearest solid (the one attaining the minimum)
+      std::size_t best = 0;
+      double d = std::numeric_limits<double>::infinity();
+      for (std::size_t k = 0; k < shapes.size(); ++k) {
+        const double dk = shapes[k]->distance(x);
+        if (dk < d) {
+          d = dk;
+          best = k;
+        }
+      }
+      return shapes[best]->gradient(x);
+    };
+  }
+  // W_F^u from the solid level set shrunk by zeta (section 4.4.6)
+  solid_phi_ = solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
+  weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
+
+  // liquids: particles seeded in each liquid's shape
+  std::vector<ShapePtr<Dim>> liquid_shapes;
+  for (std::size_t i = 0; i < scene.liquids.size(); ++i)
+    liquid_shapes.push_back(
+        make_shape<Dim>(scene.liquids[i].shape, "liquids[" + std::to_string(i) + "].shape"));
+  if (!scene.liquids.empty()) reference_density_ = scene.liquids.front().density;
+  const int per_cell = scene.particles.per_cell > 0 ? scene.particles.per_cell : (Dim == 2 ? 4 : 8);
+  particles_ = seed_particles(grid_, scene.liquids, liquid_shapes, solids_, per_cell,
+                              scene.particles.seed);
+
+  // solver settings
+  pcg_settings_.tolerance = scene.solver.tolerance;
+  pcg_settings_.max_iterations = scene.solver.max_iterations;
+
+  // frame 0: the seeded state on the grid (no pressure yet)
+  particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  update_liquid_weights();
+  pressure_ = VectorX::Zero(grid_.num_cells());
+  stats_.frame = 0;
+  stats_.time = 0.0;
+  stats_.solver.scheme = scene.solver.scheme;
+  fill_state_stats(stats_);
+}
+
+template <int Dim>
+void Simulation<Dim>::update_liquid_weights() {
+  liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_);
+  weights_.liquid_cell = liquid_cell_weights(grid_, lattice_, liquid_phi_);
+  weights_.liquid_face = liquid_face_weights(grid_, lattice_, liquid_phi_, weights_.liquid_cell);
+}
+
+template <int Dim>
+double Simulation<Dim>::cfl_dt() const {
+  const double speed = std::max(max_particle_speed(particles_),
+                                u_.size() ? u_.template lpNorm<Eigen::Infinity>() : 0.0);
+  const double max_dt = scene_.time.max_dt;
+  return speed > 0.0 ? std::min(max_dt, scene_.time.cfl * grid_.dx() / speed) : max_dt;
+}
+
+template <int Dim>
+void Simulation<Dim>::step(double dt) {
+  // (1) map velocity from particles to grid (APIC)
+  particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  // (2) add external force (gravity) on the faces that carry mass
+  for (int f = 0; f < grid_.num_faces(); ++f)
+    if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+  // (4) liquid/air domain: level set from the particles on the half lattice
+  // (5) volume fractions W_L^p, W_L^u (W_F^u is fixed: the solids are static)
+  update_liquid_weights();
+  weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+  // (7)-(10) active DOFs, assembly (or stencil set-up) and the SSOR-PCG solve; (11) velocity
+  // update u = u* - dt P^-1 (W_L^u)^-1 G W_L^p p
+  const auto solve_start = Clock::now();
+  const PressureSolveResult solve =
+      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
+  stats_.timing_solve += seconds_since(solve_start);
+  if (solve.pcg.breakdown) {
+    std::ostringstream msg;
+    msg << "t = " << time_ << " s: pressure solver broke down: " << solve.pcg.message;
+    throw SimulationError(msg.str());
+  }
+  pressure_ = solve.pressure;
+  stats_.solver.iterations += solve.pcg.iterations;
+  stats_.solver.staggered_iterations += 1;
+  stats_.solver.max_relative_residual =
+      std::max(stats_.solver.max_relative_residual, solve.pcg.relative_residual);
+  stats_.solver.converged = stats_.solver.converged && solve.pcg.converged;
+  stats_.solver.dofs_pressure = std::max<long>(stats_.solver.dofs_pressure, solve.dofs);
+  check_finite("the pressure solve");
+  // extrapolate the velocity into air and solid, then zero the normal velocity on walls and
+  // inside the (static) solids
+  std::vector<char> valid(grid_.num_faces(), 0);
+  for (int f = 0; f < grid_.num_faces(); ++f)
+    valid[f] = weights_.fluid_face[f] > 0.0 &&
+               (weights_.liquid_face[f] > 0.0 || face_mass_[f] > 0.0);
+  const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
+  extrapolate_velocity(grid_, u_, valid, layers);
+  for (int f = 0; f < grid_.num_faces(); ++f) {
+    const auto [axis, coord] = grid_.face_coord(f);
+    const bool wall = grid_.is_boundary_face(axis, coord) &&
+                      boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
+    if (wall || weights_.fluid_face[f] == 0.0) u_[f] = 0.0;
+  }
+  // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
+  // leaving through open faces are removed
+  grid_to_particles(particles_, grid_, u_);
+  advect_particles(particles_, grid_, u_, dt, solids_, boundary_);
+  // (15) position correction for volume preservation
+  if (scene_.particles.position_correction)
+    correct_positions(particles_, grid_, dt, solids_, boundary_);
+  check_finite("advection");
+}
+
+template <int Dim>
+void Simulation<Dim>::check_finite(const char* after) const {
+  std::string what;
+  if (!all_finite(u_)) what = "non-finite grid velocity";
+  if (!all_finite(pressure_)) what = "non-finite pressure";
+  for (std::size_t p = 0; p < particles_.size() && what.empty(); ++p)
+    if (!particles_.x[p].allFinite() || !particles_.v[p].allFinite())
+      what = "non-finite particle position or velocity (particle " + std::to_string(p) + ")";
+  if (what.empty()) return;
+  std::ostringstream msg;
+  msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): " << what << " after " << after;
+  throw SimulationError(msg.str());
+}
+
+template <int Dim>
+FrameStats Simulation<Dim>::advance_frame() {
+  const auto frame_start = Clock::now();
+  stats_ = FrameStats{};
+  stats_.solver.scheme = scene_.solver.scheme;
+  stats_.dt_min = std::numeric_limits<double>::infinity();
+  // substeps that land exactly on the frame time (frame + 1) / fps
+  const double frame_end = (frame_ + 1) / scene_.time.fps;
+  while (time_ < frame_end) {
+    const double remaining = frame_end - time_;
+    // equal substeps no longer than the CFL limit, the last one ending on the frame time
+    const double dt_cfl = cfl_dt();
+    const double n = std::max(1.0, std::ceil(remaining / dt_cfl - 1e-9));
+    const double dt = remaining / n;
+    step(dt);
+    time_ = n == 1.0 ? frame_end : time_ + dt;
+    ++stats_.steps;
+    stats_.dt_min = std::min(stats_.dt_min, dt);
+    stats_.dt_max = std::max(stats_.dt_max, dt);
+  }
+  ++frame_;
+  stats_.frame = frame_;
+  stats_.time = frame_end;
+  if (stats_.steps == 0) stats_.dt_min = 0.0;
+  // the liquid weights of the final state
+  update_liquid_weights();
+  fill_state_stats(stats_);
+  stats_.timing_total = seconds_since(frame_start);
+  return stats_;
+}
+
+template <int Dim>
+void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
+  // liquid volume = sum W_L^p dx^Dim
+  s.liquid_volume = weights_.liquid_cell.sum() * grid_.cell_volume();
+  s.particles = static_cast<long>(particles_.size());
+  // particle bounding box and kinetic energy sum 1/2 m |v|^2
+  s.liquid_bounds_lower.clear();
+  s.liquid_bounds_upper.clear();
+  if (particles_.size() > 0) {
+    Vec<Dim> lo = particles_.x[0], hi = particles_.x[0];
+    for (const auto& x : particles_.x) {
+      lo = lo.cwiseMin(x);
+      hi = hi.cwiseMax(x);
+    }
+    s.liquid_bounds_lower = to_std<Dim>(lo);
+    s.liquid_bounds_upper = to_std<Dim>(hi);
+  }
+  double energy = 0.0;
+  for (std::size_t p = 0; p < particles_.size(); ++p)
+    energy += 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
+  s.kinetic_energy_liquid = energy;
+  s.kinetic_energy_bodies = 0.0;
+  // probes: grid velocity and cell pressure interpolated at the probe
+  s.probes.clear();
+  for (const auto& probe : scene_.probes) {
+    ProbeStats ps;
+    ps.name = probe.name;
+    ps.position = probe.position;
+    const Vec<Dim> x = to_vec<Dim>(probe.position, Vec<Dim>::Zero());
+    ps.velocity = to_std<Dim>(grid_.interpolate_velocity(u_, x));
+    ps.pressure = grid_.interpolate_cell(pressure_, x);
+    s.probes.push_back(ps);
+  }
+}
+
+template <int Dim>
+Image Simulation<Dim>::render(const RenderSpec& spec) const {
+  RenderView<Dim> view;
+  view.grid = &grid_;
+  view.liquid_phi = &liquid_phi_;
+  view.particles = &particles_.x;
+  view.velocity = &u_;
+  view.pressure = &pressure_;
+  for (const auto& shape : solid_shapes_) {
+    RenderSolid<Dim> solid;
+    solid.shape = shape;
+    view.solids.push_back(solid);
+  }
+  view.boundary = boundary_;
+  view.time = time_;
+  return render_frame<Dim>(view, spec);
+}
+
+std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene) {
+  require_supported(scene);
+  if (scene.dim == 3) return std::make_unique<Simulation<3>>(scene);
+  return std::make_unique<Simulation<2>>(scene);
+}
+
+template class Simulation<2>;
+template class Simulation<3>;
+
+}  // namespace monolith
