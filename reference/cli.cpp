@@ -5,22 +5,14 @@
 
 #include "reference/cli.hpp"
 
-#include <omp.h>
-#include <unistd.h>
+#include "reference/runner.hpp"
 
-#include <chrono>
-#include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <iomanip>
-#include <iostream>
-#include <sstream>
 
 #include "reference/embedded_data.hpp"
 #include "reference/errors.hpp"
 #include "reference/scene.hpp"
 #include "reference/simulation.hpp"
-#include "reference/stats.hpp"
 
 #ifndef MONOLITH_VERSION
 #define MONOLITH_VERSION "0.0.0"
@@ -30,7 +22,6 @@ namespace monolith {
 
 namespace {
 
-namespace fs = std::filesystem;
 using nlohmann::json;
 
 const char* kUsage =
@@ -67,16 +58,6 @@ const char* kHelp =
     "exit codes: 0 success, 2 invalid input, 3 simulation failure (outputs so far are kept).\n"
     "documentation: docs/cli.md and docs/scene-format.md\n";
 
-/// Parsed arguments of `run` and `check`.
-struct Options {
-  std::string scene;
-  std::vector<std::string> overrides;
-  std::string out_dir;
-  int threads = 0;
-  bool no_render = false;
-  bool quiet = false;
-};
-
 bool parse_nonneg_int(const std::string& s, long long max, long long& out) {
   if (s.empty() || s.size() > 12) return false;
   for (char c : s)
@@ -86,8 +67,8 @@ bool parse_nonneg_int(const std::string& s, long long max, long long& out) {
 }
 
 /// Parses the arguments after the command name; throws InputError on a bad flag.
-Options parse_options(const std::string& command, const std::vector<std::string>& args, bool run_flags) {
-  Options o;
+RunOptions parse_options(const std::string& command, const std::vector<std::string>& args, bool run_flags) {
+  RunOptions o;
   std::vector<std::string> problems;
   for (std::size_t i = 0; i < args.size(); ++i) {
     std::string a = args[i];
@@ -159,126 +140,8 @@ Options parse_options(const std::string& command, const std::vector<std::string>
   return o;
 }
 
-std::string frame_file(int k) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "frame_%05d.ppm", k);
-  return buf;
-}
-
-std::string seconds_text(double s) {
-  std::ostringstream o;
-  if (s < 60.0)
-    o << std::fixed << std::setprecision(1) << s << "s";
-  else if (s < 3600.0)
-    o << static_cast<int>(s / 60.0) << "m" << std::setw(2) << std::setfill('0') << static_cast<int>(s) % 60 << "s";
-  else
-    o << static_cast<int>(s / 3600.0) << "h" << std::setw(2) << std::setfill('0') << static_cast<int>(s / 60.0) % 60 << "m";
-  return o.str();
-}
-
-/// Writes summary.json (the scene as run, the version, totals, the status).
-void write_summary(const fs::path& dir, const SceneDesc& scene, const json& totals, bool failed, int failed_frame,
-                   const std::string& message) {
-  json s;
-  s["format"] = "monolith-summary/1";
-  s["version"] = MONOLITH_VERSION;
-  s["scene"] = scene.as_run;
-  s["source"] = scene.source_label;
-  s["totals"] = totals;
-  s["status"] = failed ? "failed" : "ok";
-  s["failed_frame"] = failed ? json(failed_frame) : json(nullptr);
-  if (failed) s["message"] = message;
-  std::ofstream f(dir / "summary.json");
-  f << s.dump(2) << "\n";
-  if (!f) throw InputError(dir.string() + ": (output): cannot write summary.json (a writable output folder)");
-}
-
-int cmd_run(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
-  (void)out;
-  const Options o = parse_options("run", args, true);
-  // --no-render acts as a last --set render.enabled=false
-  std::vector<std::string> overrides = o.overrides;
-  if (o.no_render) overrides.push_back("render.enabled=false");
-  if (o.threads > 0) omp_set_num_threads(o.threads);
-
-  // scene and simulation
-  const SceneDesc scene = load_scene(o.scene, overrides);
-  require_supported(scene);
-  const fs::path dir = o.out_dir.empty() ? fs::path("out") / scene.name : fs::path(o.out_dir);
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir, ec))
-    throw InputError(dir.string() + ": (output): cannot create the output folder (a writable folder path for --out)");
-  const bool render = scene.render.enabled;
-  if (render) {
-    fs::create_directories(dir / "frames", ec);
-    if (ec) throw InputError((dir / "frames").string() + ": (output): cannot create the folder (a writable output folder)");
-  }
-  std::ofstream stats(dir / "stats.jsonl", std::ios::trunc);
-  if (!stats) throw InputError((dir / "stats.jsonl").string() + ": (output): cannot write (a writable output folder)");
-
-  const bool live = !o.quiet && &err == &std::cerr && isatty(STDERR_FILENO);
-  const bool lines = !o.quiet && !live;
-  const int frames = scene.time.frames;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
-
-  // totals, kept up to date for summary.json
-  long total_steps = 0;
-  double volume0 = 0.0, volume = 0.0;
-  int done = 0;
-  auto totals = [&] {
-    json t;
-    t["frames"] = done;
-    t["steps"] = total_steps;
-    t["wall_time"] = elapsed();
-    t["initial_liquid_volume"] = volume0;
-    t["final_liquid_volume"] = volume;
-    t["volume_drift"] = volume0 > 0.0 ? (volume - volume0) / volume0 : 0.0;
-    return t;
-  };
-
-  int frame = 0;
-  try {
-    auto sim = make_simulation(scene);
-    // frame 0: the initial state
-    FrameStats st = sim->current_stats();
-    volume0 = volume = st.liquid_volume;
-    stats << st.to_json().dump() << "\n" << std::flush;
-    if (render) sim->render(scene.render).write_ppm((dir / "frames" / frame_file(0)).string());
-    for (frame = 1; frame <= frames; ++frame) {
-      st = sim->advance_frame();
-      st.frame = frame;
-      total_steps += st.steps;
-      volume = st.liquid_volume;
-      stats << st.to_json().dump() << "\n" << std::flush;
-      if (render) sim->render(scene.render).write_ppm((dir / "frames" / frame_file(frame)).string());
-      done = frame;
-      // progress
-      const double el = elapsed();
-      const double eta = el / frame * (frames - frame);
-      std::ostringstream line;
-      line << "frame " << frame << "/" << frames << "  t=" << std::setprecision(4) << st.time << "s  steps "
-           << st.steps << "  elapsed " << seconds_text(el) << "  ETA " << seconds_text(eta);
-      if (live)
-        err << "\r" << line.str() << "   " << std::flush;
-      else if (lines)
-        err << line.str() << "\n" << std::flush;
-    }
-    if (live) err << "\n";
-  } catch (const SimulationError& e) {
-    if (live) err << "\n";
-    write_summary(dir, scene, totals(), true, frame, e.what());
-    err << scene.source_label << ": simulation failed at frame " << frame << ": " << e.what() << "\n";
-    return 3;
-  }
-  write_summary(dir, scene, totals(), false, -1, "");
-  if (!o.quiet) err << "wrote " << done << " frames to " << dir.string() << " in " << seconds_text(elapsed()) << "\n";
-  return 0;
-}
-
 int cmd_check(const std::vector<std::string>& args, std::ostream& out) {
-  const Options o = parse_options("check", args, false);
+  const RunOptions o = parse_options("check", args, false);
   const SceneDesc scene = load_scene(o.scene, o.overrides);
   require_supported(scene);
   long long cells = 1;
@@ -307,6 +170,11 @@ int cmd_list(const std::vector<std::string>& args, std::ostream& out) {
 }  // namespace
 
 int run_cli(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+  return run_cli_with(args, out, err, [](const SceneDesc& scene) { return make_simulation(scene); });
+}
+
+int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::ostream& err,
+                 const SimulationFactory& factory) {
   try {
     if (args.empty()) {
       err << "monolith: missing command\n" << kUsage;
@@ -322,7 +190,7 @@ int run_cli(const std::vector<std::string>& args, std::ostream& out, std::ostrea
       out << "monolith " << MONOLITH_VERSION << "\n";
       return 0;
     }
-    if (command == "run") return cmd_run(rest, out, err);
+    if (command == "run") return run_scene(parse_options("run", rest, true), err, factory);
     if (command == "check") return cmd_check(rest, out);
     if (command == "list") return cmd_list(rest, out);
     err << "monolith: unknown command \"" << command.substr(0, 80) << "\" (run, check, list, --help, --version)\n"

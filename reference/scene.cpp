@@ -463,6 +463,24 @@ class SceneParser {
   std::filesystem::path base_dir_;
 };
 
+/// Nesting depth of a JSON value, computed without recursion (hostile input may be deep).
+std::size_t json_depth(const json& root, std::size_t limit) {
+  std::vector<std::pair<const json*, std::size_t>> stack{{&root, 1}};
+  std::size_t deepest = 0;
+  while (!stack.empty()) {
+    const auto [v, d] = stack.back();
+    stack.pop_back();
+    deepest = std::max(deepest, d);
+    if (deepest > limit) return deepest;
+    if (v->is_structured())
+      for (const auto& child : *v) stack.push_back({&child, d + 1});
+  }
+  return deepest;
+}
+
+/// Deepest nesting a scene document may have (shapes nest at most kMaxShapeDepth levels).
+constexpr std::size_t kMaxJsonDepth = 2 * kMaxShapeDepth + 16;
+
 /// A shape whose spec parsed cleanly, to be built and checked against the domain.
 struct PlacedShape {
   const ShapeSpec* spec;
@@ -564,6 +582,11 @@ double estimate_memory_bytes(int dim, const std::vector<int>& cells, double part
 
 SceneDesc parse_scene(const json& j, const std::string& label, const std::filesystem::path& base_dir) {
   SceneParser p(label, base_dir);
+  // refuse absurdly deep documents before anything copies or walks them recursively
+  if (json_depth(j, kMaxJsonDepth) > kMaxJsonDepth) {
+    p.add("", "the document is nested too deeply", "at most " + std::to_string(kMaxJsonDepth) + " levels of arrays and objects");
+    throw InputError(p.problems);
+  }
   SceneDesc s;
   s.source_label = label;
   s.base_dir = base_dir;
