@@ -72,8 +72,12 @@ std::size_t edit_distance(const std::string& a, const std::string& b) {
 std::string closest(const std::string& key, const std::vector<std::string>& allowed) {
   std::string best;
   std::size_t best_d = std::numeric_limits<std::size_t>::max();
+  auto lower = [](std::string t) {
+    for (char& c : t) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return t;
+  };
   for (const auto& a : allowed) {
-    const std::size_t d = edit_distance(key, a);
+    const std::size_t d = edit_distance(lower(key), lower(a));
     if (d < best_d) best_d = d, best = a;
   }
   const std::size_t limit = std::max<std::size_t>(2, key.size() / 3);
@@ -237,7 +241,7 @@ class SceneParser {
     std::string s;
     if (!read_string(v, path, allowed, s)) return false;
     if (std::find(values.begin(), values.end(), s) == values.end()) {
-      std::string what = "unknown value " + describe(v);
+      std::string what = "unknown value \"" + (s.size() > 40 ? s.substr(0, 40) + "..." : s) + "\"";
       const std::string guess = closest(s, values);
       if (!guess.empty()) what += " (did you mean \"" + guess + "\"?)";
       add(path, what, allowed);
@@ -623,6 +627,7 @@ SceneDesc parse_scene(const json& j, const std::string& label, const std::filesy
   bool domain_ok = false;
   if (const json* dj = p.member(j, "domain", "", true, "an object with lower, upper, cells")) {
     const std::size_t before = p.problems.size();
+    std::size_t geometry_problems = 0;
     if (p.expect_object(*dj, "domain", "an object with lower, upper, cells")) {
       const json& d = *dj;
       p.check_keys(d, "domain", {"lower", "upper", "cells", "boundary", "wall_friction", "wall_restitution"});
@@ -659,6 +664,8 @@ SceneDesc parse_scene(const json& j, const std::string& label, const std::filesy
             ordered = false;
           }
         }
+        // the box itself is usable for the overlap checks even if the cells are not cubic
+        geometry_problems = p.problems.size() - before;
         if (ordered) {
           const double dx0 = (s.domain.upper[0] - s.domain.lower[0]) / s.domain.cells[0];
           for (std::size_t a = 1; a < n; ++a) {
@@ -692,8 +699,8 @@ SceneDesc parse_scene(const json& j, const std::string& label, const std::filesy
       p.opt_number(d, "domain", "wall_friction", kNonNegative, s.domain.wall_friction);
       p.opt_number(d, "domain", "wall_restitution", kUnitClosed, s.domain.wall_restitution);
     }
-    domain_ok = p.problems.size() == before && dim && s.domain.cells.size() == n &&
-                s.domain.lower.size() == n && s.domain.upper.size() == n;
+    domain_ok = geometry_problems == 0 && dim && s.domain.cells.size() == n && s.domain.lower.size() == n &&
+                s.domain.upper.size() == n;
   }
 
   // gravity
