@@ -30,7 +30,7 @@ Rgb to_rgb(const V3& c) {
   return r;
 }
 
-const V3 kWater = V3(36, 116, 196) / 255.0;
+const V3 kWater = V3(40, 126, 206) / 255.0;
 const V3 kSkyTop = V3(178, 196, 220) / 255.0;
 const V3 kSkyHorizon = V3(236, 239, 244) / 255.0;
 const V3 kFloorA = V3(222, 225, 230) / 255.0;
@@ -46,9 +46,9 @@ V3 sky(const V3& dir) {
 
 // --- the default camera ------------------------------------------------------------------------
 
-/// Looks at the domain centre from direction (1, 0.8, 1.4) (front-right-above), 40 degree field
-/// of view across the smaller image side, at the distance where all 8 domain corners fit within
-/// 92% of the frame.
+/// Looks at the domain from direction (1, 0.8, 1.4) (front-right-above), 40 degree field of view
+/// across the smaller image side; the view is panned so that the projected domain box is centred
+/// and placed at the distance where its 8 corners fit within 92% of the frame.
 struct Camera {
   V3 eye, forward, right, up;
   double tan_x = 0.0, tan_y = 0.0;  // half extents of the image plane at distance 1
@@ -63,14 +63,29 @@ struct Camera {
     const double t = std::tan(20.0 * M_PI / 180.0);
     tan_x = w >= h ? t * w / h : t;
     tan_y = w >= h ? t : t * h / w;
+    // pan so that the projected box is centred, then move back until it fits (a few rounds)
+    V3 target = center;
     double dist = 0.0;
-    for (int k = 0; k < 8; ++k) {
-      const V3 p = domain.corner(static_cast<Box<3>::CornerType>(k)) - center;
-      const double along = p.dot(back);
-      dist = std::max(dist, along + std::abs(p.dot(right)) / (0.92 * tan_x));
-      dist = std::max(dist, along + std::abs(p.dot(up)) / (0.92 * tan_y));
+    for (int round = 0; round < 4; ++round) {
+      dist = 0.0;
+      for (int k = 0; k < 8; ++k) {
+        const V3 p = domain.corner(static_cast<Box<3>::CornerType>(k)) - target;
+        const double along = p.dot(back);
+        dist = std::max(dist, along + std::abs(p.dot(right)) / (0.92 * tan_x));
+        dist = std::max(dist, along + std::abs(p.dot(up)) / (0.92 * tan_y));
+      }
+      double xmin = kInf, xmax = -kInf, ymin = kInf, ymax = -kInf;
+      for (int k = 0; k < 8; ++k) {
+        const V3 p = domain.corner(static_cast<Box<3>::CornerType>(k)) - (target + dist * back);
+        const double z = p.dot(forward);
+        xmin = std::min(xmin, p.dot(right) / z);
+        xmax = std::max(xmax, p.dot(right) / z);
+        ymin = std::min(ymin, p.dot(up) / z);
+        ymax = std::max(ymax, p.dot(up) / z);
+      }
+      target += dist * (0.5 * (xmin + xmax) * right + 0.5 * (ymin + ymax) * up);
     }
-    eye = center + dist * back;
+    eye = target + dist * back;
   }
   /// Unit ray direction through image point (px, py) (pixel centres at integer + 1/2, y down).
   V3 ray(double px, double py) const {
@@ -243,7 +258,7 @@ struct Renderer {
   Camera camera;
   ColorScale scale;
   std::string color_by;
-  V3 light = V3(-0.25, 1.1, 0.5).normalized();
+  V3 light = V3(0.3, 1.0, 0.55).normalized();
   double pixel_angle = 0.0;
   std::array<bool, 6> wall{};
 
@@ -285,7 +300,7 @@ struct Renderer {
       if (what == kLiquid) {
         const V3 base = scale.active ? field_color(x - 0.5 * scene.feature * n) : kWater;
         // liquid is a little self-lit (light scattered inside it), so its shadowed sides stay clear
-        V3 c = base * (ambient + 0.12 + 0.62 * ndl * sh);
+        V3 c = base * (ambient + 0.2 + 0.55 * ndl * sh);
         const double fresnel = 0.04 + 0.96 * std::pow(1.0 - ndv, 5.0);
         const V3 reflect_dir = dir - 2.0 * dir.dot(n) * n;
         c = (1.0 - 0.7 * fresnel) * c + 0.7 * fresnel * sky(reflect_dir);

@@ -11,6 +11,7 @@
 #include <memory>
 #include <string>
 
+#include "reference/embedded_data.hpp"
 #include "reference/render.hpp"
 
 using namespace monolith;
@@ -455,5 +456,57 @@ TEST_CASE("gallery: dam-break-like pictures in 2D and 3D", "[.][gallery][render]
       keep_picture(img, std::string("gallery3d_") + by);
       CHECK(img.width == 640);
     }
+  }
+}
+
+// --- built-in scenes at t = 0 (hidden: run with "[gallery]"): the shapes of make_shape ---------
+
+namespace {
+
+template <int Dim>
+void render_initial_scene(const SceneDesc& desc) {
+  VecI<Dim> cells;
+  Vec<Dim> lower;
+  std::array<bool, Dim> periodic{};
+  for (int a = 0; a < Dim; ++a) {
+    cells[a] = desc.domain.cells[a];
+    lower[a] = desc.domain.lower[a];
+    periodic[a] = desc.domain.boundary[2 * a] == BoundaryType::periodic;
+  }
+  const MacGrid<Dim> grid(lower, desc.dx(), cells, periodic);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  std::vector<ShapePtr<Dim>> liquids;
+  for (size_t k = 0; k < desc.liquids.size(); ++k)
+    liquids.push_back(make_shape<Dim>(desc.liquids[k].shape, "liquids"));
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) {
+    double d = 1e9;
+    for (const auto& s : liquids) d = std::min(d, s->distance(lattice.position(lattice.coord(k))));
+    phi[k] = d;
+  }
+  RenderView<Dim> view;
+  view.grid = &grid;
+  view.liquid_phi = &phi;
+  for (int f = 0; f < 2 * Dim; ++f) view.boundary[f] = desc.domain.boundary[f];
+  for (const BodySpec& b : desc.bodies) view.solids.push_back({make_shape<Dim>(b.shape, "bodies"), Rgb{170, 140, 110}});
+  RenderSpec spec = desc.render;
+  spec.color_by = "none";
+  const auto start = std::chrono::steady_clock::now();
+  const Image img = render_frame<Dim>(view, spec);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  WARN(desc.name << ": " << seconds << " s");
+  keep_picture(img, "scene_" + desc.name);
+  CHECK(img.width == spec.size[0]);
+}
+
+}  // namespace
+
+TEST_CASE("gallery: built-in scenes at t = 0", "[.][gallery][render]") {
+  for (const EmbeddedFile& f : embedded_scenes()) {
+    const SceneDesc desc = load_scene(std::string(f.name), {});
+    if (desc.dim == 2)
+      render_initial_scene<2>(desc);
+    else
+      render_initial_scene<3>(desc);
   }
 }
