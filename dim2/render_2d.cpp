@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -144,27 +145,53 @@ Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
                         (spec.color_by == "pressure" && view.pressure) || spec.color_by == "viscosity";
   if (has_phi && field_ok) scale = make_color_scale(spec.color_by, liquid_field_values(view, lattice, spec.color_by));
 
+  // the level set at every pixel centre inside the domain (+inf outside it or without liquid)
+  const size_t npx = static_cast<size_t>(width) * height;
+  std::vector<double> phi_px(npx, std::numeric_limits<double>::infinity());
+  if (has_phi) {
+#pragma omp parallel for schedule(dynamic, 8)
+    for (int j = 0; j < height; ++j)
+      for (int i = 0; i < width; ++i)
+        if (v.inside(i, j) > 0.0)
+          phi_px[static_cast<size_t>(j) * width + i] = lattice.interpolate(*view.liquid_phi, v.world(i + 0.5, j + 0.5));
+  }
+  // depth below the free surface straight above, in pixels (water darkens with depth)
+  std::vector<float> depth_px(npx, 0.0f);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < width; ++i) {
+    int top = -1;
+    for (int j = 0; j < height; ++j) {
+      const size_t k = static_cast<size_t>(j) * width + i;
+      if (phi_px[k] < 0.0) {
+        if (top < 0) top = j;
+        depth_px[k] = static_cast<float>(j - top);
+      } else {
+        top = -1;
+      }
+    }
+  }
+
   // background and liquid, pixel by pixel (rows are independent: deterministic in parallel)
+  const double deep = std::max(12.0 * dx, 0.3 * (v.hi[1] - v.lo[1])) / pixel;  // darkest depth, pixels
 #pragma omp parallel for schedule(dynamic, 8)
   for (int j = 0; j < height; ++j) {
     for (int i = 0; i < width; ++i) {
       const double in = v.inside(i, j);
       if (in <= 0.0) continue;
+      const size_t k = static_cast<size_t>(j) * width + i;
       const Vec<2> x = v.world(i + 0.5, j + 0.5);
       const double h = (x[1] - v.lo[1]) / (v.hi[1] - v.lo[1]);
       Rgb c = mix(kSkyBottom, kSkyTop, h);
-      if (has_phi) {
-        const double phi = lattice.interpolate(*view.liquid_phi, x);
-        const double cover = std::clamp(0.5 - phi / pixel, 0.0, 1.0);
-        if (cover > 0.0) {
-          // body colour: plain water darkening with depth, or the colour field
-          Rgb body = scale.active ? scale.color(field_at(view, spec.color_by, x))
-                                  : mix(kWater, kWaterDeep, smoothstep(0.0, 8.0 * dx, -phi));
-          // a thin darker rim one pixel inside the surface makes the interface crisp
-          const double rim = std::clamp(1.0 - std::abs(-phi / pixel - 0.8) / 0.9, 0.0, 1.0);
-          body = mix(body, scaled(body, 0.62), 0.8 * rim);
-          c = mix(c, body, cover);
-        }
+      const double phi = phi_px[k];
+      const double cover = std::clamp(0.5 - phi / pixel, 0.0, 1.0);
+      if (cover > 0.0) {
+        // body colour: plain water darkening with depth, or the colour field
+        Rgb body = scale.active ? scale.color(field_at(view, spec.color_by, x))
+                                : mix(kWater, kWaterDeep, smoothstep(0.0, deep, depth_px[k]));
+        // a thin darker rim one pixel inside the surface makes the interface crisp
+        const double rim = std::clamp(1.0 - std::abs(-phi / pixel - 0.8) / 0.9, 0.0, 1.0);
+        body = mix(body, scaled(body, 0.62), 0.8 * rim);
+        c = mix(c, body, cover);
       }
       img.set(i, j, mix(kMargin, c, in));
     }
