@@ -593,9 +593,12 @@ Image plot_lines(const PlotSpec& spec) {
   fill_rect(img, ax.right, ax.top, ax.right + 1, ax.bottom, ink);
 
   // title and axis labels
-  if (!spec.title.empty())
-    draw_text(img, (spec.width - text_width(spec.title, 2 * s)) / 2 > 0 ? (spec.width - text_width(spec.title, 2 * s)) / 2 : 0,
-              (ax.top - text_height(2 * s)) / 2, spec.title, ink, text_width(spec.title, 2 * s) <= spec.width ? 2 * s : s);
+  if (!spec.title.empty()) {
+    // twice the label size when it fits, else the label size
+    const int ts = text_width(spec.title, 2 * s) <= spec.width - 8 * s ? 2 * s : s;
+    draw_text(img, std::max(0, (spec.width - text_width(spec.title, ts)) / 2),
+              std::max(0, (ax.top - text_height(ts)) / 2), spec.title, ink, ts);
+  }
   if (!spec.x_label.empty())
     draw_text(img, (ax.left + ax.right - text_width(spec.x_label, s)) / 2,
               spec.height - text_height(s) - 6 * s, spec.x_label, ink, s);
@@ -615,7 +618,32 @@ Image plot_lines(const PlotSpec& spec) {
     if (!listed.empty()) {
       const int row_h = text_height(s) + 6 * s, sample_w = 22 * s;
       const int box_w = sample_w + widest + 14 * s, box_h = static_cast<int>(listed.size()) * row_h + 6 * s;
-      const int bx = ax.right - box_w - 8 * s, by = ax.top + 8 * s;
+      // the corner of the data rectangle that the fewest data samples fall into
+      int bx = ax.right - box_w - 8 * s, by = ax.top + 8 * s;
+      long best = -1;
+      for (int corner = 0; corner < 4; ++corner) {
+        const int cx = corner % 2 == 0 ? ax.right - box_w - 8 * s : ax.left + 8 * s;
+        const int cy = corner < 2 ? ax.top + 8 * s : ax.bottom - box_h - 8 * s;
+        long hits = 0;
+        for (const PlotSeries& ser : spec.series) {
+          const size_t n = std::min(ser.x.size(), ser.y.size());
+          for (size_t i = 0; i < n; ++i) {
+            // the point itself and (for lines) samples along the segment to the next one
+            const int steps = ser.line && i + 1 < n ? 16 : 1;
+            for (int q = 0; q < steps; ++q) {
+              const double f = static_cast<double>(q) / steps;
+              const double x = q == 0 ? ax.px(ser.x[i]) : (1 - f) * ax.px(ser.x[i]) + f * ax.px(ser.x[i + 1]);
+              const double y = q == 0 ? ax.py(ser.y[i]) : (1 - f) * ax.py(ser.y[i]) + f * ax.py(ser.y[i + 1]);
+              hits += x >= cx - 4 * s && x <= cx + box_w + 4 * s && y >= cy - 4 * s && y <= cy + box_h + 4 * s;
+            }
+          }
+        }
+        if (best < 0 || hits < best) {
+          best = hits;
+          bx = cx;
+          by = cy;
+        }
+      }
       fill_rect(img, bx, by, bx + box_w, by + box_h, Rgb{255, 255, 255}, 0.88);
       fill_rect(img, bx, by, bx + box_w, by + 1, Rgb{190, 190, 196});
       fill_rect(img, bx, by + box_h - 1, bx + box_w, by + box_h, Rgb{190, 190, 196});

@@ -192,3 +192,46 @@ TEST_CASE("plot is deterministic and writes a readable PPM", "[unit]") {
   CHECK(c.rgb == a.rgb);
   std::filesystem::remove(path);
 }
+
+TEST_CASE("legend lists the labelled series in their colours", "[unit]") {
+  PlotSpec spec;
+  spec.title = "Martin & Moyce (1952): surge front";
+  spec.x_label = "T = t sqrt(2g/a)";
+  spec.y_label = "Z = z/a";
+  PlotSeries exp;
+  exp.label = "experiment";
+  exp.line = false;
+  exp.marker = Marker::square;
+  exp.color = Rgb{20, 20, 20};
+  PlotSeries sim;
+  sim.label = "simulation";
+  sim.color = Rgb{0, 150, 60};
+  for (int k = 0; k <= 10; ++k) {
+    exp.x.push_back(0.3 * k);
+    exp.y.push_back(1.0 + 0.25 * k * k * 0.1);
+    sim.x.push_back(0.3 * k);
+    sim.y.push_back(1.0 + 0.24 * k * k * 0.1);
+  }
+  PlotSeries unlisted;
+  unlisted.x = {0.0, 3.0};
+  unlisted.y = {1.0, 1.0};
+  unlisted.color = Rgb{250, 0, 250};
+  spec.series = {exp, sim, unlisted};
+  const Image img = plot_lines(spec);
+  keep_picture(img, "plot_legend");
+  const PlotAxes ax = plot_axes(spec);
+  // the legend avoids the data, so it sits top-left here: count series colours there
+  int green = 0, magenta_in_legend = 0;
+  const int x0 = ax.left, y1 = ax.top + (ax.bottom - ax.top) / 3;
+  const int x1 = ax.left + (ax.right - ax.left) / 2;
+  for (int y = ax.top; y < y1; ++y)
+    for (int x = x0; x < x1; ++x) {
+      green += color_distance(img.get(x, y), Rgb{0, 150, 60}) < 40;
+      magenta_in_legend += color_distance(img.get(x, y), Rgb{250, 0, 250}) < 40;
+    }
+  CHECK(green > 10);
+  CHECK(magenta_in_legend == 0);
+  spec.legend = false;
+  const Image bare = plot_lines(spec);
+  CHECK(bare.rgb != img.rgb);
+}

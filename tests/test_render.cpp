@@ -290,6 +290,51 @@ TEST_CASE("2D: the time is written in a corner", "[unit][render]") {
   CHECK(diff_elsewhere == 0);
 }
 
+TEST_CASE("2D: a colour bar with its range is drawn only when colouring by a field", "[unit][render]") {
+  TestScene<2> scene(32);
+  RenderSpec spec;
+  spec.size = {320, 320};
+  const Map2 m(320, 320);
+  // the top-right quarter of the domain's top band, away from the solid
+  const auto ink_and_ramp = [&](const Image& img, int& ink, int& ramp) {
+    ink = ramp = 0;
+    for (int j = m.j(1.0); j < m.j(1.0) + 30; ++j)
+      for (int i = m.i(0.5); i < m.i(1.0); ++i) {
+        const Rgb c = img.get(i, j);
+        ink += brightness(c) < 150;
+        ramp += color_distance(c, colormap_viridis(1.0)) < 40;
+      }
+  };
+  spec.color_by = "speed";
+  int ink = 0, ramp = 0;
+  ink_and_ramp(render_frame<2>(scene.view, spec), ink, ramp);
+  CHECK(ink > 30);   // digits of the range and the caption
+  CHECK(ramp > 5);   // the yellow end of the ramp
+  spec.color_by = "none";
+  ink_and_ramp(render_frame<2>(scene.view, spec), ink, ramp);
+  CHECK(ink == 0);
+  CHECK(ramp == 0);
+}
+
+TEST_CASE("renderers survive an empty view and a non-finite level set", "[unit][render]") {
+  RenderSpec spec;
+  spec.size = {64, 48};
+  const Image e2 = render_frame<2>(RenderView<2>{}, spec);
+  const Image e3 = render_frame<3>(RenderView<3>{}, spec);
+  CHECK(e2.width == 64);
+  CHECK(e2.height == 48);
+  CHECK(e3.width == 64);
+  CHECK(e3.height == 48);
+  TestScene<2> s2(8);
+  TestScene<3> s3(8);
+  s2.phi.setConstant(std::nan(""));
+  s3.phi.setConstant(std::nan(""));
+  const Image n2 = render_frame<2>(s2.view, spec);
+  const Image n3 = render_frame<3>(s3.view, spec);
+  CHECK(n2.rgb.size() == 64u * 48u * 3u);
+  CHECK(n3.rgb.size() == 64u * 48u * 3u);
+}
+
 // --- 3D ---------------------------------------------------------------------------------------------
 
 namespace {
