@@ -109,7 +109,8 @@ Rgb plot_palette(int index);
 /// The layout and data ranges plot_lines uses for spec.
 PlotAxes plot_axes(const PlotSpec& spec);
 /// Draws the plot: frame, ticks with numeric labels, optional grid, the series (lines and/or
-/// markers), title, axis labels and legend.
+/// markers), title, axis labels and legend (in the corner of the data rectangle that covers the
+/// fewest data samples).
 Image plot_lines(const PlotSpec& spec);
 /// plot_lines(spec).write_ppm(path).
 void write_plot(const PlotSpec& spec, const std::string& path);
