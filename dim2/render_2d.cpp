@@ -147,14 +147,25 @@ Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
 
   // the level set at every pixel centre inside the domain (+inf outside it or without liquid)
   const size_t npx = static_cast<size_t>(width) * height;
+  // The liquid is drawn wetting the walls: within 3/4 dx of a wall face the level set is read
+  // 3/4 dx inside (particles are kept a little clear of walls, which would otherwise show as a
+  // hairline gap between the liquid and the wall).
+  Vec<2> wet_lo = v.lo, wet_hi = v.hi;
+  for (int a = 0; a < 2; ++a) {
+    if (view.boundary[2 * a] == BoundaryType::wall) wet_lo[a] += 0.75 * dx;
+    if (view.boundary[2 * a + 1] == BoundaryType::wall) wet_hi[a] -= 0.75 * dx;
+  }
   std::vector<double> phi_px(npx, std::numeric_limits<double>::infinity());
   if (has_phi) {
 #pragma omp parallel for schedule(dynamic, 8)
     for (int j = 0; j < height; ++j)
       for (int i = 0; i < width; ++i)
-        if (v.inside(i, j) > 0.0)
-          phi_px[static_cast<size_t>(j) * width + i] = lattice.interpolate(*view.liquid_phi, v.world(i + 0.5, j + 0.5));
+        if (v.inside(i, j) > 0.0) {
+          const Vec<2> x = v.world(i + 0.5, j + 0.5).cwiseMax(wet_lo).cwiseMin(wet_hi);
+          phi_px[static_cast<size_t>(j) * width + i] = lattice.interpolate(*view.liquid_phi, x);
+        }
   }
+  const auto coverage = [&](size_t k) { return std::clamp(0.5 - phi_px[k] / pixel, 0.0, 1.0); };
   // depth below the free surface straight above, in pixels (water darkens with depth)
   std::vector<float> depth_px(npx, 0.0f);
 #pragma omp parallel for schedule(static)
@@ -188,8 +199,15 @@ Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
         // body colour: plain water darkening with depth, or the colour field
         Rgb body = scale.active ? scale.color(field_at(view, spec.color_by, x))
                                 : mix(kWater, kWaterDeep, smoothstep(0.0, deep, depth_px[k]));
-        // a thin darker rim one pixel inside the surface makes the interface crisp
-        const double rim = std::clamp(1.0 - std::abs(-phi / pixel - 0.8) / 0.9, 0.0, 1.0);
+        // a thin darker rim on the liquid's edge pixels makes the interface crisp; edges are found
+        // in the picture (a neighbour inside the domain with less liquid), because a level set
+        // rebuilt from particles is shallow in the bulk and its value alone cannot tell
+        double least = cover;
+        const int ni[4] = {i - 1, i + 1, i, i}, nj[4] = {j, j, j - 1, j + 1};
+        for (int q = 0; q < 4; ++q)
+          if (ni[q] >= 0 && nj[q] >= 0 && ni[q] < width && nj[q] < height && v.inside(ni[q], nj[q]) >= 1.0)
+            least = std::min(least, coverage(static_cast<size_t>(nj[q]) * width + ni[q]));
+        const double rim = cover - least;
         body = mix(body, scaled(body, 0.62), 0.8 * rim);
         c = mix(c, body, cover);
       }
@@ -197,14 +215,22 @@ Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
     }
   }
 
-  // particles: faint dots where the level set is thin (spray, sheets), none in the bulk
+  // particles: light dots where the liquid is thin (a sheet or filament under 3 dx across, or
+  // spray outside the level set), none in the bulk. A level set rebuilt from particles is only a
+  // distance near its surface (it is about -dx/3 all through the bulk), so thinness is judged by
+  // looking 1.5 dx to both sides of the particle along four directions.
   if (view.particles && has_phi) {
     const double r = std::clamp(0.14 * dx * v.scale, 0.6, 3.0);
+    const double reach = 1.5 * dx, c = std::sqrt(0.5);
+    const Vec<2> dirs[4] = {Vec<2>(1, 0), Vec<2>(0, 1), Vec<2>(c, c), Vec<2>(c, -c)};
     for (const Vec<2>& p : *view.particles) {
+      if (!grid.domain_box().contains(p)) continue;
       const double phi = lattice.interpolate(*view.liquid_phi, p);
-      const double a = 0.75 * std::clamp((phi + 1.5 * dx) / (1.5 * dx), 0.0, 1.0);
-      if (a <= 0.0 || !grid.domain_box().contains(p)) continue;
-      fill_disk(img, v.px(p[0]), v.py(p[1]), r, phi > 0.0 ? kWater : Rgb{178, 218, 250}, a);
+      bool thin = phi > 0.0;
+      for (int d = 0; d < 4 && !thin; ++d)
+        thin = lattice.interpolate(*view.liquid_phi, p + reach * dirs[d]) > 0.0 &&
+               lattice.interpolate(*view.liquid_phi, p - reach * dirs[d]) > 0.0;
+      if (thin) fill_disk(img, v.px(p[0]), v.py(p[1]), r, phi > 0.0 ? kWater : Rgb{178, 218, 250}, phi > 0.0 ? 0.8 : 0.5);
     }
   }
 

@@ -142,7 +142,16 @@ struct LiquidField {
   double inv_h = 1.0;
   V3 lo, hi;
 
-  double sample(const V3& x) const {
+  // the liquid wets the walls: inside the domain within 3/4 dx of a wall face, the level set is
+  // read 3/4 dx inside (particles are kept a little clear of walls)
+  V3 dom_lo, dom_hi, wet_lo, wet_hi;
+
+  double sample(const V3& x0) const {
+    V3 x = x0;
+    for (int a = 0; a < 3; ++a) {
+      if (x[a] >= dom_lo[a] && x[a] < wet_lo[a]) x[a] = wet_lo[a];
+      if (x[a] <= dom_hi[a] && x[a] > wet_hi[a]) x[a] = wet_hi[a];
+    }
     const V3 c = x.cwiseMax(lo).cwiseMin(hi);
     const double outside = (x - c).norm();
     const double v = trilinear(c);
@@ -402,6 +411,12 @@ Image render_frame<3>(const RenderView<3>& view, const RenderSpec& spec) {
     sc.liquid.inv_h = 1.0 / lattice.spacing;
     sc.liquid.lo = lattice.origin;
     sc.liquid.hi = lattice.position(lattice.dims - VecI<3>::Ones());
+    sc.liquid.dom_lo = sc.liquid.wet_lo = domain.min();
+    sc.liquid.dom_hi = sc.liquid.wet_hi = domain.max();
+    for (int a = 0; a < 3; ++a) {
+      if (r.wall[2 * a]) sc.liquid.wet_lo[a] += 0.75 * grid.dx();
+      if (r.wall[2 * a + 1]) sc.liquid.wet_hi[a] -= 0.75 * grid.dx();
+    }
   }
   const Vec<3> grow = 0.25 * domain.sizes();
   const Box<3> limit(domain.min() - grow, domain.max() + grow);

@@ -260,6 +260,31 @@ TEST_CASE("2D: particles show where the liquid is thin", "[unit][render]") {
   CHECK(with.get(m.i(0.5), m.j(0.4)) == without.get(m.i(0.5), m.j(0.4)));
 }
 
+TEST_CASE("2D: particles inside a thin sheet are drawn, inside the bulk not", "[unit][render]") {
+  TestScene<2> scene(32);
+  // a horizontal sheet 0.04 thick (1.3 dx) at y = 0.8, beside the ball; the level set in the
+  // ball is shallow, as a particle reconstruction gives (-dx/3 throughout)
+  const SampleLattice<2> lattice = half_lattice(scene.grid);
+  for (int k = 0; k < lattice.size(); ++k) {
+    const Vec<2> x = lattice.position(lattice.coord(k));
+    const double sheet = std::max(std::abs(x[1] - 0.8) - 0.02, std::abs(x[0] - 0.35) - 0.2);
+    scene.phi[k] = std::min(std::max(scene.phi[k], -0.01), sheet);
+  }
+  scene.particles = {Vec<2>(0.3, 0.8), Vec<2>(0.5, 0.4)};
+  scene.view.particles = &scene.particles;
+  scene.view.solids.clear();
+  RenderSpec spec;
+  spec.size = {256, 256};
+  spec.color_by = "none";
+  const Map2 m(256, 256);
+  const Image with = render_frame<2>(scene.view, spec);
+  keep_picture(with, "render2d_sheet");
+  scene.view.particles = nullptr;
+  const Image without = render_frame<2>(scene.view, spec);
+  CHECK(color_distance(with.get(m.i(0.3), m.j(0.8)), without.get(m.i(0.3), m.j(0.8))) > 60);
+  CHECK(with.get(m.i(0.5), m.j(0.4)) == without.get(m.i(0.5), m.j(0.4)));
+}
+
 TEST_CASE("2D: deterministic, and the same for 1 and 2 threads", "[unit][render]") {
   TestScene<2> scene(32);
   RenderSpec spec;
