@@ -18,10 +18,16 @@ constexpr double kWallMargin = 0.01;
 /// Seeding jitter: width of the jitter window as a fraction of the sub-cell width, so the
 /// stratified sub-lattice keeps a minimum spacing of half a sub-cell.
 constexpr double kSeedJitter = 0.5;
-/// Position correction: relaxation time (s) and the per-step under-relaxation of the Jacobi
-/// projection of the minimum-distance constraints (docs/particles.md).
+/// Position correction (docs/particles.md): kernel support in rest spacings, relaxation time (s),
+/// under-relaxation of the Jacobi step, tolerated compression before a particle is corrected,
+/// and the largest step per call in rest spacings.
+constexpr double kCorrectionSupport = 2.0;
 constexpr double kCorrectionTime = 0.02;
 constexpr double kCorrectionRelaxation = 0.5;
+constexpr double kCorrectionSlack = 0.02;
+constexpr double kCorrectionMaxStep = 0.25;
+/// Pairs closer than this many rest spacings are pushed apart regardless of density.
+constexpr double kCorrectionMinDistance = 0.5;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
 
@@ -451,8 +457,43 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
 
 // --- position correction -------------------------------------------------------------------------
 
-/// Jacobi projection of pairwise minimum-distance constraints |x_i - x_j| >= (s_i + s_j) / 2
-/// (s = (m / rho)^(1/Dim), the rest spacing), relaxed by min(1, dt / T) (docs/particles.md).
+namespace {
+
+/// Density kernel of the position correction, (1 - q^2)^3 for q = r / h < 1 (poly6 shape).
+double correction_kernel(double q2) {
+  if (q2 >= 1.0) return 0.0;
+  const double t = 1.0 - q2;
+  return t * t * t;
+}
+
+/// Kernel sum of a particle inside an infinite uniform lattice of spacing s (the rest number
+/// density n0; h / s = kCorrectionSupport). Scale invariant, so a constant per dimension.
+template <int Dim>
+double lattice_number_density() {
+  const int reach = static_cast<int>(std::ceil(kCorrectionSupport));
+  const int side = 2 * reach + 1;
+  double sum = 0.0;
+  for (int k = 0; k < int_pow(side, Dim); ++k) {
+    const VecI<Dim> off = decode_index<Dim>(k, VecI<Dim>::Constant(side)) -
+                          VecI<Dim>::Constant(reach);
+    const double r2 = off.template cast<double>().squaredNorm();
+    sum += correction_kernel(r2 / (kCorrectionSupport * kCorrectionSupport));
+  }
+  return sum;
+}
+
+}  // namespace
+
+/// Unilateral position-based density constraint (Macklin & Mueller 2013, applied as a position
+/// correction as in Takahashi & Lin 2019): with number density n_i = sum_j W(|x_i - x_j| / h),
+/// h = kCorrectionSupport s (s = (m / rho)^(1/Dim), the rest spacing), and the constraint
+/// C_i = n_i / n0 - 1 (n0 the number density of a uniform lattice of spacing s), only particles
+/// with C_i > kCorrectionSlack are corrected:
+///   lambda_i = -(C_i - slack) / (sum_k |grad_k C_i|^2 + eps),
+///   dx_i = alpha / n0 sum_j (lambda_i + lambda_j) grad W_spiky(x_i - x_j),
+/// one Jacobi iteration per call, alpha = kCorrectionRelaxation min(1, dt / kCorrectionTime).
+/// Compressed clusters spread towards emptier neighbours; a uniform lattice (C = 0) and free
+/// surfaces (C < 0) do not move, so the correction never inflates the liquid.
 template <int Dim>
 void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
                        const SolidField<Dim>& solids,
@@ -461,20 +502,24 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   if (np < 2 || !(dt > 0.0)) return;
   const double dx = grid.dx();
   const double alpha = kCorrectionRelaxation * std::min(1.0, dt / kCorrectionTime);
+  const double n0 = lattice_number_density<Dim>();
 
-  // rest spacings
-  std::vector<double> spacing(np);
-  double max_spacing = 0.0;
+  // kernel supports h_i from the rest spacings
+  std::vector<double> support(np);
+  double max_support = 0.0;
   for (long p = 0; p < np; ++p) {
-    spacing[p] = particle_spacing(particles, p, dx);
-    max_spacing = std::max(max_spacing, spacing[p]);
+    support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
+    max_support = std::max(max_support, support[p]);
   }
 
-  // spatial hash: particles bucketed by grid cell (counting sort, stable in particle order)
+  // spatial hash: particles bucketed by grid cell (counting sort, stable in particle order), with
+  // the wrapped positions stored in bucket order for locality
   const int nc = grid.num_cells();
   std::vector<int> bucket(np), start(nc + 1, 0), order(np);
+  std::vector<Vec<Dim>> xw(np), xs(np);
   for (long p = 0; p < np; ++p) {
-    bucket[p] = grid.cell_index(grid.cell_containing(grid.wrap_position(particles.x[p])));
+    xw[p] = grid.wrap_position(particles.x[p]);
+    bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
     ++start[bucket[p] + 1];
   }
   for (int c = 0; c < nc; ++c) start[c + 1] += start[c];
@@ -482,51 +527,145 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     std::vector<int> fill(start.begin(), start.end() - 1);
     for (long p = 0; p < np; ++p) order[fill[bucket[p]]++] = static_cast<int>(p);
   }
-  const int ring = std::max(1, static_cast<int>(std::ceil(max_spacing / dx)));
+  for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
+  const int ring = std::max(1, static_cast<int>(std::ceil(max_support / dx)));
   const int side = 2 * ring + 1;
   const int neighbour_cells = int_pow(side, Dim);
+  // a periodic axis shorter than the stencil maps two offsets to one cell: deduplicate then
+  bool dedup = false;
+  bool any_periodic = false;
+  for (int a = 0; a < Dim; ++a) {
+    dedup = dedup || (grid.periodic(a) && grid.cells()[a] < side);
+    any_periodic = any_periodic || grid.periodic(a);
+  }
 
-  // displacements from the old positions (Jacobi, so the result is order independent)
-  std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
-#pragma omp parallel for schedule(dynamic, 256)
-  for (long p = 0; p < np; ++p) {
-    const Vec<Dim> xi = grid.wrap_position(particles.x[p]);
-    const VecI<Dim> ci = grid.cell_containing(xi);
-    std::vector<int> visited;
-    visited.reserve(neighbour_cells);
-    Vec<Dim> push = Vec<Dim>::Zero();
+  // the bucket slots of the cells around `cell` (each cell once)
+  auto gather_candidates = [&](int cell, std::vector<int>& cand, std::vector<int>& cells) {
+    cand.clear();
+    cells.clear();
+    const VecI<Dim> ci = grid.cell_coord(cell);
     for (int k = 0; k < neighbour_cells; ++k) {
-      const VecI<Dim> off = decode_index<Dim>(k, VecI<Dim>::Constant(side));
-      const VecI<Dim> cj = ci + off - VecI<Dim>::Constant(ring);
-      const int cell = grid.cell_index_or_outside(cj);
-      if (cell < 0) continue;
-      // a small periodic domain can map two offsets to one cell
-      if (std::find(visited.begin(), visited.end(), cell) != visited.end()) continue;
-      visited.push_back(cell);
-      for (int s = start[cell]; s < start[cell + 1]; ++s) {
-        const int j = order[s];
-        if (j == p) continue;
-        const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xi - particles.x[j]));
-        const double rest = 0.5 * (spacing[p] + spacing[j]);
-        const double r = d.norm();
-        if (r >= rest) continue;
-        Vec<Dim> dir;
-        if (r > 1e-9 * rest) {
-          dir = d / r;
-        } else {
-          // coincident pair: separate along x, the lower index to the minus side
-          dir = Vec<Dim>::Zero();
-          dir[0] = p < j ? -1.0 : 1.0;
-        }
-        // each particle of a violating pair takes half of the overlap
-        push += 0.5 * (rest - r) * dir;
+      const VecI<Dim> cj =
+          ci + decode_index<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring);
+      const int c = grid.cell_index_or_outside(cj);
+      if (c < 0) continue;
+      if (dedup) {
+        if (std::find(cells.begin(), cells.end(), c) != cells.end()) continue;
       }
+      cells.push_back(c);
+      for (int q = start[c]; q < start[c + 1]; ++q) cand.push_back(q);
     }
+  };
+  // visits every neighbour j != p within the support of p (minimum image on periodic axes)
+  auto for_neighbours = [&](int p, const std::vector<int>& cand, auto&& visit) {
+    const double h = support[p];
+    const Vec<Dim> xp = xw[p];
+    for (int q : cand) {
+      Vec<Dim> d = xp - xs[q];
+      if (any_periodic) d = periodic_difference(grid, d);
+      const double r2 = d.squaredNorm();
+      if (r2 >= h * h) continue;
+      const int j = order[q];
+      if (j == p) continue;
+      visit(j, d, std::sqrt(r2), h);
+    }
+  };
+
+  // spiky gradient grad_{x_i} W(x_i - x_j) = -3 (1 - r/h)^2 / h * (x_i - x_j) / r
+  auto spiky_gradient = [](long p, long j, const Vec<Dim>& d, double r, double h) {
+    Vec<Dim> dir;
+    if (r > 1e-9 * h) {
+      dir = d / r;
+    } else {
+      // coincident pair: a fixed direction, opposite for the two particles
+      dir = Vec<Dim>::Zero();
+      dir[0] = p < j ? 1.0 : -1.0;
+    }
+    const double t = 1.0 - r / h;
+    return Vec<Dim>(-3.0 * t * t / h * dir);
+  };
+
+  // pass 1: constraint values and multipliers (zero unless the particle is compressed)
+  std::vector<double> lambda(np, 0.0);
+  std::vector<char> close_pair(np, 0);
+  long compressed = 0;
+#pragma omp parallel reduction(+ : compressed)
+  {
+    std::vector<int> cand, cells;
+#pragma omp for schedule(dynamic, 16)
+  for (int cell = 0; cell < nc; ++cell) {
+    if (start[cell] == start[cell + 1]) continue;
+    gather_candidates(cell, cand, cells);
+  for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+    const int p = order[slot];
+    double n = 1.0;  // the particle itself
+    Vec<Dim> grad_self = Vec<Dim>::Zero();
+    double grad_others = 0.0;
+    const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
+    for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
+      if (r < min_distance) close_pair[p] = 1;
+      n += correction_kernel(r * r / (h * h));
+      const Vec<Dim> g = spiky_gradient(p, j, d, r, h) / n0;
+      grad_self += g;
+      grad_others += g.squaredNorm();
+    });
+    const double c = n / n0 - 1.0 - kCorrectionSlack;
+    if (c <= 0.0) continue;
+    const double h = support[p];
+    // eps regularises the denominator (units 1/length^2, scaled by h)
+    const double eps = 1e-6 / (h * h);
+    lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
+    ++compressed;
+  }
+  }
+  }
+
+  if (compressed == 0 && std::find(close_pair.begin(), close_pair.end(), 1) == close_pair.end())
+    return;
+
+  // cells holding a compressed particle or a close pair: only their neighbourhoods move
+  std::vector<char> active_cell(nc, 0);
+  for (long p = 0; p < np; ++p)
+    if (lambda[p] != 0.0 || close_pair[p]) active_cell[bucket[p]] = 1;
+
+  // pass 2: displacements from the multipliers (Jacobi, so the result is order independent)
+  std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
+#pragma omp parallel
+  {
+    std::vector<int> cand, cells;
+#pragma omp for schedule(dynamic, 16)
+  for (int cell = 0; cell < nc; ++cell) {
+    if (start[cell] == start[cell + 1]) continue;
+    gather_candidates(cell, cand, cells);
+    bool near_active = false;
+    for (int c : cells) near_active = near_active || active_cell[c];
+    if (!near_active) continue;
+  for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+    const int p = order[slot];
+    Vec<Dim> push = Vec<Dim>::Zero();
+    const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
+    for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
+      // density constraints
+      const double l = lambda[p] + lambda[j];
+      if (l != 0.0) push += l * spiky_gradient(p, j, d, r, h) / n0;
+      // minimum distance: each particle of a close pair takes half of the overlap
+      if (r < min_distance) {
+        Vec<Dim> dir = Vec<Dim>::Zero();
+        if (r > 1e-9 * h)
+          dir = d / r;
+        else
+          dir[0] = p < j ? -1.0 : 1.0;
+        push += 0.5 * (min_distance - r) * dir;
+      }
+    });
     push *= alpha;
-    // never more than half a spacing per step
+    // never more than kCorrectionMaxStep spacings per step
+    const double cap = kCorrectionMaxStep * support[p] / kCorrectionSupport;
     const double len = push.norm();
-    if (len > 0.5 * spacing[p]) push *= 0.5 * spacing[p] / len;
+    if (len > cap) push *= cap / len;
     delta[p] = push;
+  }
+  }
   }
 
   // apply, then keep clear of solids and walls

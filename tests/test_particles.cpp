@@ -1,0 +1,602 @@
+// Tests of particle seeding, advection (RK2, solids, walls, periodic and open faces) and
+// position correction.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+
+#include <omp.h>
+
+#include "reference/particles.hpp"
+
+using namespace monolith;
+
+namespace {
+
+/// A ball (disk in 2D) SDF, local to the test so it depends on nothing but the particle code.
+template <int Dim>
+class TestBall : public Shape<Dim> {
+ public:
+  TestBall(const Vec<Dim>& c, double r) : c_(c), r_(r) {}
+  double distance(const Vec<Dim>& x) const override { return (x - c_).norm() - r_; }
+  Vec<Dim> gradient(const Vec<Dim>& x) const override { return (x - c_).normalized(); }
+  Box<Dim> bounds() const override {
+    return Box<Dim>(c_ - Vec<Dim>::Constant(r_), c_ + Vec<Dim>::Constant(r_));
+  }
+
+ private:
+  Vec<Dim> c_;
+  double r_;
+};
+
+/// An axis-aligned box SDF.
+template <int Dim>
+class TestBox : public Shape<Dim> {
+ public:
+  TestBox(const Vec<Dim>& c, const Vec<Dim>& half) : c_(c), half_(half) {}
+  double distance(const Vec<Dim>& x) const override {
+    const Vec<Dim> q = (x - c_).cwiseAbs() - half_;
+    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+  }
+  Box<Dim> bounds() const override { return Box<Dim>(c_ - half_, c_ + half_); }
+
+ private:
+  Vec<Dim> c_, half_;
+};
+
+/// A solid ball as a SolidField (distance < 0 inside the solid).
+template <int Dim>
+SolidField<Dim> solid_ball(const Vec<Dim>& c, double r) {
+  SolidField<Dim> s;
+  s.distance = [c, r](const Vec<Dim>& x) { return (x - c).norm() - r; };
+  s.gradient = [c](const Vec<Dim>& x) { return Vec<Dim>((x - c).normalized()); };
+  return s;
+}
+
+template <int Dim>
+LiquidSpec liquid_spec(const Vec<Dim>& centre, double density = 1000.0) {
+  LiquidSpec spec;
+  spec.name = "water";
+  spec.density = density;
+  spec.shape.type = "sphere";
+  spec.shape.center.assign(centre.data(), centre.data() + Dim);
+  return spec;
+}
+
+template <int Dim>
+MacGrid<Dim> unit_grid(int n, bool periodic_x = false) {
+  std::array<bool, Dim> periodic{};
+  periodic[0] = periodic_x;
+  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+}
+
+template <int Dim>
+std::array<BoundaryType, 2 * Dim> walls() {
+  std::array<BoundaryType, 2 * Dim> b;
+  b.fill(BoundaryType::wall);
+  return b;
+}
+
+template <int Dim>
+double ball_volume(double r) {
+  return Dim == 2 ? M_PI * r * r : 4.0 / 3.0 * M_PI * r * r * r;
+}
+
+/// Face field of the velocity function f sampled at the face centres.
+template <int Dim, class F>
+VectorX sample_faces(const MacGrid<Dim>& grid, F f) {
+  VectorX u(grid.num_faces());
+  for (int i = 0; i < grid.num_faces(); ++i) {
+    const auto [axis, coord] = grid.face_coord(i);
+    u[i] = f(grid.face_center(axis, coord))[axis];
+  }
+  return u;
+}
+
+/// Variance of the number of particles per grid cell over the cells of `region`.
+template <int Dim>
+double count_variance(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                      const Box<Dim>& region) {
+  std::vector<int> count(grid.num_cells(), 0);
+  for (const auto& x : particles.x) ++count[grid.cell_index(grid.cell_containing(x))];
+  double sum = 0.0, sum2 = 0.0;
+  int n = 0;
+  for (int c = 0; c < grid.num_cells(); ++c) {
+    if (!region.contains(grid.cell_center(grid.cell_coord(c)))) continue;
+    sum += count[c];
+    sum2 += double(count[c]) * count[c];
+    ++n;
+  }
+  const double mean = sum / n;
+  return sum2 / n - mean * mean;
+}
+
+/// Particles on the perfect sub-lattice (sub per axis per cell) inside shape.
+template <int Dim>
+Particles<Dim> lattice_particles(const MacGrid<Dim>& grid, const Shape<Dim>& shape, int sub) {
+  Particles<Dim> p;
+  const int n = grid.cells()[0] * sub;
+  const int total = static_cast<int>(std::pow(n, Dim));
+  for (int k = 0; k < total; ++k) {
+    Vec<Dim> x;
+    int r = k;
+    for (int a = 0; a < Dim; ++a) {
+      x[a] = grid.origin()[a] + (r % n + 0.5) * grid.dx() / sub;
+      r /= n;
+    }
+    if (shape.distance(x) >= 0.0) continue;
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(1000.0 * grid.cell_volume() / std::pow(sub, Dim));
+    p.density.push_back(1000.0);
+    p.liquid.push_back(0);
+  }
+  return p;
+}
+
+}  // namespace
+
+// --- seeding -------------------------------------------------------------------------------------
+
+namespace {
+
+template <int Dim>
+void check_seeding() {
+  const int n = Dim == 2 ? 40 : 24;
+  const int per_cell = Dim == 2 ? 4 : 8;
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const double dx = grid.dx();
+  const Vec<Dim> centre = Vec<Dim>::Constant(0.5);
+  const double radius = 0.3;
+  auto ball = std::make_shared<TestBall<Dim>>(centre, radius);
+  LiquidSpec spec = liquid_spec<Dim>(centre, 900.0);
+
+  // count close to per_cell * volume / dx^Dim
+  const Particles<Dim> p = seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{},
+                                               per_cell, 1u);
+  const double expected = per_cell * ball_volume<Dim>(radius) / grid.cell_volume();
+  INFO("dim " << Dim << ": seeded " << p.size() << ", expected " << expected);
+  CHECK(std::abs(p.size() / expected - 1.0) < 0.02);
+  // every particle inside the shape, with the right mass, density and liquid index
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    REQUIRE(ball->distance(p.x[i]) < 0.0);
+    REQUIRE(p.mass[i] == Approx(900.0 * grid.cell_volume() / per_cell).epsilon(1e-14));
+    REQUIRE(p.density[i] == 900.0);
+    REQUIRE(p.liquid[i] == 0);
+  }
+  // stratified: exactly per_cell particles in every cell well inside the shape
+  std::vector<int> count(grid.num_cells(), 0);
+  for (const auto& x : p.x) ++count[grid.cell_index(grid.cell_containing(x))];
+  for (int c = 0; c < grid.num_cells(); ++c)
+    if (ball->distance(grid.cell_center(grid.cell_coord(c))) < -dx) REQUIRE(count[c] == per_cell);
+
+  // deterministic for a seed, different for another
+  const Particles<Dim> same = seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{},
+                                                  per_cell, 1u);
+  const Particles<Dim> other = seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{},
+                                                   per_cell, 2u);
+  REQUIRE(same.size() == p.size());
+  bool identical = true;
+  for (std::size_t i = 0; i < p.size(); ++i) identical = identical && same.x[i] == p.x[i];
+  CHECK(identical);
+  bool differs = other.size() != p.size();
+  for (std::size_t i = 0; i < std::min(p.size(), other.size()); ++i)
+    differs = differs || other.x[i] != p.x[i];
+  CHECK(differs);
+
+  // a solid ball overlapping the liquid: nothing inside it or within 0.05 dx of it
+  const SolidField<Dim> solid = solid_ball<Dim>(Vec<Dim>::Constant(0.35), 0.15);
+  const Particles<Dim> q = seed_particles<Dim>(grid, {spec}, {ball}, solid, per_cell, 1u);
+  CHECK(q.size() < p.size());
+  for (const auto& x : q.x) REQUIRE(solid.distance(x) > 0.05 * dx);
+}
+
+}  // namespace
+
+TEST_CASE("seeding: count, stratification, determinism, solids", "[unit]") {
+  check_seeding<2>();
+  check_seeding<3>();
+}
+
+TEST_CASE("seeding: velocity, rotation and APIC matrix of a liquid", "[unit]") {
+  const MacGrid<2> grid2 = unit_grid<2>(20);
+  LiquidSpec spec2 = liquid_spec<2>(Vec<2>(0.5, 0.4));
+  spec2.velocity = {0.3, -0.2};
+  spec2.angular_velocity = {1.5};
+  auto disk = std::make_shared<TestBall<2>>(Vec<2>(0.5, 0.4), 0.2);
+  const Particles<2> p2 = seed_particles<2>(grid2, {spec2}, {disk}, SolidField<2>{}, 4, 3u);
+  REQUIRE(p2.size() > 0);
+  for (std::size_t i = 0; i < p2.size(); ++i) {
+    const Vec<2> r = p2.x[i] - Vec<2>(0.5, 0.4);
+    REQUIRE((p2.v[i] - Vec<2>(0.3 - 1.5 * r[1], -0.2 + 1.5 * r[0])).norm() < 1e-14);
+    REQUIRE(p2.c[i](0, 1) == -1.5);
+    REQUIRE(p2.c[i](1, 0) == 1.5);
+    REQUIRE(p2.c[i](0, 0) == 0.0);
+  }
+
+  const MacGrid<3> grid3 = unit_grid<3>(12);
+  LiquidSpec spec3 = liquid_spec<3>(Vec<3>(0.5, 0.5, 0.5));
+  spec3.velocity = {0.0, 1.0, 0.0};
+  spec3.angular_velocity = {0.2, -0.4, 0.9};
+  auto ball = std::make_shared<TestBall<3>>(Vec<3>(0.5, 0.5, 0.5), 0.3);
+  const Particles<3> p3 = seed_particles<3>(grid3, {spec3}, {ball}, SolidField<3>{}, 8, 3u);
+  const Vec<3> omega(0.2, -0.4, 0.9);
+  REQUIRE(p3.size() > 0);
+  for (std::size_t i = 0; i < p3.size(); ++i) {
+    const Vec<3> r = p3.x[i] - Vec<3>(0.5, 0.5, 0.5);
+    REQUIRE((p3.v[i] - Vec<3>(0.0, 1.0, 0.0) - omega.cross(r)).norm() < 1e-14);
+    // c r = omega x r for any r
+    REQUIRE((p3.c[i] * r - omega.cross(r)).norm() < 1e-14);
+  }
+}
+
+TEST_CASE("seeding: overlapping liquids, non-square per_cell, shapes without a centre",
+          "[unit]") {
+  const MacGrid<2> grid = unit_grid<2>(32);
+  auto a = std::make_shared<TestBall<2>>(Vec<2>(0.4, 0.5), 0.2);
+  auto b = std::make_shared<TestBall<2>>(Vec<2>(0.6, 0.5), 0.2);
+  LiquidSpec la = liquid_spec<2>(Vec<2>(0.4, 0.5), 1000.0), lb = liquid_spec<2>(Vec<2>(0.6, 0.5), 800.0);
+  // a shape without `center`: the rotation is about the centre of its bounds
+  lb.shape.type = "polygon";
+  lb.shape.center.clear();
+  lb.angular_velocity = {2.0};
+  const Particles<2> p = seed_particles<2>(grid, {la, lb}, {a, b}, SolidField<2>{}, 5, 9u);
+  // the union is seeded once: overlapping points belong to the first liquid
+  const double d = 0.1;  // half the centre distance
+  const double lens = 2.0 * (0.04 * std::acos(d / 0.2) - d * std::sqrt(0.04 - d * d));
+  const double union_area = 2.0 * M_PI * 0.04 - lens;
+  const double expected = 5 * union_area / grid.cell_volume();
+  INFO("seeded " << p.size() << ", expected " << expected);
+  CHECK(std::abs(p.size() / expected - 1.0) < 0.02);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.liquid[i] == 1) {
+      REQUIRE(a->distance(p.x[i]) >= 0.0);
+      REQUIRE(p.density[i] == 800.0);
+      const Vec<2> r = p.x[i] - Vec<2>(0.6, 0.5);
+      REQUIRE((p.v[i] - Vec<2>(-2.0 * r[1], 2.0 * r[0])).norm() < 1e-12);
+    }
+  }
+  // a shape crossing the domain boundary is seeded only inside the domain
+  auto edge = std::make_shared<TestBox<2>>(Vec<2>(0.0, 0.5), Vec<2>(0.25, 0.25));
+  const Particles<2> q = seed_particles<2>(grid, {la}, {edge}, SolidField<2>{}, 4, 1u);
+  CHECK(q.size() == static_cast<std::size_t>(4 * 8 * 16));
+  for (const auto& x : q.x) REQUIRE(grid.domain_box().contains(x));
+}
+
+// --- advection -----------------------------------------------------------------------------------
+
+namespace {
+
+template <int Dim>
+double rotation_error(int steps) {
+  // rigid rotation about the domain centre in the x-y plane (linear: interpolation is exact)
+  const MacGrid<Dim> grid = unit_grid<Dim>(16);
+  const Vec<Dim> centre = Vec<Dim>::Constant(0.5);
+  auto field = [&](const Vec<Dim>& x) {
+    Vec<Dim> v = Vec<Dim>::Zero();
+    v[0] = -(x[1] - centre[1]);
+    v[1] = x[0] - centre[0];
+    return v;
+  };
+  const VectorX u = sample_faces<Dim>(grid, field);
+  Particles<Dim> p;
+  Vec<Dim> x0 = centre;
+  x0[0] += 0.25;
+  p.x = {x0};
+  p.v = {Vec<Dim>::Zero()};
+  p.c = {Mat<Dim>::Zero()};
+  p.mass = {1.0};
+  p.density = {1.0};
+  p.liquid = {0};
+  const double T = 0.5 * M_PI;
+  for (int s = 0; s < steps; ++s)
+    advect_particles(p, grid, u, T / steps, SolidField<Dim>{}, walls<Dim>());
+  Vec<Dim> exact = centre;
+  exact[1] += 0.25;
+  return (p.x[0] - exact).norm();
+}
+
+template <int Dim>
+void check_rk2_order() {
+  std::vector<double> errors;
+  for (int steps : {8, 16, 32, 64}) errors.push_back(rotation_error<Dim>(steps));
+  for (std::size_t k = 1; k < errors.size(); ++k) {
+    const double order = std::log2(errors[k - 1] / errors[k]);
+    INFO("dim " << Dim << ": error " << errors[k - 1] << " -> " << errors[k] << ", order "
+                << order);
+    CHECK(order > 1.8);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("advection: RK2 converges at second order in a rigid rotation", "[unit][convergence]") {
+  check_rk2_order<2>();
+  check_rk2_order<3>();
+}
+
+namespace {
+
+template <int Dim>
+void check_solid_in_flow() {
+  // a uniform flow towards a solid ball: no particle ever ends inside it
+  const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 32 : 16);
+  const double dx = grid.dx();
+  const SolidField<Dim> solid = solid_ball<Dim>(Vec<Dim>::Constant(0.5), 0.15);
+  Vec<Dim> flow = Vec<Dim>::Zero();
+  flow[0] = 1.0;
+  const VectorX u = sample_faces<Dim>(grid, [&](const Vec<Dim>&) { return flow; });
+  auto block = std::make_shared<TestBox<Dim>>(
+      [] { Vec<Dim> c = Vec<Dim>::Constant(0.5); c[0] = 0.2; return c; }(),
+      Vec<Dim>::Constant(0.12));
+  Particles<Dim> p = seed_particles<Dim>(grid, {liquid_spec<Dim>(Vec<Dim>::Constant(0.5))},
+                                         {block}, SolidField<Dim>{}, Dim == 2 ? 4 : 8, 5u);
+  const std::size_t n0 = p.size();
+  REQUIRE(n0 > 0);
+  for (int step = 0; step < 24; ++step) {
+    advect_particles(p, grid, u, 1.4 * dx, solid, walls<Dim>());
+    for (const auto& x : p.x) {
+      REQUIRE(solid.distance(x) >= 0.0);
+      REQUIRE(grid.domain_box().contains(x));
+    }
+  }
+  // walls: nothing removed, and the particles that reached x+ sit just inside it
+  CHECK(p.size() == n0);
+  double max_x = 0.0;
+  for (const auto& x : p.x) max_x = std::max(max_x, x[0]);
+  CHECK(max_x == Approx(1.0 - 0.01 * dx).epsilon(1e-12));
+}
+
+template <int Dim>
+void check_periodic_and_open() {
+  const MacGrid<Dim> grid = unit_grid<Dim>(10, true);
+  const double dx = grid.dx();
+  Vec<Dim> flow = Vec<Dim>::Zero();
+  flow[0] = 1.0;
+  flow[1] = 0.5;
+  const VectorX u = sample_faces<Dim>(grid, [&](const Vec<Dim>&) { return flow; });
+  // periodic x: a particle crossing x = 1 reappears at the low end
+  std::array<BoundaryType, 2 * Dim> boundary = walls<Dim>();
+  boundary[0] = boundary[1] = BoundaryType::periodic;
+  boundary[3] = BoundaryType::open;  // y+
+  Particles<Dim> p;
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> uni(0.02, 0.98);
+  const int count = 500;
+  for (int i = 0; i < count; ++i) {
+    Vec<Dim> x;
+    for (int a = 0; a < Dim; ++a) x[a] = uni(rng);
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(1.0);
+    p.density.push_back(1.0);
+    p.liquid.push_back(0);
+  }
+  const double dt = 0.3;
+  // expected: those with y + 0.5 dt > 1 leave through the open y+ face
+  long expected_removed = 0;
+  std::vector<Vec<Dim>> expected_x;
+  for (const auto& x : p.x) {
+    Vec<Dim> y = x + dt * flow;
+    if (y[1] > 1.0) {
+      ++expected_removed;
+      continue;
+    }
+    y[0] = std::fmod(y[0], 1.0);
+    expected_x.push_back(y);
+  }
+  const long removed = advect_particles(p, grid, u, dt, SolidField<Dim>{}, boundary);
+  CHECK(removed == expected_removed);
+  REQUIRE(p.size() == expected_x.size());
+  CHECK(expected_removed > 0);
+  double err = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i) err = std::max(err, (p.x[i] - expected_x[i]).norm());
+  CHECK(err < 1e-12);
+  for (const auto& x : p.x) REQUIRE((x[0] >= 0.0 && x[0] < 1.0));
+  // open y- face: flow downwards removes what crosses y = 0; the wall stays closed otherwise
+  boundary[2] = BoundaryType::open;
+  const VectorX down = -u;
+  const std::size_t before = p.size();
+  long gone = 0;
+  for (int s = 0; s < 10; ++s) gone += advect_particles(p, grid, down, 0.25, SolidField<Dim>{},
+                                                       boundary);
+  CHECK(gone == static_cast<long>(before));
+  CHECK(p.size() == 0);
+  (void)dx;
+}
+
+}  // namespace
+
+TEST_CASE("advection: solids, walls, periodic wrap and open faces", "[unit]") {
+  check_solid_in_flow<2>();
+  check_solid_in_flow<3>();
+  check_periodic_and_open<2>();
+  check_periodic_and_open<3>();
+}
+
+// --- position correction -------------------------------------------------------------------------
+
+namespace {
+
+template <int Dim>
+void check_uniform_lattice_stays() {
+  const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 24 : 12);
+  const double dx = grid.dx();
+  auto block = std::make_shared<TestBox<Dim>>(Vec<Dim>::Constant(0.5), Vec<Dim>::Constant(0.25));
+  Particles<Dim> p = lattice_particles<Dim>(grid, *block, 2);
+  // the lattice touching a wall too
+  auto floor = std::make_shared<TestBox<Dim>>(Vec<Dim>::Constant(0.0), Vec<Dim>::Constant(0.2));
+  const Particles<Dim> q = lattice_particles<Dim>(grid, *floor, 2);
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    p.x.push_back(q.x[i]);
+    p.v.push_back(q.v[i]);
+    p.c.push_back(q.c[i]);
+    p.mass.push_back(q.mass[i]);
+    p.density.push_back(q.density[i]);
+    p.liquid.push_back(q.liquid[i]);
+  }
+  const std::vector<Vec<Dim>> x0 = p.x;
+  for (int step = 0; step < 5; ++step) correct_positions(p, grid, 0.01, SolidField<Dim>{}, walls<Dim>());
+  double moved = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i) moved = std::max(moved, (p.x[i] - x0[i]).norm());
+  INFO("dim " << Dim << ": max displacement / dx " << moved / dx);
+  CHECK(moved < 1e-3 * dx);
+}
+
+template <int Dim>
+void check_cluster_spreads() {
+  // uniformly random positions (Poisson clustering) at the seeding density, next to a solid
+  const int n = Dim == 2 ? 32 : 16;
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const double dx = grid.dx();
+  const int per_cell = Dim == 2 ? 4 : 8;
+  const SolidField<Dim> solid = solid_ball<Dim>(Vec<Dim>::Constant(0.5), 0.1);
+  Particles<Dim> p;
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<double> uni(0.25, 0.75);
+  const int count = static_cast<int>(per_cell * std::pow(0.5 * n, Dim));
+  while (static_cast<int>(p.size()) < count) {
+    Vec<Dim> x;
+    for (int a = 0; a < Dim; ++a) x[a] = uni(rng);
+    if (solid.distance(x) < 0.05 * dx) continue;
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(1000.0 * grid.cell_volume() / per_cell);
+    p.density.push_back(1000.0);
+    p.liquid.push_back(0);
+  }
+  // a compressed corner cluster: extra particles packed into one cell
+  for (int i = 0; i < 4 * per_cell; ++i) {
+    Vec<Dim> x = Vec<Dim>::Constant(0.3);
+    for (int a = 0; a < Dim; ++a) x[a] += dx * (uni(rng) - 0.5) / 0.5 * 0.5;
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(1000.0 * grid.cell_volume() / per_cell);
+    p.density.push_back(1000.0);
+    p.liquid.push_back(0);
+  }
+  const Box<Dim> inner(Vec<Dim>::Constant(0.25 + dx), Vec<Dim>::Constant(0.75 - dx));
+  const double var0 = count_variance(p, grid, inner);
+  auto min_distance = [&]() {
+    double m = 1e30;
+    for (std::size_t i = 0; i < p.size(); ++i)
+      for (std::size_t j = i + 1; j < p.size(); ++j) m = std::min(m, (p.x[i] - p.x[j]).norm());
+    return m;
+  };
+  const double min0 = min_distance();
+  for (int step = 0; step < 20; ++step) {
+    correct_positions(p, grid, 0.02, solid, walls<Dim>());
+    for (const auto& x : p.x) REQUIRE(solid.distance(x) >= 0.0);
+  }
+  const double var1 = count_variance(p, grid, inner);
+  const double min1 = min_distance();
+  INFO("dim " << Dim << ": per-cell count variance " << var0 << " -> " << var1
+              << ", min distance / spacing " << min0 / (0.5 * dx) << " -> " << min1 / (0.5 * dx));
+  CHECK(var1 < 0.5 * var0);
+  // close pairs are pushed towards the minimum distance of half a rest spacing (0.25 dx here)
+  CHECK(min1 > 0.8 * 0.5 * 0.5 * dx);
+  for (const auto& x : p.x) REQUIRE(grid.domain_box().contains(x));
+}
+
+template <int Dim>
+void check_correction_keeps_volume() {
+  // a jittered seeded ball at rest: corrections keep the reconstructed volume steady
+  const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 32 : 12);
+  auto ball = std::make_shared<TestBall<Dim>>(Vec<Dim>::Constant(0.5), 0.3);
+  Particles<Dim> p = seed_particles<Dim>(grid, {liquid_spec<Dim>(Vec<Dim>::Constant(0.5))},
+                                         {ball}, SolidField<Dim>{}, Dim == 2 ? 4 : 8, 4u);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  auto volume = [&]() {
+    const VectorX phi = liquid_phi_on_lattice(p, grid, lattice);
+    double v = 0.0;
+    for (int k = 0; k < phi.size(); ++k) v += phi[k] < 0.0 ? 1.0 : 0.0;
+    return v * std::pow(lattice.spacing, Dim);
+  };
+  auto mean_radius = [&]() {
+    double m = 0.0;
+    for (const auto& x : p.x) m += (x - Vec<Dim>::Constant(0.5)).norm();
+    return m / p.size();
+  };
+  const double r0 = mean_radius();
+  const double v0 = volume();
+  auto run = [&](int steps) {
+    for (int step = 0; step < steps; ++step)
+      correct_positions(p, grid, 0.02, SolidField<Dim>{}, walls<Dim>());
+  };
+  run(30);
+  const double v50 = volume();
+  run(30);
+  const double v1 = volume();
+  INFO("dim " << Dim << ": lattice volume " << v0 << " -> " << v50 << " -> " << v1
+              << ", mean radius " << r0 << " -> " << mean_radius());
+  // a one-off settling of the seeding jitter, then steady
+  CHECK(std::abs(v1 / v50 - 1.0) < 0.002);
+  CHECK(std::abs(v1 / v0 - 1.0) < 0.02);
+}
+
+}  // namespace
+
+TEST_CASE("position correction: a uniform lattice stays put", "[unit][property]") {
+  check_uniform_lattice_stays<2>();
+  check_uniform_lattice_stays<3>();
+}
+
+TEST_CASE("position correction: clustered particles spread, never into solids or walls",
+          "[unit]") {
+  check_cluster_spreads<2>();
+  check_cluster_spreads<3>();
+}
+
+TEST_CASE("position correction keeps the reconstructed volume steady", "[unit][validation]") {
+  check_correction_keeps_volume<2>();
+  check_correction_keeps_volume<3>();
+}
+
+TEST_CASE("position correction on 500k particles (timing)", "[.][perf]") {
+  const MacGrid<3> grid = unit_grid<3>(64);
+  auto ball = std::make_shared<TestBall<3>>(Vec<3>::Constant(0.5), 0.3);
+  Particles<3> p = seed_particles<3>(grid, {liquid_spec<3>(Vec<3>::Constant(0.5))}, {ball},
+                                     SolidField<3>{}, 8, 4u);
+  const double t0 = omp_get_wtime();
+  correct_positions(p, grid, 0.01, SolidField<3>{}, walls<3>());
+  const double t1 = omp_get_wtime();
+  correct_positions(p, grid, 0.01, SolidField<3>{}, walls<3>());
+  const double t2 = omp_get_wtime();
+  VectorX u, m, rho;
+  particles_to_grid(p, grid, u, m, rho);
+  const double t3 = omp_get_wtime();
+  grid_to_particles(p, grid, u);
+  const double t4 = omp_get_wtime();
+  advect_particles(p, grid, u, 0.01, SolidField<3>{}, walls<3>());
+  const double t5 = omp_get_wtime();
+  WARN(p.size() << " particles, " << omp_get_max_threads() << " threads: correction "
+                << (t1 - t0) << " s then " << (t2 - t1) << " s, p2g " << (t3 - t2)
+                << " s, g2p " << (t4 - t3) << " s, advection " << (t5 - t4) << " s");
+  REQUIRE(p.size() > 0);
+}
+
+// --- small helpers -------------------------------------------------------------------------------
+
+TEST_CASE("remove_flagged and max_particle_speed", "[unit]") {
+  Particles<3> p;
+  for (int i = 0; i < 5; ++i) {
+    p.x.push_back(Vec<3>::Constant(i));
+    p.v.push_back(Vec<3>(i, 0.0, 0.0));
+    p.c.push_back(Mat<3>::Identity() * i);
+    p.mass.push_back(i);
+    p.density.push_back(10.0 * i);
+    p.liquid.push_back(i);
+  }
+  CHECK(max_particle_speed(p) == 4.0);
+  p.remove_flagged({0, 1, 0, 1, 0});
+  REQUIRE(p.size() == 3);
+  CHECK(p.liquid == std::vector<int>{0, 2, 4});
+  CHECK(p.mass == std::vector<double>{0.0, 2.0, 4.0});
+  CHECK(p.c[1](0, 0) == 2.0);
+  CHECK(p.v.size() == 3);
+  CHECK(max_particle_speed(Particles<2>{}) == 0.0);
+}
