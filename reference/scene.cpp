@@ -1051,9 +1051,9 @@ SceneDesc load_scene(const std::string& path_or_name, const std::vector<std::str
   std::error_code ec;
   const std::filesystem::path path(path_or_name);
 
-  // a built-in name (no folder, no extension, not a file here) or a file path
+  // a built-in name (unless a regular file of that name exists here) or a file path
   const EmbeddedFile* builtin = nullptr;
-  if (!std::filesystem::exists(path, ec)) {
+  if (!std::filesystem::is_regular_file(path, ec)) {
     for (const auto& f : embedded_scenes())
       if (f.name == path_or_name) builtin = &f;
   }
