@@ -365,6 +365,9 @@ Image Simulation<Dim>::render(const RenderSpec& spec) const {
 
 std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene) {
   require_supported(scene);
+  if (scene.solver.backend != "explicit" && scene.solver.backend != "matrixfree")
+    throw InputError(scene.source_label + ": solver.backend: unknown back end \"" +
+                     scene.solver.backend + "\" (explicit, matrixfree)");
   if (scene.dim == 3) return std::make_unique<Simulation<3>>(scene);
   return std::make_unique<Simulation<2>>(scene);
 }

@@ -3,6 +3,7 @@
 
 #include <cmath>
 
+#include "reference/errors.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/scene.hpp"
 #include "reference/simulation.hpp"
@@ -130,4 +131,67 @@ TEST_CASE("hydrostatic column simulated from particles stays near rest with p = 
       CHECK(s.time == Approx(3.0 / 50.0).epsilon(1e-14));
     }
   }
+}
+
+namespace {
+
+/// A unit tank entirely filled with liquid, every side a wall (an enclosed liquid: the pressure
+/// system has a constant null space).
+nlohmann::json full_tank(int dim, int n) {
+  nlohmann::json j = column_scene(dim, n, 1.0, "matrixfree");
+  j["domain"]["boundary"] = nlohmann::json::object();
+  j["probes"] = nlohmann::json::array();
+  return j;
+}
+
+}  // namespace
+
+TEST_CASE("an enclosed, completely full tank runs and stays at rest", "[validation]") {
+  for (int dim : {2, 3}) {
+    const int n = dim == 2 ? 16 : 8;
+    auto sim = make_simulation(parse_scene(full_tank(dim, n), "full", "."));
+    FrameStats s;
+    for (int frame = 0; frame < 2; ++frame) s = sim->advance_frame();
+    INFO("dim " << dim << ": dofs " << s.solver.dofs_pressure << " iterations "
+                << s.solver.iterations << " KE " << s.kinetic_energy_liquid);
+    CHECK(s.solver.converged);
+    CHECK(s.solver.dofs_pressure == static_cast<long>(std::pow(n, dim)));
+    // gravity is balanced by pressure: the kinetic energy stays far below that of one step of
+    // free fall (1/2 m (g dt)^2 = 19 J for 1000 kg)
+    CHECK(s.kinetic_energy_liquid < 1e-2 * 0.5 * 1000.0 * std::pow(9.81 * s.dt_max, 2));
+  }
+}
+
+TEST_CASE("CFL substeps land exactly on frame times", "[unit]") {
+  for (int dim : {2, 3}) {
+    nlohmann::json j = column_scene(dim, dim == 2 ? 16 : 8, 0.4, "matrixfree");
+    std::vector<double> velocity(dim, 0.0);
+    velocity[0] = 4.0;  // fast enough that cfl dx / speed < 1 / fps
+    j["liquids"][0]["velocity"] = velocity;
+    j["time"] = {{"fps", 30}, {"cfl", 1.0}, {"max_dt", 0.02}};
+    const SceneDesc scene = parse_scene(j, "cfl", ".");
+    auto sim = make_simulation(scene);
+    const double dx = 1.0 / scene.domain.cells[0];
+    for (int frame = 1; frame <= 3; ++frame) {
+      const FrameStats s = sim->advance_frame();
+      INFO("dim " << dim << " frame " << frame << " steps " << s.steps << " dt " << s.dt_min
+                  << " .. " << s.dt_max);
+      CHECK(s.frame == frame);
+      CHECK(s.time == frame / 30.0);
+      CHECK(s.steps >= 2);
+      CHECK(s.dt_max <= 0.02);
+      CHECK(s.dt_max <= 1.0 * dx / 3.0);  // particles are still faster than 3 m/s
+      CHECK(s.dt_min * s.steps <= 1.0 / 30.0 + 1e-15);
+      CHECK(s.dt_max * s.steps >= 1.0 / 30.0 - 1e-15);
+    }
+  }
+}
+
+TEST_CASE("make_simulation refuses unsupported physics and unknown back ends", "[unit]") {
+  nlohmann::json viscous = column_scene(2, 8, 0.5, "matrixfree");
+  viscous["liquids"][0]["viscosity"] = {{"model", "newtonian"}, {"eta", 1.0}};
+  CHECK_THROWS_AS(make_simulation(parse_scene(viscous, "viscous", ".")), InputError);
+  SceneDesc scene = parse_scene(column_scene(2, 8, 0.5, "matrixfree"), "backend", ".");
+  scene.solver.backend = "gpu";
+  CHECK_THROWS_AS(make_simulation(scene), InputError);
 }
