@@ -1,11 +1,11 @@
 #include "reference/particles.hpp"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <random>
-
-#include <omp.h>
 
 namespace monolith {
 
@@ -74,7 +74,9 @@ struct ParticleTraits<3> {
 
 /// Uniform double in (0, 1) from a 32-bit Mersenne twister draw (portable across standard
 /// libraries, unlike std::uniform_real_distribution).
-double unit_draw(std::mt19937& rng) { return (static_cast<double>(rng()) + 0.5) / 4294967296.0; }
+double unit_draw(std::mt19937& rng) {
+  return (static_cast<double>(rng()) + 0.5) / 4294967296.0;
+}
 
 int int_pow(int base, int exponent) {
   int r = 1;
@@ -195,6 +197,12 @@ void Particles<Dim>::remove_flagged(const std::vector<char>& flag) {
 
 // --- seeding -------------------------------------------------------------------------------------
 
+/// Stratified seeding: each cell covered by the liquid's bounds is split into n^Dim sub-cells
+/// (n = ceil(per_cell^(1/Dim)); per_cell of them drawn at random when per_cell is not a perfect
+/// power), one particle per sub-cell jittered by +-kSeedJitter/2 of the sub-cell width. Kept:
+/// inside the shape, not inside an earlier liquid, more than kSolidMargin dx from solids, inside
+/// the domain. One std::mt19937(seed) drawn in a fixed order, so the result depends only on the
+/// inputs.
 template <int Dim>
 Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<LiquidSpec>& liquids,
                               const std::vector<ShapePtr<Dim>>& liquid_shapes,
@@ -263,8 +271,8 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
         if (!solids.empty() && !(solids.distance(x) > kSolidMargin * dx)) continue;
         if (!domain.contains(x)) continue;
         particles.x.push_back(x);
-        particles.v.push_back(v0 + ParticleTraits<Dim>::rotation_velocity(spec.angular_velocity,
-                                                                          x - centre));
+        particles.v.push_back(
+            v0 + ParticleTraits<Dim>::rotation_velocity(spec.angular_velocity, x - centre));
         particles.c.push_back(grad_v);
         particles.mass.push_back(mass);
         particles.density.push_back(spec.density);
@@ -284,7 +292,8 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 
 // --- APIC transfers ------------------------------------------------------------------------------
 
-/// APIC particle-to-grid (Jiang et al. 2015, on the faces of each component a):
+/// APIC particle-to-grid (Algorithm 1 line 1; Jiang et al. 2015, per velocity component a on
+/// its face lattice):
 ///   m_f = sum_p w_fp m_p,  (m u)_f = sum_p w_fp m_p (v_pa + c_pa . (x_f - x_p)),
 ///   rho_f = sum_p w_fp m_p rho_p / m_f,
 /// with w_fp the multilinear weights of face lattice a. Deterministic for a fixed thread count:
@@ -358,8 +367,9 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   }
 }
 
-/// APIC grid-to-particle (Jiang et al. 2015): v_pa = sum_f w_fp u_f, c_pa = sum_f grad w_fp u_f
-/// (row a of c is the gradient of component a; exact for affine fields away from walls).
+/// APIC grid-to-particle (first half of Algorithm 1 line 14; Jiang et al. 2015): v_pa = sum_f w_fp
+/// u_f, c_pa = sum_f grad w_fp u_f (row a of c is the gradient of component a; exact for affine
+/// fields away from walls).
 template <int Dim>
 void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u) {
   constexpr int kCorners = 1 << Dim;
@@ -388,6 +398,8 @@ void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
 
 // --- extrapolation -------------------------------------------------------------------------------
 
+/// Breadth-first extrapolation: per layer, every invalid face with valid same-axis neighbours
+/// (+-1 along each axis, wrapped on periodic axes) of the previous layer takes their average.
 template <int Dim>
 void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
                           int layers) {
@@ -429,6 +441,9 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
 
 // --- advection -----------------------------------------------------------------------------------
 
+/// Midpoint rule (RK2), Algorithm 1 line 14: x* = x + dt/2 u(x), x' = x + dt u(x*), then
+/// periodic wrap, projection out of solids to kSolidMargin dx, clamping to kWallMargin dx inside
+/// walls, and removal beyond open faces.
 template <int Dim>
 long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
                       double dt, const SolidField<Dim>& solids,
@@ -474,8 +489,8 @@ double lattice_number_density() {
   const int side = 2 * reach + 1;
   double sum = 0.0;
   for (int k = 0; k < int_pow(side, Dim); ++k) {
-    const VecI<Dim> off = decode_index<Dim>(k, VecI<Dim>::Constant(side)) -
-                          VecI<Dim>::Constant(reach);
+    const VecI<Dim> off =
+        decode_index<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(reach);
     const double r2 = off.template cast<double>().squaredNorm();
     sum += correction_kernel(r2 / (kCorrectionSupport * kCorrectionSupport));
   }
@@ -493,7 +508,9 @@ double lattice_number_density() {
 ///   dx_i = alpha / n0 sum_j (lambda_i + lambda_j) grad W_spiky(x_i - x_j),
 /// one Jacobi iteration per call, alpha = kCorrectionRelaxation min(1, dt / kCorrectionTime).
 /// Compressed clusters spread towards emptier neighbours; a uniform lattice (C = 0) and free
-/// surfaces (C < 0) do not move, so the correction never inflates the liquid.
+/// surfaces (C < 0) do not move, so apart from a one-off settling of the seeding noise the
+/// correction does not inflate the liquid. Pairs closer than kCorrectionMinDistance spacings are
+/// also pushed apart (half the overlap each). Algorithm 1, line 15.
 template <int Dim>
 void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
                        const SolidField<Dim>& solids,
@@ -593,31 +610,31 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   {
     std::vector<int> cand, cells;
 #pragma omp for schedule(dynamic, 16)
-  for (int cell = 0; cell < nc; ++cell) {
-    if (start[cell] == start[cell + 1]) continue;
-    gather_candidates(cell, cand, cells);
-  for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
-    const int p = order[slot];
-    double n = 1.0;  // the particle itself
-    Vec<Dim> grad_self = Vec<Dim>::Zero();
-    double grad_others = 0.0;
-    const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
-    for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
-      if (r < min_distance) close_pair[p] = 1;
-      n += correction_kernel(r * r / (h * h));
-      const Vec<Dim> g = spiky_gradient(p, j, d, r, h) / n0;
-      grad_self += g;
-      grad_others += g.squaredNorm();
-    });
-    const double c = n / n0 - 1.0 - kCorrectionSlack;
-    if (c <= 0.0) continue;
-    const double h = support[p];
-    // eps regularises the denominator (units 1/length^2, scaled by h)
-    const double eps = 1e-6 / (h * h);
-    lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
-    ++compressed;
-  }
-  }
+    for (int cell = 0; cell < nc; ++cell) {
+      if (start[cell] == start[cell + 1]) continue;
+      gather_candidates(cell, cand, cells);
+      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+        const int p = order[slot];
+        double n = 1.0;  // the particle itself
+        Vec<Dim> grad_self = Vec<Dim>::Zero();
+        double grad_others = 0.0;
+        const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
+        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
+          if (r < min_distance) close_pair[p] = 1;
+          n += correction_kernel(r * r / (h * h));
+          const Vec<Dim> g = spiky_gradient(p, j, d, r, h) / n0;
+          grad_self += g;
+          grad_others += g.squaredNorm();
+        });
+        const double c = n / n0 - 1.0 - kCorrectionSlack;
+        if (c <= 0.0) continue;
+        const double h = support[p];
+        // eps regularises the denominator (units 1/length^2, scaled by h)
+        const double eps = 1e-6 / (h * h);
+        lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
+        ++compressed;
+      }
+    }
   }
 
   if (compressed == 0 && std::find(close_pair.begin(), close_pair.end(), 1) == close_pair.end())
@@ -634,38 +651,38 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   {
     std::vector<int> cand, cells;
 #pragma omp for schedule(dynamic, 16)
-  for (int cell = 0; cell < nc; ++cell) {
-    if (start[cell] == start[cell + 1]) continue;
-    gather_candidates(cell, cand, cells);
-    bool near_active = false;
-    for (int c : cells) near_active = near_active || active_cell[c];
-    if (!near_active) continue;
-  for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
-    const int p = order[slot];
-    Vec<Dim> push = Vec<Dim>::Zero();
-    const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
-    for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
-      // density constraints
-      const double l = lambda[p] + lambda[j];
-      if (l != 0.0) push += l * spiky_gradient(p, j, d, r, h) / n0;
-      // minimum distance: each particle of a close pair takes half of the overlap
-      if (r < min_distance) {
-        Vec<Dim> dir = Vec<Dim>::Zero();
-        if (r > 1e-9 * h)
-          dir = d / r;
-        else
-          dir[0] = p < j ? -1.0 : 1.0;
-        push += 0.5 * (min_distance - r) * dir;
+    for (int cell = 0; cell < nc; ++cell) {
+      if (start[cell] == start[cell + 1]) continue;
+      gather_candidates(cell, cand, cells);
+      bool near_active = false;
+      for (int c : cells) near_active = near_active || active_cell[c];
+      if (!near_active) continue;
+      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+        const int p = order[slot];
+        Vec<Dim> push = Vec<Dim>::Zero();
+        const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
+        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
+          // density constraints
+          const double l = lambda[p] + lambda[j];
+          if (l != 0.0) push += l * spiky_gradient(p, j, d, r, h) / n0;
+          // minimum distance: each particle of a close pair takes half of the overlap
+          if (r < min_distance) {
+            Vec<Dim> dir = Vec<Dim>::Zero();
+            if (r > 1e-9 * h)
+              dir = d / r;
+            else
+              dir[0] = p < j ? -1.0 : 1.0;
+            push += 0.5 * (min_distance - r) * dir;
+          }
+        });
+        push *= alpha;
+        // never more than kCorrectionMaxStep spacings per step
+        const double cap = kCorrectionMaxStep * support[p] / kCorrectionSupport;
+        const double len = push.norm();
+        if (len > cap) push *= cap / len;
+        delta[p] = push;
       }
-    });
-    push *= alpha;
-    // never more than kCorrectionMaxStep spacings per step
-    const double cap = kCorrectionMaxStep * support[p] / kCorrectionSupport;
-    const double len = push.norm();
-    if (len > cap) push *= cap / len;
-    delta[p] = push;
-  }
-  }
+    }
   }
 
   // apply, then keep clear of solids and walls
@@ -680,7 +697,8 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
 
 // --- liquid surface ------------------------------------------------------------------------------
 
-/// Zhu & Bridson (2005): phi(x) = |x - x_bar(x)| - r_bar(x), with x_bar and r_bar the kernel-
+/// The liquid/air domain of Algorithm 1 line 4, after Zhu & Bridson (2005):
+/// phi(x) = |x - x_bar(x)| - r_bar(x), with x_bar and r_bar the kernel-
 /// weighted averages of the particle positions and radii, k(s) = max(0, 1 - s^2)^3, s = |x - x_p|
 /// / R. Particles splat onto the lattice points within R; slabs of the last axis wider than 2 R
 /// are processed even/odd in parallel, so no two threads touch the same point and every point
@@ -840,22 +858,21 @@ double max_particle_speed(const Particles<Dim>& particles) {
 
 // --- explicit instantiations ---------------------------------------------------------------------
 
-#define MONOLITH_INSTANTIATE_PARTICLES(D)                                                        \
-  template struct Particles<D>;                                                                  \
-  template Particles<D> seed_particles(const MacGrid<D>&, const std::vector<LiquidSpec>&,        \
-                                       const std::vector<ShapePtr<D>>&, const SolidField<D>&,    \
-                                       int, unsigned);                                           \
-  template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,    \
-                                  VectorX&);                                                     \
-  template void grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&);             \
-  template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);      \
-  template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,       \
-                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);  \
-  template void correct_positions(Particles<D>&, const MacGrid<D>&, double,                      \
-                                  const SolidField<D>&,                                          \
-                                  const std::array<BoundaryType, 2 * D>&);                       \
-  template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                 \
-                                         const SampleLattice<D>&);                               \
+#define MONOLITH_INSTANTIATE_PARTICLES(D)                                                          \
+  template struct Particles<D>;                                                                    \
+  template Particles<D> seed_particles(const MacGrid<D>&, const std::vector<LiquidSpec>&,          \
+                                       const std::vector<ShapePtr<D>>&, const SolidField<D>&, int, \
+                                       unsigned);                                                  \
+  template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,      \
+                                  VectorX&);                                                       \
+  template void grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&);               \
+  template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \
+  template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,         \
+                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);    \
+  template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
+                                  const std::array<BoundaryType, 2 * D>&);                         \
+  template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
+                                         const SampleLattice<D>&);                                 \
   template double max_particle_speed(const Particles<D>&);
 
 MONOLITH_INSTANTIATE_PARTICLES(2)

@@ -1,13 +1,12 @@
 // Tests of the APIC transfers on the MAC grid (Jiang et al. 2015): affine exactness, momentum
 // conservation, angular momentum of a rigid rotation, face density, determinism, and the
 // breadth-first velocity extrapolation.
-#include <catch2/catch.hpp>
+#include <omp.h>
 
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <deque>
 #include <random>
-
-#include <omp.h>
 
 #include "reference/particles.hpp"
 
@@ -42,10 +41,18 @@ Particles<Dim> random_cloud(int count, double lo, double hi, unsigned seed) {
 }
 
 /// 2D angular momentum is the scalar x v_y - y v_x; 3D the vector x cross v.
-double angular(const Vec<2>& x, const Vec<2>& v) { return x[0] * v[1] - x[1] * v[0]; }
-Vec<3> angular(const Vec<3>& x, const Vec<3>& v) { return x.cross(v); }
-Eigen::VectorXd as_vector(double L) { return Eigen::VectorXd::Constant(1, L); }
-Eigen::VectorXd as_vector(const Vec<3>& L) { return L; }
+double angular(const Vec<2>& x, const Vec<2>& v) {
+  return x[0] * v[1] - x[1] * v[0];
+}
+Vec<3> angular(const Vec<3>& x, const Vec<3>& v) {
+  return x.cross(v);
+}
+Eigen::VectorXd as_vector(double L) {
+  return Eigen::VectorXd::Constant(1, L);
+}
+Eigen::VectorXd as_vector(const Vec<3>& L) {
+  return L;
+}
 
 template <int Dim>
 void check_affine_exactness() {
@@ -104,10 +111,10 @@ void check_linear_momentum(bool periodic) {
     const int off = grid.face_offset(a), nf = grid.num_faces(a);
     const double grid_momentum =
         (mass.segment(off, nf).array() * ug.segment(off, nf).array()).sum();
-    INFO("dim " << Dim << " periodic " << periodic << " axis " << a << ": particle "
-                << total[a] << ", grid " << grid_momentum);
-    CHECK(std::abs(grid_momentum - total[a]) < 1e-12 * std::max(1.0, std::abs(total[a])) +
-                                                   1e-12 * particles.size());
+    INFO("dim " << Dim << " periodic " << periodic << " axis " << a << ": particle " << total[a]
+                << ", grid " << grid_momentum);
+    CHECK(std::abs(grid_momentum - total[a]) <
+          1e-12 * std::max(1.0, std::abs(total[a])) + 1e-12 * particles.size());
   }
   // total mass is conserved too
   double pm = 0.0;
@@ -121,8 +128,8 @@ void check_rigid_rotation_angular_momentum() {
   const MacGrid<Dim> grid = make_grid<Dim>(16);
   Particles<Dim> particles = random_cloud<Dim>(Dim == 2 ? 2000 : 6000, -0.35, 0.35, 33u);
   // rigid motion about x0: v = v0 + omega x (x - x0), c = [omega]_x
-  std::vector<double> omega = Dim == 2 ? std::vector<double>{2.5}
-                                       : std::vector<double>{0.7, -1.3, 2.1};
+  std::vector<double> omega =
+      Dim == 2 ? std::vector<double>{2.5} : std::vector<double>{0.7, -1.3, 2.1};
   Vec<Dim> x0 = Vec<Dim>::Constant(0.05), v0 = Vec<Dim>::Constant(0.3);
   Mat<Dim> c = Mat<Dim>::Zero();
   if constexpr (Dim == 2) {
@@ -274,8 +281,7 @@ void check_extrapolation(bool periodic) {
 
 }  // namespace
 
-TEST_CASE("velocity extrapolation fills breadth-first layers with neighbour averages",
-          "[unit]") {
+TEST_CASE("velocity extrapolation fills breadth-first layers with neighbour averages", "[unit]") {
   for (bool periodic : {false, true}) {
     check_extrapolation<2>(periodic);
     check_extrapolation<3>(periodic);

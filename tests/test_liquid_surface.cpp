@@ -1,11 +1,10 @@
 // Tests of the Zhu & Bridson (2005) liquid surface reconstructed from particles
 // (liquid_phi_on_lattice): sign, position of the zero level set, enclosed volume, determinism.
-#include <catch2/catch.hpp>
+#include <omp.h>
 
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <random>
-
-#include <omp.h>
 
 #include "reference/particles.hpp"
 
@@ -95,8 +94,8 @@ double negative_volume(const SampleLattice<Dim>& lattice, const VectorX& phi, in
 
 /// Zero crossing of phi along the ray centre + t dir, t in [0, t_max] (bisection after a scan).
 template <int Dim>
-double zero_crossing(const SampleLattice<Dim>& lattice, const VectorX& phi,
-                     const Vec<Dim>& centre, const Vec<Dim>& dir, double t_max) {
+double zero_crossing(const SampleLattice<Dim>& lattice, const VectorX& phi, const Vec<Dim>& centre,
+                     const Vec<Dim>& dir, double t_max) {
   const int steps = 400;
   double t0 = 0.0;
   for (int i = 1; i <= steps; ++i) {
@@ -291,7 +290,7 @@ TEST_CASE("zhu-bridson surface on a 64^3 grid (timing)", "[.][perf]") {
   const double t0 = omp_get_wtime();
   const VectorX phi = liquid_phi_on_lattice(particles, grid, half_lattice(grid));
   const double t1 = omp_get_wtime();
-  WARN("64^3 grid, " << particles.size() << " particles: seeding done, surface "
-                     << (t1 - t0) << " s with " << omp_get_max_threads() << " threads");
+  WARN("64^3 grid, " << particles.size() << " particles: seeding done, surface " << (t1 - t0)
+                     << " s with " << omp_get_max_threads() << " threads");
   REQUIRE(phi.size() == 129 * 129 * 129);
 }

@@ -1,11 +1,10 @@
 // Tests of particle seeding, advection (RK2, solids, walls, periodic and open faces) and
 // position correction.
-#include <catch2/catch.hpp>
+#include <omp.h>
 
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <random>
-
-#include <omp.h>
 
 #include "reference/particles.hpp"
 
@@ -153,8 +152,8 @@ void check_seeding() {
   LiquidSpec spec = liquid_spec<Dim>(centre, 900.0);
 
   // count close to per_cell * volume / dx^Dim
-  const Particles<Dim> p = seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{},
-                                               per_cell, 1u);
+  const Particles<Dim> p =
+      seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{}, per_cell, 1u);
   const double expected = per_cell * ball_volume<Dim>(radius) / grid.cell_volume();
   INFO("dim " << Dim << ": seeded " << p.size() << ", expected " << expected);
   CHECK(std::abs(p.size() / expected - 1.0) < 0.02);
@@ -172,10 +171,10 @@ void check_seeding() {
     if (ball->distance(grid.cell_center(grid.cell_coord(c))) < -dx) REQUIRE(count[c] == per_cell);
 
   // deterministic for a seed, different for another
-  const Particles<Dim> same = seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{},
-                                                  per_cell, 1u);
-  const Particles<Dim> other = seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{},
-                                                   per_cell, 2u);
+  const Particles<Dim> same =
+      seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{}, per_cell, 1u);
+  const Particles<Dim> other =
+      seed_particles<Dim>(grid, {spec}, {ball}, SolidField<Dim>{}, per_cell, 2u);
   REQUIRE(same.size() == p.size());
   bool identical = true;
   for (std::size_t i = 0; i < p.size(); ++i) identical = identical && same.x[i] == p.x[i];
@@ -231,12 +230,12 @@ TEST_CASE("seeding: velocity, rotation and APIC matrix of a liquid", "[unit]") {
   }
 }
 
-TEST_CASE("seeding: overlapping liquids, non-square per_cell, shapes without a centre",
-          "[unit]") {
+TEST_CASE("seeding: overlapping liquids, non-square per_cell, shapes without a centre", "[unit]") {
   const MacGrid<2> grid = unit_grid<2>(32);
   auto a = std::make_shared<TestBall<2>>(Vec<2>(0.4, 0.5), 0.2);
   auto b = std::make_shared<TestBall<2>>(Vec<2>(0.6, 0.5), 0.2);
-  LiquidSpec la = liquid_spec<2>(Vec<2>(0.4, 0.5), 1000.0), lb = liquid_spec<2>(Vec<2>(0.6, 0.5), 800.0);
+  LiquidSpec la = liquid_spec<2>(Vec<2>(0.4, 0.5), 1000.0),
+             lb = liquid_spec<2>(Vec<2>(0.6, 0.5), 800.0);
   // a shape without `center`: the rotation is about the centre of its bounds
   lb.shape.type = "polygon";
   lb.shape.center.clear();
@@ -328,10 +327,14 @@ void check_solid_in_flow() {
   flow[0] = 1.0;
   const VectorX u = sample_faces<Dim>(grid, [&](const Vec<Dim>&) { return flow; });
   auto block = std::make_shared<TestBox<Dim>>(
-      [] { Vec<Dim> c = Vec<Dim>::Constant(0.5); c[0] = 0.2; return c; }(),
+      [] {
+        Vec<Dim> c = Vec<Dim>::Constant(0.5);
+        c[0] = 0.2;
+        return c;
+      }(),
       Vec<Dim>::Constant(0.12));
-  Particles<Dim> p = seed_particles<Dim>(grid, {liquid_spec<Dim>(Vec<Dim>::Constant(0.5))},
-                                         {block}, SolidField<Dim>{}, Dim == 2 ? 4 : 8, 5u);
+  Particles<Dim> p = seed_particles<Dim>(grid, {liquid_spec<Dim>(Vec<Dim>::Constant(0.5))}, {block},
+                                         SolidField<Dim>{}, Dim == 2 ? 4 : 8, 5u);
   const std::size_t n0 = p.size();
   REQUIRE(n0 > 0);
   for (int step = 0; step < 24; ++step) {
@@ -400,8 +403,8 @@ void check_periodic_and_open() {
   const VectorX down = -u;
   const std::size_t before = p.size();
   long gone = 0;
-  for (int s = 0; s < 10; ++s) gone += advect_particles(p, grid, down, 0.25, SolidField<Dim>{},
-                                                       boundary);
+  for (int s = 0; s < 10; ++s)
+    gone += advect_particles(p, grid, down, 0.25, SolidField<Dim>{}, boundary);
   CHECK(gone == static_cast<long>(before));
   CHECK(p.size() == 0);
   (void)dx;
@@ -438,7 +441,8 @@ void check_uniform_lattice_stays() {
     p.liquid.push_back(q.liquid[i]);
   }
   const std::vector<Vec<Dim>> x0 = p.x;
-  for (int step = 0; step < 5; ++step) correct_positions(p, grid, 0.01, SolidField<Dim>{}, walls<Dim>());
+  for (int step = 0; step < 5; ++step)
+    correct_positions(p, grid, 0.01, SolidField<Dim>{}, walls<Dim>());
   double moved = 0.0;
   for (std::size_t i = 0; i < p.size(); ++i) moved = std::max(moved, (p.x[i] - x0[i]).norm());
   INFO("dim " << Dim << ": max displacement / dx " << moved / dx);
@@ -507,8 +511,8 @@ void check_correction_keeps_volume() {
   // a jittered seeded ball at rest: corrections keep the reconstructed volume steady
   const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 32 : 12);
   auto ball = std::make_shared<TestBall<Dim>>(Vec<Dim>::Constant(0.5), 0.3);
-  Particles<Dim> p = seed_particles<Dim>(grid, {liquid_spec<Dim>(Vec<Dim>::Constant(0.5))},
-                                         {ball}, SolidField<Dim>{}, Dim == 2 ? 4 : 8, 4u);
+  Particles<Dim> p = seed_particles<Dim>(grid, {liquid_spec<Dim>(Vec<Dim>::Constant(0.5))}, {ball},
+                                         SolidField<Dim>{}, Dim == 2 ? 4 : 8, 4u);
   const SampleLattice<Dim> lattice = half_lattice(grid);
   auto volume = [&]() {
     const VectorX phi = liquid_phi_on_lattice(p, grid, lattice);
@@ -545,8 +549,7 @@ TEST_CASE("position correction: a uniform lattice stays put", "[unit][property]"
   check_uniform_lattice_stays<3>();
 }
 
-TEST_CASE("position correction: clustered particles spread, never into solids or walls",
-          "[unit]") {
+TEST_CASE("position correction: clustered particles spread, never into solids or walls", "[unit]") {
   check_cluster_spreads<2>();
   check_cluster_spreads<3>();
 }
@@ -573,9 +576,9 @@ TEST_CASE("position correction on 500k particles (timing)", "[.][perf]") {
   const double t4 = omp_get_wtime();
   advect_particles(p, grid, u, 0.01, SolidField<3>{}, walls<3>());
   const double t5 = omp_get_wtime();
-  WARN(p.size() << " particles, " << omp_get_max_threads() << " threads: correction "
-                << (t1 - t0) << " s then " << (t2 - t1) << " s, p2g " << (t3 - t2)
-                << " s, g2p " << (t4 - t3) << " s, advection " << (t5 - t4) << " s");
+  WARN(p.size() << " particles, " << omp_get_max_threads() << " threads: correction " << (t1 - t0)
+                << " s then " << (t2 - t1) << " s, p2g " << (t3 - t2) << " s, g2p " << (t4 - t3)
+                << " s, advection " << (t5 - t4) << " s");
   REQUIRE(p.size() > 0);
 }
 
