@@ -129,15 +129,16 @@ void MeshSdf::build_pseudo_normals() {
     for (int k = 0; k < 3; ++k) {
       vertex_normal_[t[k]] +=
           corner_angle(v[t[k]], v[t[(k + 1) % 3]], v[t[(k + 2) % 3]]) * face_normal_[f];
-      const auto key = std::minmax(t[k], t[(k + 1) % 3]);
-      edge_sum[key] += face_normal_[f];
+      // (Eigen vectors are not zero-initialised: insert an explicit zero first)
+      const std::pair<int, int> key = std::minmax(t[k], t[(k + 1) % 3]);
+      edge_sum.try_emplace(key, Vec<3>::Zero()).first->second += face_normal_[f];
     }
   }
   // edge normals: the sum of the normals of the faces sharing the edge
   for (std::size_t f = 0; f < nt; ++f) {
     const auto& t = mesh_.triangles[f];
     for (int k = 0; k < 3; ++k) {
-      edge_normal_[f][k] = edge_sum[std::minmax(t[k], t[(k + 1) % 3])];
+      edge_normal_[f][k] = edge_sum.at(std::minmax(t[k], t[(k + 1) % 3]));
     }
   }
 }
