@@ -63,6 +63,18 @@ void write_summary(const fs::path& dir, const SceneDesc& scene, const json& tota
   if (!f) throw InputError(dir.string() + ": (output): cannot write summary.json (a writable output folder)");
 }
 
+/// Renders the current state into frames/frame_NNNNN.ppm; a file that cannot be written is an
+/// input error (the output folder), not an internal one.
+void write_frame(const AnySimulation& sim, const SceneDesc& scene, const fs::path& dir, int k) {
+  const fs::path path = dir / "frames" / frame_file(k);
+  const Image image = sim.render(scene.render);
+  try {
+    image.write_ppm(path.string());
+  } catch (const std::runtime_error& e) {
+    throw InputError(path.string() + ": (output): cannot write the picture: " + e.what() + " (a writable output folder)");
+  }
+}
+
 }  // namespace
 
 int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& factory) {
@@ -115,14 +127,14 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
     FrameStats st = sim->current_stats();
     volume0 = volume = st.liquid_volume;
     stats << st.to_json().dump() << "\n" << std::flush;
-    if (render) sim->render(scene.render).write_ppm((dir / "frames" / frame_file(0)).string());
+    if (render) write_frame(*sim, scene, dir, 0);
     for (frame = 1; frame <= frames; ++frame) {
       st = sim->advance_frame();
       st.frame = frame;
       total_steps += st.steps;
       volume = st.liquid_volume;
       stats << st.to_json().dump() << "\n" << std::flush;
-      if (render) sim->render(scene.render).write_ppm((dir / "frames" / frame_file(frame)).string());
+      if (render) write_frame(*sim, scene, dir, frame);
       done = frame;
       // progress
       const double el = elapsed();

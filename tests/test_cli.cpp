@@ -268,6 +268,11 @@ TEST_CASE("run without rendering, with progress lines, and into the default fold
   fs::remove_all(out);
   CHECK(fake_cli({"run", scene, "--out", out.string(), "--set", "render.enabled=false", "--quiet"}).code == 0);
   CHECK_FALSE(fs::exists(out / "frames"));
+  // --flag=value is the same as --flag value
+  fs::remove_all(out);
+  CHECK(fake_cli({"run", scene, "--out=" + out.string(), "--frames=2", "--quiet", "--set=time.fps=20"}).code == 0);
+  CHECK(read_jsonl(out / "stats.jsonl").size() == 3);
+  CHECK(read_jsonl(out / "stats.jsonl")[2]["time"].get<double>() == Approx(0.1));
   // default folder out/<scene name>, relative to the working directory
   const fs::path cwd = fs::current_path();
   fs::current_path(temp_dir());
