@@ -181,6 +181,10 @@ struct Scene {
   LiquidField liquid;
   Box<3> domain, trace_box;
   double feature = 1.0;  // dx: the scale of surface detail
+  /// Misses closer than this soften shadows: 2 dx, or half the largest level set value when the
+  /// level set is capped (a particle reconstruction is a constant about one dx away from liquid).
+  double penumbra_reach = 2.0;
+  int max_steps = 400;  // sphere-tracing steps per ray (grows with the grid)
   std::vector<Box<3>> solid_boxes;
 
   double solid_distance(size_t k, const V3& x) const {
@@ -213,8 +217,9 @@ struct Scene {
   }
   V3 normal(const V3& x, int what) const {
     if (what == kLiquid) {
-      // central differences over one lattice spacing smooth the trilinear facets
-      const double h = 1.0 / liquid.inv_h;
+      // central differences over two lattice spacings (one cell) smooth the trilinear facets and
+      // the particle-scale bumps of a reconstructed surface
+      const double h = 2.0 / liquid.inv_h;
       V3 g;
       for (int a = 0; a < 3; ++a) {
         V3 e = V3::Zero();
@@ -229,7 +234,7 @@ struct Scene {
   /// Sphere tracing along o + t d for t in [t0, t1]; returns the hit parameter or +inf.
   double trace(const V3& o, const V3& d, double t0, double t1, double pixel_angle, int& what) const {
     double t = t0;
-    for (int step = 0; step < 400 && t <= t1; ++step) {
+    for (int step = 0; step < max_steps && t <= t1; ++step) {
       const double dist = distance(o + t * d, what);
       const double eps = std::max(0.35 * pixel_angle * t, 1e-4 * feature);
       if (dist < eps) return t;
@@ -247,7 +252,9 @@ struct Scene {
     for (int step = 0; step < 160 && t < t1; ++step) {
       const double dist = distance(p + t * l);
       if (dist < 1e-3 * feature) return 0.0;
-      lit = std::min(lit, 10.0 * dist / t);
+      // penumbra from near misses only: far from the surface a level set need not be a distance
+      // (particle reconstructions are capped a few dx out), which would darken long shadow rays
+      if (dist < penumbra_reach) lit = std::min(lit, 10.0 * dist / t);
       t += std::clamp(dist, 0.2 * feature, 4.0 * feature);
     }
     return std::clamp(lit, 0.0, 1.0);
@@ -401,6 +408,8 @@ Image render_frame<3>(const RenderView<3>& view, const RenderSpec& spec) {
   sc.view = &view;
   sc.domain = domain;
   sc.feature = grid.dx();
+  sc.penumbra_reach = 2.0 * grid.dx();
+  sc.max_steps = 300 + 2 * grid.cells().sum();
   const SampleLattice<3> lattice = half_lattice(grid);
   sc.has_liquid = view.liquid_phi && view.liquid_phi->size() == lattice.size() && lattice.dims.minCoeff() >= 2;
   if (sc.has_liquid) {
@@ -411,6 +420,8 @@ Image render_frame<3>(const RenderView<3>& view, const RenderSpec& spec) {
     sc.liquid.inv_h = 1.0 / lattice.spacing;
     sc.liquid.lo = lattice.origin;
     sc.liquid.hi = lattice.position(lattice.dims - VecI<3>::Ones());
+    const double phi_max = view.liquid_phi->maxCoeff();
+    if (std::isfinite(phi_max) && phi_max > 0.0) sc.penumbra_reach = std::min(sc.penumbra_reach, 0.5 * phi_max);
     sc.liquid.dom_lo = sc.liquid.wet_lo = domain.min();
     sc.liquid.dom_hi = sc.liquid.wet_hi = domain.max();
     for (int a = 0; a < 3; ++a) {
