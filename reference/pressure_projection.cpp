@@ -233,14 +233,11 @@ void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const 
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::relax_colour(int colour, const VectorX& rhs, VectorX& x,
-                                                   double omega) const {
+                                                   double omega, bool reverse) const {
   const std::vector<int>& list = colour_dofs_[colour];
   const int count = static_cast<int>(list.size());
-  // dofs of one colour only couple to the other colour: independent updates
-#pragma omp parallel for schedule(static) if (colouring_valid_)
-  for (int m = 0; m < count; ++m) {
-    const int i = list[m];
-    if (diagonal_[i] == 0.0) continue;
+  auto relax = [&](int i) {
+    if (diagonal_[i] == 0.0) return;
     double off = 0.0;
     for (int j = 0; j < kNeighbours; ++j) {
       const int s = i * kNeighbours + j;
@@ -248,21 +245,32 @@ void MatrixFreePressureOperator<Dim>::relax_colour(int colour, const VectorX& rh
       if (n >= 0) off -= coefficient_[s] * liquid_[i] * liquid_[n] * x[n];
     }
     x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
+  };
+  if (colouring_valid_) {
+    // dofs of one colour only couple to the other colour: independent updates in any order
+#pragma omp parallel for schedule(static)
+    for (int m = 0; m < count; ++m) relax(list[m]);
+  } else if (!reverse) {
+    // an odd periodic axis couples a colour to itself: serial, in list order
+    for (int m = 0; m < count; ++m) relax(list[m]);
+  } else {
+    // and in reverse order for the backward sweep, so that the SSOR preconditioner stays symmetric
+    for (int m = count - 1; m >= 0; --m) relax(list[m]);
   }
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x,
                                                     double omega) const {
-  relax_colour(0, rhs, x, omega);
-  relax_colour(1, rhs, x, omega);
+  relax_colour(0, rhs, x, omega, false);
+  relax_colour(1, rhs, x, omega, false);
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x,
                                                      double omega) const {
-  relax_colour(1, rhs, x, omega);
-  relax_colour(0, rhs, x, omega);
+  relax_colour(1, rhs, x, omega, true);
+  relax_colour(0, rhs, x, omega, true);
 }
 
 template <int Dim>

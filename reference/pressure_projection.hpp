@@ -89,7 +89,7 @@ class MatrixFreePressureOperator : public LinearOperator {
 
  private:
   static constexpr int kNeighbours = 2 * Dim;
-  void relax_colour(int colour, const VectorX& rhs, VectorX& x, double omega) const;
+  void relax_colour(int colour, const VectorX& rhs, VectorX& x, double omega, bool reverse) const;
   const MacGrid<Dim>* grid_;
   int num_dofs_ = 0;
   std::vector<int> cell_of_dof_;

@@ -168,8 +168,11 @@ TEMPLATE_TEST_CASE_SIG("the velocity update makes u weighted-divergence free", "
 
 TEMPLATE_TEST_CASE_SIG("enclosed and periodic liquid: null space detected, PCG converges",
                        "[property]", ((int Dim), Dim), 2, 3) {
-  for (bool periodic : {false, true}) {
-    const Setup<Dim> s(Dim == 2 ? 16 : 8, true, periodic);
+  // (odd cell counts on a periodic axis break the red-black colouring: sweeps then run serially)
+  for (int variant = 0; variant < 3; ++variant) {
+    const bool periodic = variant > 0;
+    const int n = (Dim == 2 ? 16 : 8) + (variant == 2 ? 1 : 0);
+    const Setup<Dim> s(n, true, periodic);
     const PressureDofs dofs = select_pressure_dofs(s.grid, s.w, s.dt);
     REQUIRE(dofs.null_space.size() == 1);
     // the null vector really is one: A n = 0
@@ -180,12 +183,18 @@ TEMPLATE_TEST_CASE_SIG("enclosed and periodic liquid: null space detected, PCG c
     VectorX ax;
     mf.apply(x, ax);
     CHECK(an.norm() <= 1e-12 * ax.norm());
+    // the SSOR preconditioner of the matrix-free operator is symmetric, odd periodic axes too
+    const VectorX s1 = random_vector(dofs.size(), 8), s2 = random_vector(dofs.size(), 9);
+    VectorX z1, z2;
+    ssor_precondition(mf, s1, z1, 1.0);
+    ssor_precondition(mf, s2, z2, 1.0);
+    CHECK(z1.dot(s2) == Approx(s1.dot(z2)).epsilon(1e-10));
     PcgSettings settings;
     settings.tolerance = 1e-10;
     VectorX u_explicit = s.u_star, u_matrixfree = s.u_star;
     const auto r1 = solve_pressure(s.grid, s.w, s.dt, "explicit", settings, u_explicit);
     const auto r2 = solve_pressure(s.grid, s.w, s.dt, "matrixfree", settings, u_matrixfree);
-    INFO("periodic " << periodic << " iterations " << r1.pcg.iterations << " / "
+    INFO("periodic " << periodic << " n " << n << " iterations " << r1.pcg.iterations << " / "
                      << r2.pcg.iterations);
     REQUIRE(r1.pcg.converged);
     REQUIRE(r2.pcg.converged);
