@@ -341,3 +341,34 @@ TEST_CASE("polygon: exact distance, both orientations give the same sign", "[uni
   CHECK_THROWS_WITH(make_shape<2>(line, "liquids[1].shape"),
                     Catch::Contains("liquids[1].shape.points"));
 }
+
+TEST_CASE("bunny in 2D: the embedded silhouette placed by center and size", "[unit]") {
+  // the asset: a few hundred vertices, counter-clockwise, the mesh's side-view extent
+  const auto& raw = bunny_silhouette_points();
+  CHECK(raw.size() >= 200);
+  CHECK(raw.size() <= 400);
+  const PolygonShape outline(raw);
+  CHECK(outline.signed_area() > 0.0);
+  CHECK(outline.bounds().sizes()[0] == Approx(9.91).margin(0.05));
+  CHECK(outline.bounds().sizes()[1] == Approx(9.65).margin(0.05));
+  ShapeSpec s;
+  s.type = "bunny";
+  s.center = {0.5, 0.4};
+  s.size = 0.3;
+  const auto bunny = make_shape<2>(s, "bodies[0].shape");
+  const Box<2> b = bunny->bounds();
+  CHECK(b.sizes().maxCoeff() == Approx(0.3).epsilon(1e-12));
+  CHECK((b.center() - Vec<2>(0.5, 0.4)).norm() < 1e-12);
+  // the body (lower middle) is inside, the space between the ears and the back outside
+  CHECK(bunny->distance(Vec<2>(0.5, 0.4 - 0.05)) < 0.0);
+  CHECK(bunny->distance(Vec<2>(0.5, 0.9)) == Approx(0.9 - b.max()[1]).margin(0.05));
+  // area scales with size^2, both from the polygon and the midpoint rule
+  const double scale = 0.3 / outline.bounds().sizes().maxCoeff();
+  const double area = outline.signed_area() * scale * scale;
+  CHECK(volume_inside<2>(*bunny, b, 400) == Approx(area).epsilon(0.01));
+  // a rotation by pi about the centre turns it upside down
+  s.rotation = {EIGEN_PI};
+  const auto flipped = make_shape<2>(s, "k");
+  const Vec<2> probe(0.5 + 0.02, 0.4 - 0.11);
+  CHECK(flipped->distance(Vec<2>(1.0, 0.8) - probe) == Approx(bunny->distance(probe)).margin(1e-12));
+}
