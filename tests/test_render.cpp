@@ -448,6 +448,22 @@ TEST_CASE("3D: color_by speed colours the liquid", "[unit][render]") {
   CHECK(differ > 300);
 }
 
+TEST_CASE("3D: the time is written in a corner", "[unit][render]") {
+  TestScene<3> scene(12);
+  RenderSpec spec;
+  spec.size = {160, 120};
+  spec.color_by = "none";
+  const Image a = render_frame<3>(scene.view, spec);
+  scene.view.time = 7.5;
+  const Image b = render_frame<3>(scene.view, spec);
+  int diff_label = 0, diff_elsewhere = 0;
+  for (int j = 0; j < 120; ++j)
+    for (int i = 0; i < 160; ++i)
+      if (a.get(i, j) != b.get(i, j)) (i < 80 && j < 20 ? diff_label : diff_elsewhere)++;
+  CHECK(diff_label > 5);
+  CHECK(diff_elsewhere == 0);
+}
+
 TEST_CASE("3D: deterministic for 1 and 2 threads", "[unit][render]") {
   TestScene<3> scene(16);
   RenderSpec spec;
