@@ -4,6 +4,9 @@
 #include "dim3/shapes_3d.hpp"
 
 #include <cmath>
+#include <map>
+#include <mutex>
+#include <sstream>
 
 #include "reference/embedded_data.hpp"
 #include "reference/errors.hpp"
@@ -30,7 +33,39 @@ TriangleMesh placed_bunny_mesh(const Vec<3>& center, double size) {
   return m;
 }
 
+std::shared_ptr<const MeshSdf> unit_bunny_sdf() {
+  // thread-safe one-time construction (a function-local static)
+  static const std::shared_ptr<const MeshSdf> sdf =
+      std::make_shared<MeshSdf>(placed_bunny_mesh(Vec<3>::Zero(), 1.0));
+  return sdf;
+}
+
 namespace {
+
+/// Mesh SDFs already built in this process, by file, modification time, scale and translate
+/// (the scene validator and the simulation both build the scene's shapes).
+std::shared_ptr<const MeshSdf> memoized_mesh_sdf(const std::filesystem::path& file,
+                                                 const Vec<3>& scale, const Vec<3>& translate,
+                                                 const std::string& key_path) {
+  static std::mutex mutex;
+  static std::map<std::string, std::weak_ptr<const MeshSdf>> built;
+  std::error_code ec;
+  const auto stamp = std::filesystem::last_write_time(file, ec);
+  std::ostringstream key;
+  key.precision(17);
+  key << file.string() << '|' << (ec ? 0 : stamp.time_since_epoch().count()) << '|'
+      << scale.transpose() << '|' << translate.transpose();
+  {
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (auto found = built[key.str()].lock()) return found;
+  }
+  TriangleMesh mesh = load_obj(file, key_path);
+  mesh.transform(scale, translate);
+  auto sdf = std::make_shared<const MeshSdf>(std::move(mesh));
+  const std::lock_guard<std::mutex> lock(mutex);
+  built[key.str()] = sdf;
+  return sdf;
+}
 
 Vec<3> vec3_param(const std::vector<double>& v, const std::string& key_path, const char* key,
                   const Vec<3>& fallback) {
@@ -62,9 +97,8 @@ ShapePtr<3> make_dimension_shape<3>(const ShapeSpec& spec, const std::string& ke
     const Vec<3> translate = vec3_param(spec.translate, key_path, "translate", Vec<3>::Zero());
     const std::filesystem::path file =
         spec.resolved_file.empty() ? std::filesystem::path(spec.file) : spec.resolved_file;
-    TriangleMesh mesh = load_obj(file, key_path + ".file");
-    mesh.transform(scale, translate);
-    auto shape = std::make_shared<MeshShape>(std::make_shared<MeshSdf>(std::move(mesh)));
+    auto shape = std::make_shared<MeshShape>(
+        memoized_mesh_sdf(file, scale, translate, key_path + ".file"));
     return apply_rotation<3>(shape, spec, translate);
   }
   if (spec.type == "bunny") {
@@ -72,8 +106,8 @@ ShapePtr<3> make_dimension_shape<3>(const ShapeSpec& spec, const std::string& ke
     if (!(spec.size > 0.0) || !std::isfinite(spec.size)) {
       throw InputError(key_path + ".size: must be a finite number > 0");
     }
-    auto shape = std::make_shared<MeshShape>(
-        std::make_shared<MeshSdf>(placed_bunny_mesh(center, spec.size)));
+    // the shared unit bunny, scaled to `size` about `center`
+    auto shape = std::make_shared<ScaledMeshShape>(unit_bunny_sdf(), spec.size, center);
     return apply_rotation<3>(shape, spec, center);
   }
   if (spec.type == "polygon") {

@@ -24,6 +24,33 @@ class MeshShape : public Shape<3> {
   std::shared_ptr<const MeshSdf> sdf_;
 };
 
+/// A shape scaled uniformly by s about the origin of its frame and moved to `center`:
+/// d(x) = s d_0((x - center) / s). Uniform scaling keeps an exact SDF exact.
+class ScaledMeshShape : public Shape<3> {
+ public:
+  ScaledMeshShape(std::shared_ptr<const MeshSdf> sdf, double scale, const Vec<3>& center)
+      : sdf_(std::move(sdf)), scale_(scale), center_(center) {}
+  double distance(const Vec<3>& x) const override {
+    return scale_ * sdf_->distance((x - center_) / scale_);
+  }
+  Vec<3> gradient(const Vec<3>& x) const override {
+    return sdf_->exact((x - center_) / scale_).normal;
+  }
+  Box<3> bounds() const override {
+    const Box<3> b = sdf_->bounds();
+    return Box<3>(center_ + scale_ * b.min(), center_ + scale_ * b.max());
+  }
+
+ private:
+  std::shared_ptr<const MeshSdf> sdf_;
+  double scale_;
+  Vec<3> center_;
+};
+
+/// The SDF (with its cache) of the bunny normalised to size 1 and centred at the origin, built
+/// once per process on first use and shared by every bunny shape.
+std::shared_ptr<const MeshSdf> unit_bunny_sdf();
+
 /// The embedded bunny mesh (npm "bunny" 1.0.1, 1839 vertices, 3674 triangles), as read.
 const TriangleMesh& bunny_mesh();
 

@@ -270,5 +270,25 @@ TEST_CASE("bunny: volume by divergence theorem vs volume_inside, signs", "[unit]
     CHECK(std::min(std::abs(w), std::abs(w - 1.0)) < 1e-6);
   }
   CHECK(agree == total);
-  (void)centroid;
+  // the cached, scaled bunny agrees with the exact SDF of the placed mesh within 0.3 h
+  const double h = size / 64.0;
+  double worst = 0.0;
+  for (int k = 0; k < 2000; ++k) {
+    const Vec<3> x = b.center() + 0.7 * random_point(rng, -1, 1).cwiseProduct(b.sizes());
+    worst = std::max(worst, std::abs(bunny->distance(x) - sdf.exact_distance(x)));
+  }
+  INFO("bunny cache error " << worst << " = " << worst / h << " h");
+  CHECK(worst < 0.3 * h);
+  // the gradient is the exact unit normal; a second bunny reuses the shared SDF (fast)
+  CHECK(bunny->gradient(centroid).norm() == Approx(1.0));
+  const auto t2 = std::chrono::steady_clock::now();
+  s.size = 2.0;
+  const auto big = make_shape<3>(s, "bodies[1].shape");
+  CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t2).count() < 0.05);
+  // uniform scaling about the centre scales the distance
+  for (int k = 0; k < 20; ++k) {
+    const Vec<3> x = b.center() + 0.7 * random_point(rng, -1, 1).cwiseProduct(b.sizes());
+    const Vec<3> xs = center + (2.0 / size) * (x - center);
+    CHECK(big->distance(xs) == Approx((2.0 / size) * bunny->distance(x)).margin(1e-12));
+  }
 }
