@@ -23,6 +23,80 @@ double cross(const Vec<2>& a, const Vec<2>& b) { return a[0] * b[1] - a[1] * b[0
 
 PolygonShape::PolygonShape(std::vector<Vec<2>> points) : points_(std::move(points)) {
   for (const auto& p : points_) bounds_.extend(p);
+  // acceleration for many vertices: edge hierarchy and sign lattice
+  if (points_.size() > 32) {
+    order_.resize(points_.size());
+    for (std::size_t i = 0; i < order_.size(); ++i) order_[i] = static_cast<int>(i);
+    nodes_.reserve(2 * order_.size());
+    build(0, static_cast<int>(order_.size()));
+    build_sign_lattice();
+  }
+}
+
+int PolygonShape::build(int begin, int end) {
+  // node box over edges [begin, end) of order_
+  const int id = static_cast<int>(nodes_.size());
+  nodes_.emplace_back();
+  const std::size_t n = points_.size();
+  Box<2> box, mids;
+  for (int i = begin; i < end; ++i) {
+    const Vec<2>& a = points_[order_[i]];
+    const Vec<2>& b = points_[(order_[i] + 1) % n];
+    box.extend(a);
+    box.extend(b);
+    mids.extend(Vec<2>(0.5 * (a + b)));
+  }
+  nodes_[id].box = box;
+  nodes_[id].begin = begin;
+  nodes_[id].end = end;
+  if (end - begin <= 4) return id;
+  // median split of the edge midpoints along the longer axis
+  int axis = 0;
+  mids.sizes().maxCoeff(&axis);
+  const int mid = (begin + end) / 2;
+  std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
+                   [&](int l, int r) {
+                     return points_[l][axis] + points_[(l + 1) % n][axis] <
+                            points_[r][axis] + points_[(r + 1) % n][axis];
+                   });
+  const int left = build(begin, mid);
+  const int right = build(mid, end);
+  nodes_[id].left = left;
+  nodes_[id].right = right;
+  return id;
+}
+
+void PolygonShape::build_sign_lattice() {
+  // exact signed distances at the nodes of a lattice over the bounds, padded by 2 cells
+  h_ = bounds_.sizes().maxCoeff() / 128.0;
+  origin_ = bounds_.min().array() - 2.0 * h_;
+  nx_ = static_cast<int>(std::ceil(bounds_.sizes()[0] / h_)) + 5;
+  ny_ = static_cast<int>(std::ceil(bounds_.sizes()[1] / h_)) + 5;
+  lattice_.resize(static_cast<std::size_t>(nx_) * ny_);
+  for (int j = 0; j < ny_; ++j) {
+    for (int i = 0; i < nx_; ++i) {
+      const Vec<2> x = origin_ + h_ * Vec<2>(i, j);
+      const double d = nearest_all(x, nullptr);
+      lattice_[static_cast<std::size_t>(j) * nx_ + i] = winding_number(x) != 0 ? -d : d;
+    }
+  }
+}
+
+bool PolygonShape::inside(const Vec<2>& x) const {
+  // outside the bounds: outside
+  if (bounds_.exteriorDistance(x) > 0.0) return false;
+  if (!lattice_.empty()) {
+    // bilinear value; decisive when farther from zero than its error bound sqrt(2)/2 h
+    const Vec<2> s = (x - origin_) / h_;
+    const int i = std::clamp(static_cast<int>(s[0]), 0, nx_ - 2);
+    const int j = std::clamp(static_cast<int>(s[1]), 0, ny_ - 2);
+    const double fx = s[0] - i, fy = s[1] - j;
+    const double* r0 = &lattice_[static_cast<std::size_t>(j) * nx_ + i];
+    const double* r1 = r0 + nx_;
+    const double v = (r0[0] * (1 - fx) + r0[1] * fx) * (1 - fy) + (r1[0] * (1 - fx) + r1[1] * fx) * fy;
+    if (std::abs(v) > 0.75 * h_) return v < 0.0;
+  }
+  return winding_number(x) != 0;
 }
 
 double PolygonShape::signed_area() const {
@@ -50,6 +124,40 @@ int PolygonShape::winding_number(const Vec<2>& x) const {
 }
 
 double PolygonShape::nearest(const Vec<2>& x, Vec<2>* point) const {
+  if (nodes_.empty()) return nearest_all(x, point);
+  // depth-first through the edge hierarchy, nearer child first, pruned by box distance
+  const std::size_t n = points_.size();
+  double best = std::numeric_limits<double>::infinity();
+  int stack[96];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const Node& node = nodes_[stack[--top]];
+    if (node.box.squaredExteriorDistance(x) >= best) continue;
+    if (node.left < 0) {
+      for (int k = node.begin; k < node.end; ++k) {
+        const Vec<2>& a = points_[order_[k]];
+        const Vec<2> e = points_[(order_[k] + 1) % n] - a;
+        const double len2 = e.squaredNorm();
+        const double t = len2 > 0.0 ? std::clamp((x - a).dot(e) / len2, 0.0, 1.0) : 0.0;
+        const Vec<2> q = a + t * e;
+        const double d2 = (x - q).squaredNorm();
+        if (d2 < best) {
+          best = d2;
+          if (point) *point = q;
+        }
+      }
+      continue;
+    }
+    const double dl = nodes_[node.left].box.squaredExteriorDistance(x);
+    const double dr = nodes_[node.right].box.squaredExteriorDistance(x);
+    stack[top++] = dl <= dr ? node.right : node.left;
+    stack[top++] = dl <= dr ? node.left : node.right;
+  }
+  return std::sqrt(best);
+}
+
+double PolygonShape::nearest_all(const Vec<2>& x, Vec<2>* point) const {
   // exact distance: minimum over the edges of the distance to a segment
   double best = std::numeric_limits<double>::infinity();
   const std::size_t n = points_.size();
@@ -70,7 +178,7 @@ double PolygonShape::nearest(const Vec<2>& x, Vec<2>* point) const {
 
 double PolygonShape::distance(const Vec<2>& x) const {
   const double d = nearest(x, nullptr);
-  return winding_number(x) != 0 ? -d : d;
+  return inside(x) ? -d : d;
 }
 
 Vec<2> PolygonShape::gradient(const Vec<2>& x) const {
@@ -79,7 +187,7 @@ Vec<2> PolygonShape::gradient(const Vec<2>& x) const {
   const double d = nearest(x, &q);
   if (d < 1e-12 * (1.0 + bounds_.sizes().norm())) return Shape<2>::gradient(x);
   const Vec<2> g = (x - q) / d;
-  return winding_number(x) != 0 ? Vec<2>(-g) : g;
+  return inside(x) ? Vec<2>(-g) : g;
 }
 
 std::vector<Vec<2>> parse_point_list(std::string_view text, const std::string& label,

@@ -180,6 +180,14 @@ MeshQuery MeshSdf::exact(const Vec<3>& x) const {
       stack[top++] = node.right;
     }
   }
+  // a mesh of degenerate triangles only has no surface to measure against
+  if (best_tri < 0) {
+    MeshQuery none;
+    none.distance = std::numeric_limits<double>::infinity();
+    none.closest = x;
+    none.normal = Vec<3>::UnitY();
+    return none;
+  }
   // sign: the angle-weighted pseudo-normal of the nearest feature
   const auto& t = mesh_.triangles[best_tri];
   Vec<3> pseudo;

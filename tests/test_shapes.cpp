@@ -4,6 +4,7 @@
 
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "dim2/shapes_2d.hpp"
@@ -371,4 +372,45 @@ TEST_CASE("bunny in 2D: the embedded silhouette placed by center and size", "[un
   const auto flipped = make_shape<2>(s, "k");
   const Vec<2> probe(0.5 + 0.02, 0.4 - 0.11);
   CHECK(flipped->distance(Vec<2>(1.0, 0.8) - probe) == Approx(bunny->distance(probe)).margin(1e-12));
+}
+
+TEST_CASE("polygon acceleration (edge hierarchy, sign lattice) is exact", "[dense-reference]") {
+  // the bunny outline (302 vertices: accelerated) against a brute-force reference
+  const auto& pts = bunny_silhouette_points();
+  const PolygonShape poly(pts);
+  auto reference = [&](const Vec<2>& x) {
+    double best = std::numeric_limits<double>::infinity();
+    bool odd = false;
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      const Vec<2>& a = pts[i];
+      const Vec<2>& b = pts[(i + 1) % pts.size()];
+      const Vec<2> e = b - a;
+      const double t = std::clamp((x - a).dot(e) / e.squaredNorm(), 0.0, 1.0);
+      best = std::min(best, (x - a - t * e).norm());
+      // even-odd crossing of the ray to +x (a simple polygon)
+      if ((a[1] > x[1]) != (b[1] > x[1]) && a[0] + (x[1] - a[1]) / (b[1] - a[1]) * e[0] > x[0]) {
+        odd = !odd;
+      }
+    }
+    return odd ? -best : best;
+  };
+  std::mt19937 rng(21);
+  const Box<2> b = poly.bounds();
+  int near = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const Vec<2> x = b.center() + 0.7 * random_point<2>(rng, -1, 1).cwiseProduct(b.sizes());
+    const double r = reference(x);
+    REQUIRE(poly.distance(x) == Approx(r).margin(1e-12));
+    near += std::abs(r) < 0.1;
+  }
+  CHECK(near > 100);
+  // points just off the boundary, on both sides of edge midpoints
+  for (std::size_t i = 0; i < pts.size(); i += 7) {
+    const Vec<2> a = pts[i], e = pts[(i + 1) % pts.size()] - a;
+    const Vec<2> n(e[1], -e[0]);
+    for (double off : {-1e-3, 1e-3}) {
+      const Vec<2> x = a + 0.5 * e + off * n.normalized();
+      REQUIRE(poly.distance(x) == Approx(reference(x)).margin(1e-12));
+    }
+  }
 }
