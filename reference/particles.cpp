@@ -24,7 +24,7 @@ constexpr double kSeedJitter = 0.5;
 constexpr double kCorrectionSupport = 2.0;
 constexpr double kCorrectionTime = 0.02;
 constexpr double kCorrectionRelaxation = 0.5;
-constexpr double kCorrectionSlack = 0.02;
+constexpr double kCorrectionSlack = 0.05;
 constexpr double kCorrectionMaxStep = 0.25;
 /// Pairs closer than this many rest spacings are pushed apart regardless of density.
 constexpr double kCorrectionMinDistance = 0.5;

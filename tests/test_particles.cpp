@@ -473,9 +473,11 @@ void check_cluster_spreads() {
     p.liquid.push_back(0);
   }
   // a compressed corner cluster: extra particles packed into one cell
+  const Vec<Dim> cluster_centre = grid.cell_center(grid.cell_containing(Vec<Dim>::Constant(0.3)));
   for (int i = 0; i < 4 * per_cell; ++i) {
-    Vec<Dim> x = Vec<Dim>::Constant(0.3);
-    for (int a = 0; a < Dim; ++a) x[a] += dx * (uni(rng) - 0.5) / 0.5 * 0.5;
+    // uni - 0.5 is in [-0.25, 0.25]: the cluster fills the middle half of the cell
+    Vec<Dim> x = cluster_centre;
+    for (int a = 0; a < Dim; ++a) x[a] += dx * (uni(rng) - 0.5);
     p.x.push_back(x);
     p.v.push_back(Vec<Dim>::Zero());
     p.c.push_back(Mat<Dim>::Zero());
@@ -485,22 +487,43 @@ void check_cluster_spreads() {
   }
   const Box<Dim> inner(Vec<Dim>::Constant(0.25 + dx), Vec<Dim>::Constant(0.75 - dx));
   const double var0 = count_variance(p, grid, inner);
+  // smallest pair distance away from the solid (a particle projected onto the solid's 0.05 dx
+  // margin may be held against a neighbour there)
   auto min_distance = [&]() {
     double m = 1e30;
-    for (std::size_t i = 0; i < p.size(); ++i)
-      for (std::size_t j = i + 1; j < p.size(); ++j) m = std::min(m, (p.x[i] - p.x[j]).norm());
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (solid.distance(p.x[i]) < 0.1 * dx) continue;
+      for (std::size_t j = i + 1; j < p.size(); ++j)
+        if (solid.distance(p.x[j]) >= 0.1 * dx) m = std::min(m, (p.x[i] - p.x[j]).norm());
+    }
     return m;
   };
   const double min0 = min_distance();
+  // particles in the cell of the compressed cluster
+  const int cluster_cell = grid.cell_index(grid.cell_containing(Vec<Dim>::Constant(0.3)));
+  auto cluster_count = [&]() {
+    int k = 0;
+    for (const auto& x : p.x) k += grid.cell_index(grid.cell_containing(x)) == cluster_cell;
+    return k;
+  };
+  const int cluster0 = cluster_count();
+  int cluster5 = 0;
   for (int step = 0; step < 20; ++step) {
     correct_positions(p, grid, 0.02, solid, walls<Dim>());
     for (const auto& x : p.x) REQUIRE(solid.distance(x) >= 0.0);
+    if (step == 4) cluster5 = cluster_count();
   }
+  // the compressed cell sheds at least half of its excess of 4 per_cell within 5 steps
+  INFO("dim " << Dim << ": cluster cell " << cluster0 << " -> " << cluster5 << " particles");
+  CHECK(cluster0 >= 4 * per_cell);
+  CHECK(cluster5 < 3 * per_cell);
   const double var1 = count_variance(p, grid, inner);
   const double min1 = min_distance();
   INFO("dim " << Dim << ": per-cell count variance " << var0 << " -> " << var1
               << ", min distance / spacing " << min0 / (0.5 * dx) << " -> " << min1 / (0.5 * dx));
-  CHECK(var1 < 0.5 * var0);
+  // 0.6: the 5 % compression slack of the correction (chosen so a 2D dam break neither loses nor
+  // gains volume, docs/particles.md) leaves mild fluctuations alone
+  CHECK(var1 < 0.6 * var0);
   // close pairs are pushed towards the minimum distance of half a rest spacing (0.25 dx here)
   CHECK(min1 > 0.8 * 0.5 * 0.5 * dx);
   for (const auto& x : p.x) REQUIRE(grid.domain_box().contains(x));
