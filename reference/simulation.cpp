@@ -90,8 +90,7 @@ class Simulation : public AnySimulation {
   // liquid state
   Particles<Dim> particles_;
   VectorX liquid_phi_;
-  VectorX raw_liquid_face_;
-  ///< W_L^u before the clamp of kMinLiquidFaceFraction (the geometric liquid fraction)
+  VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
   VectorX u_, face_mass_, face_density_, pressure_;
   PcgSettings pcg_settings_;
   // time and statistics
