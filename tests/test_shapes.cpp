@@ -414,3 +414,36 @@ TEST_CASE("polygon acceleration (edge hierarchy, sign lattice) is exact", "[dens
     }
   }
 }
+
+TEMPLATE_TEST_CASE_SIG("rotation centres: union about its first child's bounds, halfspace about the origin",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  std::mt19937 rng(17);
+  const Vec<Dim> c0 = Vec<Dim>::Constant(0.3), c1 = Vec<Dim>::Constant(0.6);
+  ShapeSpec u;
+  u.type = "union";
+  u.shapes = {box_spec<Dim>(c0, Vec<Dim>::Constant(0.1)), round_spec<Dim>("sphere", c1, 0.15)};
+  ShapeSpec ur = u;
+  ur.rotation = rotation_value<Dim>(1.1);
+  const Mat<Dim> r = rotation_matrix<Dim>(ur.rotation);
+  const auto a = make_shape<Dim>(u, "u");
+  const auto b = make_shape<Dim>(ur, "u");
+  // the pivot is the centre of the first child's bounds, c0
+  for (int k = 0; k < 200; ++k) {
+    const Vec<Dim> x = random_point<Dim>(rng, -0.5, 1.5);
+    REQUIRE(b->distance(Vec<Dim>(c0 + r * (x - c0))) == Approx(a->distance(x)).margin(1e-14));
+  }
+  // halfspace y <= 0.2 rotated about the origin: the normal rotates, the offset stays
+  ShapeSpec hs;
+  hs.type = "halfspace";
+  hs.normal = rep<Dim>(0.0);
+  hs.normal[1] = 1.0;
+  hs.offset = 0.2;
+  hs.rotation = rotation_value<Dim>(0.8);
+  const auto h = make_shape<Dim>(hs, "h");
+  const Vec<Dim> n = rotation_matrix<Dim>(hs.rotation) * Vec<Dim>::Unit(1);
+  for (int k = 0; k < 50; ++k) {
+    const Vec<Dim> x = random_point<Dim>(rng, -2, 2);
+    REQUIRE(h->distance(x) == Approx(n.dot(x) - 0.2).margin(1e-14));
+  }
+  CHECK(std::isinf(h->bounds().max()[0]));
+}
