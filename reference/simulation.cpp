@@ -91,6 +91,7 @@ class Simulation : public AnySimulation {
   Particles<Dim> particles_;
   VectorX liquid_phi_;
   VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
+  bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   VectorX u_, face_mass_, face_density_, pressure_;
   PcgSettings pcg_settings_;
   // time and statistics
@@ -164,6 +165,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   // frame 0: the seeded state on the grid (no pressure yet)
   particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
   update_liquid_weights();
+  liquid_weights_current_ = true;
   pressure_ = VectorX::Zero(grid_.num_cells());
   stats_.frame = 0;
   stats_.time = 0.0;
@@ -195,8 +197,10 @@ void Simulation<Dim>::step(double dt) {
   for (int f = 0; f < grid_.num_faces(); ++f)
     if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
   // (4) liquid/air domain: level set from the particles on the half lattice
-  // (5) volume fractions W_L^p, W_L^u (W_F^u is fixed: the solids are static)
-  update_liquid_weights();
+  // (5) volume fractions W_L^p, W_L^u (W_F^u is fixed: the solids are static); the particles
+  // have not moved since the end of the last frame if that is where we are
+  if (!liquid_weights_current_) update_liquid_weights();
+  liquid_weights_current_ = false;
   weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
   // (7)-(10) active DOFs, assembly (or stencil set-up) and the SSOR-PCG solve; (11) velocity
   // update u = u* - dt P^-1 (W_L^u)^-1 G W_L^p p
@@ -302,8 +306,9 @@ FrameStats Simulation<Dim>::advance_frame() {
   stats_.frame = frame_;
   stats_.time = frame_end;
   if (stats_.steps == 0) stats_.dt_min = 0.0;
-  // the liquid weights of the final state
+  // the liquid weights of the final state (reused by the next step)
   update_liquid_weights();
+  liquid_weights_current_ = true;
   fill_state_stats(stats_);
   stats_.timing_total = seconds_since(frame_start);
   return stats_;
