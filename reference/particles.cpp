@@ -615,20 +615,31 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
       gather_candidates(cell, cand, cells);
       for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
         const int p = order[slot];
+        const double h = support[p];
+        const double inv_h2 = 1.0 / (h * h);
+        const double min_distance = kCorrectionMinDistance * h / kCorrectionSupport;
+        const double min_distance2 = min_distance * min_distance;
+        const Vec<Dim> xp = xw[p];
+        // number density from squared distances only (no square roots)
         double n = 1.0;  // the particle itself
+        for (int q : cand) {
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
+          const double r2 = d.squaredNorm();
+          if (r2 >= h * h || order[q] == p) continue;
+          if (r2 < min_distance2) close_pair[p] = 1;
+          n += correction_kernel(r2 * inv_h2);
+        }
+        const double c = n / n0 - 1.0 - kCorrectionSlack;
+        if (c <= 0.0) continue;
+        // constraint gradients, only for the compressed particles
         Vec<Dim> grad_self = Vec<Dim>::Zero();
         double grad_others = 0.0;
-        const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
-        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
-          if (r < min_distance) close_pair[p] = 1;
-          n += correction_kernel(r * r / (h * h));
-          const Vec<Dim> g = spiky_gradient(p, j, d, r, h) / n0;
+        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double hp) {
+          const Vec<Dim> g = spiky_gradient(p, j, d, r, hp) / n0;
           grad_self += g;
           grad_others += g.squaredNorm();
         });
-        const double c = n / n0 - 1.0 - kCorrectionSlack;
-        if (c <= 0.0) continue;
-        const double h = support[p];
         // eps regularises the denominator (units 1/length^2, scaled by h)
         const double eps = 1e-6 / (h * h);
         lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
