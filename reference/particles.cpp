@@ -682,7 +682,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
             if (r > 1e-9 * h)
               dir = d / r;
             else
-              dir[0] = p < j ? -1.0 : 1.0;
+              dir[0] = p < j ? 1.0 : -1.0;  // as in spiky_gradient
             push += 0.5 * (min_distance - r) * dir;
           }
         });

@@ -626,3 +626,24 @@ TEST_CASE("remove_flagged and max_particle_speed", "[unit]") {
   CHECK(p.v.size() == 3);
   CHECK(max_particle_speed(Particles<2>{}) == 0.0);
 }
+
+TEST_CASE("position correction separates coincident particles", "[unit]") {
+  const MacGrid<2> grid = unit_grid<2>(8);
+  const double dx = grid.dx();
+  Particles<2> p;
+  for (int i = 0; i < 2; ++i) {
+    p.x.push_back(Vec<2>(0.5, 0.5));
+    p.v.push_back(Vec<2>::Zero());
+    p.c.push_back(Mat<2>::Zero());
+    p.mass.push_back(1000.0 * grid.cell_volume() / 4);
+    p.density.push_back(1000.0);
+    p.liquid.push_back(0);
+  }
+  for (int step = 0; step < 10; ++step)
+    correct_positions(p, grid, 0.02, SolidField<2>{}, walls<2>());
+  // both move apart along x, symmetrically, to about the minimum distance (0.5 s = dx / 4)
+  CHECK(p.x[0][0] > 0.5);
+  CHECK(p.x[1][0] < 0.5);
+  CHECK(std::abs((p.x[0] + p.x[1])[0] - 1.0) < 1e-12);
+  CHECK((p.x[0] - p.x[1]).norm() > 0.2 * dx);
+}
