@@ -3,7 +3,6 @@
 /// The discrete pressure gradient G of eq. (8) on the MAC grid, and its negative transpose, the
 /// divergence.
 
-
 #include "reference/common.hpp"
 #include "reference/mac_grid.hpp"
 

@@ -52,15 +52,21 @@ class SparseMatrixOperator : public LinearOperator {
       y[i] = s;
     }
   }
-  VectorX diagonal() const override { return diagonal_; }
+  VectorX diagonal() const override {
+    return diagonal_;
+  }
   void forward_sweep(const VectorX& rhs, VectorX& x, double omega) const override {
     for (int i = 0; i < a_.rows(); ++i) relax_row(i, rhs, x, omega);
   }
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega) const override {
     for (int i = static_cast<int>(a_.rows()) - 1; i >= 0; --i) relax_row(i, rhs, x, omega);
   }
-  const std::vector<VectorX>& null_space() const override { return null_space_; }
-  const SparseMatrix& matrix() const { return a_; }
+  const std::vector<VectorX>& null_space() const override {
+    return null_space_;
+  }
+  const SparseMatrix& matrix() const {
+    return a_;
+  }
 
  private:
   void relax_row(int i, const VectorX& rhs, VectorX& x, double omega) const {

@@ -9,7 +9,9 @@ namespace {
 void project_out(const std::vector<VectorX>& basis, VectorX& v) {
   for (const VectorX& n : basis) v -= n.dot(v) * n;
 }
-double inf_norm(const VectorX& v) { return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0; }
+double inf_norm(const VectorX& v) {
+  return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0;
+}
 }  // namespace
 
 void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, double omega) {

@@ -10,7 +10,7 @@
 namespace monolith {
 
 struct PcgSettings {
-  double tolerance = 1e-6;   ///< stop when ||r||_inf <= tolerance ||b||_inf
+  double tolerance = 1e-6;  ///< stop when ||r||_inf <= tolerance ||b||_inf
   int max_iterations = 2000;
   double omega = 1.0;        ///< SSOR relaxation in (0, 2); 1 = symmetric Gauss-Seidel
   bool precondition = true;  ///< false: plain CG
@@ -20,8 +20,8 @@ struct PcgResult {
   int iterations = 0;
   double relative_residual = 0.0;  ///< ||b - A x||_inf / ||b||_inf at exit (0 when b = 0)
   bool converged = false;
-  bool breakdown = false;          ///< a non-finite value or p^T A p <= 0 stopped the iteration
-  std::string message;             ///< what broke down, empty otherwise
+  bool breakdown = false;  ///< a non-finite value or p^T A p <= 0 stopped the iteration
+  std::string message;     ///< what broke down, empty otherwise
 };
 
 /// z = M^-1 r for the SSOR preconditioner: one forward then one backward SOR sweep from z = 0,

@@ -21,7 +21,9 @@ SparseMatrix diagonal_matrix(const VectorX& d) {
 
 /// (W_L^u)^-1 entry: 0 where W_L^u = 0 (such faces have no liquid cell beside them, so the
 /// matching row of G W_L^p is zero anyway).
-double inverse_or_zero(double v) { return v > 0.0 ? 1.0 / v : 0.0; }
+double inverse_or_zero(double v) {
+  return v > 0.0 ? 1.0 / v : 0.0;
+}
 
 /// Per-face coefficient dt W_F^u P^-1 (W_L^u)^-1 / dx^2 of the stencil form of A.
 VectorX face_coefficients(const PressureWeights& w, double dt, double dx) {
@@ -179,8 +181,11 @@ template <int Dim>
 MatrixFreePressureOperator<Dim>::MatrixFreePressureOperator(const MacGrid<Dim>& grid,
                                                             const PressureWeights& w,
                                                             const PressureDofs& dofs, double dt)
-    : grid_(&grid), num_dofs_(dofs.size()), cell_of_dof_(dofs.cell_of_dof),
-      fluid_face_(w.fluid_face), null_space_(dofs.null_space) {
+    : grid_(&grid),
+      num_dofs_(dofs.size()),
+      cell_of_dof_(dofs.cell_of_dof),
+      fluid_face_(w.fluid_face),
+      null_space_(dofs.null_space) {
   const VectorX k = face_coefficients(w, dt, grid.dx());
   liquid_.resize(num_dofs_);
   neighbour_.assign(num_dofs_ * kNeighbours, -1);

@@ -93,15 +93,15 @@ class MatrixFreePressureOperator : public LinearOperator {
   const MacGrid<Dim>* grid_;
   int num_dofs_ = 0;
   std::vector<int> cell_of_dof_;
-  VectorX liquid_;                  ///< W_L^p per DOF
-  VectorX fluid_face_;              ///< W_F^u per face (for rhs)
-  std::vector<int> neighbour_;      ///< per DOF and face: neighbour DOF, -1 none
-  std::vector<double> coefficient_; ///< per DOF and face: dt W_F^u P^-1 (W_L^u)^-1 / dx^2
-  std::vector<int> face_;           ///< per DOF and face: face index (for rhs)
-  std::vector<double> face_sign_;   ///< +1 if the DOF is the face's plus cell, -1 if minus
+  VectorX liquid_;                   ///< W_L^p per DOF
+  VectorX fluid_face_;               ///< W_F^u per face (for rhs)
+  std::vector<int> neighbour_;       ///< per DOF and face: neighbour DOF, -1 none
+  std::vector<double> coefficient_;  ///< per DOF and face: dt W_F^u P^-1 (W_L^u)^-1 / dx^2
+  std::vector<int> face_;            ///< per DOF and face: face index (for rhs)
+  std::vector<double> face_sign_;    ///< +1 if the DOF is the face's plus cell, -1 if minus
   VectorX diagonal_;
   std::array<std::vector<int>, 2> colour_dofs_;
-  bool colouring_valid_ = true;     ///< false on odd periodic axes: colours then run serially
+  bool colouring_valid_ = true;  ///< false on odd periodic axes: colours then run serially
   std::vector<VectorX> null_space_;
 };
 

@@ -38,7 +38,9 @@ std::vector<double> to_std(const Vec<Dim>& x) {
   return std::vector<double>(x.data(), x.data() + Dim);
 }
 
-bool all_finite(const VectorX& v) { return v.allFinite(); }
+bool all_finite(const VectorX& v) {
+  return v.allFinite();
+}
 
 /// Faces whose geometric liquid fraction is below this keep their solved velocity out of the
 /// particles: it is replaced by extrapolation from the faces above it (a departure from the
@@ -90,7 +92,7 @@ class Simulation : public AnySimulation {
   // liquid state
   Particles<Dim> particles_;
   VectorX liquid_phi_;
-  VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
+  VectorX raw_liquid_face_;              ///< W_L^u before the clamp of kMinLiquidFaceFraction
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   VectorX u_, face_mass_, face_density_, pressure_;
   PcgSettings pcg_settings_;
@@ -145,7 +147,8 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
     };
   }
   // W_F^u from the solid level set shrunk by zeta (section 4.4.6)
-  solid_phi_ = solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
+  solid_phi_ =
+      solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
   weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
 
   // liquids: particles seeded in each liquid's shape
@@ -155,8 +158,8 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
         make_shape<Dim>(scene.liquids[i].shape, "liquids[" + std::to_string(i) + "].shape"));
   if (!scene.liquids.empty()) reference_density_ = scene.liquids.front().density;
   const int per_cell = scene.particles.per_cell > 0 ? scene.particles.per_cell : (Dim == 2 ? 4 : 8);
-  particles_ = seed_particles(grid_, scene.liquids, liquid_shapes, solids_, per_cell,
-                              scene.particles.seed);
+  particles_ =
+      seed_particles(grid_, scene.liquids, liquid_shapes, solids_, per_cell, scene.particles.seed);
 
   // solver settings
   pcg_settings_.tolerance = scene.solver.tolerance;
@@ -225,9 +228,9 @@ void Simulation<Dim>::step(double dt) {
   // normal velocity on walls and fully solid faces, and remove the inflow into solids
   std::vector<char> valid(grid_.num_faces(), 0);
   for (int f = 0; f < grid_.num_faces(); ++f)
-    valid[f] = weights_.fluid_face[f] > 0.0 &&
-               (raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
-                (weights_.liquid_face[f] == 0.0 && face_mass_[f] > 0.0));
+    valid[f] =
+        weights_.fluid_face[f] > 0.0 && (raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
+                                         (weights_.liquid_face[f] == 0.0 && face_mass_[f] > 0.0));
   const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
   extrapolate_velocity(grid_, u_, valid, layers);
   for (int f = 0; f < grid_.num_faces(); ++f) {

@@ -85,8 +85,9 @@ struct AxisMap {
 /// Fraction where phi < 0 of the union of the 2^Dim lattice cells with lower corners
 /// lower + {0,1}^Dim.
 template <int Dim>
-double control_volume_fraction(const SampleLattice<Dim>& lattice, const std::array<AxisMap, Dim>& maps,
-                               const VecI<Dim>& lower, const VectorX& phi) {
+double control_volume_fraction(const SampleLattice<Dim>& lattice,
+                               const std::array<AxisMap, Dim>& maps, const VecI<Dim>& lower,
+                               const VectorX& phi) {
   double sum = 0.0;
   for (int sub = 0; sub < (1 << Dim); ++sub) {
     // the lattice cell of this sub-cube, after wrapping or mirroring

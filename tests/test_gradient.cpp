@@ -1,6 +1,5 @@
 // G of eq. (8) and its adjoint, the divergence.
 #include <catch2/catch.hpp>
-
 #include <random>
 
 #include "reference/gradient.hpp"
@@ -63,8 +62,8 @@ TEMPLATE_TEST_CASE_SIG("G is num_faces x num_cells and matches its matrix-free f
   }
 }
 
-TEMPLATE_TEST_CASE_SIG("adjointness <G p, W u> = -<p, div_W u>", "[property]", ((int Dim), Dim),
-                       2, 3) {
+TEMPLATE_TEST_CASE_SIG("adjointness <G p, W u> = -<p, div_W u>", "[property]", ((int Dim), Dim), 2,
+                       3) {
   for (bool periodic : {false, true}) {
     const auto grid = make_grid<Dim>(periodic);
     const SparseMatrix g = gradient_matrix(grid);
@@ -93,8 +92,7 @@ TEMPLATE_TEST_CASE_SIG("G of a linear field is its exact gradient on interior fa
     for (int f = 0; f < grid.num_faces(); ++f) {
       const auto [axis, coord] = grid.face_coord(f);
       // interior faces (on a periodic axis: not the seam, where the linear field jumps)
-      if (grid.is_boundary_face(axis, coord) || (grid.periodic(axis) && coord[axis] == 0))
-        continue;
+      if (grid.is_boundary_face(axis, coord) || (grid.periodic(axis) && coord[axis] == 0)) continue;
       REQUIRE(gp[f] == Approx(slope[axis]).epsilon(1e-12));
       ++checked;
     }
@@ -108,8 +106,8 @@ TEMPLATE_TEST_CASE_SIG("G of a linear field is its exact gradient on interior fa
   }
 }
 
-TEMPLATE_TEST_CASE_SIG("open boundary faces see zero pressure outside", "[unit]",
-                       ((int Dim), Dim), 2, 3) {
+TEMPLATE_TEST_CASE_SIG("open boundary faces see zero pressure outside", "[unit]", ((int Dim), Dim),
+                       2, 3) {
   const auto grid = make_grid<Dim>(false);
   const VectorX p = VectorX::Constant(grid.num_cells(), 4.0);
   const VectorX gp = apply_gradient(grid, p);

@@ -1,8 +1,8 @@
 // SSOR-preconditioned CG (section 4.3) on both operator back ends.
-#include <catch2/catch.hpp>
+#include <omp.h>
 
 #include <Eigen/Dense>
-#include <omp.h>
+#include <catch2/catch.hpp>
 #include <random>
 
 #include "reference/pcg.hpp"
@@ -129,7 +129,8 @@ TEST_CASE("PCG reports breakdown, zero right-hand side and the iteration cap", "
   // b = 0: x = 0 at once
   const SparseMatrix a = laplacian_plus_diagonal(10, 5);
   VectorX y = VectorX::Ones(a.rows());
-  const PcgResult zero = pcg_solve(SparseMatrixOperator(a), VectorX::Zero(a.rows()), y, PcgSettings{});
+  const PcgResult zero =
+      pcg_solve(SparseMatrixOperator(a), VectorX::Zero(a.rows()), y, PcgSettings{});
   CHECK(zero.converged);
   CHECK(zero.iterations == 0);
   CHECK(y.norm() == 0.0);
@@ -165,8 +166,8 @@ TEMPLATE_TEST_CASE_SIG("the SSOR preconditioner is symmetric positive definite o
   }
 }
 
-TEMPLATE_TEST_CASE_SIG("matrix-free apply and sweeps are deterministic under OpenMP",
-                       "[property]", ((int Dim), Dim), 2, 3) {
+TEMPLATE_TEST_CASE_SIG("matrix-free apply and sweeps are deterministic under OpenMP", "[property]",
+                       ((int Dim), Dim), 2, 3) {
   const Pool<Dim> pool(Dim == 2 ? 32 : 12);
   const MatrixFreePressureOperator<Dim> mf(pool.grid, pool.w, pool.dofs, 0.01);
   const VectorX x = random_vector(pool.dofs.size(), 9);

@@ -1,8 +1,7 @@
 // The variational pressure system of eq. (8) (A22 and b2 of eq. (24)): both back ends, SPD-ness,
 // the CHOLMOD oracle, the velocity update and enclosed liquids.
-#include <catch2/catch.hpp>
-
 #include <Eigen/Dense>
+#include <catch2/catch.hpp>
 #include <random>
 
 #include "reference/cholmod_solver.hpp"
@@ -74,12 +73,15 @@ struct Setup {
   }
 };
 
-double relative(const VectorX& a, const VectorX& b) { return (a - b).norm() / b.norm(); }
+double relative(const VectorX& a, const VectorX& b) {
+  return (a - b).norm() / b.norm();
+}
 
 }  // namespace
 
-TEMPLATE_TEST_CASE_SIG("A of eq. (8) is symmetric positive definite with a free surface and a solid",
-                       "[property][dense-reference]", ((int Dim), Dim), 2, 3) {
+TEMPLATE_TEST_CASE_SIG(
+    "A of eq. (8) is symmetric positive definite with a free surface and a solid",
+    "[property][dense-reference]", ((int Dim), Dim), 2, 3) {
   const Setup<Dim> s(Dim == 2 ? 8 : 4, false);
   const PressureDofs dofs = select_pressure_dofs(s.grid, s.w, s.dt);
   REQUIRE(dofs.size() > 0);
@@ -239,7 +241,8 @@ TEMPLATE_TEST_CASE_SIG("projection of a gradient field converges to the analytic
   // u* = grad psi with psi = 0 on the free surface y = h and d psi / dn = 0 on the walls: the
   // projection removes all of u*, so p = rho psi / dt exactly in the continuum
   const double h = 0.6 + 0.013, rho = 1000.0, dt = 0.01;
-  const std::vector<int> levels = Dim == 2 ? std::vector<int>{16, 32, 64} : std::vector<int>{8, 16, 32};
+  const std::vector<int> levels =
+      Dim == 2 ? std::vector<int>{16, 32, 64} : std::vector<int>{8, 16, 32};
   std::vector<double> errors, velocity;
   for (int n : levels) {
     const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), {});
@@ -247,8 +250,8 @@ TEMPLATE_TEST_CASE_SIG("projection of a gradient field converges to the analytic
     std::array<BoundaryType, 2 * Dim> boundary;
     boundary.fill(BoundaryType::wall);
     PressureWeights w;
-    w.fluid_face = fluid_face_weights(grid, lattice, solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0),
-                                      boundary);
+    w.fluid_face = fluid_face_weights(grid, lattice,
+                                      solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0), boundary);
     VectorX phi(lattice.size());
     for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - h;
     w.liquid_cell = liquid_cell_weights(grid, lattice, phi);
@@ -275,9 +278,9 @@ TEMPLATE_TEST_CASE_SIG("projection of a gradient field converges to the analytic
     velocity.push_back(u_max);
   }
   const double order = std::log2(errors[1] / errors[2]);
-  INFO("pressure errors (max over full cells, relative to max psi = 1) " << errors[0] << " "
-       << errors[1] << " " << errors[2] << ", order " << order << "; residual velocity "
-       << velocity[0] << " " << velocity[1] << " " << velocity[2]);
+  INFO("pressure errors (max over full cells, relative to max psi = 1) "
+       << errors[0] << " " << errors[1] << " " << errors[2] << ", order " << order
+       << "; residual velocity " << velocity[0] << " " << velocity[1] << " " << velocity[2]);
   CHECK(errors[2] < errors[1]);
   CHECK(order > 1.7);
   CHECK(errors[2] < 1e-3);

@@ -1,6 +1,5 @@
 // The whole step of Algorithm 1 on a liquid at rest: hydrostatics (validation).
 #include <catch2/catch.hpp>
-
 #include <cmath>
 
 #include "reference/errors.hpp"
@@ -46,8 +45,9 @@ nlohmann::json column_scene(int dim, int n, double height, const std::string& ba
 
 }  // namespace
 
-TEMPLATE_TEST_CASE_SIG("pressure step of a column with a flat analytic surface is exactly hydrostatic",
-                       "[validation]", ((int Dim), Dim), 2, 3) {
+TEMPLATE_TEST_CASE_SIG(
+    "pressure step of a column with a flat analytic surface is exactly hydrostatic", "[validation]",
+    ((int Dim), Dim), 2, 3) {
   // lines 2 and 7-11 of Algorithm 1 on the weights of an exact flat surface: u* = -g dt on every
   // face holding liquid must be cancelled exactly and p must equal rho g depth at every cell
   // centre (the W_L^p weighting is the variational ghost-fluid boundary condition)
@@ -60,8 +60,8 @@ TEMPLATE_TEST_CASE_SIG("pressure step of a column with a flat analytic surface i
   boundary[3] = BoundaryType::open;
   for (double h : {0.5, 0.5 + 0.3 / n, 0.5 + 0.5 / n, 0.5 + 0.8 / n}) {
     PressureWeights w;
-    w.fluid_face = fluid_face_weights(grid, lattice, solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0),
-                                      boundary);
+    w.fluid_face = fluid_face_weights(grid, lattice,
+                                      solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0), boundary);
     VectorX phi(lattice.size());
     for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - h;
     w.liquid_cell = liquid_cell_weights(grid, lattice, phi);
@@ -84,7 +84,8 @@ TEMPLATE_TEST_CASE_SIG("pressure step of a column with a flat analytic surface i
         const double depth = h - grid.cell_center(grid.cell_coord(c))[1];
         p_err = std::max(p_err, std::abs(r.pressure[c] - rho * g * depth) / (rho * g * h));
       }
-      INFO("h " << h << " " << backend << ": max |u| " << u_max << ", max pressure error " << p_err);
+      INFO("h " << h << " " << backend << ": max |u| " << u_max << ", max pressure error "
+                << p_err);
       CHECK(u_max < 1e-8 * g * dt);
       CHECK(p_err < 1e-8);
     }
@@ -117,7 +118,8 @@ TEST_CASE("hydrostatic column simulated from particles stays near rest with p = 
         worst_speed = std::max(worst_speed, std::sqrt(speed));
         const double depth = height - probe.position[1];
         if (depth >= 3.0 / n)
-          worst_pressure = std::max(worst_pressure, std::abs(probe.pressure / (rho * g * depth) - 1.0));
+          worst_pressure =
+              std::max(worst_pressure, std::abs(probe.pressure / (rho * g * depth) - 1.0));
       }
       INFO("dim " << dim << " " << backend << ": steps " << s.steps << " dt " << dt
                   << " max probe speed / (g dt) " << worst_speed / (g * dt)

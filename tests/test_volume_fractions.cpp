@@ -1,6 +1,5 @@
 // Volume fractions (section 3.1.2) and the solid shrinkage of section 4.4.6.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 #include <random>
 
@@ -74,9 +73,8 @@ TEST_CASE("simplex fractions: known values and complement", "[unit][property]") 
 TEST_CASE("tetrahedron fraction matches a fine quadrature of the linear function",
           "[unit][dense-reference]") {
   // midpoint rule on a 60^3 lattice of the reference tetrahedron x, y, z >= 0, x + y + z <= 1
-  const std::array<std::array<double, 4>, 3> cases{{{-0.7, -0.2, 0.5, 0.9},
-                                                    {-0.3, 0.8, -0.6, 0.1},
-                                                    {0.4, -0.9, 0.2, -0.1}}};
+  const std::array<std::array<double, 4>, 3> cases{
+      {{-0.7, -0.2, 0.5, 0.9}, {-0.3, 0.8, -0.6, 0.1}, {0.4, -0.9, 0.2, -0.1}}};
   for (const auto& phi : cases) {
     const int n = 60;
     long inside = 0, negative = 0;
@@ -89,8 +87,7 @@ TEST_CASE("tetrahedron fraction matches a fine quadrature of the linear function
           const double v = phi[0] * (1 - x - y - z) + phi[1] * x + phi[2] * y + phi[3] * z;
           negative += v < 0.0;
         }
-    CHECK(simplex_negative_fraction<3>(phi) ==
-          Approx(double(negative) / inside).margin(0.01));
+    CHECK(simplex_negative_fraction<3>(phi) == Approx(double(negative) / inside).margin(0.01));
   }
 }
 
@@ -98,7 +95,8 @@ TEMPLATE_TEST_CASE_SIG("ball fractions converge to the exact volume at second or
                        "[convergence]", ((int Dim), Dim), 2, 3) {
   const Ball<Dim> ball;
   const double exact = ball_volume<Dim>(ball.radius);
-  const std::vector<int> levels = Dim == 2 ? std::vector<int>{16, 32, 64} : std::vector<int>{8, 16, 32};
+  const std::vector<int> levels =
+      Dim == 2 ? std::vector<int>{16, 32, 64} : std::vector<int>{8, 16, 32};
   std::vector<double> cell_err, face_err;
   for (int n : levels) {
     const auto grid = unit_grid<Dim>(n);
@@ -115,7 +113,8 @@ TEMPLATE_TEST_CASE_SIG("ball fractions converge to the exact volume at second or
     double worst = 0.0;
     for (int a = 0; a < Dim; ++a)
       worst = std::max(worst, std::abs(wf.segment(grid.face_offset(a), grid.num_faces(a)).sum() *
-                                           grid.cell_volume() - exact));
+                                           grid.cell_volume() -
+                                       exact));
     face_err.push_back(worst);
   }
   const double order_cell = std::log2(cell_err[1] / cell_err[2]);
@@ -129,8 +128,8 @@ TEMPLATE_TEST_CASE_SIG("ball fractions converge to the exact volume at second or
   CHECK(std::log2(cell_err[0] / cell_err[2]) / 2.0 > 1.7);
 }
 
-TEMPLATE_TEST_CASE_SIG("lattice-aligned box: exact fractions, full and empty cells exact",
-                       "[unit]", ((int Dim), Dim), 2, 3) {
+TEMPLATE_TEST_CASE_SIG("lattice-aligned box: exact fractions, full and empty cells exact", "[unit]",
+                       ((int Dim), Dim), 2, 3) {
   const int n = 8;
   const auto grid = unit_grid<Dim>(n);
   const auto lattice = half_lattice(grid);
@@ -138,9 +137,8 @@ TEMPLATE_TEST_CASE_SIG("lattice-aligned box: exact fractions, full and empty cel
   // sides sit 1e-10 outside the lattice planes so that no lattice triangle has phi = 0 at all
   // its corners (a zero-measure ambiguity of phi = 0 counted as outside)
   const Vec<Dim> lo = Vec<Dim>::Constant(0.25 - 1e-10), hi = Vec<Dim>::Constant(0.6875 + 1e-10);
-  const VectorX phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) {
-    return ((lo - x).cwiseMax(x - hi)).maxCoeff();
-  });
+  const VectorX phi = sample<Dim>(
+      lattice, [&](const Vec<Dim>& x) { return ((lo - x).cwiseMax(x - hi)).maxCoeff(); });
   const VectorX wc = cell_negative_fractions(grid, lattice, phi);
   CHECK(wc.sum() * grid.cell_volume() == Approx(std::pow(hi[0] - lo[0], Dim)).epsilon(1e-8));
   for (int c = 0; c < grid.num_cells(); ++c) {
@@ -198,8 +196,10 @@ TEMPLATE_TEST_CASE_SIG("weights: solid shrinkage, walls, open and periodic bound
     const double zeta = 0.01 * grid.dx();
     const VectorX plain = sample<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.5; });
     const VectorX shifted = plain.array() + zeta;
-    const VectorX wf0 = VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, plain);
-    const VectorX wf1 = VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, shifted);
+    const VectorX wf0 =
+        VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, plain);
+    const VectorX wf1 =
+        VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, shifted);
     CHECK(wf1.sum() > wf0.sum());
     // a liquid layer that fills only the lower half of the cell row j = 2: faces y = 3 dx have
     // W_L^u = 0 geometrically but sit beside liquid cells, so they are clamped
