@@ -91,6 +91,16 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
   fs::create_directories(dir, ec);
   if (ec || !fs::is_directory(dir, ec))
     throw InputError(dir.string() + ": (output): cannot create the output folder (a writable folder path for --out)");
+  // outputs of an earlier run into the same folder would be mistaken for this one's
+  fs::remove(dir / "summary.json", ec);
+  if (fs::is_directory(dir / "frames", ec)) {
+    std::vector<fs::path> stale;
+    for (const auto& entry : fs::directory_iterator(dir / "frames", ec)) {
+      const std::string f = entry.path().filename().string();
+      if (f.size() == 15 && f.rfind("frame_", 0) == 0 && entry.path().extension() == ".ppm") stale.push_back(entry.path());
+    }
+    for (const auto& f : stale) fs::remove(f, ec);
+  }
   const bool render = scene.render.enabled;
   if (render) {
     fs::create_directories(dir / "frames", ec);

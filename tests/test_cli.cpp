@@ -268,6 +268,13 @@ TEST_CASE("run without rendering, with progress lines, and into the default fold
   fs::remove_all(out);
   CHECK(fake_cli({"run", scene, "--out", out.string(), "--set", "render.enabled=false", "--quiet"}).code == 0);
   CHECK_FALSE(fs::exists(out / "frames"));
+  // frames of an earlier, longer run into the same folder are removed
+  fs::remove_all(out);
+  CHECK(fake_cli({"run", scene, "--out", out.string(), "--frames", "3", "--quiet"}).code == 0);
+  CHECK(fs::exists(out / "frames" / "frame_00003.ppm"));
+  CHECK(fake_cli({"run", scene, "--out", out.string(), "--frames", "1", "--quiet"}).code == 0);
+  CHECK_FALSE(fs::exists(out / "frames" / "frame_00003.ppm"));
+  CHECK(fs::exists(out / "frames" / "frame_00001.ppm"));
   // --flag=value is the same as --flag value
   fs::remove_all(out);
   CHECK(fake_cli({"run", scene, "--out=" + out.string(), "--frames=2", "--quiet", "--set=time.fps=20"}).code == 0);
