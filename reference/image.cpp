@@ -44,6 +44,73 @@ void Image::write_ppm(const std::string& path) const {
   if (!out) throw std::runtime_error("cannot write " + path);
 }
 
+namespace {
+std::uint32_t crc32(const std::uint8_t* data, size_t n, std::uint32_t crc = 0) {
+  // the CRC-32 of the PNG specification (polynomial 0xEDB88320), bitwise
+  crc = ~crc;
+  for (size_t i = 0; i < n; ++i) {
+    crc ^= data[i];
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  return ~crc;
+}
+void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
+  for (int s = 24; s >= 0; s -= 8) out.push_back(static_cast<std::uint8_t>(v >> s));
+}
+void put_chunk(std::ofstream& out, const char* type, const std::vector<std::uint8_t>& data) {
+  std::vector<std::uint8_t> body(type, type + 4);
+  body.insert(body.end(), data.begin(), data.end());
+  std::vector<std::uint8_t> head;
+  put_u32(head, static_cast<std::uint32_t>(data.size()));
+  std::vector<std::uint8_t> tail;
+  put_u32(tail, crc32(body.data(), body.size()));
+  out.write(reinterpret_cast<const char*>(head.data()), 4);
+  out.write(reinterpret_cast<const char*>(body.data()), static_cast<std::streamsize>(body.size()));
+  out.write(reinterpret_cast<const char*>(tail.data()), 4);
+}
+}  // namespace
+
+void Image::write_png(const std::string& path) const {
+  // raw scanlines, each prefixed by filter type 0
+  std::vector<std::uint8_t> raw;
+  raw.reserve(static_cast<size_t>(height) * (3 * width + 1));
+  for (int y = 0; y < height; ++y) {
+    raw.push_back(0);
+    raw.insert(raw.end(), rgb.begin() + static_cast<long>(y) * width * 3,
+               rgb.begin() + static_cast<long>(y + 1) * width * 3);
+  }
+  // zlib stream of stored deflate blocks (at most 65535 bytes each) and the Adler-32 checksum
+  std::vector<std::uint8_t> z = {0x78, 0x01};
+  for (size_t pos = 0; pos < raw.size() || pos == 0; pos += 65535) {
+    const size_t n = std::min<size_t>(65535, raw.size() - pos);
+    z.push_back(pos + n >= raw.size() ? 1 : 0);
+    z.push_back(static_cast<std::uint8_t>(n & 0xff));
+    z.push_back(static_cast<std::uint8_t>(n >> 8));
+    z.push_back(static_cast<std::uint8_t>(~n & 0xff));
+    z.push_back(static_cast<std::uint8_t>((~n >> 8) & 0xff));
+    z.insert(z.end(), raw.begin() + static_cast<long>(pos), raw.begin() + static_cast<long>(pos + n));
+    if (raw.empty()) break;
+  }
+  std::uint32_t a = 1, b = 0;
+  for (std::uint8_t byte : raw) {
+    a = (a + byte) % 65521u;
+    b = (b + a) % 65521u;
+  }
+  put_u32(z, (b << 16) | a);
+  std::vector<std::uint8_t> header;
+  put_u32(header, static_cast<std::uint32_t>(width));
+  put_u32(header, static_cast<std::uint32_t>(height));
+  header.insert(header.end(), {8, 2, 0, 0, 0});  // 8-bit RGB, no interlace
+  std::ofstream out(path, std::ios::binary);
+  if (!out) throw std::runtime_error("cannot write " + path);
+  const std::uint8_t signature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  out.write(reinterpret_cast<const char*>(signature), 8);
+  put_chunk(out, "IHDR", header);
+  put_chunk(out, "IDAT", z);
+  put_chunk(out, "IEND", {});
+  if (!out) throw std::runtime_error("cannot write " + path);
+}
+
 Image Image::read_ppm(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot read " + path);
