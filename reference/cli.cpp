@@ -30,6 +30,7 @@ const char* kUsage =
     "                     [--threads N] [--no-render] [--quiet] [--set KEY=VALUE]...\n"
     "  monolith check SCENE [--set KEY=VALUE]...\n"
     "  monolith list\n"
+    "  monolith convert IN.ppm OUT.png\n"
     "  monolith --help | --version\n";
 
 const char* kHelp =
@@ -41,6 +42,7 @@ const char* kHelp =
     "                frames/frame_NNNNN.ppm, stats.jsonl and summary.json into the output folder\n"
     "  check SCENE   validate SCENE and print every problem found (exit 0 if valid, 2 if not)\n"
     "  list          the built-in scenes: name, dimension, description\n"
+    "  convert       re-encode a PPM picture (a frame or a plot) as PNG for web pages\n"
     "\n"
     "options of run (check takes --set too):\n"
     "  --frames N        number of frames to simulate (same as --set time.frames=N)\n"
@@ -167,6 +169,24 @@ int cmd_list(const std::vector<std::string>& args, std::ostream& out) {
   return 0;
 }
 
+int cmd_convert(const std::vector<std::string>& args, std::ostream& out) {
+  if (args.size() != 2)
+    throw InputError("convert: expected IN.ppm OUT.png (got " + std::to_string(args.size()) + " arguments)");
+  Image image;
+  try {
+    image = Image::read_ppm(args[0]);
+  } catch (const std::runtime_error& e) {
+    throw InputError(args[0] + ": " + e.what() + " (a binary P6 PPM with maxval 255 is allowed)");
+  }
+  try {
+    image.write_png(args[1]);
+  } catch (const std::runtime_error& e) {
+    throw InputError(args[1] + ": " + e.what());
+  }
+  out << "wrote " << args[1] << " (" << image.width << " x " << image.height << ")\n";
+  return 0;
+}
+
 }  // namespace
 
 int run_cli(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
@@ -193,7 +213,9 @@ int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::o
     if (command == "run") return run_scene(parse_options("run", rest, true), err, factory);
     if (command == "check") return cmd_check(rest, out);
     if (command == "list") return cmd_list(rest, out);
-    err << "monolith: unknown command \"" << command.substr(0, 80) << "\" (run, check, list, --help, --version)\n"
+    if (command == "convert") return cmd_convert(rest, out);
+    err << "monolith: unknown command \"" << command.substr(0, 80)
+        << "\" (run, check, list, convert, --help, --version)\n"
         << kUsage;
     return 2;
   } catch (const InputError& e) {

@@ -447,3 +447,19 @@ TEST_CASE("the built binary answers like the library (MONOLITH_BIN)", "[unit]") 
   status = std::system((std::string("\"") + bin + "\" check \"" + bad + "\" 2> /dev/null").c_str());
   CHECK(WEXITSTATUS(status) == 2);
 }
+
+TEST_CASE("convert re-encodes a PPM as PNG and refuses bad input with 2", "[unit]") {
+  const fs::path dir = temp_dir();
+  Image img(12, 7, {10, 200, 30});
+  img.write_ppm((dir / "in.ppm").string());
+  const Result ok = cli({"convert", (dir / "in.ppm").string(), (dir / "out.png").string()});
+  CHECK(ok.code == 0);
+  REQUIRE(fs::exists(dir / "out.png"));
+  CHECK(fs::file_size(dir / "out.png") > 12 * 7 * 3);
+  CHECK(cli({"convert", (dir / "missing.ppm").string(), (dir / "x.png").string()}).code == 2);
+  CHECK(cli({"convert", (dir / "in.ppm").string()}).code == 2);
+  const std::string not_ppm = write_file("not_a_picture.ppm", "P3\n1 1\n255\n0 0 0\n");
+  const Result bad = cli({"convert", not_ppm, (dir / "y.png").string()});
+  CHECK(bad.code == 2);
+  CHECK(bad.err.find("not_a_picture.ppm") != std::string::npos);
+}
