@@ -2,10 +2,13 @@
 
 #include <omp.h>
 
+#include <Eigen/IterativeLinearSolvers>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <random>
+
+#include "reference/volume_fractions.hpp"
 
 namespace monolith {
 
@@ -28,6 +31,11 @@ constexpr double kCorrectionSlack = 0.05;
 constexpr double kCorrectionMaxStep = 0.25;
 /// Pairs closer than this many rest spacings are pushed apart regardless of density.
 constexpr double kCorrectionMinDistance = 0.5;
+/// Density projection (docs/particles.md): fraction of the Poisson solution's gradient applied per
+/// call, largest move per call in cells, relative tolerance of the conjugate gradient solve.
+constexpr double kProjectionRelaxation = 1.0;
+constexpr double kProjectionMaxStep = 0.25;
+constexpr double kProjectionTolerance = 1e-4;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
 
@@ -52,7 +60,7 @@ struct ParticleTraits<2> {
   }
   /// Particle radius / particle spacing, calibrated so a uniformly seeded block's zero level set
   /// lies on the block boundary and its enclosed area matches (docs/particles.md).
-  static constexpr double surface_radius = 0.59;
+  static constexpr double surface_radius = 0.60;
 };
 
 template <>
@@ -69,7 +77,7 @@ struct ParticleTraits<3> {
     return c;
   }
   /// Particle radius / particle spacing (3D calibration, docs/particles.md).
-  static constexpr double surface_radius = 0.58;
+  static constexpr double surface_radius = 0.60;
 };
 
 /// Uniform double in (0, 1) from a 32-bit Mersenne twister draw (portable across standard
@@ -706,6 +714,261 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   }
 }
 
+// --- density projection --------------------------------------------------------------------------
+
+namespace {
+
+/// Antiderivative of the hat max(0, 1 - |u|).
+double hat_integral(double u) {
+  if (u <= -1.0) return 0.0;
+  if (u <= 0.0) return 0.5 * (1.0 + u) * (1.0 + u);
+  if (u < 1.0) return 1.0 - 0.5 * (1.0 - u) * (1.0 - u);
+  return 1.0;
+}
+
+/// One axis of the splat kernel of the density projection: the hat of a cell centre averaged
+/// over a box of `width` (a particle's rest spacing, in cells) centred at offset t (in cells):
+/// (H(t + width/2) - H(t - width/2)) / width, H the hat's antiderivative. A regular lattice of
+/// particles of that spacing then splats exactly the hat-weighted volume of the region it fills.
+double box_hat_weight(double t, double width) {
+  return (hat_integral(t + 0.5 * width) - hat_integral(t - 0.5 * width)) / width;
+}
+
+/// The liquid indicator of the level set convolved with the multilinear hat of each cell centre,
+///   T_c = dx^-Dim int hat_c(x) H(-phi(x)) dx,
+/// i.e. what a perfectly even distribution of liquid particles filling {phi < 0} would splat
+/// onto cell c. Evaluated on the half cells of the lattice (2^Dim per cell; their liquid
+/// fractions from lattice_cell_negative_fraction): per axis, the half cells 2c-1 .. 2c+2 carry the
+/// hat integrals 1/8, 3/8, 3/8, 1/8. A half cell outside a non-periodic domain passes its weight
+/// to the adjacent inside one, as the clamped particle stencil does.
+template <int Dim>
+VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi) {
+  constexpr int kCorners = 1 << Dim;
+  // liquid fractions of the half cells
+  VecI<Dim> dims = 2 * grid.cells();
+  int count = 1;
+  for (int a = 0; a < Dim; ++a) count *= dims[a];
+  VectorX cur(count);
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < count; ++k) {
+    const VecI<Dim> lower = decode_index<Dim>(k, dims);
+    std::array<double, kCorners> corner;
+    for (int b = 0; b < kCorners; ++b) {
+      VecI<Dim> i = lower;
+      for (int a = 0; a < Dim; ++a) i[a] += (b >> a) & 1;
+      corner[b] = phi[lattice.index(i)];
+    }
+    cur[k] = lattice_cell_negative_fraction<Dim>(corner);
+  }
+  // per axis, the 4-tap hat integrals from half cells to cells
+  static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
+  for (int a = 0; a < Dim; ++a) {
+    VecI<Dim> out_dims = dims;
+    out_dims[a] = grid.cells()[a];
+    int out_count = 1;
+    for (int b = 0; b < Dim; ++b) out_count *= out_dims[b];
+    VectorX next(out_count);
+    const int n2 = dims[a];
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < out_count; ++k) {
+      const VecI<Dim> o = decode_index<Dim>(k, out_dims);
+      double sum = 0.0;
+      for (int t = 0; t < 4; ++t) {
+        int j = 2 * o[a] - 1 + t;
+        if (grid.periodic(a))
+          j = (j + n2) % n2;
+        else
+          j = std::clamp(j, 0, n2 - 1);
+        VecI<Dim> i = o;
+        i[a] = j;
+        int li = 0;
+        for (int b = Dim - 1; b >= 0; --b) li = li * dims[b] + i[b];
+        sum += kTaps[t] * cur[li];
+      }
+      next[k] = sum;
+    }
+    cur.swap(next);
+    dims = out_dims;
+  }
+  return cur;
+}
+
+/// One (reconstruction, solve, move) of project_particle_density.
+template <int Dim>
+DensityProjectionStats project_density_once(Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                                            const SampleLattice<Dim>& lattice,
+                                            const VectorX& fluid_face,
+                                            const SolidField<Dim>& solids,
+                                            const std::array<BoundaryType, 2 * Dim>& boundary) {
+  DensityProjectionStats stats;
+  const long np = static_cast<long>(particles.size());
+  if (np == 0) return stats;
+  const int nc = grid.num_cells();
+  const int nf = grid.num_faces();
+  const double dx = grid.dx();
+  const double cell_volume = grid.cell_volume();
+
+  // particle volume fractions: each particle's volume spread as a box of its rest spacing and
+  // then by the hat of the cell centres, splatted serially in particle order (deterministic)
+  VectorX rho = VectorX::Zero(nc);
+  for (long p = 0; p < np; ++p) {
+    const double volume =
+        particles.density[p] > 0.0 ? particles.mass[p] / particles.density[p] : 0.0;
+    const double width = particle_spacing(particles, p, dx) / dx;
+    const Vec<Dim> xr = (grid.wrap_position(particles.x[p]) - grid.origin()) / dx;
+    // per axis: five candidate cells around the particle and their weights
+    std::array<std::array<int, 5>, Dim> cell;
+    std::array<std::array<double, 5>, Dim> weight;
+    for (int a = 0; a < Dim; ++a) {
+      const int base = static_cast<int>(std::floor(xr[a])) - 2;
+      for (int k = 0; k < 5; ++k) {
+        int c = base + k;
+        weight[a][k] = box_hat_weight(c + 0.5 - xr[a], width);
+        if (grid.periodic(a))
+          c = ((c % grid.cells()[a]) + grid.cells()[a]) % grid.cells()[a];
+        else
+          c = std::clamp(c, 0, grid.cells()[a] - 1);
+        cell[a][k] = c;
+      }
+    }
+    std::array<int, Dim> k{};
+    while (true) {
+      double w = volume / cell_volume;
+      VecI<Dim> ci;
+      for (int a = 0; a < Dim; ++a) {
+        w *= weight[a][k[a]];
+        ci[a] = cell[a][k[a]];
+      }
+      if (w != 0.0) rho[grid.cell_index(ci)] += w;
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++k[a] < 5) break;
+        k[a] = 0;
+      }
+      if (a == Dim) break;
+    }
+  }
+  // liquid fractions of the particle level set, smoothed by the same hat
+  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice);
+  const VectorX target = hat_liquid_fractions(grid, lattice, phi);
+
+  // unknowns: cells holding particle volume or smoothed liquid
+  std::vector<int> unknown(nc, -1);
+  std::vector<int> cells;
+  for (int c = 0; c < nc; ++c)
+    if (rho[c] > 0.0 || target[c] > 0.0) {
+      unknown[c] = static_cast<int>(cells.size());
+      cells.push_back(c);
+    }
+  const int n = static_cast<int>(cells.size());
+  stats.cells = n;
+  if (n == 0) return stats;
+
+  // with q = -psi dx^2: (-L dx^2) psi = e (rows in cell order), and the move is grad q
+  std::vector<Triplet> triplets;
+  triplets.reserve(static_cast<std::size_t>(n) * (2 * Dim + 1));
+  VectorX rhs(n);
+  for (int r = 0; r < n; ++r) {
+    const int c = cells[r];
+    const VecI<Dim> ci = grid.cell_coord(c);
+    double diag = 0.0;
+    for (int a = 0; a < Dim; ++a)
+      for (int s = 0; s < 2; ++s) {
+        // the face between c and its neighbour along a (s = 0: minus side, 1: plus side)
+        VecI<Dim> fc = ci;
+        fc[a] += s;
+        if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
+        const int fi = grid.face_index(a, fc);
+        const double wf = fluid_face[fi];
+        if (!(wf > 0.0)) continue;
+        diag += wf;
+        VecI<Dim> cj = ci;
+        cj[a] += s == 0 ? -1 : 1;
+        const int j = grid.cell_index_or_outside(cj);
+        if (j >= 0 && unknown[j] >= 0 && j != c) triplets.emplace_back(r, unknown[j], -wf);
+      }
+    // a tiny shift keeps fully enclosed liquid (no air neighbour) non-singular
+    triplets.emplace_back(r, r, diag * (1.0 + 1e-6) + 1e-12);
+    const double e = rho[c] - target[c];
+    rhs[r] = e;
+    stats.error_before += std::abs(e) * cell_volume;
+  }
+  SparseMatrix A(n, n);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::ConjugateGradient<SparseMatrix, Eigen::Lower | Eigen::Upper,
+                           Eigen::DiagonalPreconditioner<double>>
+      cg;
+  cg.setTolerance(kProjectionTolerance);
+  cg.setMaxIterations(4 * n + 100);
+  cg.compute(A);
+  const VectorX psi = cg.solve(rhs);  // in units of dx^2
+  stats.iterations = static_cast<int>(cg.iterations());
+
+  // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids
+  VectorX move = VectorX::Zero(nf);
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < nf; ++f) {
+    if (!(fluid_face[f] > 0.0)) continue;
+    const auto [axis, coord] = grid.face_coord(f);
+    const int minus = grid.face_cell_minus(axis, coord);
+    const int plus = grid.face_cell_plus(axis, coord);
+    const double pm = minus >= 0 && unknown[minus] >= 0 ? psi[unknown[minus]] : 0.0;
+    const double pp = plus >= 0 && unknown[plus] >= 0 ? psi[unknown[plus]] : 0.0;
+    move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+  }
+
+  // move the particles (at most kProjectionMaxStep dx), then keep clear of solids and walls
+  const double cap = kProjectionMaxStep * dx;
+  double max_move = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_move)
+  for (long p = 0; p < np; ++p) {
+    Vec<Dim> d = grid.interpolate_velocity(move, particles.x[p]);
+    const double len = d.norm();
+    if (len > cap) d *= cap / len;
+    max_move = std::max(max_move, std::min(len, cap));
+    Vec<Dim> x = particles.x[p] + d;
+    settle_position(grid, solids, boundary, false, x);
+    particles.x[p] = x;
+  }
+  stats.max_move = max_move;
+  return stats;
+}
+
+}  // namespace
+
+/// Grid density projection (after Kugelstadt et al. 2019), with e the volume-fraction error:
+///   rho~_c = dx^-Dim sum_p V_p w_cp     (V_p = m_p / rho_p, w_cp the hat of cell c averaged over
+///                                        the box of side s_p = V_p^(1/Dim) around x_p)
+///   T_c    = dx^-Dim int hat_c(x) H(-phi(x)) dx           (the same kernel on the level set)
+///   e_c    = rho~_c - T_c
+///   L q = e on S = {c : rho~_c > 0 or T_c > 0},  (L q)_c = sum_f W_F^u_f (q_nb - q_c) / dx^2,
+///         q = 0 outside S (air), no flux through faces with W_F^u = 0 (walls, solids);
+///   x_p <- x_p + omega grad q (x_p),  grad q on the faces, interpolated like a velocity.
+/// L is num_S x num_S, negative semi-definite; the solve uses -L dx^2 (symmetric positive
+/// definite) with a diagonally preconditioned conjugate gradient. Since div(grad q) = e, the move
+/// empties over-full cells (e > 0) into under-full ones to first order.
+template <int Dim>
+DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                                                const SampleLattice<Dim>& lattice,
+                                                const VectorX& fluid_face,
+                                                const SolidField<Dim>& solids,
+                                                const std::array<BoundaryType, 2 * Dim>& boundary,
+                                                int iterations) {
+  DensityProjectionStats total;
+  for (int it = 0; it < iterations; ++it) {
+    const DensityProjectionStats one =
+        project_density_once(particles, grid, lattice, fluid_face, solids, boundary);
+    if (it == 0)
+      total = one;
+    else {
+      total.iterations += one.iterations;
+      total.max_move = std::max(total.max_move, one.max_move);
+    }
+  }
+  return total;
+}
+
 // --- liquid surface ------------------------------------------------------------------------------
 
 /// The liquid/air domain of Algorithm 1 line 4, after Zhu & Bridson (2005):
@@ -882,6 +1145,9 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                  const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);    \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
                                   const std::array<BoundaryType, 2 * D>&);                         \
+  template DensityProjectionStats project_particle_density(                                        \
+      Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
+      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int);                          \
   template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
                                          const SampleLattice<D>&);                                 \
   template double max_particle_speed(const Particles<D>&);

@@ -80,6 +80,39 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
                        const SolidField<Dim>& solids,
                        const std::array<BoundaryType, 2 * Dim>& boundary);
 
+/// What project_particle_density did (for statistics and tests).
+struct DensityProjectionStats {
+  int cells = 0;              ///< unknowns of the Poisson problem
+  int iterations = 0;         ///< conjugate gradient iterations
+  double error_before = 0.0;  ///< sum_c |e_c| dx^Dim before the move (m^Dim), e_c as in particles.cpp
+  double max_move = 0.0;      ///< largest particle displacement (m)
+};
+
+/// Grid-based implicit density projection after Kugelstadt, Bender, Fernandez-Fernandez, Jeske,
+/// Loschner and Longva (2019), "Implicit density projection for volume conserving liquids",
+/// IEEE TVCG 27(4). Compares, per cell, the particle volume fraction (each particle's volume m/rho
+/// spread over a box of its rest spacing and weighted by the hat function of the cell centre)
+/// with the liquid fraction of the particle level set (liquid_phi_on_lattice on `lattice`)
+/// weighted by the same hat function, solves
+/// a Poisson problem with the face weights `fluid_face` (W_F^u: Neumann at walls and solids,
+/// Dirichlet 0 in air) for the error and moves every particle by the gradient of the solution,
+/// so over-full cells empty into under-full ones and the reconstructed volume follows the
+/// particle volume (a form of Algorithm 1, line 15). `iterations` repeats the whole (reconstruction, solve, move); the stats are
+/// those of the first iteration (error_before) and the sums over all (iterations, max_move the
+/// largest). Respects solids, walls and periodicity; deterministic for any thread count.
+template <int Dim>
+DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                                                const SampleLattice<Dim>& lattice,
+                                                const VectorX& fluid_face,
+                                                const SolidField<Dim>& solids,
+                                                const std::array<BoundaryType, 2 * Dim>& boundary,
+                                                int iterations = 1);
+
+/// Iterations of project_particle_density applied to freshly seeded particles (the simulation
+/// does this once before frame 0, so the particle volume and the level set's agree from the
+/// start; measured in docs/particles.md).
+inline constexpr int kSeedProjectionIterations = 2;
+
 /// The liquid's signed distance (negative inside) sampled on `lattice` (normally half_lattice of
 /// the grid), reconstructed from the particles after Zhu & Bridson (2005). Calibrated so that a
 /// uniformly seeded block of liquid gives a zero level set on the block's boundary (within a

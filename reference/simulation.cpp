@@ -165,6 +165,10 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   pcg_settings_.tolerance = scene.solver.tolerance;
   pcg_settings_.max_iterations = scene.solver.max_iterations;
 
+  // the seeded particles spread so that their volume and the level set's agree from frame 0
+  if (scene.particles.position_correction)
+    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
+                             kSeedProjectionIterations);
   // frame 0: the seeded state on the grid (no pressure yet)
   particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
   update_liquid_weights();
@@ -245,8 +249,12 @@ void Simulation<Dim>::step(double dt) {
   grid_to_particles(particles_, grid_, u_);
   advect_particles(particles_, grid_, u_, dt, solids_, boundary_);
   // (15) position correction for volume preservation
-  if (scene_.particles.position_correction)
+  // and the grid density projection that keeps the particle volume and the level set's volume
+  // equal (docs/particles.md)
+  if (scene_.particles.position_correction) {
     correct_positions(particles_, grid_, dt, solids_, boundary_);
+    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
+  }
   check_finite("advection");
 }
 
