@@ -3,9 +3,8 @@
 // requirement). The liquid is carried by particles of fixed volume; what keeps the level set's
 // volume on theirs is the position correction of Algorithm 1 line 15 (the density constraint and
 // the grid density projection of reference/particles.cpp, docs/particles.md).
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -61,9 +60,9 @@ void report(const std::string& label, const DriftHistory& h) {
     lo = std::min(lo, d);
     hi = std::max(hi, d);
   }
-  std::cout << label << ": worst |drift| " << 100.0 * h.worst() << " % at frame "
-            << h.worst_frame() << " (min " << 100.0 * lo << " %, max " << 100.0 * hi << " %), "
-            << h.drift.size() << " frames in " << h.seconds << " s\n";
+  std::cout << label << ": worst |drift| " << 100.0 * h.worst() << " % at frame " << h.worst_frame()
+            << " (min " << 100.0 * lo << " %, max " << 100.0 * hi << " %), " << h.drift.size()
+            << " frames in " << h.seconds << " s\n";
 }
 
 }  // namespace
