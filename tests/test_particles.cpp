@@ -703,8 +703,7 @@ double particle_volume(const Particles<Dim>& p) {
 /// A block seeded against the lower walls, [0, 0.5]^Dim of the unit box.
 template <int Dim>
 Particles<Dim> seeded_corner_block(const MacGrid<Dim>& grid) {
-  auto block =
-      std::make_shared<TestBox<Dim>>(Vec<Dim>::Constant(0.25), Vec<Dim>::Constant(0.25));
+  auto block = std::make_shared<TestBox<Dim>>(Vec<Dim>::Constant(0.25), Vec<Dim>::Constant(0.25));
   return seed_particles<Dim>(grid, {liquid_spec<Dim>(Vec<Dim>::Constant(0.25))}, {block},
                              SolidField<Dim>{}, Dim == 2 ? 4 : 8, 11u);
 }
@@ -717,14 +716,14 @@ void check_projection_even_block() {
   const VectorX fluid = open_fluid_faces(grid);
   const double vp = particle_volume(p);
   const double v0 = level_set_volume(p, grid);
-  const DensityProjectionStats first = project_particle_density(
-      p, grid, half_lattice(grid), fluid, SolidField<Dim>{}, walls<Dim>(), 2);
+  const DensityProjectionStats first = project_particle_density(p, grid, half_lattice(grid), fluid,
+                                                                SolidField<Dim>{}, walls<Dim>(), 2);
   const DensityProjectionStats again =
       project_particle_density(p, grid, half_lattice(grid), fluid, SolidField<Dim>{}, walls<Dim>());
   const double v1 = level_set_volume(p, grid);
   INFO("dim " << Dim << ": particle volume " << vp << ", level set " << v0 << " -> " << v1
-              << ", error " << first.error_before << " -> " << again.error_before
-              << ", moves " << first.max_move / dx << " then " << again.max_move / dx << " dx");
+              << ", error " << first.error_before << " -> " << again.error_before << ", moves "
+              << first.max_move / dx << " then " << again.max_move / dx << " dx");
   // an evenly seeded block is nearly consistent already: moves below the seeding jitter (+-1/8 dx
   // with the defaults), shrinking from call to call with the error
   CHECK(first.max_move < 0.125 * dx);
