@@ -60,7 +60,7 @@ struct ParticleTraits<2> {
   }
   /// Particle radius / particle spacing, calibrated so a uniformly seeded block's zero level set
   /// lies on the block boundary and its enclosed area matches (docs/particles.md).
-  static constexpr double surface_radius = 0.60;
+  static constexpr double surface_radius = 0.59;
 };
 
 template <>
@@ -77,7 +77,7 @@ struct ParticleTraits<3> {
     return c;
   }
   /// Particle radius / particle spacing (3D calibration, docs/particles.md).
-  static constexpr double surface_radius = 0.60;
+  static constexpr double surface_radius = 0.58;
 };
 
 /// Uniform double in (0, 1) from a 32-bit Mersenne twister draw (portable across standard
