@@ -65,7 +65,9 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
                           int layers);
 
 /// Moves particles through the (extrapolated) grid velocity u for dt with a second-order
-/// Runge-Kutta scheme; pushes particles that end inside a solid back out along its gradient,
+/// Runge-Kutta scheme, in substeps of at most half a cell so that thin solids are not tunnelled
+/// through at large CFL numbers; after every substep pushes particles inside a solid back out
+/// along its gradient,
 /// keeps them inside walls, wraps periodic axes. Particles that leave through an open face are
 /// removed; returns how many were removed.
 template <int Dim>

@@ -236,6 +236,18 @@ VectorX liquid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
   return w;
 }
 
+template <int Dim>
+VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
+                                  const VectorX& solid_phi, double reach) {
+  VectorX phi = liquid_phi;
+  if (solid_phi.size() != liquid_phi.size()) return phi;
+  const double inside = -0.5 * grid.dx();
+  // lattice points inside a solid with liquid within reach count as liquid
+  for (int k = 0; k < phi.size(); ++k)
+    if (solid_phi[k] < 0.0 && liquid_phi[k] < reach) phi[k] = std::min(phi[k], inside);
+  return phi;
+}
+
 #define MONOLITH_INSTANTIATE(D)                                                                   \
   template double lattice_cell_negative_fraction<D>(const std::array<double, (1 << D)>&);         \
   template VectorX solid_phi_on_lattice<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
@@ -249,7 +261,9 @@ VectorX liquid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
   template VectorX liquid_cell_weights<D>(const MacGrid<D>&, const SampleLattice<D>&,             \
                                           const VectorX&);                                        \
   template VectorX liquid_face_weights<D>(const MacGrid<D>&, const SampleLattice<D>&,             \
-                                          const VectorX&, const VectorX&);
+                                          const VectorX&, const VectorX&);                        \
+  template VectorX extend_liquid_into_solids<D>(const MacGrid<D>&, const VectorX&,                \
+                                                const VectorX&, double);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE
