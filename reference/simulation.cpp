@@ -63,6 +63,7 @@ class Simulation : public AnySimulation {
   FrameStats current_stats() const override { return stats_; }
   FrameStats advance_frame() override;
   Image render(const RenderSpec& spec) const override;
+  double liquid_potential_energy() const override;
 
  private:
   /// One step of Algorithm 1 of length dt (the liquid part; lines 3, 6, 12 and 13 concern
@@ -374,6 +375,14 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
     ps.pressure = grid_.interpolate_cell(pressure_, x);
     s.probes.push_back(ps);
   }
+}
+
+template <int Dim>
+double Simulation<Dim>::liquid_potential_energy() const {
+  double energy = 0.0;
+  for (std::size_t p = 0; p < particles_.size(); ++p)
+    energy -= particles_.mass[p] * gravity_.dot(particles_.x[p]);
+  return energy;
 }
 
 template <int Dim>

@@ -24,6 +24,10 @@ class AnySimulation {
   virtual FrameStats advance_frame() = 0;
   /// Renders the current state.
   virtual Image render(const RenderSpec& spec) const = 0;
+  /// Gravitational potential energy of the liquid particles, -sum_p m_p g . x_p (J; 2D: J per
+  /// metre of depth), zero at the origin; with the kinetic energy of FrameStats it gives the
+  /// total energy that a liquid in a static container must never gain.
+  virtual double liquid_potential_energy() const { return 0.0; }
 };
 
 /// Builds the simulation for scene.dim. Throws InputError for scenes that need physics this
