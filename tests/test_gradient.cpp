@@ -2,9 +2,11 @@
 #include <catch2/catch.hpp>
 #include <random>
 
+#include "tests/support/test_helpers.hpp"
 #include "reference/gradient.hpp"
 
 using namespace monolith;
+using namespace monolith::testing;
 
 namespace {
 
@@ -15,14 +17,6 @@ MacGrid<Dim> make_grid(bool periodic_x) {
   std::array<bool, Dim> periodic{};
   periodic[0] = periodic_x;
   return MacGrid<Dim>(Vec<Dim>::Constant(-0.3), 0.125, cells, periodic);
-}
-
-VectorX random_vector(int n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  VectorX v(n);
-  for (int i = 0; i < n; ++i) v[i] = u(rng);
-  return v;
 }
 
 /// Weighted divergence written from cell coordinates alone: for every cell, the sum over axes of

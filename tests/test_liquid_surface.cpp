@@ -6,42 +6,13 @@
 #include <cmath>
 #include <random>
 
+#include "tests/support/test_helpers.hpp"
 #include "reference/particles.hpp"
 
 using namespace monolith;
+using namespace monolith::testing;
 
 namespace {
-
-/// A ball (disk in 2D) SDF, local to the test so it depends on nothing but the particle code.
-template <int Dim>
-class TestBall : public Shape<Dim> {
- public:
-  TestBall(const Vec<Dim>& c, double r) : c_(c), r_(r) {}
-  double distance(const Vec<Dim>& x) const override { return (x - c_).norm() - r_; }
-  Vec<Dim> gradient(const Vec<Dim>& x) const override { return (x - c_).normalized(); }
-  Box<Dim> bounds() const override {
-    return Box<Dim>(c_ - Vec<Dim>::Constant(r_), c_ + Vec<Dim>::Constant(r_));
-  }
-
- private:
-  Vec<Dim> c_;
-  double r_;
-};
-
-/// An axis-aligned box SDF.
-template <int Dim>
-class TestBox : public Shape<Dim> {
- public:
-  TestBox(const Vec<Dim>& c, const Vec<Dim>& half) : c_(c), half_(half) {}
-  double distance(const Vec<Dim>& x) const override {
-    const Vec<Dim> q = (x - c_).cwiseAbs() - half_;
-    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
-  }
-  Box<Dim> bounds() const override { return Box<Dim>(c_ - half_, c_ + half_); }
-
- private:
-  Vec<Dim> c_, half_;
-};
 
 template <int Dim>
 LiquidSpec water_spec(const Vec<Dim>& centre) {

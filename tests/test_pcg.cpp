@@ -5,21 +5,15 @@
 #include <catch2/catch.hpp>
 #include <random>
 
+#include "tests/support/test_helpers.hpp"
 #include "reference/pcg.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/volume_fractions.hpp"
 
 using namespace monolith;
+using namespace monolith::testing;
 
 namespace {
-
-VectorX random_vector(int n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  VectorX v(n);
-  for (int i = 0; i < n; ++i) v[i] = u(rng);
-  return v;
-}
 
 /// 2D five-point Laplacian on m x m nodes plus a positive random diagonal: SPD.
 SparseMatrix laplacian_plus_diagonal(int m, unsigned seed) {

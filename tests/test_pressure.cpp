@@ -4,36 +4,15 @@
 #include <catch2/catch.hpp>
 #include <random>
 
+#include "tests/support/test_helpers.hpp"
 #include "reference/cholmod_solver.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/volume_fractions.hpp"
 
 using namespace monolith;
+using namespace monolith::testing;
 
 namespace {
-
-/// A ball SDF (the test's own analytic solid).
-template <int Dim>
-class TestBall : public Shape<Dim> {
- public:
-  TestBall(const Vec<Dim>& c, double r) : c_(c), r_(r) {}
-  double distance(const Vec<Dim>& x) const override { return (x - c_).norm() - r_; }
-  Box<Dim> bounds() const override {
-    return Box<Dim>(c_ - Vec<Dim>::Constant(r_), c_ + Vec<Dim>::Constant(r_));
-  }
-
- private:
-  Vec<Dim> c_;
-  double r_;
-};
-
-VectorX random_vector(int n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  VectorX v(n);
-  for (int i = 0; i < n; ++i) v[i] = u(rng);
-  return v;
-}
 
 /// A small scene: unit box of n^Dim cells, walls (top open unless `enclosed`), a solid ball,
 /// liquid below y = 0.55 (everywhere if `enclosed`), density varying along x.

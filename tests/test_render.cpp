@@ -11,56 +11,14 @@
 #include <memory>
 #include <string>
 
+#include "tests/support/test_helpers.hpp"
 #include "reference/embedded_data.hpp"
 #include "reference/render.hpp"
 
 using namespace monolith;
+using namespace monolith::testing;
 
 namespace {
-
-// --- analytic shapes for the tests ---------------------------------------------------------------
-
-template <int Dim>
-class TestBall : public Shape<Dim> {
- public:
-  TestBall(const Vec<Dim>& c, double r) : c_(c), r_(r) {}
-  double distance(const Vec<Dim>& x) const override { return (x - c_).norm() - r_; }
-  Vec<Dim> gradient(const Vec<Dim>& x) const override {
-    const Vec<Dim> d = x - c_;
-    return d.norm() > 0 ? Vec<Dim>(d.normalized()) : Vec<Dim>(Vec<Dim>::UnitX());
-  }
-  Box<Dim> bounds() const override {
-    return Box<Dim>(c_ - Vec<Dim>::Constant(r_), c_ + Vec<Dim>::Constant(r_));
-  }
-
- private:
-  Vec<Dim> c_;
-  double r_;
-};
-
-template <int Dim>
-class TestBox : public Shape<Dim> {
- public:
-  TestBox(const Vec<Dim>& c, const Vec<Dim>& half) : c_(c), h_(half) {}
-  double distance(const Vec<Dim>& x) const override {
-    const Vec<Dim> q = (x - c_).cwiseAbs() - h_;
-    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
-  }
-  Vec<Dim> gradient(const Vec<Dim>& x) const override {
-    Vec<Dim> g;
-    const double e = 1e-6;
-    for (int a = 0; a < Dim; ++a) {
-      Vec<Dim> d = Vec<Dim>::Zero();
-      d[a] = e;
-      g[a] = (distance(x + d) - distance(x - d)) / (2 * e);
-    }
-    return g.normalized();
-  }
-  Box<Dim> bounds() const override { return Box<Dim>(c_ - h_, c_ + h_); }
-
- private:
-  Vec<Dim> c_, h_;
-};
 
 // --- a hand-made scene: unit domain, liquid ball, one solid box ---------------------------------
 

@@ -1,0 +1,57 @@
+#pragma once
+/// \file test_helpers.hpp
+/// Analytic shapes and random data shared by the tests: each test depends only on the library
+/// code under test plus these exact, independent definitions.
+
+#include <algorithm>
+#include <random>
+
+#include "reference/common.hpp"
+#include "reference/shape.hpp"
+
+namespace monolith::testing {
+
+/// A ball (a disk in 2D) with its exact signed distance.
+template <int Dim>
+class TestBall : public Shape<Dim> {
+ public:
+  TestBall(const Vec<Dim>& c, double r) : c_(c), r_(r) {}
+  double distance(const Vec<Dim>& x) const override { return (x - c_).norm() - r_; }
+  Vec<Dim> gradient(const Vec<Dim>& x) const override {
+    const Vec<Dim> d = x - c_;
+    return d.norm() > 0 ? Vec<Dim>(d.normalized()) : Vec<Dim>(Vec<Dim>::UnitX());
+  }
+  Box<Dim> bounds() const override {
+    return Box<Dim>(c_ - Vec<Dim>::Constant(r_), c_ + Vec<Dim>::Constant(r_));
+  }
+
+ private:
+  Vec<Dim> c_;
+  double r_;
+};
+
+/// An axis-aligned box with its exact signed distance.
+template <int Dim>
+class TestBox : public Shape<Dim> {
+ public:
+  TestBox(const Vec<Dim>& c, const Vec<Dim>& half) : c_(c), half_(half) {}
+  double distance(const Vec<Dim>& x) const override {
+    const Vec<Dim> q = (x - c_).cwiseAbs() - half_;
+    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+  }
+  Box<Dim> bounds() const override { return Box<Dim>(c_ - half_, c_ + half_); }
+
+ private:
+  Vec<Dim> c_, half_;
+};
+
+/// n numbers uniform in [-1, 1], reproducible for a seed.
+inline VectorX random_vector(int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  VectorX v(n);
+  for (int i = 0; i < n; ++i) v[i] = u(rng);
+  return v;
+}
+
+}  // namespace monolith::testing
