@@ -108,15 +108,6 @@ double field_at(const RenderView<2>& view, const std::string& color_by, const Ve
   return view.viscosity ? grid.interpolate_cell(*view.viscosity, x) : 0.0;
 }
 
-/// The time label "t=1.234 s" on a light panel in the top-left corner of the domain.
-void draw_time(Image& img, double time, int x, int y, int s) {
-  char buf[48];
-  std::snprintf(buf, sizeof(buf), "t=%.3f s", time);
-  const std::string text = buf;
-  fill_rect(img, x, y, x + text_width(text, s) + 6 * s, y + text_height(s) + 6 * s, Rgb{255, 255, 255}, 0.78);
-  draw_text(img, x + 3 * s, y + 3 * s, text, kInk, s);
-}
-
 }  // namespace
 
 /// Renders the 2D frame: background, liquid (from liquid_phi on the half lattice, coverage
@@ -128,7 +119,7 @@ Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
   Image img(width, height, kMargin);
   const int s = std::max(1, (std::min(width, height) + 200) / 400);  // font magnification
   if (!view.grid) {
-    draw_time(img, view.time, 4 * s, 4 * s, s);
+    draw_time_label(img, view.time, 4 * s, 4 * s, s);
     return img;
   }
   const MacGrid<2>& grid = *view.grid;
@@ -304,7 +295,7 @@ Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
 
   // labels: time (top left) and the colour bar (top right), inside the domain
   const int lx = static_cast<int>(std::ceil(L)) + 4 * s, ly = static_cast<int>(std::ceil(T)) + 4 * s;
-  draw_time(img, view.time, lx, ly, s);
+  draw_time_label(img, view.time, lx, ly, s);
   if (scale.active) {
     const int bar_w = std::clamp(static_cast<int>((R - L) / 4), 40, 220), bar_h = 5 * s + 2;
     const int label_w = text_width(scale.label, s) + 4 * s;

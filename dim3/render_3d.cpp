@@ -376,14 +376,6 @@ std::vector<double> liquid_field_values(const RenderView<3>& view, const SampleL
   return values;
 }
 
-void draw_time(Image& img, double time, int x, int y, int s) {
-  char buf[48];
-  std::snprintf(buf, sizeof(buf), "t=%.3f s", time);
-  const std::string text = buf;
-  fill_rect(img, x, y, x + text_width(text, s) + 6 * s, y + text_height(s) + 6 * s, Rgb{255, 255, 255}, 0.78);
-  draw_text(img, x + 3 * s, y + 3 * s, text, kInk, s);
-}
-
 }  // namespace
 
 /// Renders the 3D frame: one sphere-traced ray per pixel plus four more on edges between
@@ -394,7 +386,7 @@ Image render_frame<3>(const RenderView<3>& view, const RenderSpec& spec) {
   const int s = std::max(1, (std::min(width, height) + 200) / 400);  // font magnification
   if (!view.grid) {
     Image img(width, height, to_rgb(kSkyHorizon));
-    draw_time(img, view.time, 4 * s, 4 * s, s);
+    draw_time_label(img, view.time, 4 * s, 4 * s, s);
     return img;
   }
   const MacGrid<3>& grid = *view.grid;
@@ -510,7 +502,7 @@ Image render_frame<3>(const RenderView<3>& view, const RenderSpec& spec) {
     }
 
   // labels: time (top left) and the colour bar (top right)
-  draw_time(img, view.time, 4 * s, 4 * s, s);
+  draw_time_label(img, view.time, 4 * s, 4 * s, s);
   if (r.scale.active) {
     const int bar_w = std::clamp(width / 4, 40, 220), bar_h = 5 * s + 2;
     const int label_w = text_width(r.scale.label, s) + 4 * s;

@@ -678,4 +678,13 @@ Image plot_lines(const PlotSpec& spec) {
 
 void write_plot(const PlotSpec& spec, const std::string& path) { plot_lines(spec).write_ppm(path); }
 
+void draw_time_label(Image& img, double time, int x, int y, int scale) {
+  char buf[48];
+  std::snprintf(buf, sizeof(buf), "t=%.3f s", time);
+  const std::string text = buf;
+  fill_rect(img, x, y, x + text_width(text, scale) + 6 * scale, y + text_height(scale) + 6 * scale,
+            Rgb{255, 255, 255}, 0.78);
+  draw_text(img, x + 3 * scale, y + 3 * scale, text, Rgb{30, 32, 40}, scale);
+}
+
 }  // namespace monolith

@@ -41,6 +41,10 @@ void fill_rect(Image& img, int x0, int y0, int x1, int y1, Rgb color, double alp
 
 // --- numbers and colour scales ------------------------------------------------------------------
 
+/// The simulation-time label "t=1.234 s" (dark text on a light panel) with its top-left corner
+/// at (x, y), font magnified by `scale`; used by both frame renderers.
+void draw_time_label(Image& img, double time, int x, int y, int scale);
+
 /// A short label for v with about `digits` significant digits: "0", "0.25", "12.5", "-3",
 /// "1.5e-04", "2e+06" (exponent form outside [1e-3, 1e5)).
 std::string format_number(double v, int digits = 3);
