@@ -79,26 +79,6 @@ View2 make_view(const Box<2>& domain, int width, int height, int margin) {
   return v;
 }
 
-/// Values of the colour field over the liquid cells (cell centre inside the liquid), the sample
-/// set of the robust colour range.
-std::vector<double> liquid_field_values(const RenderView<2>& view, const SampleLattice<2>& lattice,
-                                        const std::string& color_by) {
-  std::vector<double> values;
-  const MacGrid<2>& grid = *view.grid;
-  for (int c = 0; c < grid.num_cells(); ++c) {
-    const VecI<2> cc = grid.cell_coord(c);
-    // the cell centre is half-lattice point 2c + 1
-    const VecI<2> li = (2 * cc.array() + 1).matrix();
-    if ((*view.liquid_phi)[lattice.index(li)] >= 0.0) continue;
-    if (color_by == "speed" && view.velocity)
-      values.push_back(grid.interpolate_velocity(*view.velocity, grid.cell_center(cc)).norm());
-    else if (color_by == "pressure" && view.pressure)
-      values.push_back((*view.pressure)[c]);
-    else if (color_by == "viscosity")
-      values.push_back(view.viscosity ? (*view.viscosity)[c] : 0.0);
-  }
-  return values;
-}
 
 /// The colour field at a point (the face velocity's magnitude, or a cell field interpolated).
 double field_at(const RenderView<2>& view, const std::string& color_by, const Vec<2>& x) {

@@ -357,24 +357,6 @@ struct Renderer {
   }
 };
 
-/// Liquid-cell samples of the colour field (cell centre inside the liquid).
-std::vector<double> liquid_field_values(const RenderView<3>& view, const SampleLattice<3>& lattice,
-                                        const std::string& color_by) {
-  std::vector<double> values;
-  const MacGrid<3>& grid = *view.grid;
-  for (int c = 0; c < grid.num_cells(); ++c) {
-    const VecI<3> cc = grid.cell_coord(c);
-    const VecI<3> li = (2 * cc.array() + 1).matrix();  // the cell centre on the half lattice
-    if ((*view.liquid_phi)[lattice.index(li)] >= 0.0) continue;
-    if (color_by == "speed" && view.velocity)
-      values.push_back(grid.interpolate_velocity(*view.velocity, grid.cell_center(cc)).norm());
-    else if (color_by == "pressure" && view.pressure)
-      values.push_back((*view.pressure)[c]);
-    else if (color_by == "viscosity")
-      values.push_back(view.viscosity ? (*view.viscosity)[c] : 0.0);
-  }
-  return values;
-}
 
 }  // namespace
 

@@ -4,6 +4,7 @@
 /// 2D renderer lives in dim2/render_2d.cpp and the 3D ray marcher in dim3/render_3d.cpp.
 
 #include <array>
+#include <string>
 #include <vector>
 
 #include "reference/common.hpp"
@@ -35,6 +36,13 @@ struct RenderView {
   std::array<BoundaryType, 2 * Dim> boundary{};
   double time = 0.0;
 };
+
+/// Values of the colour field `color_by` (speed, pressure, viscosity) at the centres of the cells
+/// whose centre lies inside the liquid: the sample set both renderers take their robust colour
+/// range from. `lattice` is half_lattice(*view.grid).
+template <int Dim>
+std::vector<double> liquid_field_values(const RenderView<Dim>& view, const SampleLattice<Dim>& lattice,
+                                        const std::string& color_by);
 
 /// Renders one frame at spec.size with colouring spec.color_by.
 template <int Dim>
