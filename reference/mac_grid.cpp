@@ -6,22 +6,6 @@
 namespace monolith {
 
 namespace {
-/// Linear index of c in a lattice of size dims (x fastest).
-template <int Dim>
-int linear_index(const VecI<Dim>& c, const VecI<Dim>& dims) {
-  int index = 0;
-  for (int a = Dim - 1; a >= 0; --a) index = index * dims[a] + c[a];
-  return index;
-}
-template <int Dim>
-VecI<Dim> lattice_coord(int index, const VecI<Dim>& dims) {
-  VecI<Dim> c;
-  for (int a = 0; a < Dim; ++a) {
-    c[a] = index % dims[a];
-    index /= dims[a];
-  }
-  return c;
-}
 int wrap(int i, int n) { return ((i % n) + n) % n; }
 }  // namespace
 
@@ -52,7 +36,7 @@ double MacGrid<Dim>::cell_volume() const {
 
 template <int Dim>
 int MacGrid<Dim>::cell_index(const VecI<Dim>& c) const {
-  return linear_index<Dim>(c, cells_);
+  return lattice_index<Dim>(c, cells_);
 }
 
 template <int Dim>
@@ -97,7 +81,7 @@ VecI<Dim> MacGrid<Dim>::cell_containing(const Vec<Dim>& x) const {
 
 template <int Dim>
 int MacGrid<Dim>::face_index(int axis, const VecI<Dim>& f) const {
-  return face_offset_[axis] + linear_index<Dim>(f, face_dims_[axis]);
+  return face_offset_[axis] + lattice_index<Dim>(f, face_dims_[axis]);
 }
 
 template <int Dim>
@@ -186,7 +170,7 @@ void MacGrid<Dim>::stencil(const Vec<Dim>& x, const Vec<Dim>& shift, const VecI<
       c[a] = i01[a][bit];
       weight *= w01[a][bit];
     }
-    idx[corner] = linear_index<Dim>(c, dims);
+    idx[corner] = lattice_index<Dim>(c, dims);
     w[corner] = weight;
     if (grad) {
       Vec<Dim> g;

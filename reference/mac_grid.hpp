@@ -21,6 +21,26 @@
 
 namespace monolith {
 
+/// Linear index of coordinate c in a lattice of size dims, x fastest: the one numbering used for
+/// cells, faces of each axis, half-lattice samples and stress DOFs alike.
+template <int Dim>
+inline int lattice_index(const VecI<Dim>& c, const VecI<Dim>& dims) {
+  int index = 0;
+  for (int a = Dim - 1; a >= 0; --a) index = index * dims[a] + c[a];
+  return index;
+}
+
+/// Inverse of lattice_index.
+template <int Dim>
+inline VecI<Dim> lattice_coord(int index, const VecI<Dim>& dims) {
+  VecI<Dim> c;
+  for (int a = 0; a < Dim; ++a) {
+    c[a] = index % dims[a];
+    index /= dims[a];
+  }
+  return c;
+}
+
 template <int Dim>
 class MacGrid {
  public:
@@ -113,19 +133,8 @@ struct SampleLattice {
   VecI<Dim> dims = VecI<Dim>::Ones();
 
   int size() const { return dims.prod(); }
-  int index(const VecI<Dim>& i) const {
-    int k = 0;
-    for (int a = Dim - 1; a >= 0; --a) k = k * dims[a] + i[a];
-    return k;
-  }
-  VecI<Dim> coord(int k) const {
-    VecI<Dim> i;
-    for (int a = 0; a < Dim; ++a) {
-      i[a] = k % dims[a];
-      k /= dims[a];
-    }
-    return i;
-  }
+  int index(const VecI<Dim>& i) const { return lattice_index<Dim>(i, dims); }
+  VecI<Dim> coord(int k) const { return lattice_coord<Dim>(k, dims); }
   Vec<Dim> position(const VecI<Dim>& i) const {
     return origin + i.template cast<double>() * spacing;
   }

@@ -171,16 +171,6 @@ Vec<Dim> periodic_difference(const MacGrid<Dim>& grid, Vec<Dim> d) {
   return d;
 }
 
-/// Lattice coordinate of a linear index (x fastest).
-template <int Dim>
-VecI<Dim> decode_index(int index, const VecI<Dim>& dims) {
-  VecI<Dim> c;
-  for (int a = 0; a < Dim; ++a) {
-    c[a] = index % dims[a];
-    index /= dims[a];
-  }
-  return c;
-}
 
 }  // namespace
 
@@ -270,7 +260,7 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
           std::swap(sub_order[s], sub_order[pick]);
         }
       for (int k = 0; k < per_cell; ++k) {
-        const VecI<Dim> sub = decode_index<Dim>(sub_order[k], VecI<Dim>::Constant(n));
+        const VecI<Dim> sub = lattice_coord<Dim>(sub_order[k], VecI<Dim>::Constant(n));
         Vec<Dim> x;
         for (int a = 0; a < Dim; ++a) {
           const double jitter = kSeedJitter * (unit_draw(rng) - 0.5);
@@ -349,7 +339,7 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
         for (int k = 0; k < kCorners; ++k) {
           if (w[k] == 0.0) continue;
           // affine velocity at the face sample (minimum image on periodic axes)
-          const Vec<Dim> xf = grid.face_center(a, decode_index<Dim>(idx[k], dims));
+          const Vec<Dim> xf = grid.face_center(a, lattice_coord<Dim>(idx[k], dims));
           const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
           const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
           const int f = offset + idx[k];
@@ -518,7 +508,7 @@ double lattice_number_density() {
   double sum = 0.0;
   for (int k = 0; k < int_pow(side, Dim); ++k) {
     const VecI<Dim> off =
-        decode_index<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(reach);
+        lattice_coord<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(reach);
     const double r2 = off.template cast<double>().squaredNorm();
     sum += correction_kernel(r2 / (kCorrectionSupport * kCorrectionSupport));
   }
@@ -591,7 +581,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     const VecI<Dim> ci = grid.cell_coord(cell);
     for (int k = 0; k < neighbour_cells; ++k) {
       const VecI<Dim> cj =
-          ci + decode_index<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring);
+          ci + lattice_coord<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring);
       const int c = grid.cell_index_or_outside(cj);
       if (c < 0) continue;
       if (dedup) {
@@ -772,7 +762,7 @@ VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
   VectorX cur(count);
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < count; ++k) {
-    const VecI<Dim> lower = decode_index<Dim>(k, dims);
+    const VecI<Dim> lower = lattice_coord<Dim>(k, dims);
     std::array<double, kCorners> corner;
     for (int b = 0; b < kCorners; ++b) {
       VecI<Dim> i = lower;
@@ -792,7 +782,7 @@ VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
     const int n2 = dims[a];
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < out_count; ++k) {
-      const VecI<Dim> o = decode_index<Dim>(k, out_dims);
+      const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
       double sum = 0.0;
       for (int t = 0; t < 4; ++t) {
         int j = 2 * o[a] - 1 + t;
