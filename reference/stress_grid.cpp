@@ -62,22 +62,14 @@ Vec<Dim> StressGrid<Dim>::shift(int k) {
 
 template <int Dim>
 int StressGrid<Dim>::index(int k, const VecI<Dim>& c) const {
-  int i = 0;
-  for (int a = Dim - 1; a >= 0; --a) i = i * dims_[k][a] + c[a];
-  return offset_[k] + i;
+  return offset_[k] + lattice_index<Dim>(c, dims_[k]);
 }
 
 template <int Dim>
 std::pair<int, VecI<Dim>> StressGrid<Dim>::coord(int index) const {
   int k = 0;
   while (index >= offset_[k + 1]) ++k;
-  int i = index - offset_[k];
-  VecI<Dim> c;
-  for (int a = 0; a < Dim; ++a) {
-    c[a] = i % dims_[k][a];
-    i /= dims_[k][a];
-  }
-  return {k, c};
+  return {k, lattice_coord<Dim>(index - offset_[k], dims_[k])};
 }
 
 template <int Dim>
