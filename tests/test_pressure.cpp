@@ -228,14 +228,7 @@ TEMPLATE_TEST_CASE_SIG("projection of a gradient field converges to the analytic
     const auto lattice = half_lattice(grid);
     std::array<BoundaryType, 2 * Dim> boundary;
     boundary.fill(BoundaryType::wall);
-    PressureWeights w;
-    w.fluid_face = fluid_face_weights(grid, lattice,
-                                      solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0), boundary);
-    VectorX phi(lattice.size());
-    for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - h;
-    w.liquid_cell = liquid_cell_weights(grid, lattice, phi);
-    w.liquid_face = liquid_face_weights(grid, lattice, phi, w.liquid_cell);
-    w.face_density = VectorX::Constant(grid.num_faces(), rho);
+    const PressureWeights w = flat_surface_weights<Dim>(grid, boundary, h, rho);
     VectorX u(grid.num_faces());
     for (int f = 0; f < grid.num_faces(); ++f) {
       const auto [axis, coord] = grid.face_coord(f);

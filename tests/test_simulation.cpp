@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
+#include "tests/support/test_helpers.hpp"
 #include "reference/errors.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/scene.hpp"
@@ -9,6 +10,7 @@
 #include "reference/volume_fractions.hpp"
 
 using namespace monolith;
+using namespace monolith::testing;
 
 namespace {
 
@@ -59,14 +61,9 @@ TEMPLATE_TEST_CASE_SIG(
   boundary.fill(BoundaryType::wall);
   boundary[3] = BoundaryType::open;
   for (double h : {0.5, 0.5 + 0.3 / n, 0.5 + 0.5 / n, 0.5 + 0.8 / n}) {
-    PressureWeights w;
-    w.fluid_face = fluid_face_weights(grid, lattice,
-                                      solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0), boundary);
+    const PressureWeights w = flat_surface_weights<Dim>(grid, boundary, h, rho);
     VectorX phi(lattice.size());
     for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - h;
-    w.liquid_cell = liquid_cell_weights(grid, lattice, phi);
-    w.liquid_face = liquid_face_weights(grid, lattice, phi, w.liquid_cell);
-    w.face_density = VectorX::Constant(grid.num_faces(), rho);
     const VectorX raw = face_negative_fractions(grid, lattice, phi);
     for (const std::string backend : {"explicit", "matrixfree"}) {
       VectorX u = VectorX::Zero(grid.num_faces());

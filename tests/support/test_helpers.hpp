@@ -7,7 +7,9 @@
 #include <random>
 
 #include "reference/common.hpp"
+#include "reference/pressure_projection.hpp"
 #include "reference/shape.hpp"
+#include "reference/volume_fractions.hpp"
 
 namespace monolith::testing {
 
@@ -52,6 +54,24 @@ inline VectorX random_vector(int n, unsigned seed) {
   VectorX v(n);
   for (int i = 0; i < n; ++i) v[i] = u(rng);
   return v;
+}
+
+/// The weights of eq. (8) for liquid of density rho below the flat surface y = h, no solids
+/// (walls and open faces as `boundary` says); the liquid level set is y - h on the half lattice.
+template <int Dim>
+PressureWeights flat_surface_weights(const MacGrid<Dim>& grid,
+                                     const std::array<BoundaryType, 2 * Dim>& boundary, double h,
+                                     double rho) {
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  PressureWeights w;
+  w.fluid_face = fluid_face_weights(grid, lattice,
+                                    solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0), boundary);
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - h;
+  w.liquid_cell = liquid_cell_weights(grid, lattice, phi);
+  w.liquid_face = liquid_face_weights(grid, lattice, phi, w.liquid_cell);
+  w.face_density = VectorX::Constant(grid.num_faces(), rho);
+  return w;
 }
 
 }  // namespace monolith::testing
