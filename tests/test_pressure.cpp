@@ -225,7 +225,6 @@ TEMPLATE_TEST_CASE_SIG("projection of a gradient field converges to the analytic
   std::vector<double> errors, velocity;
   for (int n : levels) {
     const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), {});
-    const auto lattice = half_lattice(grid);
     std::array<BoundaryType, 2 * Dim> boundary;
     boundary.fill(BoundaryType::wall);
     const PressureWeights w = flat_surface_weights<Dim>(grid, boundary, h, rho);
