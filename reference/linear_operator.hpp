@@ -21,10 +21,15 @@ class LinearOperator {
   virtual VectorX diagonal() const = 0;
   /// One forward SOR sweep on A x = rhs, in place on x, relaxation omega: for every row i in the
   /// operator's sweep order, x_i <- (1 - omega) x_i + omega (rhs_i - sum_{j != i} A_ij x_j) / A_ii.
-  /// Rows with A_ii = 0 are left unchanged.
-  virtual void forward_sweep(const VectorX& rhs, VectorX& x, double omega) const = 0;
+  /// Rows with A_ii = 0 are left unchanged. With `active` (size n), only rows with active[i] != 0
+  /// are relaxed; the others keep their value (and still enter the sums): with those values zero
+  /// this is SOR on the principal submatrix A_FF of the active set F, which is what the
+  /// preconditioner of MPRGP needs on the free variables (mprgp.hpp).
+  virtual void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                             const std::vector<char>* active = nullptr) const = 0;
   /// The same sweep in the reverse order (so forward then backward is symmetric SOR).
-  virtual void backward_sweep(const VectorX& rhs, VectorX& x, double omega) const = 0;
+  virtual void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                              const std::vector<char>* active = nullptr) const = 0;
   /// Orthonormal basis of the null space of A (empty when A is definite). Solvers project it out
   /// of the right-hand side and of every iterate.
   virtual const std::vector<VectorX>& null_space() const { return no_null_space_; }
@@ -55,11 +60,15 @@ class SparseMatrixOperator : public LinearOperator {
   VectorX diagonal() const override {
     return diagonal_;
   }
-  void forward_sweep(const VectorX& rhs, VectorX& x, double omega) const override {
-    for (int i = 0; i < a_.rows(); ++i) relax_row(i, rhs, x, omega);
+  void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                     const std::vector<char>* active = nullptr) const override {
+    for (int i = 0; i < a_.rows(); ++i)
+      if (!active || (*active)[i]) relax_row(i, rhs, x, omega);
   }
-  void backward_sweep(const VectorX& rhs, VectorX& x, double omega) const override {
-    for (int i = static_cast<int>(a_.rows()) - 1; i >= 0; --i) relax_row(i, rhs, x, omega);
+  void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                      const std::vector<char>* active = nullptr) const override {
+    for (int i = static_cast<int>(a_.rows()) - 1; i >= 0; --i)
+      if (!active || (*active)[i]) relax_row(i, rhs, x, omega);
   }
   const std::vector<VectorX>& null_space() const override {
     return null_space_;

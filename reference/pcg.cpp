@@ -14,10 +14,11 @@ double inf_norm(const VectorX& v) {
 }
 }  // namespace
 
-void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, double omega) {
+void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, double omega,
+                       const std::vector<char>* active) {
   z.setZero(r.size());
-  a.forward_sweep(r, z, omega);
-  a.backward_sweep(r, z, omega);
+  a.forward_sweep(r, z, omega, active);
+  a.backward_sweep(r, z, omega, active);
 }
 
 PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,

@@ -26,8 +26,10 @@ struct PcgResult {
 
 /// z = M^-1 r for the SSOR preconditioner: one forward then one backward SOR sweep from z = 0,
 /// i.e. z = (2 - omega)/omega (D/omega + U)^-1 D (D/omega + L)^-1 r (symmetric positive definite
-/// for 0 < omega < 2 when A is).
-void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, double omega);
+/// for 0 < omega < 2 when A is). With `active`, the same on the principal submatrix of the active
+/// rows (z is zero on the others; r is read on the active rows only).
+void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, double omega,
+                       const std::vector<char>* active = nullptr);
 
 /// Solves A x = b by preconditioned CG from the initial guess in x (resized and zeroed if its
 /// size is wrong). The null space of A (a.null_space()) is projected out of b and the iterates,

@@ -238,11 +238,12 @@ void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const 
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::relax_colour(int colour, const VectorX& rhs, VectorX& x,
-                                                   double omega, bool reverse) const {
+                                                   double omega, bool reverse,
+                                                   const std::vector<char>* active) const {
   const std::vector<int>& list = colour_dofs_[colour];
   const int count = static_cast<int>(list.size());
   auto relax = [&](int i) {
-    if (diagonal_[i] == 0.0) return;
+    if (diagonal_[i] == 0.0 || (active && !(*active)[i])) return;
     double off = 0.0;
     for (int j = 0; j < kNeighbours; ++j) {
       const int s = i * kNeighbours + j;
@@ -265,17 +266,17 @@ void MatrixFreePressureOperator<Dim>::relax_colour(int colour, const VectorX& rh
 }
 
 template <int Dim>
-void MatrixFreePressureOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x,
-                                                    double omega) const {
-  relax_colour(0, rhs, x, omega, false);
-  relax_colour(1, rhs, x, omega, false);
+void MatrixFreePressureOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                                    const std::vector<char>* active) const {
+  relax_colour(0, rhs, x, omega, false, active);
+  relax_colour(1, rhs, x, omega, false, active);
 }
 
 template <int Dim>
-void MatrixFreePressureOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x,
-                                                     double omega) const {
-  relax_colour(1, rhs, x, omega, true);
-  relax_colour(0, rhs, x, omega, true);
+void MatrixFreePressureOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                                     const std::vector<char>* active) const {
+  relax_colour(1, rhs, x, omega, true, active);
+  relax_colour(0, rhs, x, omega, true, active);
 }
 
 template <int Dim>

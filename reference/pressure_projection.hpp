@@ -81,15 +81,18 @@ class MatrixFreePressureOperator : public LinearOperator {
   int size() const override { return num_dofs_; }
   void apply(const VectorX& x, VectorX& y) const override;
   VectorX diagonal() const override { return diagonal_; }
-  void forward_sweep(const VectorX& rhs, VectorX& x, double omega) const override;
-  void backward_sweep(const VectorX& rhs, VectorX& x, double omega) const override;
+  void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                     const std::vector<char>* active = nullptr) const override;
+  void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                      const std::vector<char>* active = nullptr) const override;
   const std::vector<VectorX>& null_space() const override { return null_space_; }
   /// b = W_L^p G^T W_F^u u* restricted to the DOFs, by a stencil loop.
   VectorX rhs(const VectorX& u_star) const;
 
  private:
   static constexpr int kNeighbours = 2 * Dim;
-  void relax_colour(int colour, const VectorX& rhs, VectorX& x, double omega, bool reverse) const;
+  void relax_colour(int colour, const VectorX& rhs, VectorX& x, double omega, bool reverse,
+                    const std::vector<char>* active) const;
   const MacGrid<Dim>* grid_;
   int num_dofs_ = 0;
   std::vector<int> cell_of_dof_;
