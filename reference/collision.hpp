@@ -1,0 +1,75 @@
+#pragma once
+/// \file collision.hpp
+/// Collision detection between rigid bodies and with the domain walls (§3.2.4): broad phase on
+/// world bounding boxes, narrow phase by surface samples tested against the other body's
+/// signed distance (both directions; spheres exactly from their centres), normals from SDF
+/// gradients, then contact reduction per pair. docs/rigid-bodies.md describes it.
+
+#include <array>
+#include <vector>
+
+#include "reference/common.hpp"
+#include "reference/rigid_body.hpp"
+#include "reference/scene.hpp"
+
+namespace monolith {
+
+/// The domain's wall faces as half-spaces.
+template <int Dim>
+struct Walls {
+  Vec<Dim> lower = Vec<Dim>::Zero(), upper = Vec<Dim>::Zero();
+  /// Per face in the order x-, x+, y-, y+ (, z-, z+): true for a `wall` boundary.
+  std::array<bool, 2 * Dim> is_wall{};
+  double friction = 0, restitution = 0;
+  static Walls from_scene(const SceneDesc& scene);
+  /// Inward unit normal of face f (pointing into the domain).
+  static Vec<Dim> face_normal(int face);
+  /// Signed distance of x from the plane of face f (positive inside the domain).
+  double face_distance(int face, const Vec<Dim>& x) const;
+};
+
+template <int Dim>
+struct Contact {
+  int body_a = -1;  ///< index into bodies: always a dynamic body
+  int body_b = -1;  ///< index into bodies, or -1 for a domain wall
+  int wall_face = -1;  ///< face index (x-, x+, y-, ...) when body_b == -1
+  Vec<Dim> point = Vec<Dim>::Zero();   ///< world contact point (on the surface of body_b / the wall)
+  Vec<Dim> normal = Vec<Dim>::Zero();  ///< unit, from b towards a: the direction in which a must
+                                       ///< move to separate
+  double phi = 0;  ///< signed gap along normal (negative = penetration), WITHOUT the margin
+  double friction = 0, restitution = 0;  ///< combined per pair: sqrt(mu_a mu_b), max(e_a, e_b);
+                                         ///< walls use Walls::friction/restitution
+  /// The point on the surface of body_a: point + phi * normal.
+  Vec<Dim> point_a() const { return point + phi * normal; }
+};
+
+/// Parameters of the contact reduction.
+struct ContactReduction {
+  /// Candidates whose normals are within this angle (cosine) of a cluster's normal form one
+  /// patch.
+  double cluster_cosine = 0.95;
+  /// Points kept per patch: 2 in 2D, 4 in 3D (the extreme points of the patch).
+  int max_points_2d = 2, max_points_3d = 4;
+};
+
+/// All contacts with phi < search_distance between pairs of bodies (not both non-dynamic) and
+/// between dynamic bodies and walls. body_a is the dynamic body of a pair (the lower index if
+/// both are dynamic), body_b the other one (fixed, kinematic, dynamic, or -1 for a wall).
+/// Broad phase on world AABBs (grown by search_distance), then surface samples of each body
+/// against the other's SDF, both directions (sphere-sphere and sphere-wall exactly: one contact
+/// from centre distances), normals from SDF gradients, then contact reduction per pair: the
+/// candidates are clustered by normal and each patch keeps its deepest point and the points
+/// that span it (<= 4 in 3D, 2 in 2D). Order: body pairs by (a, b) index, then walls by body
+/// and face; deterministic.
+template <int Dim>
+std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bodies,
+                                          const Walls<Dim>& walls, double search_distance,
+                                          const ContactReduction& reduction = {});
+
+/// Reduces candidate contacts of one pair (same body_a, body_b) to a few extreme points per
+/// normal cluster (exposed for tests).
+template <int Dim>
+std::vector<Contact<Dim>> reduce_contacts(std::vector<Contact<Dim>> candidates,
+                                          const ContactReduction& reduction = {});
+
+}  // namespace monolith
