@@ -1,0 +1,189 @@
+// Stress volume-fraction weights W_F^s, W_L^s (section 3.1.2) on the stress control volumes.
+#include <catch2/catch.hpp>
+#include <cmath>
+
+#include "reference/stress_weights.hpp"
+#include "reference/volume_fractions.hpp"
+#include "tests/support/test_helpers.hpp"
+
+using namespace monolith;
+using monolith::testing::TestBall;
+using monolith::testing::TestBox;
+
+namespace {
+
+template <int Dim>
+MacGrid<Dim> unit_grid(int n, bool periodic_x = false) {
+  std::array<bool, Dim> periodic{};
+  periodic[0] = periodic_x;
+  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+}
+
+template <int Dim, class F>
+VectorX sample(const SampleLattice<Dim>& lattice, F&& f) {
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) phi[k] = f(lattice.position(lattice.coord(k)));
+  return phi;
+}
+
+template <int Dim>
+std::array<BoundaryType, 2 * Dim> all(BoundaryType t) {
+  std::array<BoundaryType, 2 * Dim> b;
+  b.fill(t);
+  return b;
+}
+
+double ball_volume(int dim, double r) { return dim == 2 ? M_PI * r * r : 4.0 / 3.0 * M_PI * r * r * r; }
+
+}  // namespace
+
+TEMPLATE_TEST_CASE_SIG("stress control-volume fractions of a ball converge at second order",
+                       "[convergence]", ((int Dim), Dim), 2, 3) {
+  // every component's control volumes tile the domain, so sum W dx^Dim is the ball volume
+  const Vec<Dim> centre = Vec<Dim>::Constant(0.5) + Vec<Dim>::Constant(0.013);
+  const double radius = 0.31;
+  const TestBall<Dim> ball(centre, radius);
+  const double exact = ball_volume(Dim, radius);
+  const std::vector<int> levels = Dim == 2 ? std::vector<int>{16, 32, 64} : std::vector<int>{8, 16, 32};
+  constexpr int K = StressGrid<Dim>::kComponents;
+  std::array<std::vector<double>, K> err;
+  for (int n : levels) {
+    const auto grid = unit_grid<Dim>(n);
+    const StressGrid<Dim> stress(grid);
+    const auto lattice = half_lattice(grid);
+    const VectorX phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) { return ball.distance(x); });
+    const VectorX w = stress_liquid_weights(stress, lattice, phi);
+    REQUIRE(w.minCoeff() >= 0.0);
+    REQUIRE(w.maxCoeff() <= 1.0);
+    for (int k = 0; k < K; ++k)
+      err[k].push_back(std::abs(w.segment(stress.offset(k), stress.num_dofs(k)).sum() *
+                                    grid.cell_volume() -
+                                exact));
+  }
+  for (int k = 0; k < K; ++k) {
+    const double order = std::log2(err[k][1] / err[k][2]);
+    const double order_all = std::log2(err[k][0] / err[k][2]) / 2.0;
+    INFO("component " << k << " errors " << err[k][0] << " " << err[k][1] << " " << err[k][2]
+                      << " orders " << order << " " << order_all);
+    CHECK(order > 1.7);
+    CHECK(order_all > 1.7);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("diagonal stress weights equal the cell weights", "[unit]", ((int Dim), Dim),
+                       2, 3) {
+  const auto grid = unit_grid<Dim>(Dim == 2 ? 12 : 6);
+  const StressGrid<Dim> stress(grid);
+  const auto lattice = half_lattice(grid);
+  const TestBall<Dim> liquid(Vec<Dim>::Constant(0.45), 0.33);
+  const TestBox<Dim> solid(Vec<Dim>::Constant(0.8), Vec<Dim>::Constant(0.17));
+  const VectorX liquid_phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) { return liquid.distance(x); });
+  const VectorX solid_phi = solid_phi_on_lattice<Dim>(grid, lattice, {std::make_shared<TestBox<Dim>>(solid)}, 0.0);
+  const VectorX wl = stress_liquid_weights(stress, lattice, liquid_phi);
+  const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all<Dim>(BoundaryType::wall));
+  const VectorX cell_liquid = liquid_cell_weights(grid, lattice, liquid_phi);
+  const VectorX cell_fluid = VectorX::Ones(grid.num_cells()) - cell_negative_fractions(grid, lattice, solid_phi);
+  REQUIRE(cell_liquid.maxCoeff() > 0.5);
+  REQUIRE(cell_fluid.minCoeff() < 0.5);
+  for (int a = 0; a < Dim; ++a) {
+    // W^s of tau_aa at cell c is W^p of c, exactly (same control volume, same lattice cells)
+    CHECK((wl.segment(stress.offset(a), grid.num_cells()) - cell_liquid).cwiseAbs().maxCoeff() == 0.0);
+    CHECK((wf.segment(stress.offset(a), grid.num_cells()) - cell_fluid).cwiseAbs().maxCoeff() == 0.0);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("stress weights wrap on a periodic axis", "[unit]", ((int Dim), Dim), 2, 3) {
+  // a level set periodic in x: shifting it by one cell shifts every component's weights by one
+  // DOF along x, including the DOFs on the periodic seam (whose control volumes wrap)
+  const int n = Dim == 2 ? 10 : 6;
+  const auto grid = unit_grid<Dim>(n, true);
+  const StressGrid<Dim> stress(grid);
+  const auto lattice = half_lattice(grid);
+  auto surface = [](double shift) {
+    return [shift](const Vec<Dim>& x) {
+      return x[1] - 0.5 - 0.2 * std::sin(2.0 * M_PI * (x[0] - shift)) -
+             (Dim == 3 ? 0.1 * std::cos(2.0 * M_PI * x[Dim - 1]) : 0.0);
+    };
+  };
+  const VectorX w0 = stress_liquid_weights(stress, lattice, sample<Dim>(lattice, surface(0.0)));
+  const VectorX w1 = stress_liquid_weights(stress, lattice, sample<Dim>(lattice, surface(grid.dx())));
+  double worst = 0.0;
+  int seam = 0;
+  for (int i = 0; i < stress.num_dofs(); ++i) {
+    const auto [k, c] = stress.coord(i);
+    VecI<Dim> shifted = c;
+    shifted[0] += 1;
+    worst = std::max(worst, std::abs(w1[stress.index_or_outside(k, shifted)] - w0[i]));
+    seam += c[0] == 0 && w0[i] > 0.0 && w0[i] < 1.0;
+  }
+  CHECK(seam > 0);
+  CHECK(worst < 1e-12);
+}
+
+TEMPLATE_TEST_CASE_SIG("boundary stress control volumes mirror; walls keep the inside half",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  const int n = Dim == 2 ? 8 : 4;
+  const auto grid = unit_grid<Dim>(n);
+  const StressGrid<Dim> stress(grid);
+  const auto lattice = half_lattice(grid);
+  // liquid below a tilted plane that does not depend on x: mirroring across x = 0 and x = 1 makes
+  // a boundary node's liquid fraction that of the interior node beside it in x... identical
+  const VectorX phi = sample<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.43 - 0.1 * x[Dim - 1]; });
+  const VectorX wl = stress_liquid_weights(stress, lattice, phi);
+  const VectorX no_solid = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
+  std::array<BoundaryType, 2 * Dim> mixed = all<Dim>(BoundaryType::wall);
+  mixed[1] = BoundaryType::open;  // x = 1 open
+  const VectorX wf = stress_fluid_weights(stress, lattice, no_solid, mixed);
+  int checked = 0;
+  for (int i = 0; i < stress.num_dofs(); ++i) {
+    const auto [k, c] = stress.coord(i);
+    if (StressGrid<Dim>::is_diagonal(k)) {
+      CHECK(wf[i] == 1.0);
+      continue;
+    }
+    const auto [a, b] = StressGrid<Dim>::component_axes(k);
+    // liquid: a DOF on x = 0 or x = 1 equals the one at x = 1/2 dx... by the x-independence,
+    // every DOF of a column in x has the same liquid fraction
+    VecI<Dim> ref = c;
+    ref[0] = a == 0 ? 1 : 0;
+    if (c[0] != ref[0]) CHECK(wl[i] == Approx(wl[stress.index(k, ref)]).margin(1e-14));
+    // fluid: 1 inside, 1/2 per wall the DOF lies on, 0 on the open side
+    double expected = 1.0;
+    for (int axis : {a, b}) {
+      if (c[axis] == 0) expected *= 0.5;
+      if (c[axis] == n) expected *= (axis == 0 ? 0.0 : 0.5);
+    }
+    CHECK(wf[i] == expected);
+    ++checked;
+  }
+  CHECK(checked > 0);
+  // the fluid parts of the node/edge control volumes of a closed box tile it exactly
+  const VectorX wall = stress_fluid_weights(stress, lattice, no_solid, all<Dim>(BoundaryType::wall));
+  for (int k = Dim; k < StressGrid<Dim>::kComponents; ++k)
+    CHECK(wall.segment(stress.offset(k), stress.num_dofs(k)).sum() * grid.cell_volume() ==
+          Approx(1.0).epsilon(1e-13));
+}
+
+TEMPLATE_TEST_CASE_SIG("a solid wall through a row of nodes gives them W_F^s = 1/2, like a domain wall",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // the embedded-solid analogue of the wall rule: a solid filling y < 3 dx (its surface through
+  // the nodes of row 3) halves the control volume of every off-diagonal DOF with c_y = 3
+  const int n = Dim == 2 ? 8 : 4;
+  std::array<bool, Dim> periodic;
+  periodic.fill(true);
+  const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+  const StressGrid<Dim> stress(grid);
+  const auto lattice = half_lattice(grid);
+  const double wall = 3.0 / n;
+  const VectorX solid_phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) { return x[1] - wall; });
+  const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all<Dim>(BoundaryType::periodic));
+  int checked = 0;
+  for (int i = 0; i < stress.num_dofs(); ++i) {
+    const auto [k, c] = stress.coord(i);
+    const auto [a, b] = StressGrid<Dim>::component_axes(k);
+    if (a == b || (a != 1 && b != 1) || c[1] != 3) continue;
+    CHECK(wf[i] == Approx(0.5).margin(1e-14));
+    ++checked;
+  }
+  CHECK(checked > 0);
+}
