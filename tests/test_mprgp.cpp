@@ -1,0 +1,555 @@
+// MPRGP (section 4.3) against an independent dense oracle: exact solutions of small box QPs by
+// enumerating the active sets; KKT conditions; contact-like and rank-deficient matrices; the
+// (1 + gamma) diagonal boost of section 4.4.5; CG with infinite bounds against CHOLMOD.
+#include <Eigen/Dense>
+#include <catch2/catch.hpp>
+#include <cstdio>
+#include <limits>
+#include <random>
+
+#include "reference/cholmod_solver.hpp"
+#include "reference/colouring.hpp"
+#include "reference/mprgp.hpp"
+#include "reference/pcg.hpp"
+
+using namespace monolith;
+using Dense = Eigen::MatrixXd;
+
+namespace {
+
+const double inf = std::numeric_limits<double>::infinity();
+
+double objective(const Dense& a, const VectorX& b, const VectorX& x) {
+  return 0.5 * x.dot(a * x) - b.dot(x);
+}
+
+SparseMatrix to_sparse(const Dense& a) {
+  SparseMatrix s = a.sparseView();
+  s.makeCompressed();
+  return s;
+}
+
+/// The exact minimiser of 1/2 x^T A x - b^T x on l <= x <= u for SPD A, by enumeration of all
+/// 3^n assignments (each variable at its lower bound, at its upper bound, or free): the free
+/// system A_FF x_F = b_F - A_FB x_B is solved by LDLT; a candidate is kept when it is feasible and
+/// its gradient has the KKT signs (>= 0 at lower bounds, <= 0 at upper). For SPD A exactly one
+/// assignment is a KKT point up to degeneracy; the one with the smallest objective is returned.
+struct Oracle {
+  bool found = false;
+  VectorX x;
+  double objective = inf;
+};
+Oracle enumerate_box_qp(const Dense& a, const VectorX& b, const VectorX& l, const VectorX& u) {
+  const int n = static_cast<int>(b.size());
+  const double tol = 1e-9 * (1.0 + b.lpNorm<Eigen::Infinity>() + a.lpNorm<Eigen::Infinity>());
+  Oracle best;
+  std::vector<int> state(n, 0);  // 0 lower, 1 upper, 2 free
+  for (;;) {
+    // an admissible assignment: no infinite bound is active, fixed variables only "at lower"
+    bool admissible = true;
+    for (int i = 0; i < n && admissible; ++i) {
+      if (state[i] == 0 && !std::isfinite(l[i])) admissible = false;
+      if (state[i] == 1 && (!std::isfinite(u[i]) || l[i] == u[i])) admissible = false;
+      if (state[i] == 2 && l[i] == u[i]) admissible = false;
+    }
+    if (admissible) {
+      VectorX x = VectorX::Zero(n);
+      std::vector<int> free;
+      for (int i = 0; i < n; ++i) {
+        if (state[i] == 0) x[i] = l[i];
+        if (state[i] == 1) x[i] = u[i];
+        if (state[i] == 2) free.push_back(i);
+      }
+      const int m = static_cast<int>(free.size());
+      bool ok = true;
+      if (m > 0) {
+        // free block system A_FF x_F = b_F - A_F. x_B (x_F = 0 in x so far)
+        Dense aff(m, m);
+        VectorX rhs(m);
+        const VectorX ax = a * x;
+        for (int r = 0; r < m; ++r) {
+          rhs[r] = b[free[r]] - ax[free[r]];
+          for (int c = 0; c < m; ++c) aff(r, c) = a(free[r], free[c]);
+        }
+        Eigen::LDLT<Dense> ldlt(aff);
+        const VectorX xf = ldlt.solve(rhs);
+        ok = ldlt.info() == Eigen::Success && xf.allFinite();
+        for (int r = 0; r < m; ++r) x[free[r]] = xf[r];
+      }
+      if (ok) {
+        const VectorX g = a * x - b;
+        for (int i = 0; i < n && ok; ++i) {
+          if (x[i] < l[i] - tol || x[i] > u[i] + tol) ok = false;
+          if (state[i] == 0 && l[i] < u[i] && g[i] < -tol) ok = false;
+          if (state[i] == 1 && g[i] > tol) ok = false;
+        }
+      }
+      if (ok) {
+        const double f = objective(a, b, x);
+        if (f < best.objective) {
+          best.found = true;
+          best.x = x;
+          best.objective = f;
+        }
+      }
+    }
+    // next assignment (mixed-radix counter)
+    int i = 0;
+    while (i < n && state[i] == 2) state[i++] = 0;
+    if (i == n) break;
+    ++state[i];
+  }
+  return best;
+}
+
+/// The three KKT measures of x for the box QP (all zero at the exact solution):
+/// primal = max violation of l <= x <= u; dual = max wrong-sign gradient (g_i < 0 at a lower
+/// bound, g_i > 0 at an upper bound, |g_i| on free variables); complementarity = max over i of
+/// (x_i - l_i) max(g_i, 0) and (u_i - x_i) max(-g_i, 0) (finite bounds only).
+struct Kkt {
+  double primal = 0, dual = 0, complementarity = 0;
+};
+Kkt kkt_measures(const Dense& a, const VectorX& b, const VectorX& l, const VectorX& u,
+                 const VectorX& x, double bound_tol) {
+  const VectorX g = a * x - b;
+  Kkt k;
+  for (int i = 0; i < x.size(); ++i) {
+    k.primal = std::max({k.primal, l[i] - x[i], x[i] - u[i]});
+    const bool at_l = std::isfinite(l[i]) && x[i] <= l[i] + bound_tol;
+    const bool at_u = std::isfinite(u[i]) && x[i] >= u[i] - bound_tol;
+    if (at_l && at_u) continue;  // fixed (l == u): any gradient sign is optimal
+    if (at_l)
+      k.dual = std::max(k.dual, -g[i]);
+    else if (at_u)
+      k.dual = std::max(k.dual, g[i]);
+    else
+      k.dual = std::max(k.dual, std::abs(g[i]));
+    if (std::isfinite(l[i])) k.complementarity = std::max(k.complementarity, (x[i] - l[i]) * std::max(g[i], 0.0));
+    if (std::isfinite(u[i])) k.complementarity = std::max(k.complementarity, (u[i] - x[i]) * std::max(-g[i], 0.0));
+  }
+  return k;
+}
+
+/// A random SPD matrix Q diag(eig) Q^T with eigenvalues log-uniform in [1/cond, 1].
+Dense random_spd(int n, double cond, std::mt19937& rng) {
+  std::normal_distribution<double> normal;
+  Dense g(n, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) g(i, j) = normal(rng);
+  Eigen::HouseholderQR<Dense> qr(g);
+  const Dense q = qr.householderQ();
+  VectorX eig(n);
+  std::uniform_real_distribution<double> t(0.0, 1.0);
+  for (int i = 0; i < n; ++i) eig[i] = std::pow(cond, -t(rng));
+  return q * eig.asDiagonal() * q.transpose();
+}
+
+/// A contact-like matrix J M^-1 J^T: `bodies` rigid bodies with `dofs` velocity DOFs each (3 in
+/// 2D, 6 in 3D), masses and inertias in [0.5, 2]; every contact row touches one or two random
+/// bodies with random entries (normal and lever-arm terms); contact c always touches body
+/// c % bodies, so every body is touched and the rank is generically min(contacts, dofs * bodies).
+struct ContactSystem {
+  Dense j;      ///< contacts x (dofs * bodies)
+  VectorX m_inv;  ///< inverse mass diagonal
+  Dense a;      ///< J M^-1 J^T
+};
+ContactSystem random_contacts(int contacts, int bodies, int dofs, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0), mass(0.5, 2.0);
+  std::uniform_int_distribution<int> body(0, bodies - 1), two(0, 1);
+  ContactSystem s;
+  s.m_inv.resize(bodies * dofs);
+  for (int i = 0; i < s.m_inv.size(); ++i) s.m_inv[i] = 1.0 / mass(rng);
+  s.j = Dense::Zero(contacts, bodies * dofs);
+  for (int c = 0; c < contacts; ++c) {
+    const int b0 = c % bodies;
+    int b1 = two(rng) ? body(rng) : -1;
+    if (b1 == b0) b1 = -1;
+    for (int k = 0; k < dofs; ++k) {
+      s.j(c, b0 * dofs + k) = u(rng);
+      if (b1 >= 0) s.j(c, b1 * dofs + k) = -u(rng);
+    }
+  }
+  s.a = s.j * s.m_inv.asDiagonal() * s.j.transpose();
+  return s;
+}
+
+VectorX random_vec(int n, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  VectorX v(n);
+  for (int i = 0; i < n; ++i) v[i] = u(rng);
+  return v;
+}
+
+MprgpSettings tight(bool precondition) {
+  MprgpSettings s;
+  s.tolerance = 1e-10;
+  s.precondition = precondition;
+  return s;
+}
+
+/// Solves with MPRGP (explicit sparse operator) and checks x, the objective and the KKT
+/// measures against the oracle. Returns the iteration count.
+int check_against_oracle(const Dense& a, const VectorX& b, const VectorX& l, const VectorX& u,
+                         bool precondition) {
+  const Oracle oracle = enumerate_box_qp(a, b, l, u);
+  REQUIRE(oracle.found);
+  SparseMatrixOperator op(to_sparse(a));
+  VectorX x = VectorX::Zero(b.size());
+  const MprgpResult r = mprgp_solve(op, b, l, u, x, tight(precondition));
+  INFO("precondition " << precondition << " iterations " << r.iterations << " (cg "
+                       << r.cg_steps << ", expansion " << r.expansion_steps << ", proportioning "
+                       << r.proportioning_steps << ") " << r.message);
+  REQUIRE(r.converged);
+  REQUIRE_FALSE(r.breakdown);
+  // the problems have unit-scale data and condition <= 1e3: 1e-10 on the projected gradient
+  // leaves at most ~1e-7 in x
+  const double scale = 1.0 + oracle.x.lpNorm<Eigen::Infinity>();
+  CHECK((x - oracle.x).lpNorm<Eigen::Infinity>() <= 1e-7 * scale);
+  CHECK(std::abs(objective(a, b, x) - oracle.objective) <= 1e-10 * (1.0 + std::abs(oracle.objective)));
+  const Kkt k = kkt_measures(a, b, l, u, x, 0.0);
+  CHECK(k.primal == 0.0);  // iterates are projected: exactly feasible
+  CHECK(k.dual <= 1e-9 * (1.0 + b.lpNorm<Eigen::Infinity>()));
+  CHECK(k.complementarity <= 1e-9 * scale * (1.0 + b.lpNorm<Eigen::Infinity>()));
+  return r.iterations;
+}
+
+}  // namespace
+
+TEST_CASE("the dense oracle solves a QP with a known solution", "[unit][dense-reference]") {
+  // min 1/2 |x|^2 - b.x on [0, 1]^3 is the clamp of b
+  const Dense a = Dense::Identity(3, 3);
+  const VectorX b = (VectorX(3) << -0.5, 0.3, 2.0).finished();
+  const Oracle o = enumerate_box_qp(a, b, VectorX::Zero(3), VectorX::Ones(3));
+  REQUIRE(o.found);
+  CHECK((o.x - VectorX((VectorX(3) << 0.0, 0.3, 1.0).finished())).norm() < 1e-14);
+}
+
+TEST_CASE("MPRGP matches the enumeration oracle on random SPD box QPs", "[unit][dense-reference]") {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> width(0.0, 1.0);
+  int iters[2] = {0, 0}, active = 0, total = 0;
+  for (int trial = 0; trial < 30; ++trial) {
+    const int n = 2 + trial % 8;  // 2..9
+    const Dense a = random_spd(n, 1e3, rng);
+    // the unconstrained minimiser is uniform in [-1.5, 1.5]^n, the box [-w_l, w_u] with w in
+    // [0, 1]: a mix of free and active variables at the solution
+    const VectorX b = a * (1.5 * random_vec(n, rng));
+    VectorX l(n), u(n);
+    for (int i = 0; i < n; ++i) {
+      l[i] = -width(rng);
+      u[i] = width(rng);
+    }
+    const Oracle o = enumerate_box_qp(a, b, l, u);
+    for (int i = 0; i < n; ++i) active += o.x[i] <= l[i] || o.x[i] >= u[i];
+    total += n;
+    for (int pre = 0; pre < 2; ++pre) iters[pre] += check_against_oracle(a, b, l, u, pre == 1);
+  }
+  std::printf("random SPD box QPs (30, n = 2..9, cond 1e3, %d of %d variables active): total "
+              "iterations %d without, %d with SSOR\n", active, total, iters[0], iters[1]);
+  CHECK(active > total / 5);
+  CHECK(active < total);
+}
+
+TEST_CASE("MPRGP matches the oracle on one-sided (lambda >= 0) contact-like QPs, 2D and 3D bodies",
+          "[unit][dense-reference]") {
+  std::mt19937 rng(5);
+  for (int dofs : {3, 6}) {
+    int iters[2] = {0, 0};
+    for (int trial = 0; trial < 20; ++trial) {
+      const int bodies = 1 + trial % 3;
+      const int contacts = std::min(10, std::max(2, bodies * dofs - trial % 3));  // full rank
+      ContactSystem s = random_contacts(contacts, bodies, dofs, rng);
+      REQUIRE(Eigen::SelfAdjointEigenSolver<Dense>(s.a).eigenvalues().minCoeff() > 1e-8);
+      // b = -(J v + bias): contacts approaching (J v < 0) want a push, separating ones do not
+      const VectorX b = -(s.j * random_vec(bodies * dofs, rng));
+      const VectorX l = VectorX::Zero(contacts), u = VectorX::Constant(contacts, inf);
+      for (int pre = 0; pre < 2; ++pre) iters[pre] += check_against_oracle(s.a, b, l, u, pre == 1);
+    }
+    std::printf("contact QPs, %d DOFs per body (20, n <= 10): total iterations %d without, %d with SSOR\n",
+                dofs, iters[0], iters[1]);
+  }
+}
+
+TEST_CASE("MPRGP matches the oracle on two-sided friction boxes -mu lambda <= z <= mu lambda",
+          "[unit][dense-reference]") {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> lam(0.0, 1.0);
+  for (int dofs : {3, 6}) {
+    for (int trial = 0; trial < 12; ++trial) {
+      const int tangents = dofs == 3 ? 1 : 2;
+      const int contacts = 2 + trial % 3;
+      ContactSystem s = random_contacts(contacts * tangents, 2, dofs, rng);
+      const VectorX b = -(s.j * random_vec(2 * dofs, rng));
+      const double mu = 0.3 + 0.1 * (trial % 4);
+      VectorX l(contacts * tangents), u(contacts * tangents);
+      for (int c = 0; c < contacts; ++c) {
+        // one contact with lambda = 0 gives a fixed variable (l = u = 0)
+        const double lambda = c == 0 && trial % 2 ? 0.0 : lam(rng);
+        for (int t = 0; t < tangents; ++t) {
+          l[c * tangents + t] = -mu * lambda;
+          u[c * tangents + t] = mu * lambda;
+        }
+      }
+      for (int pre = 0; pre < 2; ++pre) check_against_oracle(s.a, b, l, u, pre == 1);
+    }
+  }
+}
+
+TEST_CASE("degenerate QPs: solution exactly at a bound with zero gradient", "[unit][dense-reference]") {
+  // construct the solution: x* with chosen active sets and g* = A x* - b with the KKT signs,
+  // several bound variables degenerate (g*_i = 0 at the bound)
+  std::mt19937 rng(23);
+  for (int trial = 0; trial < 20; ++trial) {
+    const int n = 4 + trial % 6;
+    const Dense a = random_spd(n, 1e2, rng);
+    VectorX l = VectorX::Constant(n, -1.0), u = VectorX::Constant(n, 1.0), xs(n), gs(n);
+    for (int i = 0; i < n; ++i) {
+      switch ((i + trial) % 5) {
+        case 0: xs[i] = -1.0; gs[i] = 0.7; break;    // at lower, strictly
+        case 1: xs[i] = -1.0; gs[i] = 0.0; break;    // at lower, degenerate
+        case 2: xs[i] = 1.0; gs[i] = 0.0; break;     // at upper, degenerate
+        case 3: xs[i] = 1.0; gs[i] = -0.4; break;    // at upper, strictly
+        default: xs[i] = 0.3 - 0.1 * i; gs[i] = 0.0;  // free
+      }
+    }
+    const VectorX b = a * xs - gs;
+    const Oracle o = enumerate_box_qp(a, b, l, u);
+    REQUIRE(o.found);
+    CHECK((o.x - xs).lpNorm<Eigen::Infinity>() < 1e-9);  // the oracle finds the constructed point
+    for (int pre = 0; pre < 2; ++pre) check_against_oracle(a, b, l, u, pre == 1);
+  }
+}
+
+TEST_CASE("rank-deficient contact sets: J M^-1 J^T singular, with and without the gamma boost",
+          "[unit][dense-reference]") {
+  std::mt19937 rng(31);
+  for (int dofs : {3, 6}) {
+    for (int trial = 0; trial < 8; ++trial) {
+      // more contacts than body DOFs: A = J M^-1 J^T is singular
+      const int bodies = 1;
+      const int contacts = dofs + 2 + trial % 3;
+      ContactSystem s = random_contacts(contacts, bodies, dofs, rng);
+      const VectorX b = -(s.j * random_vec(bodies * dofs, rng));
+      const VectorX l = VectorX::Zero(contacts), u = VectorX::Constant(contacts, inf);
+      SparseMatrixOperator op(to_sparse(s.a));
+
+      // (a) the boosted problem of section 4.4.5, A + gamma diag(A), is SPD: lambda is unique
+      const double gamma = 0.1;
+      const Dense boosted = s.a + gamma * Dense(s.a.diagonal().asDiagonal());
+      const Oracle ob = enumerate_box_qp(boosted, b, l, u);
+      REQUIRE(ob.found);
+      DiagonalBoost boost(op, gamma);
+      for (bool pre : {false, true}) {
+        VectorX x = VectorX::Zero(contacts);
+        const MprgpResult r = mprgp_solve(boost, b, l, u, x, tight(pre));
+        REQUIRE(r.converged);
+        CHECK((x - ob.x).lpNorm<Eigen::Infinity>() <= 1e-7 * (1.0 + ob.x.lpNorm<Eigen::Infinity>()));
+        const Kkt k = kkt_measures(boosted, b, l, u, x, 0.0);
+        CHECK(k.dual <= 1e-9 * (1.0 + b.lpNorm<Eigen::Infinity>()));
+      }
+
+      // (b) the singular problem itself: lambda is not unique, but the velocity change
+      // M^-1 J^T lambda and the objective are. Oracle: the enumeration on A + eps I, whose
+      // solution is within sqrt(eps) |lambda*| of the solution set in the J^T lambda norm and
+      // within eps |lambda*|^2 / 2 in objective (eps = 1e-12 relative to ||A||).
+      const double eps = 1e-12 * s.a.diagonal().maxCoeff();
+      const Oracle os = enumerate_box_qp(s.a + eps * Dense::Identity(contacts, contacts), b, l, u);
+      REQUIRE(os.found);
+      const VectorX dv_oracle = s.m_inv.asDiagonal() * (s.j.transpose() * os.x);
+      for (bool pre : {false, true}) {
+        VectorX x = VectorX::Zero(contacts);
+        const MprgpResult r = mprgp_solve(op, b, l, u, x, tight(pre));
+        INFO("dofs " << dofs << " contacts " << contacts << " pre " << pre << " iterations " << r.iterations);
+        REQUIRE(r.converged);
+        const VectorX dv = s.m_inv.asDiagonal() * (s.j.transpose() * x);
+        const double sz = 1.0 + os.x.lpNorm<Eigen::Infinity>();
+        CHECK((dv - dv_oracle).lpNorm<Eigen::Infinity>() <= 1e-5 * sz);
+        CHECK(std::abs(objective(s.a, b, x) - os.objective) <= 1e-9 * sz * sz);
+        const Kkt k = kkt_measures(s.a, b, l, u, x, 0.0);
+        CHECK(k.primal == 0.0);
+        CHECK(k.dual <= 1e-9 * (1.0 + b.lpNorm<Eigen::Infinity>()));
+      }
+    }
+  }
+}
+
+TEST_CASE("with all bounds infinite MPRGP is (preconditioned) CG and matches CHOLMOD", "[unit]") {
+  // a 2D five-point Laplacian plus a diagonal shift, 20 x 20
+  const int m = 20, n = m * m;
+  std::vector<Triplet> t;
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i) {
+      const int k = i + m * j;
+      t.emplace_back(k, k, 4.1);
+      if (i > 0) t.emplace_back(k, k - 1, -1.0);
+      if (i < m - 1) t.emplace_back(k, k + 1, -1.0);
+      if (j > 0) t.emplace_back(k, k - m, -1.0);
+      if (j < m - 1) t.emplace_back(k, k + m, -1.0);
+    }
+  SparseMatrix a(n, n);
+  a.setFromTriplets(t.begin(), t.end());
+  std::mt19937 rng(3);
+  const VectorX b = random_vec(n, rng);
+  const VectorX exact = cholmod_solve(a, b);
+  SparseMatrixOperator op(a);
+  const VectorX l = VectorX::Constant(n, -inf), u = VectorX::Constant(n, inf);
+  int iters[2];
+  for (int pre = 0; pre < 2; ++pre) {
+    VectorX x = VectorX::Zero(n);
+    const MprgpResult r = mprgp_solve(op, b, l, u, x, tight(pre == 1));
+    REQUIRE(r.converged);
+    CHECK(r.expansion_steps == 0);
+    CHECK(r.proportioning_steps == 0);
+    CHECK((x - exact).lpNorm<Eigen::Infinity>() <= 1e-9 * exact.lpNorm<Eigen::Infinity>());
+    iters[pre] = r.iterations;
+    // the same iteration count as pcg_solve with the same settings
+    PcgSettings ps;
+    ps.tolerance = 1e-10;
+    ps.precondition = pre == 1;
+    VectorX y = VectorX::Zero(n);
+    const PcgResult pr = pcg_solve(op, b, y, ps);
+    CHECK(std::abs(pr.iterations - r.iterations) <= 1);
+  }
+  std::printf("unbounded Laplacian 20x20: CG %d iterations, SSOR-PCG %d\n", iters[0], iters[1]);
+  CHECK(iters[1] < iters[0]);
+}
+
+TEST_CASE("obstacle problem: SSOR on the free set cuts the iterations, same answer", "[unit][property]") {
+  // -Laplace(x) = f on an m x m grid above the obstacle x >= psi (the classic MPRGP benchmark)
+  const int m = 40, n = m * m;
+  const double h = 1.0 / (m + 1);
+  std::vector<Triplet> t;
+  VectorX b(n), l(n);
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i) {
+      const int k = i + m * j;
+      t.emplace_back(k, k, 4.0);
+      if (i > 0) t.emplace_back(k, k - 1, -1.0);
+      if (i < m - 1) t.emplace_back(k, k + 1, -1.0);
+      if (j > 0) t.emplace_back(k, k - m, -1.0);
+      if (j < m - 1) t.emplace_back(k, k + m, -1.0);
+      const double x = (i + 1) * h, y = (j + 1) * h;
+      b[k] = -15.0 * h * h;                                   // load pushing down
+      l[k] = -0.3 + 0.4 * std::exp(-20.0 * ((x - 0.5) * (x - 0.5) + (y - 0.5) * (y - 0.5)));
+    }
+  SparseMatrix a(n, n);
+  a.setFromTriplets(t.begin(), t.end());
+  const VectorX u = VectorX::Constant(n, inf);
+  SparseMatrixOperator op(a);
+  VectorX x[2];
+  MprgpResult r[2];
+  for (int pre = 0; pre < 2; ++pre) {
+    x[pre] = VectorX::Zero(n);
+    MprgpSettings s = tight(pre == 1);
+    s.tolerance = 1e-8;
+    s.max_iterations = 5000;
+    r[pre] = mprgp_solve(op, b, l, u, x[pre], s);
+    REQUIRE(r[pre].converged);
+    const Kkt k = kkt_measures(Dense(a), b, l, u, x[pre], 0.0);
+    CHECK(k.primal == 0.0);
+    CHECK(k.dual <= 1e-8 * b.lpNorm<Eigen::Infinity>());
+    std::printf("obstacle 40x40 %s: %d iterations (cg %d, expansion %d, proportioning %d)\n",
+                pre ? "SSOR" : "plain", r[pre].iterations, r[pre].cg_steps,
+                r[pre].expansion_steps, r[pre].proportioning_steps);
+  }
+  // both are solutions of one strictly convex QP
+  CHECK((x[0] - x[1]).lpNorm<Eigen::Infinity>() <= 1e-6 * x[0].lpNorm<Eigen::Infinity>());
+  CHECK(r[1].iterations < r[0].iterations);
+  // the contact set is neither empty nor everything
+  int active = 0;
+  for (int i = 0; i < n; ++i) active += x[0][i] <= l[i];
+  CHECK(active > 0);
+  CHECK(active < n);
+}
+
+TEST_CASE("DiagonalBoost: apply, diagonal and sweeps equal those of the explicit A + gamma diag(A)",
+          "[unit]") {
+  std::mt19937 rng(41);
+  const int n = 12;
+  const Dense a = random_spd(n, 1e2, rng);
+  const double gamma = 0.35;
+  const Dense boosted = a + gamma * Dense(a.diagonal().asDiagonal());
+  SparseMatrixOperator op(to_sparse(a)), explicit_op(to_sparse(boosted));
+  DiagonalBoost boost(op, gamma);
+  const VectorX v = random_vec(n, rng), rhs = random_vec(n, rng);
+  VectorX y1, y2;
+  boost.apply(v, y1);
+  explicit_op.apply(v, y2);
+  CHECK((y1 - y2).norm() <= 1e-13 * y2.norm());
+  CHECK((boost.diagonal() - boosted.diagonal()).norm() <= 1e-14 * boosted.diagonal().norm());
+  std::vector<char> mask(n, 1);
+  mask[3] = mask[7] = 0;
+  const std::vector<char>* no_mask = nullptr;
+  const std::vector<char>* with_mask = &mask;
+  for (const std::vector<char>* m : {no_mask, with_mask})
+    for (double omega : {1.0, 1.4}) {
+      VectorX x1 = v, x2 = v;
+      boost.forward_sweep(rhs, x1, omega, m);
+      explicit_op.forward_sweep(rhs, x2, omega, m);
+      CHECK((x1 - x2).norm() <= 1e-13 * x2.norm());
+      boost.backward_sweep(rhs, x1, omega, m);
+      explicit_op.backward_sweep(rhs, x2, omega, m);
+      CHECK((x1 - x2).norm() <= 1e-13 * x2.norm());
+    }
+}
+
+TEST_CASE("MPRGP on the coloured operator gives the answer of the plain operator", "[unit]") {
+  std::mt19937 rng(47);
+  ContactSystem s = random_contacts(10, 3, 3, rng);
+  const VectorX b = -(s.j * random_vec(9, rng));
+  const VectorX l = VectorX::Zero(10), u = VectorX::Constant(10, inf);
+  const SparseMatrix a = to_sparse(s.a);
+  ColouredSparseOperator coloured(a, welsh_powell(matrix_adjacency(a)));
+  SparseMatrixOperator plain(a);
+  VectorX x1 = VectorX::Zero(10), x2 = VectorX::Zero(10);
+  REQUIRE(mprgp_solve(coloured, b, l, u, x1, tight(true)).converged);
+  REQUIRE(mprgp_solve(plain, b, l, u, x2, tight(true)).converged);
+  CHECK((x1 - x2).lpNorm<Eigen::Infinity>() <= 1e-7 * (1.0 + x2.lpNorm<Eigen::Infinity>()));
+}
+
+TEST_CASE("MPRGP edge cases: b = 0, an infeasible initial guess, fixed variables, bad input", "[unit]") {
+  const Dense a = (Dense(2, 2) << 2.0, 0.5, 0.5, 1.0).finished();
+  SparseMatrixOperator op(to_sparse(a));
+  // b = 0 with 0 feasible: x = 0 at once
+  VectorX x = VectorX::Constant(2, 0.5);
+  MprgpResult r = mprgp_solve(op, VectorX::Zero(2), VectorX::Constant(2, -1.0), VectorX::Ones(2), x, tight(true));
+  CHECK(r.converged);
+  CHECK(x.norm() <= 1e-10);
+  // an infeasible initial guess is projected first
+  x = VectorX::Constant(2, 5.0);
+  const VectorX b = (VectorX(2) << 1.0, -3.0).finished();
+  r = mprgp_solve(op, b, VectorX::Zero(2), VectorX::Constant(2, inf), x, tight(true));
+  CHECK(r.converged);
+  CHECK(x[1] == 0.0);
+  CHECK(std::abs(x[0] - 0.5) <= 1e-10);  // x1 at 0, 2 x0 = 1
+  // all variables fixed
+  x = VectorX::Zero(2);
+  r = mprgp_solve(op, b, VectorX::Constant(2, 0.25), VectorX::Constant(2, 0.25), x, tight(true));
+  CHECK(r.converged);
+  CHECK(r.iterations == 0);
+  CHECK(x == VectorX::Constant(2, 0.25));
+  // mismatched sizes and crossed bounds are rejected
+  CHECK_THROWS_AS(mprgp_solve(op, VectorX::Zero(3), VectorX::Zero(2), VectorX::Ones(2), x, tight(true)),
+                  std::invalid_argument);
+  CHECK_THROWS_AS(mprgp_solve(op, b, VectorX::Ones(2), VectorX::Zero(2), x, tight(true)),
+                  std::invalid_argument);
+  // an indefinite operator is reported as a breakdown, not a wrong answer
+  SparseMatrixOperator indefinite(to_sparse((Dense(2, 2) << 1.0, 0.0, 0.0, -1.0).finished()));
+  x = VectorX::Zero(2);
+  r = mprgp_solve(indefinite, VectorX::Ones(2), VectorX::Constant(2, -inf), VectorX::Constant(2, inf), x,
+                  tight(false));
+  CHECK_FALSE(r.converged);
+  CHECK(r.breakdown);
+}
+
+TEST_CASE("the operator norm estimate is close to lambda_max and not far below it", "[unit]") {
+  std::mt19937 rng(53);
+  for (int trial = 0; trial < 5; ++trial) {
+    const Dense a = random_spd(15, 1e3, rng);
+    SparseMatrixOperator op(to_sparse(a));
+    const double lmax = Eigen::SelfAdjointEigenSolver<Dense>(a).eigenvalues().maxCoeff();
+    const double est = estimate_operator_norm(op, 30);
+    CHECK(est >= 0.98 * lmax);
+    CHECK(est <= 1.05 * lmax * (1.0 + 1e-12));
+  }
+}
