@@ -75,16 +75,26 @@ struct MassProperties {
 template <int Dim>
 MassProperties<Dim> mass_properties(const ShapeSpec& spec, const Shape<Dim>& shape, double density);
 
+/// Lattice resolution (cells along the longest side of the bounds) that mass_properties uses
+/// for union/difference.
+inline constexpr int kIntegrationCells2d = 2048;
+inline constexpr int kIntegrationCells3d = 160;
+
 /// Numerical integration of volume, centre of mass and inertia over {distance < 0} inside
 /// `region`, on a lattice of `cells_per_axis` cells along the longest side of `region`. Each
 /// cell contributes the fraction clamp(1/2 - d / h, 0, 1) of its volume, d the SDF at the
 /// cell centre (a first-order smoothed Heaviside: second-order accurate for smooth surfaces,
-/// first order at corners), plus the cell's own second moment h^2/12 per axis. Measured error
-/// for a sphere of radius 0.3 with 256 cells per axis (3D): volume 1e-5 relative (see
-/// tests/test_mass_properties.cpp).
+/// first order at corners), plus the cell's own second moment h^2/12 per axis. Measured
+/// relative errors (tests/test_mass_properties.cpp): a 3D ball minus a concentric ball at 160
+/// cells, inertia 2.0e-4 and mass 5.2e-5; a rotated 3D box, inertia 6.1e-4; 2D shapes at 2048
+/// cells, below 1e-5.
 template <int Dim>
 MassProperties<Dim> integrate_mass_properties(const Shape<Dim>& shape, const Box<Dim>& region,
                                               int cells_per_axis, double density);
+
+/// The unrotated 2D bunny outline placed as make_shape places it (longest extent = size,
+/// bounding-box centre at `center`).
+std::vector<Vec<2>> bunny_outline(const Vec<2>& center, double size);
 
 /// Exact mass properties of a simple polygon (either orientation).
 MassProperties<2> polygon_mass_properties(const std::vector<Vec<2>>& points, double density);

@@ -108,6 +108,8 @@ class RigidBody {
   bool is_sphere_ = false;
   double sphere_radius_ = 0;
   std::string shape_type_;
+  Mat<Dim> principal_axes_ = Mat<Dim>::Identity();      ///< body frame, columns (3D only)
+  Vec<Dim> principal_moments_ = Vec<Dim>::Zero();       ///< 3D only
 };
 
 /// Rest-frame surface samples of a shape at spacing about `spacing` (see
