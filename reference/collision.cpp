@@ -36,16 +36,22 @@ bool lex_before(const Vec<Dim>& a, const Vec<Dim>& b, double tol) {
 }
 
 /// Index of the member maximising score; scores within score_tol of the best are ties, broken
-/// by the lexicographically first midpoint (coordinates within tol are equal); -1 if empty.
+/// by the smaller gap phi, then by the lexicographically first midpoint (coordinates within
+/// tol are equal); -1 if empty.
 template <int Dim, class Score>
-int argmax_geometric(const std::vector<int>& members, const std::vector<Vec<Dim>>& mids,
-                     double score_tol, double tol, Score score) {
+int argmax_geometric(const std::vector<int>& members, const std::vector<Contact<Dim>>& c,
+                     const std::vector<Vec<Dim>>& mids, double score_tol, double tol,
+                     Score score) {
   int best = -1;
   double best_score = 0.0;
   for (int m : members) {
     const double s = score(m);
-    if (best < 0 || s > best_score + score_tol ||
-        (s >= best_score - score_tol && lex_before<Dim>(mids[m], mids[best], tol))) {
+    bool better = best < 0 || s > best_score + score_tol;
+    if (!better && s >= best_score - score_tol) {
+      if (c[m].phi < c[best].phi - tol) better = true;
+      else if (c[m].phi <= c[best].phi + tol) better = lex_before<Dim>(mids[m], mids[best], tol);
+    }
+    if (better) {
       best = m;
       best_score = s;
     }
@@ -74,6 +80,15 @@ std::vector<int> patch_extremes(const std::vector<Contact<Dim>>& c, const std::v
   }
   const double scale = box.sizes().norm();
   const double tol = 1e-7 * scale + 1e-14;
+  // the patch normal (mean of the members') and distances in its tangent plane
+  Vec<Dim> n = Vec<Dim>::Zero();
+  for (int m : members) n += c[m].normal;
+  if (n.norm() == 0.0) n = c[members.front()].normal;
+  n.normalize();
+  auto tangent_distance = [&](const Vec<Dim>& x, const Vec<Dim>& y) {
+    const Vec<Dim> d = x - y;
+    return (d - d.dot(n) * n).norm();
+  };
   Vec<Dim> centroid = Vec<Dim>::Zero();
   for (int m : members) centroid += mids[m];
   centroid /= static_cast<double>(members.size());
@@ -82,33 +97,28 @@ std::vector<int> patch_extremes(const std::vector<Contact<Dim>>& c, const std::v
   for (int m : members) {
     if (c[m].phi <= min_phi + tol) deepest.push_back(m);
   }
-  const int p1 = argmax_geometric<Dim>(deepest, mids, tol, tol,
-                                       [&](int m) { return (mids[m] - centroid).norm(); });
+  const int p1 = argmax_geometric<Dim>(deepest, c, mids, tol, tol,
+                                       [&](int m) { return tangent_distance(mids[m], centroid); });
   std::vector<int> keep{p1};
   // p2: the farthest from p1
-  const int p2 = argmax_geometric<Dim>(members, mids, tol, tol,
-                                       [&](int m) { return (mids[m] - mids[p1]).norm(); });
-  const double span = (mids[p2] - mids[p1]).norm();
+  const int p2 = argmax_geometric<Dim>(members, c, mids, tol, tol,
+                                       [&](int m) { return tangent_distance(mids[m], mids[p1]); });
+  const double span = tangent_distance(mids[p2], mids[p1]);
   if (!(span > 10.0 * tol)) return keep;
   keep.push_back(p2);
   if constexpr (Dim == 3) {
     if (max_points < 3) return keep;
     // p3: the largest triangle area with p1 p2 in the patch plane; p4: the largest on the
     // other side of the line p1 p2
-    Vec<3> n = Vec<3>::Zero();
-    for (int m : members) n += c[m].normal;
-    if (n.norm() == 0.0) return keep;
-    n.normalize();
-    if (n.dot(c[p1].normal) < 0.0) n = -n;
     const double area_tol = 1e-3 * span * span;
     auto area = [&](int m) { return plane_area(mids[p1], mids[p2], mids[m], n); };
-    const int p3 = argmax_geometric<3>(members, mids, tol * span, tol,
+    const int p3 = argmax_geometric<3>(members, c, mids, tol * span, tol,
                                        [&](int m) { return std::abs(area(m)); });
     if (!(std::abs(area(p3)) > area_tol)) return keep;
     keep.push_back(p3);
     if (max_points < 4) return keep;
     const double side = area(p3) > 0.0 ? -1.0 : 1.0;
-    const int p4 = argmax_geometric<3>(members, mids, tol * span, tol,
+    const int p4 = argmax_geometric<3>(members, c, mids, tol * span, tol,
                                        [&](int m) { return side * area(m); });
     if (side * area(p4) > area_tol) keep.push_back(p4);
   }
@@ -275,8 +285,10 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
       if (!boxes[b].contains(x)) continue;
       const double phi = bb.distance(x);
       if (!(phi < search_distance)) continue;
+      const Vec<Dim> normal = bb.gradient(x);
+      if (-normal.dot(ba.gradient(x)) < reduction.accept_cosine) continue;
       Contact<Dim> c = proto;
-      c.normal = bb.gradient(x);
+      c.normal = normal;
       c.phi = phi;
       c.point = x - phi * c.normal;
       cand.push_back(c);
@@ -286,8 +298,10 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
       if (!boxes[a].contains(x)) continue;
       const double phi = ba.distance(x);
       if (!(phi < search_distance)) continue;
+      const Vec<Dim> normal = -ba.gradient(x);
+      if (normal.dot(bb.gradient(x)) < reduction.accept_cosine) continue;
       Contact<Dim> c = proto;
-      c.normal = -ba.gradient(x);
+      c.normal = normal;
       c.phi = phi;
       c.point = x;
       cand.push_back(c);
@@ -329,6 +343,7 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
         for (const auto& x : world[i]) {
           const double phi = walls.face_distance(f, x);
           if (!(phi < search_distance)) continue;
+          if (-proto.normal.dot(body.gradient(x)) < reduction.accept_cosine) continue;
           Contact<Dim> c = proto;
           c.phi = phi;
           c.point = x - phi * c.normal;
