@@ -18,7 +18,6 @@ struct BoxSet {
   const VectorX& lower;
   const VectorX& upper;
 
-  bool fixed(const VectorX&, int i) const { return lower[i] == upper[i]; }
   bool at_lower(const VectorX& x, int i) const { return x[i] <= lower[i] && lower[i] < upper[i]; }
   bool at_upper(const VectorX& x, int i) const { return x[i] >= upper[i] && lower[i] < upper[i]; }
   bool free(const VectorX& x, int i) const { return lower[i] < x[i] && x[i] < upper[i]; }

@@ -2,7 +2,8 @@
 /// \file mprgp.hpp
 /// MPRGP (modified proportioning with reduced gradient projections; Dostal & Schoberl 2005,
 /// Dostal 2009, "Optimal Quadratic Programming Algorithms", ch. 8) for the bound-constrained
-/// quadratic programs of the contact solve (section 4.3, eqs. (24)-(25)), with the SSOR
+/// quadratic programs of the contact solve (section 4.3: the friction LCP (25) and the MLCP (26),
+/// the latter with infinite bounds on tau and p), with the SSOR
 /// preconditioner applied to the free set ("preconditioning in face"), the (1 + gamma) diagonal
 /// rescaling of section 4.4.5, and a coloured sparse operator whose SOR sweeps run in parallel.
 /// Written once against LinearOperator: it runs on explicit matrices and matrix-free operators.
@@ -42,6 +43,8 @@ enum class MprgpStep { cg, expansion, proportioning };
 /// Called after every step with its kind, the new iterate and its gradient g = A x - b.
 using MprgpObserver = std::function<void(MprgpStep, const VectorX& x, const VectorX& g)>;
 
+/// Eqs. (25) and (26) as convex QPs (section 4.3): A x = b with box constraints is the optimality
+/// condition of
 /// min 1/2 x^T A x - b^T x  s.t.  lower <= x <= upper (entries may be -inf / +inf: then that
 /// variable is free; lower_i = upper_i fixes it; with all bounds infinite this is preconditioned
 /// CG). x is the initial guess (resized to zero if its size is wrong, then projected onto the
@@ -56,7 +59,8 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
 /// margin keeps alpha_bar = step_scale / ||A|| under 2 / ||A||).
 double estimate_operator_norm(const LinearOperator& a, int iterations = 30);
 
-/// Section 4.4.5: the operator A with its diagonal scaled by (1 + gamma), i.e. A + gamma diag(A)
+/// Section 4.4.5 (the paper uses gamma = 1e-4 on A_33 and A_44 of eq. (24)): the operator A with
+/// its diagonal scaled by (1 + gamma), i.e. A + gamma diag(A)
 /// (n x n, SPD for gamma > 0 whenever A is SPSD with a positive diagonal). apply, diagonal and
 /// sweeps are forwarded to A (so the preconditioner sees the boosted diagonal and A's sweep order
 /// and parallelism are kept): a sweep of the boosted matrix is A's sweep with omega / (1 + gamma)
