@@ -157,9 +157,10 @@ VectorX scatter_stress(const StressLayout<Dim>& layout, const StokesDofs& dofs, 
 /// The pressure part of x = (tau, p) as a cell field (zero on inactive cells).
 VectorX scatter_stokes_pressure(const StokesDofs& dofs, const VectorX& x, int num_cells);
 
-/// E_f of eq. (8) at (tau, p) = x, divided by nothing (the dx^Dim of every control volume
-/// dropped): 1/2 ||u(x)||^2_{P W_F^u W_L^u} + dt/4 tau^T N^-1 W^s tau, u(x) the update of u*.
-/// Its minimiser is the solution of A x = b (E_f(x) = 1/2 x^T A x - b^T x dt + const, scaled).
+/// E_f of eq. (8) at (tau, p) = x with the common factor dx^Dim of the control volumes dropped:
+/// 1/2 ||u(x)||^2_{P W_F^u W_L^u} + dt/4 tau^T N^-1 W^s tau, u(x) the update of u*. A quadratic:
+/// E_f(x) = E_f(0) + dt (1/2 x^T A x - b~^T x), b~ the b of eq. (24) with u* read only on faces with
+/// W_L^u > 0; b~ = b unless a dry face lies in the stencil of a wet stress DOF (docs/stokes.md).
 template <int Dim>
 double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
                      const StokesWeights& w, const StokesDofs& dofs, double dt,
