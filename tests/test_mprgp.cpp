@@ -1,6 +1,8 @@
 // MPRGP (section 4.3) against an independent dense oracle: exact solutions of small box QPs by
 // enumerating the active sets; KKT conditions; contact-like and rank-deficient matrices; the
 // (1 + gamma) diagonal boost of section 4.4.5; CG with infinite bounds against CHOLMOD.
+#include <omp.h>
+
 #include <Eigen/Dense>
 #include <catch2/catch.hpp>
 #include <cstdio>
@@ -552,4 +554,78 @@ TEST_CASE("the operator norm estimate is close to lambda_max and not far below i
     CHECK(est >= 0.98 * lmax);
     CHECK(est <= 1.05 * lmax * (1.0 + 1e-12));
   }
+}
+
+TEST_CASE("every MPRGP step decreases the objective (CG, expansion and proportioning alike)",
+          "[unit][property]") {
+  // f is non-increasing along the iterates: CG and proportioning steps minimise f along their
+  // direction, the expansion step is a projected gradient step with alpha_bar <= 2 / ||A||
+  // (Dostal & Schoberl 2005, lemma on the expansion step); a violation would reveal a wrong
+  // step length or an underestimated ||A||
+  std::mt19937 rng(59);
+  std::uniform_real_distribution<double> width(0.0, 1.0);
+  int steps[3] = {0, 0, 0};
+  for (int trial = 0; trial < 40; ++trial) {
+    const int n = 20 + trial;
+    const Dense a = trial % 2 ? random_spd(n, 1e4, rng) : random_contacts(n, n / 2, 3, rng).a +
+                                                            1e-3 * Dense::Identity(n, n);
+    const VectorX b = a * (2.0 * random_vec(n, rng));
+    VectorX l(n), u(n);
+    for (int i = 0; i < n; ++i) {
+      l[i] = trial % 4 < 2 ? -width(rng) : 0.0;
+      u[i] = trial % 4 < 2 ? width(rng) : inf;
+    }
+    SparseMatrixOperator op(to_sparse(a));
+    for (bool pre : {false, true}) {
+      // start from a random feasible point on the bounds, to force proportioning steps
+      VectorX x = (2.0 * random_vec(n, rng)).cwiseMax(l).cwiseMin(u);
+      double f_prev = objective(a, b, x.cwiseMax(l).cwiseMin(u));
+      double worst_increase = 0.0;
+      const MprgpResult r = mprgp_solve(op, b, l, u, x, tight(pre), [&](MprgpStep k, const VectorX& xi, const VectorX&) {
+        const double f = objective(a, b, xi);
+        worst_increase = std::max(worst_increase, (f - f_prev) / (1.0 + std::abs(f_prev)));
+        f_prev = f;
+        ++steps[static_cast<int>(k)];
+      });
+      REQUIRE(r.converged);
+      CHECK(worst_increase <= 1e-13);
+    }
+  }
+  // all three kinds occurred
+  CHECK(steps[0] > 0);
+  CHECK(steps[1] > 0);
+  CHECK(steps[2] > 0);
+}
+
+TEST_CASE("MPRGP on the coloured operator is bitwise identical on 1 and 2 threads", "[unit]") {
+  // a grid of 2D contact-like couplings big enough that the coloured sweeps and apply split
+  const int m = 60, n = m * m;
+  std::vector<Triplet> t;
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i) {
+      const int k = i + m * j;
+      t.emplace_back(k, k, 2.5);
+      if (i > 0) t.emplace_back(k, k - 1, -0.6);
+      if (i < m - 1) t.emplace_back(k, k + 1, -0.6);
+      if (j > 0) t.emplace_back(k, k - m, 0.5);
+      if (j < m - 1) t.emplace_back(k, k + m, 0.5);
+    }
+  SparseMatrix a(n, n);
+  a.setFromTriplets(t.begin(), t.end());
+  ColouredSparseOperator op(a, welsh_powell(matrix_adjacency(a)));
+  std::mt19937 rng(61);
+  const VectorX b = random_vec(n, rng);
+  const VectorX l = VectorX::Zero(n), u = VectorX::Constant(n, inf);
+  const int saved = omp_get_max_threads();
+  VectorX x[2];
+  MprgpResult r[2];
+  for (int threads = 1; threads <= 2; ++threads) {
+    omp_set_num_threads(threads);
+    x[threads - 1] = VectorX::Zero(n);
+    r[threads - 1] = mprgp_solve(op, b, l, u, x[threads - 1], tight(true));
+  }
+  omp_set_num_threads(saved);
+  REQUIRE(r[0].converged);
+  CHECK(r[0].iterations == r[1].iterations);
+  CHECK(x[0] == x[1]);
 }
