@@ -106,13 +106,32 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   for (int i = 0; i < n; ++i)
     if (!(lower[i] <= upper[i])) throw std::invalid_argument("mprgp_solve: lower > upper (or NaN bound)");
 
+  // null space of A: only on unbounded variables, projected out of b, x and z (as in pcg_solve)
+  const std::vector<VectorX>& null_space = a.null_space();
+  for (const VectorX& v : null_space) {
+    if (v.size() != n) throw std::invalid_argument("mprgp_solve: null-space vector of the wrong size");
+    for (int i = 0; i < n; ++i)
+      if (v[i] != 0.0 && (std::isfinite(lower[i]) || std::isfinite(upper[i])))
+        throw std::invalid_argument("mprgp_solve: a null-space vector touches a bounded variable");
+  }
+  auto project_out = [&](VectorX& v) {
+    for (const VectorX& basis : null_space) v -= basis.dot(v) * basis;
+  };
+
   MprgpResult result;
   const BoxSet box{lower, upper};
   if (x.size() != n) x.setZero(n);
   box.project(x);
+  project_out(x);
+  VectorX b_range;
+  if (!null_space.empty()) {
+    b_range = b;
+    project_out(b_range);
+  }
+  const VectorX& rhs = null_space.empty() ? b : b_range;
 
   // stopping scale and the fixed step length alpha_bar in (0, 2 / ||A||]
-  const double b_norm = inf_norm(b);
+  const double b_norm = inf_norm(rhs);
   if (!std::isfinite(b_norm)) {
     result.breakdown = true;
     result.message = "non-finite right-hand side";
@@ -129,7 +148,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   std::vector<char> mask, new_mask;
   auto exact_gradient = [&]() {
     a.apply(x, g);
-    g -= b;
+    g -= rhs;
   };
   auto classify = [&]() {
     box.free_gradient(x, g, phi);
@@ -142,6 +161,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
       ssor_precondition(a, g, z, settings.omega, &mask);
     else
       z = phi;
+    project_out(z);
   };
   auto fail = [&](const std::string& why) {
     result.breakdown = true;
@@ -251,6 +271,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
     }
     if (observer) observer(kind, x, g);
   }
+  project_out(x);  // removes the drift of the recurrences along the null space
   return result;
 }
 

@@ -48,8 +48,12 @@ using MprgpObserver = std::function<void(MprgpStep, const VectorX& x, const Vect
 /// min 1/2 x^T A x - b^T x  s.t.  lower <= x <= upper (entries may be -inf / +inf: then that
 /// variable is free; lower_i = upper_i fixes it; with all bounds infinite this is preconditioned
 /// CG). x is the initial guess (resized to zero if its size is wrong, then projected onto the
-/// box). A must be SPD (use DiagonalBoost for section 4.4.5); a.null_space() is not used.
-/// Throws std::invalid_argument on mismatched sizes or lower > upper.
+/// box). A must be SPD (use DiagonalBoost for section 4.4.5) except for a.null_space(): as in
+/// pcg_solve, that orthonormal basis is projected out of b, x and every preconditioned
+/// direction (so an enclosed liquid's constant pressure mode is allowed); each basis vector must
+/// be supported on unbounded variables only (l = -inf, u = +inf), so the projection keeps x
+/// feasible. Throws std::invalid_argument on mismatched sizes, lower > upper, or a null-space
+/// vector touching a bounded variable.
 MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX& lower,
                         const VectorX& upper, VectorX& x, const MprgpSettings& settings,
                         const MprgpObserver& observer = nullptr);

@@ -629,3 +629,52 @@ TEST_CASE("MPRGP on the coloured operator is bitwise identical on 1 and 2 thread
   CHECK(r[0].iterations == r[1].iterations);
   CHECK(x[0] == x[1]);
 }
+
+TEST_CASE("a null space on unbounded variables is projected out as in pcg_solve", "[unit]") {
+  // block diagonal: a pure-Neumann 1D Laplacian (null space: constants; an enclosed liquid's
+  // pressure) on unbounded variables, and a bounded SPD block (contact forces lambda >= 0)
+  const int m = 30, k = 6, n = m + k;
+  std::mt19937 rng(67);
+  const Dense c = random_spd(k, 1e2, rng);
+  std::vector<Triplet> t;
+  for (int i = 0; i < m; ++i) {
+    if (i > 0) t.emplace_back(i, i - 1, -1.0), t.emplace_back(i, i, 1.0);
+    if (i < m - 1) t.emplace_back(i, i + 1, -1.0), t.emplace_back(i, i, 1.0);
+  }
+  for (int i = 0; i < k; ++i)
+    for (int j = 0; j < k; ++j) t.emplace_back(m + i, m + j, c(i, j));
+  SparseMatrix a(n, n);
+  a.setFromTriplets(t.begin(), t.end());
+  VectorX ones = VectorX::Zero(n);
+  ones.head(m).setConstant(1.0 / std::sqrt(double(m)));
+  SparseMatrixOperator op(a, {ones});
+  VectorX b = random_vec(n, rng);  // inconsistent along the null space: projected away
+  VectorX l(n), u(n);
+  l.head(m).setConstant(-inf);
+  u.head(m).setConstant(inf);
+  l.tail(k).setZero();
+  u.tail(k).setConstant(inf);
+  for (bool pre : {false, true}) {
+    VectorX x = VectorX::Zero(n);
+    const MprgpResult r = mprgp_solve(op, b, l, u, x, tight(pre));
+    REQUIRE(r.converged);
+    // the unbounded block: the minimum-norm solution pcg_solve finds
+    SparseMatrixOperator lap(SparseMatrix(a.topLeftCorner(m, m)), {VectorX(ones.head(m))});
+    PcgSettings ps;
+    ps.tolerance = 1e-12;
+    VectorX y = VectorX::Zero(m);
+    REQUIRE(pcg_solve(lap, b.head(m), y, ps).converged);
+    CHECK((x.head(m) - y).lpNorm<Eigen::Infinity>() <= 1e-7 * y.lpNorm<Eigen::Infinity>());
+    CHECK(std::abs(x.head(m).sum()) <= 1e-10);
+    // the bounded block: the enumeration oracle
+    const Oracle o = enumerate_box_qp(c, b.tail(k), VectorX::Zero(k), VectorX::Constant(k, inf));
+    REQUIRE(o.found);
+    CHECK((x.tail(k) - o.x).lpNorm<Eigen::Infinity>() <= 1e-7 * (1.0 + o.x.lpNorm<Eigen::Infinity>()));
+  }
+  // a null-space vector on a bounded variable is rejected
+  VectorX bad = VectorX::Zero(n);
+  bad[m] = 1.0;
+  SparseMatrixOperator op_bad(a, {bad});
+  VectorX x = VectorX::Zero(n);
+  CHECK_THROWS_AS(mprgp_solve(op_bad, b, l, u, x, tight(true)), std::invalid_argument);
+}
