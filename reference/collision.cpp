@@ -187,10 +187,24 @@ std::vector<Contact<Dim>> reduce_contacts(std::vector<Contact<Dim>> cand,
     }
     if (!placed) patches.push_back({i});
   }
+  // larger patches first (stable: ties keep their depth order)
+  std::stable_sort(patches.begin(), patches.end(),
+                   [](const std::vector<int>& l, const std::vector<int>& r) { return l.size() > r.size(); });
   const int max_points = Dim == 2 ? reduction.max_points_2d : reduction.max_points_3d;
   std::vector<Contact<Dim>> out;
+  std::vector<Vec<Dim>> kept;
   for (const auto& p : patches) {
-    for (int k : patch_extremes<Dim>(cand, p, max_points)) out.push_back(cand[k]);
+    const std::size_t before = kept.size();
+    for (int k : patch_extremes<Dim>(cand, p, max_points)) {
+      // drop a point that a larger patch already has (within merge_distance)
+      bool duplicate = false;
+      for (std::size_t i = 0; i < before && !duplicate; ++i) {
+        duplicate = (kept[i] - mids[k]).norm() <= reduction.merge_distance;
+      }
+      if (duplicate) continue;
+      out.push_back(cand[k]);
+      kept.push_back(mids[k]);
+    }
   }
   return out;
 }
@@ -225,6 +239,29 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
     world[i].reserve(bodies[i].surface_samples().size());
     for (const auto& x : bodies[i].surface_samples()) world[i].push_back(r * x + shift);
   }
+
+  // a candidate's normal, as an outward direction of the sampled body, must fit its cone
+  auto fits_cone = [&](const RigidBody<Dim>& body, const Vec<Dim>& x, const Vec<Dim>& outward) {
+    const double needed = body.is_box() ? reduction.box_cone_cosine : reduction.accept_cosine;
+    return body.normal_cone_cosine(x, outward) >= needed;
+  };
+  // the contact normal (out of q, towards p) for a sample x of p with gap phi to q: the SDF
+  // gradient of q, or, when that comes from an edge or corner of a box q and x lies inside a
+  // face of a box p, that face's normal (the normal of a face-edge contact is the face's: the
+  // gradient near the edge fans out); false if the normal does not fit p's cone
+  auto sample_normal = [&](const RigidBody<Dim>& p, const RigidBody<Dim>& q, const Vec<Dim>& x,
+                           double phi, Vec<Dim>* normal) {
+    const Vec<Dim> g = q.gradient(x);
+    if (!fits_cone(p, x, Vec<Dim>(-g))) return false;
+    Vec<Dim> face, q_face;
+    if (q.is_box() && !q.box_face_normal(Vec<Dim>(x - phi * g), &q_face) &&
+        p.box_face_normal(x, &face)) {
+      *normal = -face;
+    } else {
+      *normal = g;
+    }
+    return true;
+  };
 
   // narrow phase per pair
   std::vector<std::vector<Contact<Dim>>> pair_contacts(pairs.size());
@@ -285,8 +322,8 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
       if (!boxes[b].contains(x)) continue;
       const double phi = bb.distance(x);
       if (!(phi < search_distance)) continue;
-      const Vec<Dim> normal = bb.gradient(x);
-      if (-normal.dot(ba.gradient(x)) < reduction.accept_cosine) continue;
+      Vec<Dim> normal;
+      if (!sample_normal(ba, bb, x, phi, &normal)) continue;
       Contact<Dim> c = proto;
       c.normal = normal;
       c.phi = phi;
@@ -298,15 +335,20 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
       if (!boxes[a].contains(x)) continue;
       const double phi = ba.distance(x);
       if (!(phi < search_distance)) continue;
-      const Vec<Dim> normal = -ba.gradient(x);
-      if (normal.dot(bb.gradient(x)) < reduction.accept_cosine) continue;
+      Vec<Dim> normal;
+      if (!sample_normal(bb, ba, x, phi, &normal)) continue;
+      normal = -normal;
       Contact<Dim> c = proto;
       c.normal = normal;
       c.phi = phi;
       c.point = x;
       cand.push_back(c);
     }
-    pair_contacts[k] = reduce_contacts<Dim>(std::move(cand), reduction);
+    ContactReduction pair_reduction = reduction;
+    if (!(pair_reduction.merge_distance > 0.0)) {
+      pair_reduction.merge_distance = 0.5 * std::max(ba.sample_spacing(), bb.sample_spacing());
+    }
+    pair_contacts[k] = reduce_contacts<Dim>(std::move(cand), pair_reduction);
   }
 
   // walls: dynamic bodies against each wall face
@@ -343,13 +385,15 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
         for (const auto& x : world[i]) {
           const double phi = walls.face_distance(f, x);
           if (!(phi < search_distance)) continue;
-          if (-proto.normal.dot(body.gradient(x)) < reduction.accept_cosine) continue;
+          if (!fits_cone(body, x, Vec<Dim>(-proto.normal))) continue;
           Contact<Dim> c = proto;
           c.phi = phi;
           c.point = x - phi * c.normal;
           cand.push_back(c);
         }
-        cand = reduce_contacts<Dim>(std::move(cand), reduction);
+        ContactReduction wall_reduction = reduction;
+        if (!(wall_reduction.merge_distance > 0.0)) wall_reduction.merge_distance = 0.5 * body.sample_spacing();
+        cand = reduce_contacts<Dim>(std::move(cand), wall_reduction);
       }
       wall_contacts[i].insert(wall_contacts[i].end(), cand.begin(), cand.end());
     }

@@ -45,17 +45,25 @@ struct Contact {
 
 /// Parameters of the contact reduction.
 struct ContactReduction {
-  /// A sample x of body P tested against body Q is a candidate only if the contact normal is
-  /// within this angle (cosine) of P's own surface normal at x (reversed as needed): this drops
-  /// the side faces of a box next to a floor, and points beside a corner whose normal would
-  /// come from the corner region of the other body. 0.5 keeps box edges (0.71) and corners
-  /// (0.58 in 3D), whose own normal is the diagonal.
+  /// A sample x of body P tested against body Q is a candidate only if the contact normal,
+  /// seen as an outward direction of P, lies within this angle (cosine) of P's normal cone at
+  /// x (RigidBody::normal_cone_cosine). For boxes the cone is exact (a face's normal, an
+  /// edge's or corner's fan), so the test can be tight: it drops the side faces of a box
+  /// next to a floor and the fan of normals that parallel edges would otherwise produce.
+  double box_cone_cosine = 0.9;
+  /// The same for other shapes, whose cone is approximated by the SDF gradient at x (a
+  /// polygon's or mesh's vertex has a single averaged normal: 0.5 keeps 3D corners, at 0.58).
   double accept_cosine = 0.5;
   /// Candidates whose normals are within this angle (cosine) of a cluster's normal form one
   /// patch.
   double cluster_cosine = 0.95;
   /// Points kept per patch: 2 in 2D, 4 in 3D (the extreme points of the patch).
   int max_points_2d = 2, max_points_3d = 4;
+  /// After the reduction, a point of a smaller patch within this distance of a point already
+  /// kept from a larger patch is dropped (the same place seen with a second normal, e.g.
+  /// where the edges of two equal stacked boxes coincide). <= 0: detect_contacts uses half
+  /// the larger sample spacing of the pair.
+  double merge_distance = 0.0;
 };
 
 /// All contacts with phi < search_distance between pairs of bodies (not both non-dynamic) and

@@ -351,9 +351,12 @@ RigidBody<Dim>::RigidBody(const BodySpec& spec, ShapePtr<Dim> shape,
       shape_type_(spec.shape.type) {
   if (spec.shape.type == "box") {
     // exact gradients for boxes (collision normals at edges)
-    rest_shape_ = std::make_shared<ExactBoxGradient<Dim>>(
-        rest_shape_, to_vec<Dim>(spec.shape.center), to_vec<Dim>(spec.shape.half_size),
-        rotation_matrix<Dim>(spec.shape.rotation));
+    is_box_ = true;
+    box_center_ = to_vec<Dim>(spec.shape.center);
+    box_half_ = to_vec<Dim>(spec.shape.half_size);
+    box_rotation_ = rotation_matrix<Dim>(spec.shape.rotation);
+    rest_shape_ = std::make_shared<ExactBoxGradient<Dim>>(rest_shape_, box_center_, box_half_,
+                                                          box_rotation_);
   }
   rest_bounds_ = rest_shape_->bounds();
   initial_velocity_ = vec_or_zero<Dim>(spec.velocity);
@@ -439,6 +442,44 @@ double RigidBody<Dim>::distance(const Vec<Dim>& x_world) const {
 template <int Dim>
 Vec<Dim> RigidBody<Dim>::gradient(const Vec<Dim>& x_world) const {
   return rotation() * rest_shape_->gradient(to_rest(x_world));
+}
+
+template <int Dim>
+double RigidBody<Dim>::normal_cone_cosine(const Vec<Dim>& x_world, const Vec<Dim>& n_world) const {
+  if (!is_box_) return n_world.dot(gradient(x_world));
+  // box frame: the faces through x are the axes with |y_a| = h_a (within rounding); the
+  // nearest direction of the cone keeps the components of n along those axes that point
+  // outwards, so its cosine with the unit n is the norm of that part
+  const Mat<Dim> r = rotation() * box_rotation_;
+  const Vec<Dim> y = box_rotation_.transpose() * (to_rest(x_world) - box_center_);
+  const Vec<Dim> n = r.transpose() * n_world;
+  const double tol = 1e-9 * box_half_.maxCoeff();
+  Vec<Dim> m = Vec<Dim>::Zero();
+  for (int a = 0; a < Dim; ++a) {
+    if (std::abs(y[a]) < box_half_[a] - tol) continue;
+    m[a] = std::max(y[a] < 0.0 ? -n[a] : n[a], 0.0);
+  }
+  return m.norm();
+}
+
+template <int Dim>
+bool RigidBody<Dim>::box_face_normal(const Vec<Dim>& x_world, Vec<Dim>* normal) const {
+  if (!is_box_) return false;
+  // the axes whose face planes pass through x (within rounding)
+  const Vec<Dim> y = box_rotation_.transpose() * (to_rest(x_world) - box_center_);
+  const double tol = 1e-9 * box_half_.maxCoeff();
+  int active = 0, axis = 0;
+  for (int a = 0; a < Dim; ++a) {
+    if (std::abs(y[a]) >= box_half_[a] - tol) {
+      ++active;
+      axis = a;
+    }
+  }
+  if (active != 1) return false;
+  Vec<Dim> n = Vec<Dim>::Zero();
+  n[axis] = y[axis] < 0.0 ? -1.0 : 1.0;
+  *normal = rotation() * (box_rotation_ * n);
+  return true;
 }
 
 template <int Dim>

@@ -94,6 +94,16 @@ class RigidBody {
   /// True for a sphere (disk) shape: collision uses its centre and radius exactly.
   bool is_sphere() const { return is_sphere_; }
   double sphere_radius() const { return sphere_radius_; }
+  /// True for a box shape: normal_cone_cosine is exact for it.
+  bool is_box() const { return is_box_; }
+  /// How well the outward unit direction n fits the body's normal cone at the surface point x
+  /// (world frame): the cosine of the angle between n and the cone. Boxes: the cone spanned by
+  /// the outward normals of the faces through x (one face, an edge's two, a corner's three);
+  /// other shapes: n . gradient(x).
+  double normal_cone_cosine(const Vec<Dim>& x_world, const Vec<Dim>& n_world) const;
+  /// Boxes: true when the surface point x lies inside one face (not on an edge or a corner);
+  /// `normal` receives that face's outward normal (world). False for other shapes.
+  bool box_face_normal(const Vec<Dim>& x_world, Vec<Dim>* normal) const;
   /// Shape type from the scene ("box", "sphere", ...).
   const std::string& shape_type() const { return shape_type_; }
 
@@ -106,6 +116,9 @@ class RigidBody {
   std::vector<Vec<Dim>> samples_;
   double sample_spacing_ = 0;
   bool is_sphere_ = false;
+  bool is_box_ = false;
+  Vec<Dim> box_center_ = Vec<Dim>::Zero(), box_half_ = Vec<Dim>::Zero();  ///< rest frame
+  Mat<Dim> box_rotation_ = Mat<Dim>::Identity();                         ///< rest frame
   double sphere_radius_ = 0;
   std::string shape_type_;
   Mat<Dim> principal_axes_ = Mat<Dim>::Identity();      ///< body frame, columns (3D only)
