@@ -117,7 +117,6 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
       sys.M * diagonal_matrix(w.viscosity.unaryExpr(&inverse_or_zero));
   const SparseMatrix W_s = sys.W_F_s * sys.W_L_s;
   const SparseMatrix Dt = sys.D.transpose();
-  const SparseMatrix Gt = sys.G.transpose();
   const SparseMatrix Et = sys.E.transpose();
   const SparseMatrix St_tau = sys.S_tau.transpose();
   const SparseMatrix St_p = sys.S_p.transpose();
@@ -132,12 +131,15 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
   // b1 = S E^T W_L^s M D W_F^u u*
   sys.b1 = sys.S_tau * (Et * (F_sT * (sys.W_F_u * u_star)));
   if (dofs.num_pressure() > 0) {
-    // A12 = S E^T dt W_L^s M D K G W_L^p S_p^T, A22 = S_p dt W_L^p G^T K G W_L^p S_p^T
+    // A12 = S E^T dt W_L^s M D K G W_L^p S_p^T
     const SparseMatrix GW = sys.G * sys.W_L_p;
-    const SparseMatrix GWt = GW.transpose();
     sys.A12 = sys.S_tau * (Et * (dt * (F_sT * K * GW))) * St_p;
-    sys.A22 = sys.S_p * (dt * (GWt * K * GW)) * St_p;
-    sys.b2 = sys.S_p * (sys.W_L_p * (Gt * (sys.W_F_u * u_star)));
+    // A22 and b2 are the pressure system's (the same expression, so eta = 0 reproduces
+    // solve_pressure bit for bit)
+    const ExplicitPressureSystem pressure =
+        assemble_explicit_pressure(grid, w.pressure, dofs.pressure, dt, u_star);
+    sys.A22 = pressure.A;
+    sys.b2 = pressure.b;
   } else {
     sys.A12.resize(dofs.num_stress(), 0);
     sys.A22.resize(0, 0);
