@@ -369,8 +369,9 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
       proto.body_b = -1;
       proto.wall_face = f;
       proto.normal = Walls<Dim>::face_normal(f);
-      proto.friction = walls.friction;
-      proto.restitution = walls.restitution;
+      // a wall counts as a body with the domain's coefficients
+      proto.friction = std::sqrt(body.friction * walls.friction);
+      proto.restitution = std::max(body.restitution, walls.restitution);
       std::vector<Contact<Dim>> cand;
       if (body.is_sphere()) {
         // exact: the centre's distance to the plane minus the radius

@@ -38,7 +38,8 @@ struct Contact {
                                        ///< move to separate
   double phi = 0;  ///< signed gap along normal (negative = penetration), WITHOUT the margin
   double friction = 0, restitution = 0;  ///< combined per pair: sqrt(mu_a mu_b), max(e_a, e_b);
-                                         ///< walls use Walls::friction/restitution
+                                         ///< a wall counts as a body with Walls::friction and
+                                         ///< Walls::restitution (the scene contract's rule)
   /// The point on the surface of body_a: point + phi * normal.
   Vec<Dim> point_a() const { return point + phi * normal; }
 };

@@ -144,7 +144,8 @@ TEMPLATE_TEST_CASE_SIG("sphere-wall: exact contact from the centre distance", "[
   Vec<Dim> foot = c;
   foot[1] = 0.0;
   CHECK((k.point - foot).norm() < 1e-15);
-  CHECK(k.friction == 0.3);
+  // the wall counts as a body: sqrt(0.5 x 0.3), max(0, 0.1)
+  CHECK_THAT(k.friction, WithinRel(std::sqrt(0.5 * 0.3), 1e-15));
   CHECK(k.restitution == 0.1);
 }
 
@@ -396,4 +397,85 @@ TEST_CASE("Walls::from_scene reads the wall faces, friction and restitution", "[
   // an open face takes no contacts
   std::vector<RigidBody<2>> bodies{make_body<2>(sphere<2>(Vec<2>(1.0, 0.95), 0.1))};
   CHECK(detect_contacts<2>(bodies, w, 0.01).empty());
+}
+
+TEMPLATE_TEST_CASE_SIG("equal stacked boxes: edges that line up give the corners with the face "
+                       "normal only", "[unit][collision]", ((int Dim), Dim), 2, 3) {
+  const Vec<Dim> h = Vec<Dim>::Constant(0.1);
+  Vec<Dim> lower = Vec<Dim>::Constant(0.5), upper = Vec<Dim>::Constant(0.5);
+  lower[1] = 0.1;
+  upper[1] = 0.3 + 0.001;
+  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box<Dim>(lower, h)),
+                                     make_body<Dim>(box<Dim>(upper, h))};
+  const auto contacts = detect_contacts<Dim>(bodies, no_walls<Dim>(), 0.01);
+  Vec<Dim> c = upper;
+  c[1] = 0.2;
+  std::vector<Contact<Dim>> shifted;
+  for (auto k : contacts) {
+    // compare on the lower box's top face: the points lie there (on body b's surface) or on
+    // the upper box's bottom face, 0.001 above
+    CHECK((k.normal + up<Dim>()).norm() == 0.0);
+    CHECK_THAT(k.phi, WithinAbs(0.001, 1e-14));
+    k.point[1] = std::min(k.point[1], 0.2 + 1e-12);
+    shifted.push_back(k);
+  }
+  // the corners of the shared face, each once
+  REQUIRE(shifted.size() == (Dim == 2 ? 2u : 4u));
+  for (auto& k : shifted) k.point[1] = std::abs(k.point[1] - 0.2) < 2e-3 ? 0.2 : k.point[1];
+  check_bottom_corners<Dim>(shifted, c, h, 0.2);
+}
+
+TEST_CASE("parallel edges of diagonal neighbours: the two ends of the edge, normal across",
+          "[unit][collision]") {
+  // two unit-aligned boxes whose x-parallel edges face each other across a diagonal gap
+  const double h = 0.05, g = 0.001;
+  const double off = 2.0 * h + g / std::sqrt(2.0);
+  std::vector<RigidBody<3>> bodies{
+      make_body<3>(box<3>(Vec<3>(0.5, 0.5, 0.5), Vec<3>(h, h, h))),
+      make_body<3>(box<3>(Vec<3>(0.5, 0.5 + off, 0.5 + off), Vec<3>(h, h, h)))};
+  const auto c = detect_contacts<3>(bodies, no_walls<3>(), 0.01);
+  REQUIRE(c.size() == 2u);
+  for (const auto& k : c) {
+    // b = 1 lies up and behind: the normal from b to a points down and to the front
+    CHECK((k.normal - Vec<3>(0, -1, -1).normalized()).norm() < 1e-9);
+    CHECK_THAT(k.phi, WithinAbs(g, 1e-12));
+    CHECK_THAT(std::abs(k.point[0] - 0.5), WithinAbs(h, 1e-12));
+  }
+}
+
+TEST_CASE("reduce_contacts: a rectangular patch keeps its four corners, deepest first",
+          "[unit][collision]") {
+  // a 9 x 5 lattice of candidates on a rotated rectangle in the plane normal to n, one corner
+  // slightly deeper
+  const Vec<3> n = Vec<3>(0.2, 1.0, -0.1).normalized();
+  const Vec<3> t1 = n.unitOrthogonal(), t2 = n.cross(t1);
+  std::vector<Contact<3>> cand;
+  for (int i = 0; i <= 8; ++i) {
+    for (int j = 0; j <= 4; ++j) {
+      Contact<3> k;
+      k.body_a = 0;
+      k.normal = n;
+      k.phi = (i == 8 && j == 0) ? 0.0009 : 0.001;
+      k.point = Vec<3>(1, 2, 3) + 0.01 * i * t1 + 0.01 * j * t2;
+      cand.push_back(k);
+    }
+  }
+  const auto r = reduce_contacts<3>(cand);
+  REQUIRE(r.size() == 4u);
+  CHECK(r[0].phi == 0.0009);
+  for (const auto& k : r) {
+    const Vec<3> d = k.point - Vec<3>(1, 2, 3);
+    const double u = d.dot(t1) / 0.01, v = d.dot(t2) / 0.01;
+    CHECK((std::abs(u) < 1e-9 || std::abs(u - 8) < 1e-9));
+    CHECK((std::abs(v) < 1e-9 || std::abs(v - 4) < 1e-9));
+  }
+  // a second face at 90 degrees (normal t1, spanned by n and t2) stays a second patch
+  std::vector<Contact<3>> two = cand;
+  for (auto k : cand) {
+    const Vec<3> d = k.point - Vec<3>(1, 2, 3);
+    k.point = Vec<3>(1, 2, 3) + d.dot(t1) * n + d.dot(t2) * t2 - 0.05 * t1;
+    k.normal = t1;
+    two.push_back(k);
+  }
+  CHECK(reduce_contacts<3>(two).size() == 8u);
 }
