@@ -479,3 +479,30 @@ TEST_CASE("reduce_contacts: a rectangular patch keeps its four corners, deepest 
   }
   CHECK(reduce_contacts<3>(two).size() == 8u);
 }
+
+TEMPLATE_TEST_CASE_SIG("a box on a static halfspace body: its corners", "[unit][collision]",
+                       ((int Dim), Dim), 2, 3) {
+  ShapeSpec plane;
+  plane.type = "halfspace";
+  plane.normal = as_std<Dim>(up<Dim>());
+  plane.offset = 0.2;
+  BodySpec spec;
+  spec.motion = "static";
+  spec.shape = plane;
+  ShapePtr<Dim> s = make_shape<Dim>(plane, "test");
+  MassProperties<Dim> none;  // an unbounded fixed body has no mass (as make_bodies does)
+  const RigidBody<Dim> ground(spec, s, none, 0.01);
+  CHECK(ground.surface_samples().empty());
+  const Vec<Dim> h = Vec<Dim>::Constant(0.1);
+  Vec<Dim> c = Vec<Dim>::Constant(0.5);
+  c[1] = 0.3 + 0.002;
+  const std::vector<RigidBody<Dim>> bodies{ground, make_body<Dim>(box<Dim>(c, h))};
+  const auto contacts = detect_contacts<Dim>(bodies, no_walls<Dim>(), 0.01);
+  check_bottom_corners<Dim>(contacts, c, h, 0.2);
+  for (const auto& k : contacts) {
+    CHECK(k.body_a == 1);
+    CHECK(k.body_b == 0);
+    CHECK_THAT(k.phi, WithinAbs(0.002, 1e-14));
+    CHECK((k.normal - up<Dim>()).norm() < 1e-15);
+  }
+}

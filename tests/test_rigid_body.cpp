@@ -348,3 +348,57 @@ TEST_CASE("make_bodies: every motion type from a scene, spacing dx/2", "[unit][r
   // the mass of a fixed body is not used; its position is its centre of mass
   CHECK((bodies[1].position - Vec<2>(0.5, 0.05)).norm() < 1e-15);
 }
+
+TEMPLATE_TEST_CASE_SIG("boxes: exact gradient, face normals and normal cones", "[unit][rigid]",
+                       ((int Dim), Dim), 2, 3) {
+  const std::vector<double> rot = Dim == 2 ? std::vector<double>{0.4} : std::vector<double>{0.2, -0.3, 0.4};
+  RigidBody<Dim> b = build<Dim>(box_body<Dim>(Vec<Dim>::Constant(0.5), Vec<Dim>::LinSpaced(0.1, 0.2), rot));
+  std::mt19937 rng(3);
+  random_pose(b, rng);
+  const Mat<Dim> r = b.rotation() * rotation_matrix<Dim>(rot);  // box frame -> world
+  auto world = [&](const Vec<Dim>& y) {  // box-frame offset -> world point
+    return b.to_world(Vec<Dim>(rotation_matrix<Dim>(rot) * y + Vec<Dim>::Constant(0.5)));
+  };
+  const Vec<Dim> h = Vec<Dim>::LinSpaced(0.1, 0.2);
+  // away from edges the gradient is the numerical one of the posed distance
+  std::uniform_real_distribution<double> u(-0.3, 0.3);
+  for (int k = 0; k < 50; ++k) {
+    Vec<Dim> y;
+    for (int a = 0; a < Dim; ++a) y[a] = u(rng);
+    const Vec<Dim> x = world(y);
+    const Vec<Dim> g = b.gradient(x);
+    CHECK(std::abs(g.norm() - 1.0) < 1e-14);
+    Vec<Dim> fd;
+    const double step = 1e-7;
+    for (int a = 0; a < Dim; ++a) {
+      Vec<Dim> e = Vec<Dim>::Zero();
+      e[a] = step;
+      fd[a] = (b.distance(x + e) - b.distance(x - e)) / (2 * step);
+    }
+    // central differences match up to O(step^2 / d) and rounding, except within a step of a
+    // kink: a face plane, or inside the box where two faces are equally near (skipped)
+    const Vec<Dim> q = y.cwiseAbs() - h;
+    bool near_kink = q.cwiseAbs().minCoeff() < 1e-4;
+    for (int a = 0; a < Dim; ++a) {
+      for (int c = a + 1; c < Dim; ++c) near_kink = near_kink || (q.maxCoeff() < 0.0 && std::abs(q[a] - q[c]) < 1e-4);
+    }
+    if (!near_kink) CHECK((fd - g).norm() < 1e-6);
+  }
+  // a face centre: one face, its normal; the cone test is the plain cosine
+  Vec<Dim> y = Vec<Dim>::Zero();
+  y[0] = h[0];
+  Vec<Dim> n;
+  REQUIRE(b.box_face_normal(world(y), &n));
+  CHECK((n - r.col(0)).norm() < 1e-14);
+  CHECK((b.gradient(world(y)) - r.col(0)).norm() < 1e-14);
+  CHECK_THAT(b.normal_cone_cosine(world(y), r.col(0)), WithinAbs(1.0, 1e-14));
+  CHECK_THAT(b.normal_cone_cosine(world(y), Vec<Dim>((r.col(0) + r.col(1)).normalized())),
+             WithinAbs(std::sqrt(0.5), 1e-14));
+  // a corner: no single face; the gradient is the bisector, every outward direction of the
+  // octant fits the cone exactly, an inward one not at all
+  const Vec<Dim> corner = world(h);
+  CHECK_FALSE(b.box_face_normal(corner, &n));
+  CHECK((b.gradient(corner) - r * Vec<Dim>::Ones().normalized()).norm() < 1e-12);
+  CHECK_THAT(b.normal_cone_cosine(corner, r.col(0)), WithinAbs(1.0, 1e-12));
+  CHECK_THAT(b.normal_cone_cosine(corner, Vec<Dim>(-r.col(0))), WithinAbs(0.0, 1e-12));
+}
