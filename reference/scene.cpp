@@ -1092,10 +1092,10 @@ void require_supported(const SceneDesc& scene) {
   std::vector<std::string> problems;
   const std::string& label = scene.source_label;
   for (std::size_t i = 0; i < scene.liquids.size(); ++i)
-    if (scene.liquids[i].viscosity.is_viscous())
+    if (scene.liquids[i].viscosity.model == "herschel-bulkley")
       problems.push_back(label + ": " + index_at("liquids", i) +
-                         ".viscosity: viscous liquids are not supported yet (unified Stokes solve) (an inviscid liquid: "
-                         "model \"newtonian\" with eta 0, or no viscosity key)");
+                         ".viscosity.model: herschel-bulkley liquids are not supported yet (non-Newtonian outer loop, "
+                         "section 5) (\"newtonian\" with any eta >= 0 is supported)");
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const std::string& m = scene.bodies[i].motion;
     if (m == "dynamic")

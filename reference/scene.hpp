@@ -162,7 +162,7 @@ nlohmann::json apply_overrides(nlohmann::json j, const std::string& label,
                                const std::vector<std::string>& overrides);
 
 /// Throws InputError listing what the scene asks for that this build does not support yet
-/// (viscous liquids, dynamic and kinematic bodies), each with its key path.
+/// (herschel-bulkley liquids, dynamic and kinematic bodies), each with its key path.
 void require_supported(const SceneDesc& scene);
 
 /// Peak memory estimate in bytes used to refuse scenes up front (docs/scene-format.md).

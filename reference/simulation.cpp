@@ -1,6 +1,7 @@
 /// \file simulation.cpp
-/// Simulation<Dim>: the time loop of Algorithm 1 for liquids with static solids (pressure only;
-/// every scheme name runs the same variational pressure solve of eq. (8) for now).
+/// Simulation<Dim>: the time loop of Algorithm 1 for liquids with static solids. The scheme picks
+/// the solves of eq. (8): the pressure alone, the unified pressure-viscosity (Stokes) solve, or
+/// the decoupled pressure / viscosity / pressure sequence of section 6.2 (solve_sequence).
 
 #include "reference/simulation.hpp"
 
@@ -14,6 +15,11 @@
 #include "reference/particles.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/shape.hpp"
+#include "reference/stokes_system.hpp"
+#include "reference/stress_grid.hpp"
+#include "reference/stress_weights.hpp"
+#include "reference/viscosity.hpp"
+#include "reference/viscosity_field.hpp"
 #include "reference/volume_fractions.hpp"
 
 namespace monolith {
@@ -54,7 +60,21 @@ bool all_finite(const VectorX& v) {
 /// carried 10-23 m/s into the particles of pour-into-bowl-3d (impact speed 3-4 m/s).
 constexpr double kTrustedLiquidFaceFraction = 0.1;
 
+/// Layers of faces beyond the particles' reach that get u* by extrapolation before a solve with
+/// stress unknowns: a stress control volume with W_L^s > 0 reaches at most one cell into the air.
+constexpr int kAirVelocityLayers = 2;
+
 }  // namespace
+
+SolveSequence solve_sequence(const std::string& scheme, bool viscous) {
+  // without viscous liquid (or under a scheme that leaves viscosity out) there are no stress
+  // unknowns: every scheme is the pressure solve
+  if (!viscous) return SolveSequence::pressure;
+  if (scheme == "PV-C" || scheme == "C-PV" || scheme == "PVC-iterative" || scheme == "PVC-unified")
+    return SolveSequence::unified;
+  if (scheme == "PC-VC-PC-unified") return SolveSequence::decoupled;
+  return SolveSequence::pressure;
+}
 
 template <int Dim>
 class Simulation : public AnySimulation {
@@ -81,6 +101,12 @@ class Simulation : public AnySimulation {
   void check_finite(const char* after) const;
   /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
   void fill_state_stats(FrameStats& s) const;
+  /// Lines 7-11 of Algorithm 1 for the liquid: the solves of solve_sequence(scheme) on u_, their
+  /// statistics added to stats_.
+  void solve_liquid(double dt);
+  /// Adds one solve's iterations, residual and DOF counts to stats_; throws SimulationError on a
+  /// breakdown (`what` names the solve).
+  void record_solve(const PcgResult& pcg, long pressure_dofs, long stress_dofs, const char* what);
 
   SceneDesc scene_;
   MacGrid<Dim> grid_;
@@ -93,6 +119,12 @@ class Simulation : public AnySimulation {
   SolidField<Dim> solids_;
   VectorX solid_phi_;
   PressureWeights weights_;
+  // viscosity (section 3.1): eta of each liquid, the stress DOF layout, W_F^s (fixed), W_L^s,
+  // eta per stress DOF and per cell (render), the last stress solution
+  std::vector<double> liquid_eta_;
+  SolveSequence sequence_ = SolveSequence::pressure;
+  StressGrid<Dim> stress_grid_;
+  VectorX stress_fluid_, stress_liquid_, stress_eta_, cell_eta_, stress_;
   // liquid state
   Particles<Dim> particles_;
   VectorX liquid_phi_;
@@ -156,6 +188,16 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
       solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
   weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
 
+  // viscosity: which solves the scheme runs, and the stress DOFs with W_F^s (static solids)
+  liquid_eta_ = liquid_viscosities(scene.liquids);
+  const bool viscous = std::any_of(liquid_eta_.begin(), liquid_eta_.end(),
+                                   [](double eta) { return eta > 0.0; });
+  sequence_ = solve_sequence(scene.solver.scheme, viscous);
+  stress_grid_ = StressGrid<Dim>(grid_);
+  if (sequence_ != SolveSequence::pressure)
+    stress_fluid_ = stress_fluid_weights(stress_grid_, lattice_, solid_phi_, boundary_);
+  stress_ = VectorX::Zero(stress_grid_.num_dofs());
+
   // liquids: particles seeded in each liquid's shape
   std::vector<ShapePtr<Dim>> liquid_shapes;
   for (std::size_t i = 0; i < scene.liquids.size(); ++i)
@@ -197,6 +239,12 @@ void Simulation<Dim>::update_liquid_weights() {
   weights_.liquid_cell = liquid_cell_weights(grid_, lattice_, phi);
   weights_.liquid_face = liquid_face_weights(grid_, lattice_, phi, weights_.liquid_cell);
   raw_liquid_face_ = face_negative_fractions(grid_, lattice_, phi);
+  // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
+  if (sequence_ != SolveSequence::pressure) {
+    stress_liquid_ = stress_liquid_weights(stress_grid_, lattice_, phi);
+    stress_eta_ = stress_viscosity(stress_grid_, particles_, liquid_eta_);
+  }
+  cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
   // the reported volume is that of the particles' own level set (the extension lies in solids)
   liquid_volume_ = (solid_shapes_.empty() ? weights_.liquid_cell
                                           : liquid_cell_weights(grid_, lattice_, liquid_phi_))
@@ -225,25 +273,21 @@ void Simulation<Dim>::step(double dt) {
   if (!liquid_weights_current_) update_liquid_weights();
   liquid_weights_current_ = false;
   weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
-  // (7)-(10) active DOFs, assembly (or stencil set-up) and the SSOR-PCG solve; (11) velocity
-  // update u = u* - dt P^-1 (W_L^u)^-1 G W_L^p p
-  const auto solve_start = Clock::now();
-  const PressureSolveResult solve =
-      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-  stats_.timing_solve += seconds_since(solve_start);
-  if (solve.pcg.breakdown) {
-    std::ostringstream msg;
-    msg << "t = " << time_ << " s: pressure solver broke down: " << solve.pcg.message;
-    throw SimulationError(msg.str());
+  // with stress unknowns, D reads the velocity of the air faces next to the surface (b1 of
+  // eq. (24)), which are not unknowns: extend u* there from the faces that carry mass, so the
+  // surface sees the liquid's own velocity (close to traction-free) rather than air at rest
+  // (a no-slip lid), as Batty & Bridson (2008) extrapolate before their viscosity solve
+  if (sequence_ != SolveSequence::pressure) {
+    std::vector<char> carried(grid_.num_faces(), 0);
+    for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
+    extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
   }
-  pressure_ = solve.pressure;
-  stats_.solver.iterations += solve.pcg.iterations;
-  stats_.solver.staggered_iterations += 1;
-  stats_.solver.max_relative_residual =
-      std::max(stats_.solver.max_relative_residual, solve.pcg.relative_residual);
-  stats_.solver.converged = stats_.solver.converged && solve.pcg.converged;
-  stats_.solver.dofs_pressure = std::max<long>(stats_.solver.dofs_pressure, solve.dofs);
-  check_finite("the pressure solve");
+  // (7)-(10) active DOFs, assembly (or stencil set-up) and the SSOR-PCG solves; (11) velocity
+  // update u = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau)
+  const auto solve_start = Clock::now();
+  solve_liquid(dt);
+  stats_.timing_solve += seconds_since(solve_start);
+  check_finite("the pressure/viscosity solve");
   // extrapolate the velocity from the trusted liquid faces into air and solid, then zero the
   // normal velocity on walls and fully solid faces, and remove the inflow into solids
   std::vector<char> valid(grid_.num_faces(), 0);
@@ -276,6 +320,64 @@ void Simulation<Dim>::step(double dt) {
 }
 
 template <int Dim>
+void Simulation<Dim>::solve_liquid(double dt) {
+  // pressure only: eq. (8) without stress
+  if (sequence_ == SolveSequence::pressure) {
+    const PressureSolveResult solve =
+        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
+    pressure_ = solve.pressure;
+    record_solve(solve.pcg, solve.dofs, 0, "pressure");
+    return;
+  }
+  StokesWeights w;
+  w.pressure = weights_;
+  w.fluid_stress = stress_fluid_;
+  w.liquid_stress = stress_liquid_;
+  w.viscosity = stress_eta_;
+  if (sequence_ == SolveSequence::unified) {
+    // PVC without bodies: eq. (8) in (tau, p) at once, reduced stress (section 4.4.2)
+    const StokesSolveResult solve =
+        solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
+                     scene_.solver.backend, pcg_settings_, u_);
+    pressure_ = solve.pressure;
+    stress_ = solve.stress;
+    record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
+    return;
+  }
+  // PC-VC-PC without bodies (section 6.2): pressure, viscosity with stress unknowns (p = 0; the
+  // full form, since the trace vanishes only together with the pressure), pressure again
+  const PressureSolveResult first =
+      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
+  record_solve(first.pcg, first.dofs, 0, "first pressure");
+  const StokesSolveResult viscous = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
+                                                 StressForm::full, scene_.solver.backend,
+                                                 pcg_settings_, u_);
+  record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
+  const PressureSolveResult second =
+      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
+  record_solve(second.pcg, second.dofs, 0, "second pressure");
+  pressure_ = first.pressure + second.pressure;
+  stress_ = viscous.stress;
+}
+
+template <int Dim>
+void Simulation<Dim>::record_solve(const PcgResult& pcg, long pressure_dofs, long stress_dofs,
+                                   const char* what) {
+  if (pcg.breakdown) {
+    std::ostringstream msg;
+    msg << "t = " << time_ << " s: " << what << " solver broke down: " << pcg.message;
+    throw SimulationError(msg.str());
+  }
+  stats_.solver.iterations += pcg.iterations;
+  stats_.solver.staggered_iterations += 1;
+  stats_.solver.max_relative_residual =
+      std::max(stats_.solver.max_relative_residual, pcg.relative_residual);
+  stats_.solver.converged = stats_.solver.converged && pcg.converged;
+  stats_.solver.dofs_pressure = std::max(stats_.solver.dofs_pressure, pressure_dofs);
+  stats_.solver.dofs_stress = std::max(stats_.solver.dofs_stress, stress_dofs);
+}
+
+template <int Dim>
 void Simulation<Dim>::constrain_velocity_in_solids() {
   if (solids_.empty()) return;
   const VectorX u_old = u_;
@@ -301,6 +403,7 @@ void Simulation<Dim>::check_finite(const char* after) const {
   std::string what;
   if (!all_finite(u_)) what = "non-finite grid velocity";
   if (!all_finite(pressure_)) what = "non-finite pressure";
+  if (!all_finite(stress_)) what = "non-finite viscous stress";
   for (std::size_t p = 0; p < particles_.size() && what.empty(); ++p)
     if (!particles_.x[p].allFinite() || !particles_.v[p].allFinite())
       what = "non-finite particle position or velocity (particle " + std::to_string(p) + ")";
@@ -393,6 +496,7 @@ Image Simulation<Dim>::render(const RenderSpec& spec) const {
   view.particles = &particles_.x;
   view.velocity = &u_;
   view.pressure = &pressure_;
+  view.viscosity = &cell_eta_;
   for (const auto& shape : solid_shapes_) {
     RenderSolid<Dim> solid;
     solid.shape = shape;

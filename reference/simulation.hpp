@@ -4,6 +4,7 @@
 /// state; AnySimulation erases the dimension for the CLI.
 
 #include <memory>
+#include <string>
 
 #include "reference/image.hpp"
 #include "reference/render.hpp"
@@ -29,6 +30,18 @@ class AnySimulation {
   /// total energy that a liquid in a static container must never gain.
   virtual double liquid_potential_energy() const { return 0.0; }
 };
+
+/// The solves of lines 7-11 of Algorithm 1 for the liquid, without dynamic bodies.
+enum class SolveSequence {
+  pressure,   ///< eq. (8) without stress (solve_pressure)
+  unified,    ///< eq. (8) in (tau, p) together, reduced stress (solve_stokes)
+  decoupled,  ///< section 6.2: pressure, then stress only (p = 0), then pressure again
+};
+
+/// The sequence a scheme runs when no body is dynamic: P-C, C-P, PC-iterative, PC-unified ->
+/// pressure (viscosity ignored); PV-C, C-PV, PVC-iterative, PVC-unified -> unified;
+/// PC-VC-PC-unified -> decoupled. Without viscous liquid (`viscous` false) always pressure.
+SolveSequence solve_sequence(const std::string& scheme, bool viscous);
 
 /// Builds the simulation for scene.dim. Throws InputError for scenes that need physics this
 /// build does not support yet (with the key path and what is missing).

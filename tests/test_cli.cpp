@@ -204,11 +204,11 @@ TEST_CASE("check accepts good scenes and lists every problem of bad ones", "[uni
   j = json::parse(kGood2);
   j["bodies"][0]["motion"] = "dynamic";
   j["bodies"][0]["density"] = 500;
-  j["liquids"][0]["viscosity"] = {{"eta", 1.0}};
+  j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"k", 1.0}, {"tau0", 5.0}};
   const Result u = cli({"check", write_file("unsupported.json", j.dump())});
   CHECK(u.code == 2);
   CHECK(u.err.find("bodies[0].motion: dynamic bodies are not supported yet") != std::string::npos);
-  CHECK(u.err.find("liquids[0].viscosity: viscous liquids are not supported yet (unified Stokes solve)") != std::string::npos);
+  CHECK(u.err.find("liquids[0].viscosity.model: herschel-bulkley liquids are not supported yet") != std::string::npos);
 }
 
 TEST_CASE("run writes frames, stats.jsonl and summary.json (2D and 3D)", "[unit]") {

@@ -397,14 +397,14 @@ TEST_CASE("every key, shape type and enum value is accepted", "[unit]") {
   CHECK(s.render.size[1] == 8192);
   (void)obj;
 
-  // require_supported names viscous liquids and non-static bodies, and only those
+  // require_supported names herschel-bulkley liquids and non-static bodies, and only those
   try {
     require_supported(s);
     FAIL("unsupported physics accepted");
   } catch (const InputError& e) {
     const auto& p = e.problems();
     REQUIRE(p.size() == 3);
-    CHECK(mentions(p, "liquids[0].viscosity: viscous liquids are not supported yet (unified Stokes solve)"));
+    CHECK(mentions(p, "liquids[0].viscosity.model: herschel-bulkley liquids are not supported yet"));
     CHECK(mentions(p, "bodies[3].motion"));
     CHECK(mentions(p, "bodies[4].motion"));
   }

@@ -187,9 +187,9 @@ TEST_CASE("CFL substeps land exactly on frame times", "[unit]") {
 }
 
 TEST_CASE("make_simulation refuses unsupported physics and unknown back ends", "[unit]") {
-  nlohmann::json viscous = column_scene(2, 8, 0.5, "matrixfree");
-  viscous["liquids"][0]["viscosity"] = {{"model", "newtonian"}, {"eta", 1.0}};
-  CHECK_THROWS_AS(make_simulation(parse_scene(viscous, "viscous", ".")), InputError);
+  nlohmann::json plastic = column_scene(2, 8, 0.5, "matrixfree");
+  plastic["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"k", 1.0}, {"tau0", 5.0}};
+  CHECK_THROWS_AS(make_simulation(parse_scene(plastic, "plastic", ".")), InputError);
   SceneDesc scene = parse_scene(column_scene(2, 8, 0.5, "matrixfree"), "backend", ".");
   scene.solver.backend = "gpu";
   CHECK_THROWS_AS(make_simulation(scene), InputError);
