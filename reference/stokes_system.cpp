@@ -357,6 +357,27 @@ void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& 
 }
 
 template <int Dim>
+VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
+  VectorX force(num_faces_);
+  // one writer per face: gather the unknowns acting on it
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < num_faces_; ++f) {
+    double s = 0.0;
+    for (int e = face_start_[f]; e < face_start_[f + 1]; ++e) s += face_coef_[e] * x[face_unknown_[e]];
+    force[f] = s;
+  }
+  return force;
+}
+
+template <int Dim>
+std::vector<std::pair<int, double>> MatrixFreeStokesOperator<Dim>::stencil(int i) const {
+  std::vector<std::pair<int, double>> column;
+  for (int e = unknown_start_[i]; e < unknown_start_[i + 1]; ++e)
+    column.emplace_back(unknown_face_[e], unknown_coef_[e]);
+  return column;
+}
+
+template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
   VectorX b(size_);
 #pragma omp parallel for schedule(static)

@@ -168,6 +168,17 @@ TEMPLATE_TEST_CASE_SIG("explicit and matrix-free Stokes operators agree", "[unit
         ssor_precondition(op, b, zb, 1.0);
         CHECK(std::abs(za.dot(b) - a.dot(zb)) < 1e-10 * std::abs(za.dot(b)));
         CHECK(rel_diff(op.diagonal(), VectorX(sys.A.diagonal())) < 1e-13);
+        // B x is the force of the update: G W_L^p p + D^T M W_L^s tau
+        {
+          const VectorX x = random_vector(op.size(), 200);
+          const VectorX tau = scatter_stress(layout, dofs, x);
+          const VectorX p = scatter_stokes_pressure(dofs, x, sc.grid.num_cells());
+          const VectorX force = sys.G * (sys.W_L_p * p) + sys.D.transpose() * (sys.M * (sys.W_L_s * tau));
+          CHECK(rel_diff(op.face_force(x), force) < 1e-13);
+          int entries = 0;
+          for (int i = 0; i < op.size(); ++i) entries += static_cast<int>(op.stencil(i).size());
+          CHECK(entries > op.size());
+        }
         CHECK(rel_diff(op.rhs(sc.u_star), sys.b) < 1e-13);
       }
   }
