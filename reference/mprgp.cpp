@@ -144,7 +144,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   const double gamma2 = settings.gamma_proportioning * settings.gamma_proportioning;
 
   // state: gradient g = A x - b, free/chopped gradients, free mask, direction p
-  VectorX g(n), phi(n), beta(n), z(n), p(n), ap(n), gp(n);
+  VectorX g(n), phi(n), beta(n), z(n), p(n), ap(n), gp(n), x_half;
   std::vector<char> mask, new_mask;
   auto exact_gradient = [&]() {
     a.apply(x, g);
@@ -235,9 +235,28 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
         g -= alpha_f * ap;
         box.project(x);
         box.free_gradient(x, g, phi);
-        x -= alpha_bar * phi;
-        box.project(x);
-        exact_gradient();
+        bool expanded = false;
+        if (settings.adaptive_expansion) {
+          // opt-in: the exact minimiser alpha_opt = phi^T phi / phi^T A phi along -phi when it is
+          // longer than alpha_bar, kept only if the projected point lowers f below f(x_half)
+          a.apply(phi, ap);
+          const double phi_a_phi = phi.dot(ap);
+          const double alpha_opt = phi_a_phi > 0.0 ? phi.squaredNorm() / phi_a_phi : 0.0;
+          if (alpha_opt > alpha_bar && std::isfinite(alpha_opt)) {
+            const double f_half = 0.5 * x.dot(g) - 0.5 * rhs.dot(x);  // f = 1/2 x^T (g + b) - b^T x
+            x_half = x;
+            x -= alpha_opt * phi;
+            box.project(x);
+            exact_gradient();
+            expanded = 0.5 * x.dot(g) - 0.5 * rhs.dot(x) < f_half;
+            if (!expanded) x = x_half;
+          }
+        }
+        if (!expanded) {
+          x -= alpha_bar * phi;
+          box.project(x);
+          exact_gradient();
+        }
         classify();
         precondition();
         p = z;

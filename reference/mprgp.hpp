@@ -27,6 +27,11 @@ struct MprgpSettings {
   double gamma_proportioning = 1.0;  ///< Gamma of the proportioning test
   double norm_estimate = 0.0;  ///< ||A||_2 if known (> 0); 0: estimated by power iteration
   int power_iterations = 30;   ///< power iterations of the ||A|| estimate
+  /// Opt-in departure: in an expansion step, first try the exact minimiser along the free
+  /// gradient (phi^T phi / phi^T A phi, when longer than alpha_bar), projected, and keep it if it
+  /// lowers f; otherwise the fixed step. Fewer expansion steps when many variables must reach
+  /// their bounds (docs/mprgp.md); costs one or two extra operator applications per expansion.
+  bool adaptive_expansion = false;
 };
 
 struct MprgpResult {

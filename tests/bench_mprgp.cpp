@@ -78,8 +78,9 @@ struct Run {
   MprgpResult r;
   double seconds = 0;
 };
-Run run(const LinearOperator& op, const Problem& p, bool precondition) {
+Run run(const LinearOperator& op, const Problem& p, bool precondition, bool adaptive = false) {
   MprgpSettings s;
+  s.adaptive_expansion = adaptive;
   s.tolerance = 1e-6;
   s.max_iterations = 20000;
   s.precondition = precondition;
@@ -102,8 +103,8 @@ Run run(const LinearOperator& op, const Problem& p, bool precondition) {
 int main(int argc, char** argv) {
   const int max_bodies = argc > 1 ? std::atoi(argv[1]) : 40000;
   std::printf("| bodies | contacts | colours | plain: it (cg/exp/prop) | time | SSOR: it (cg/exp/prop) | time "
-              "| coloured SSOR: it | 1 thread | 2 threads | sweep speed-up |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+              "| SSOR + adaptive expansion | time | coloured SSOR: it | 1 thread | 2 threads | sweep speed-up |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (int side = 4; side * side <= max_bodies; side *= 2) {
     const Problem p = make_problem(side, 1234u + side);
     SparseMatrixOperator plain_op(p.a);
@@ -112,6 +113,7 @@ int main(int argc, char** argv) {
     omp_set_num_threads(1);
     const Run plain = run(plain_op, p, false);
     const Run ssor = run(plain_op, p, true);
+    const Run adaptive = run(plain_op, p, true, true);
     const Run c1 = run(coloured, p, true);
     omp_set_num_threads(2);
     const Run c2 = run(coloured, p, true);
@@ -129,16 +131,16 @@ int main(int argc, char** argv) {
         sweep[t - 1] = std::min(sweep[t - 1], seconds_since(t0));
       }
     auto cell = [](const Run& r) {
-      static char buf[4][96];
+      static char buf[5][96];
       static int k = 0;
-      char* s = buf[k++ % 4];
+      char* s = buf[k++ % 5];
       std::snprintf(s, 96, "%d (%d/%d/%d)%s", r.r.iterations, r.r.cg_steps, r.r.expansion_steps,
                     r.r.proportioning_steps, r.r.converged ? "" : " NOT CONVERGED");
       return s;
     };
-    std::printf("| %d | %d | %d | %s | %.4f s | %s | %.4f s | %s | %.4f s | %.4f s | %.2f |\n", p.num_bodies,
-                static_cast<int>(p.b.size()), colours.num_colours(), cell(plain), plain.seconds, cell(ssor),
-                ssor.seconds, cell(c1), c1.seconds, c2.seconds, sweep[0] / sweep[1]);
+    std::printf("| %d | %d | %d | %s | %.4f s | %s | %.4f s | %s | %.4f s | %s | %.4f s | %.4f s | %.2f |\n",
+                p.num_bodies, static_cast<int>(p.b.size()), colours.num_colours(), cell(plain), plain.seconds,
+                cell(ssor), ssor.seconds, cell(adaptive), adaptive.seconds, cell(c1), c1.seconds, c2.seconds, sweep[0] / sweep[1]);
     std::fflush(stdout);
   }
   return 0;
