@@ -506,3 +506,53 @@ TEMPLATE_TEST_CASE_SIG("a box on a static halfspace body: its corners", "[unit][
     CHECK((k.normal - up<Dim>()).norm() < 1e-15);
   }
 }
+
+TEST_CASE("2D bunny silhouette on the floor and in a static bowl", "[unit][collision]") {
+  ShapeSpec bunny;
+  bunny.type = "bunny";
+  bunny.center = {0.5, 0.5};
+  bunny.size = 0.3;
+  bunny.rotation = {0.3};
+  std::vector<RigidBody<2>> bodies{make_body<2>(bunny, "dynamic", 0.005)};
+  double lowest = 1e9;
+  for (const auto& s : bodies[0].surface_samples()) lowest = std::min(lowest, bodies[0].to_world(s)[1]);
+  bodies[0].position[1] -= lowest - 0.001;
+  const auto c = detect_contacts<2>(bodies, unit_walls<2>(), 0.01);
+  REQUIRE(!c.empty());
+  CHECK(c.size() <= 4u);
+  CHECK_THAT(c.front().phi, WithinAbs(0.001, 1e-12));
+  for (const auto& k : c) CHECK((k.normal - up<2>()).norm() == 0.0);
+  // dropped into a static bowl (a concave body): contacts with the inner wall, normals from
+  // the bowl towards the bunny (upwards and inwards), the gap at least the smallest one
+  ShapeSpec bowl;
+  bowl.type = "bowl";
+  bowl.center = {0.5, 0.5};
+  bowl.radius = 0.3;
+  bowl.thickness = 0.05;
+  ShapeSpec small = bunny;
+  small.size = 0.15;
+  small.center = {0.5, 0.4};
+  bodies = {make_body<2>(small, "dynamic", 0.005), make_body<2>(bowl, "static", 0.005)};
+  // lower the bunny until it almost touches the bowl's inner surface
+  double gap = 1e9;
+  for (const auto& s : bodies[0].surface_samples()) gap = std::min(gap, bodies[1].distance(bodies[0].to_world(s)));
+  bodies[0].position[1] -= gap - 0.002;
+  gap = 1e9;
+  for (const auto& s : bodies[0].surface_samples()) gap = std::min(gap, bodies[1].distance(bodies[0].to_world(s)));
+  const auto d = detect_contacts<2>(bodies, no_walls<2>(), 0.01);
+  REQUIRE(!d.empty());
+  double min_phi = 1e9;
+  for (const auto& k : d) {
+    CHECK(k.body_a == 0);
+    CHECK(k.body_b == 1);
+    CHECK(k.normal[1] > 0.0);
+    CHECK(std::abs(k.normal.norm() - 1.0) < 1e-12);
+    CHECK(k.normal.dot(Vec<2>(0.5, 0.5) - k.point) > 0.0);  // towards the bowl centre
+    min_phi = std::min(min_phi, k.phi);
+  }
+  // the closest bunny sample is among the contacts (measured: 3 contacts, min phi = gap).
+  // The bowl's samples could only find a closer pair where the bunny's edge points miss the
+  // true nearest point: by at most (spacing/2)^2 / (2 R_inner) = 1.25e-5 (bound 2e-5)
+  CHECK(min_phi <= gap + 1e-12);
+  CHECK(min_phi > gap - 2e-5);
+}
