@@ -36,7 +36,9 @@ struct Contact {
   Vec<Dim> point = Vec<Dim>::Zero();   ///< world contact point (on the surface of body_b / the wall)
   Vec<Dim> normal = Vec<Dim>::Zero();  ///< unit, from b towards a: the direction in which a must
                                        ///< move to separate
-  double phi = 0;  ///< signed gap along normal (negative = penetration), WITHOUT the margin
+  double phi = 0;  ///< one entry of the constraint vector phi(x) >= 0 of eqs. (9) and (16):
+                   ///< the signed gap along normal (negative = penetration), WITHOUT the
+                   ///< margin epsilon of §3.2.4 (the contact model adds it)
   double friction = 0, restitution = 0;  ///< combined per pair: sqrt(mu_a mu_b), max(e_a, e_b);
                                          ///< a wall counts as a body with Walls::friction and
                                          ///< Walls::restitution (the scene contract's rule)
@@ -67,6 +69,8 @@ struct ContactReduction {
   double merge_distance = 0.0;
 };
 
+/// Algorithm 1, line 6 ("detect collisions between rigid bodies"): the rows of phi(x) of
+/// eqs. (9)-(16) with their points and normals, from which J_lambda and J_z are built.
 /// All contacts with phi < search_distance between pairs of bodies (not both non-dynamic) and
 /// between dynamic bodies and walls. body_a is the dynamic body of a pair (the lower index if
 /// both are dynamic), body_b the other one (fixed, kinematic, dynamic, or -1 for a wall).

@@ -66,6 +66,7 @@ class RigidBody {
   const ShapePtr<Dim>& rest_shape() const { return rest_shape_; }
   const Vec<Dim>& rest_center_of_mass() const { return rest_com_; }
 
+  /// The body's block of the velocity coordinates v of §3.2 (eqs. (10), (13)): (v, omega).
   BodyVec<Dim> generalized_velocity() const;
   void set_generalized_velocity(const BodyVec<Dim>& u);
   /// Kinetic energy 1/2 m |v|^2 + 1/2 omega . I_w omega (dynamic bodies; 0 for the others).
@@ -73,7 +74,8 @@ class RigidBody {
   /// Angular momentum about the centre of mass, I_w omega (world frame).
   AngularVec<Dim> angular_momentum() const;
 
-  /// Symplectic-Euler position update. Dynamic: x += dt v; orientation by the exact rotation
+  /// Algorithm 1, line 13 ("update rigid body positions"), after the velocity update of
+  /// eq. (13) by the caller. Symplectic-Euler position update. Dynamic: x += dt v; orientation by the exact rotation
   /// of omega over dt in 2D; in 3D the torque-free motion over dt is integrated with the
   /// symplectic splitting of the free rigid body into rotations about the principal axes
   /// (Dullweber, Leimkuhler & McLachlan 1997), which keeps the world angular momentum
