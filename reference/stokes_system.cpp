@@ -208,17 +208,14 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       }
       if constexpr (Dim == 3) {
         // the other diagonal unknown of the cell shares the eliminated DOF: E^T X E couples them
-        if (count == 2) {
         const int lu = dofs.unknown_of_dof[i];
         const int j = layout.component_of_unknown(lu);
-        const int other_lu = layout.offset(1 - j) + (lu - layout.offset(j));
-        const int other = dofs.dof_of_unknown[other_lu];
+        const int other = count == 2 ? dofs.dof_of_unknown[layout.offset(1 - j) + (lu - layout.offset(j))] : -1;
         if (other >= 0) {
           const int d = dof[1];
           partner_[i] = other;
           partner_coef_[i] = 0.5 * m[d] * inverse_or_zero(w.viscosity[d]) * w.fluid_stress[d] *
                              w.liquid_stress[d];
-        }
         }
       }
     } else {
@@ -266,10 +263,8 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     if (i < ns) {
       const int lu = dofs.unknown_of_dof[i];
       const int j = layout.component_of_unknown(lu);
-      const auto [k, c] = stress.coord(layout.dof_of_unknown(lu));
-      (void)k;
       block = j;
-      parity = c.sum() % 2;
+      parity = stress.coord(layout.dof_of_unknown(lu)).second.sum() % 2;
     } else {
       block = layout.num_components();
       parity = grid.cell_coord(dofs.pressure.cell_of_dof[i - ns]).sum() % 2;
