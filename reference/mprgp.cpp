@@ -173,7 +173,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   precondition();
   p = z;
 
-  bool verified = false;  // the last convergence test used an exactly recomputed gradient
+  bool verified = true;  // g is exact (not a recurrence) at the next convergence test
   for (;;) {
     // stopping rule on the projected gradient g^P = phi + beta
     gp = phi + beta;
