@@ -5,6 +5,7 @@
 
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <omp.h>
 
 #include "reference/collision.hpp"
 #include "reference/rigid_body.hpp"
@@ -555,4 +556,34 @@ TEST_CASE("2D bunny silhouette on the floor and in a static bowl", "[unit][colli
   // true nearest point: by at most (spacing/2)^2 / (2 R_inner) = 1.25e-5 (bound 2e-5)
   CHECK(min_phi <= gap + 1e-12);
   CHECK(min_phi > gap - 2e-5);
+}
+
+TEST_CASE("detection does not depend on the number of threads", "[unit][collision]") {
+  // a small 3D pile of rotated boxes and spheres on the floor
+  std::vector<RigidBody<3>> bodies;
+  for (int i = 0; i < 4; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      const Vec<3> c(0.2 + 0.105 * i, 0.05 + 0.1005 * j, 0.5);
+      if ((i + j) % 3 == 0) {
+        bodies.push_back(make_body<3>(sphere<3>(c, 0.05)));
+      } else {
+        bodies.push_back(make_body<3>(box<3>(c, Vec<3>::Constant(0.05), {0.02 * i, 0.01 * j, 0.03})));
+      }
+    }
+  }
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto one = detect_contacts<3>(bodies, unit_walls<3>(), 0.01);
+  omp_set_num_threads(2);
+  const auto two = detect_contacts<3>(bodies, unit_walls<3>(), 0.01);
+  omp_set_num_threads(threads);
+  REQUIRE(one.size() > 20u);
+  REQUIRE(one.size() == two.size());
+  for (std::size_t k = 0; k < one.size(); ++k) {
+    CHECK(one[k].body_a == two[k].body_a);
+    CHECK(one[k].body_b == two[k].body_b);
+    CHECK(one[k].point == two[k].point);
+    CHECK(one[k].normal == two[k].normal);
+    CHECK(one[k].phi == two[k].phi);
+  }
 }
