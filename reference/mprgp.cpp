@@ -357,9 +357,11 @@ VectorX ColouredSparseOperator::diagonal() const { return diagonal_; }
 
 void ColouredSparseOperator::relax_row(int i, const VectorX& rhs, VectorX& x, double omega) const {
   if (diagonal_[i] == 0.0) return;
+  // stored zeros are skipped: the colouring ignores them, so their x_j may be written by another
+  // thread of the same colour at this moment
   double off = 0.0;
   for (SparseMatrix::InnerIterator it(a_, i); it; ++it)
-    if (it.col() != i) off += it.value() * x[it.col()];
+    if (it.col() != i && it.value() != 0.0) off += it.value() * x[it.col()];
   x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
 }
 
