@@ -12,6 +12,10 @@ namespace monolith {
 
 namespace {
 
+/// Samples of a body against a sphere count only where they face the sphere's centre within
+/// this cosine (about 8 degrees).
+constexpr double kSphereSampleCosine = 0.99;
+
 template <int Dim>
 bool boxes_overlap(const Box<Dim>& a, const Box<Dim>& b) {
   return (a.min().array() <= b.max().array()).all() && (b.min().array() <= a.max().array()).all();
@@ -100,6 +104,7 @@ std::vector<int> patch_extremes(const std::vector<Contact<Dim>>& c, const std::v
   const int p1 = argmax_geometric<Dim>(deepest, c, mids, tol, tol,
                                        [&](int m) { return tangent_distance(mids[m], centroid); });
   std::vector<int> keep{p1};
+  if (max_points < 2) return keep;
   // p2: the farthest from p1
   const int p2 = argmax_geometric<Dim>(members, c, mids, tol, tol,
                                        [&](int m) { return tangent_distance(mids[m], mids[p1]); });
@@ -294,27 +299,60 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
       continue;
     }
     if (ba.is_sphere() || bb.is_sphere()) {
-      // a sphere against any shape: one contact at the point of the other surface nearest
-      // the centre (exact for an exact SDF; a concave shape touched at two places gives one)
+      // a sphere against any shape: the point of the other surface nearest the centre (exact
+      // for an exact SDF), plus the other body's samples against the sphere's exact SDF so
+      // that a concave shape touched in two places (a groove, a bowl's rim) gives both; each
+      // patch keeps only its deepest point
       const bool a_round = ba.is_sphere();
+      const int other_index = a_round ? b : a;
       const RigidBody<Dim>& round = a_round ? ba : bb;
       const RigidBody<Dim>& other = a_round ? bb : ba;
-      const double d = other.distance(round.position);
-      const double phi = d - round.sphere_radius();
-      if (phi < search_distance) {
-        const Vec<Dim> g = other.gradient(round.position);  // out of `other`, to the centre
+      const double radius = round.sphere_radius();
+      // orient a contact given the unit direction g out of `other` towards the sphere, the
+      // point q on other's surface and the gap
+      auto add = [&](const Vec<Dim>& g, const Vec<Dim>& q, double phi) {
         Contact<Dim> c = proto;
         c.phi = phi;
         if (a_round) {
           c.normal = g;
-          c.point = round.position - d * g;
+          c.point = q;
         } else {
           c.normal = -g;
-          c.point = round.position - round.sphere_radius() * g;
+          c.point = q + phi * g;  // on the sphere
         }
         cand.push_back(c);
+      };
+      const double d = other.distance(round.position);
+      if (d - radius < search_distance) {
+        const Vec<Dim> g = other.gradient(round.position);
+        add(g, Vec<Dim>(round.position - d * g), d - radius);
       }
-      pair_contacts[k] = std::move(cand);
+      for (const auto& x : world[other_index]) {
+        if (!boxes[a_round ? a : b].contains(x)) continue;
+        const Vec<Dim> r = round.position - x;
+        const double len = r.norm();
+        if (!(len - radius < search_distance) || len == 0.0) continue;
+        // the sample must face the centre (within ~8 degrees)
+        const Vec<Dim> towards = r / len;
+        if (other.normal_cone_cosine(x, towards) < kSphereSampleCosine) continue;
+        Vec<Dim> face;
+        if (other.is_box() && !other.box_face_normal(x, &face)) {
+          // an edge or corner sample: the exact gap from that point
+          add(towards, x, len - radius);
+        } else {
+          // a face (or smooth) sample: the touching point of the tangent plane at x, exact
+          // for a flat face wherever the sample lies on it
+          const Vec<Dim> n = other.is_box() ? face : other.gradient(x);
+          const double height = n.dot(r);
+          add(n, Vec<Dim>(round.position - height * n), height - radius);
+        }
+      }
+      ContactReduction sphere_reduction = reduction;
+      sphere_reduction.max_points_2d = sphere_reduction.max_points_3d = 1;
+      if (!(sphere_reduction.merge_distance > 0.0)) {
+        sphere_reduction.merge_distance = std::max(other.sample_spacing(), 0.25 * radius);
+      }
+      pair_contacts[k] = reduce_contacts<Dim>(std::move(cand), sphere_reduction);
       continue;
     }
     // samples of a against the SDF of b: normal = grad d_b, point on b = x - phi n

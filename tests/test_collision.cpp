@@ -587,3 +587,44 @@ TEST_CASE("detection does not depend on the number of threads", "[unit][collisio
     CHECK(one[k].phi == two[k].phi);
   }
 }
+
+TEMPLATE_TEST_CASE_SIG("a sphere in a groove (one concave body): one contact per face",
+                       "[unit][collision]", ((int Dim), Dim), 2, 3) {
+  // a V-groove: the union of two boxes tilted by +-45 degrees about z, their inner faces
+  // meeting below x = 0.5 at y = 0.3; a sphere of radius r above it touches both faces
+  const double r = 0.05, gap = 0.002;
+  ShapeSpec groove;
+  groove.type = "union";
+  for (int side = 0; side < 2; ++side) {
+    const double s = side ? 1.0 : -1.0;
+    // inner face through (0.5, 0.3) with normal (-s, 1)/sqrt(2), extending 0.3 along it
+    const Vec<2> n2 = Vec<2>(-s, 1.0).normalized();
+    const Vec<2> c2 = Vec<2>(0.5, 0.3) - 0.05 * n2 + Vec<2>(s, 1.0).normalized() * 0.15;
+    Vec<Dim> c = Vec<Dim>::Constant(0.5), h = Vec<Dim>::Constant(0.15);
+    c[0] = c2[0];
+    c[1] = c2[1];
+    h[1] = 0.05;
+    h[0] = 0.15;
+    std::vector<double> rot = Dim == 2 ? std::vector<double>{s * 0.25 * M_PI}
+                                       : std::vector<double>{0.0, 0.0, s * 0.25 * M_PI};
+    groove.shapes.push_back(box<Dim>(c, h, rot));
+  }
+  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(groove, "static", 0.01)};
+  Vec<Dim> centre = Vec<Dim>::Constant(0.5);
+  centre[1] = 0.3 + (r + gap) * std::sqrt(2.0);
+  bodies.push_back(make_body<Dim>(sphere<Dim>(centre, r)));
+  const auto c = detect_contacts<Dim>(bodies, no_walls<Dim>(), 0.01);
+  REQUIRE(c.size() == 2u);
+  for (const auto& k : c) {
+    CHECK(k.body_a == 1);
+    CHECK(k.body_b == 0);
+    // exact: the nearest face from the centre query, the other face from its samples'
+    // tangent plane (the shape library's box gradient is numerical: 1e-9)
+    CHECK_THAT(k.phi, WithinAbs(gap, 1e-9));
+    CHECK_THAT(std::abs(k.normal[0]), WithinAbs(std::sqrt(0.5), 1e-9));
+    CHECK_THAT(k.normal[1], WithinAbs(std::sqrt(0.5), 1e-9));
+    // the point on the face is where the normal through the centre meets it
+    CHECK((k.point + (r + gap) * k.normal - centre).norm() < 1e-9);
+  }
+  CHECK(c[0].normal[0] * c[1].normal[0] < 0.0);
+}
