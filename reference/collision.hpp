@@ -75,11 +75,13 @@ struct ContactReduction {
 /// between dynamic bodies and walls. body_a is the dynamic body of a pair (the lower index if
 /// both are dynamic), body_b the other one (fixed, kinematic, dynamic, or -1 for a wall).
 /// Broad phase on world AABBs (grown by search_distance), then surface samples of each body
-/// against the other's SDF, both directions (sphere-sphere and sphere-wall exactly: one contact
-/// from centre distances), normals from SDF gradients, then contact reduction per pair: the
-/// candidates are clustered by normal and each patch keeps its deepest point and the points
-/// that span it (<= 4 in 3D, 2 in 2D). Order: body pairs by (a, b) index, then walls by body
-/// and face; deterministic.
+/// against the other's SDF, both directions, normals from SDF gradients (sphere-sphere and
+/// sphere-wall exactly: one contact from centre distances; a sphere against any other body:
+/// the nearest point to its centre plus the other's samples facing the centre, one point per
+/// normal patch), then contact reduction per pair: the candidates are clustered by normal and
+/// each patch keeps its deepest point and the points that span it (<= 4 in 3D, 2 in 2D).
+/// Order: body pairs by (min, max) index, then walls by body and face; deterministic and
+/// independent of the number of threads. docs/rigid-bodies.md has the details.
 template <int Dim>
 std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bodies,
                                           const Walls<Dim>& walls, double search_distance,
