@@ -48,8 +48,8 @@ enum class MprgpStep { cg, expansion, proportioning };
 /// Called after every step with its kind, the new iterate and its gradient g = A x - b.
 using MprgpObserver = std::function<void(MprgpStep, const VectorX& x, const VectorX& g)>;
 
-/// Eqs. (25) and (26) as convex QPs (section 4.3): A x = b with box constraints is the optimality
-/// condition of
+/// Eqs. (25) and (26) as convex QPs (section 4.3): the box-constrained LCP "A x = b where
+/// lower < x < upper, A x >= b at lower, A x <= b at upper" is the optimality condition of
 /// min 1/2 x^T A x - b^T x  s.t.  lower <= x <= upper (entries may be -inf / +inf: then that
 /// variable is free; lower_i = upper_i fixes it; with all bounds infinite this is preconditioned
 /// CG). x is the initial guess (resized to zero if its size is wrong, then projected onto the
