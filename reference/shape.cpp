@@ -39,6 +39,24 @@ class BoxShape : public Shape<Dim> {
     const Vec<Dim> q = (x - center_).cwiseAbs() - half_size_;
     return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
   }
+  /// Exact gradient: outside, the direction from the nearest surface point (normalised positive
+  /// part of q, with the signs of x - c); inside, the normal of the nearest face (the axis of
+  /// the largest q; ties take the lowest axis). Central differences would blur it within a
+  /// step of every edge, which tilts resting-contact normals.
+  Vec<Dim> gradient(const Vec<Dim>& x) const override {
+    const Vec<Dim> d = x - center_;
+    const Vec<Dim> q = d.cwiseAbs() - half_size_;
+    Vec<Dim> g = Vec<Dim>::Zero();
+    if (q.maxCoeff() > 0.0) {
+      for (int a = 0; a < Dim; ++a) g[a] = q[a] > 0.0 ? (d[a] < 0.0 ? -q[a] : q[a]) : 0.0;
+      return g / g.norm();
+    }
+    int axis = 0;
+    for (int a = 1; a < Dim; ++a)
+      if (q[a] > q[axis]) axis = a;
+    g[axis] = d[axis] < 0.0 ? -1.0 : 1.0;
+    return g;
+  }
   Box<Dim> bounds() const override { return Box<Dim>(center_ - half_size_, center_ + half_size_); }
 
  private:

@@ -447,3 +447,32 @@ TEMPLATE_TEST_CASE_SIG("rotation centres: union about its first child's bounds, 
   }
   CHECK(std::isinf(h->bounds().max()[0]));
 }
+
+TEMPLATE_TEST_CASE_SIG("box gradients are exact next to edges and corners", "[unit]", ((int Dim), Dim),
+                       2, 3) {
+  ShapeSpec spec;
+  spec.type = "box";
+  spec.center = std::vector<double>(Dim, 0.0);
+  spec.half_size = std::vector<double>(Dim, 0.5);
+  const ShapePtr<Dim> box = make_shape<Dim>(spec, "box");
+  // just above the top face, 1e-6 from the edge: the face normal, not a blend
+  Vec<Dim> x = Vec<Dim>::Constant(0.5 - 1e-6);
+  x[1] = 0.5 + 1e-3;
+  CHECK((box->gradient(x) - Vec<Dim>::Unit(1)).norm() < 1e-14);
+  // just inside the top face near the edge: the top face is the nearest
+  x[1] = 0.5 - 1e-8;
+  CHECK((box->gradient(x) - Vec<Dim>::Unit(1)).norm() < 1e-14);
+  // beyond a corner: along the diagonal
+  const Vec<Dim> corner = Vec<Dim>::Constant(0.5);
+  CHECK((box->gradient(corner + Vec<Dim>::Constant(0.1)) - Vec<Dim>::Ones().normalized()).norm() <
+        1e-14);
+  // and the gradient agrees with central differences of the distance away from edges
+  const Vec<Dim> y = Vec<Dim>::Constant(0.2) + 0.6 * Vec<Dim>::Unit(0);
+  Vec<Dim> fd;
+  for (int a = 0; a < Dim; ++a) {
+    const double h = 1e-6;
+    fd[a] = (box->distance(y + h * Vec<Dim>::Unit(a)) - box->distance(y - h * Vec<Dim>::Unit(a))) /
+            (2 * h);
+  }
+  CHECK((box->gradient(y) - fd).norm() < 1e-8);
+}
