@@ -5,8 +5,11 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
+#include "reference/particles.hpp"
 #include "reference/scene.hpp"
 #include "reference/simulation.hpp"
+#include "reference/stress_grid.hpp"
+#include "reference/viscosity_field.hpp"
 
 using namespace monolith;
 
@@ -296,4 +299,55 @@ TEST_CASE("the scheme decides the solves: unified, decoupled or pressure only", 
     CHECK(s.solver.dofs_stress == 0);
     CHECK(s.solver.staggered_iterations == s.steps);
   }
+}
+
+TEMPLATE_TEST_CASE_SIG("eta per stress DOF from the particles: exact for one liquid, split between two",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // particles filling the lower half of a periodic-in-x box: liquid 0 (eta 2) at x < 0.5,
+  // liquid 1 (eta 8) at x > 0.5
+  const int n = 8;
+  std::array<bool, Dim> periodic{};
+  periodic[0] = true;
+  const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+  Particles<Dim> p;
+  for (int c = 0; c < grid.num_cells(); ++c) {
+    const Vec<Dim> x = grid.cell_center(grid.cell_coord(c));
+    if (x[1] > 0.5) continue;
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(1.0);
+    p.density.push_back(1000.0);
+    p.liquid.push_back(x[0] < 0.5 ? 0 : 1);
+  }
+  const StressGrid<Dim> stress(grid);
+  // one viscosity everywhere: reproduced exactly on every DOF (reached or filled)
+  const VectorX same = stress_viscosity(stress, p, {3.0, 3.0});
+  CHECK((same.array() - 3.0).abs().maxCoeff() < 1e-14);
+  // two: each DOF whose stencil only reaches one liquid takes its eta; the rest lie between
+  const VectorX two = stress_viscosity(stress, p, {2.0, 8.0});
+  CHECK(two.minCoeff() >= 2.0 - 1e-14);
+  CHECK(two.maxCoeff() <= 8.0 + 1e-14);
+  int left = 0, right = 0;
+  for (int i = 0; i < stress.num_dofs(); ++i) {
+    const auto [k, c] = stress.coord(i);
+    const Vec<Dim> x = stress.position(k, c);
+    if (x[1] > 0.45) continue;
+    // more than a cell from the interfaces at x = 0.5 and at the periodic seam x = 0 = 1
+    if (x[0] > 0.15 && x[0] < 0.35) {
+      CHECK(two[i] == Approx(2.0).epsilon(1e-12));
+      ++left;
+    }
+    if (x[0] > 0.65 && x[0] < 0.85) {
+      CHECK(two[i] == Approx(8.0).epsilon(1e-12));
+      ++right;
+    }
+  }
+  CHECK(left > 0);
+  CHECK(right > 0);
+  // per cell for the renderer: the same rule on the cell centres
+  const VectorX cells = cell_viscosity(grid, p, {2.0, 8.0});
+  CHECK(cells[grid.cell_index(VecI<Dim>::Constant(1))] == Approx(2.0));
+  CHECK(cells[grid.cell_index(VecI<Dim>::Unit(0) * 5 + VecI<Dim>::Constant(1) - VecI<Dim>::Unit(0))] ==
+        Approx(8.0));
 }
