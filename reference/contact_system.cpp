@@ -130,10 +130,12 @@ ContactSystem<Dim>::ContactSystem(const std::vector<RigidBody<Dim>>& bodies,
   j_lambda.setFromTriplets(jl.begin(), jl.end());
   j_z.resize(kT * nc, nd);
   j_z.setFromTriplets(jz.begin(), jz.end());
-  // C = I + R per contact row: restitution only on contacts approaching faster than the threshold
+  // C = I + R per contact row: restitution only on contacts approaching faster than the
+  // threshold whose gap (with the margin) closes within this step
   const VectorX approach = normal_velocity(v_star);
   for (int c = 0; c < nc; ++c)
-    if (approach[c] < -p.restitution_threshold) restitution_scale[c] = 1.0 + contacts[c].restitution;
+    if (approach[c] < -p.restitution_threshold && phi[c] + p.dt * approach[c] <= 0.0)
+      restitution_scale[c] = 1.0 + contacts[c].restitution;
 }
 
 template <int Dim>

@@ -76,7 +76,8 @@ class ContactSystem {
   /// The same for the friction rows, nf.
   VectorX known_tangent_velocity;
   /// Diagonal of C = I + R (eq. (11)) per contact row, nc: 1 + max(e_a, e_b) on contacts
-  /// approaching faster than the restitution threshold, 1 otherwise. Departure: the paper's R is
+  /// approaching faster than the restitution threshold whose gap phi + epsilon closes within
+  /// the step (phi + dt u* <= 0), 1 otherwise. Departure: the paper's R is
   /// per body; the scene contract combines restitution per pair, so C acts on contact rows,
   /// (I + R) J_lambda v* instead of J_lambda (I + R) v*. For one contact with a static partner
   /// both read the same.

@@ -58,14 +58,28 @@ RigidStepStats RigidWorld<Dim>::step(double dt, double t, const Vec<Dim>& gravit
     if (b.is_dynamic()) b.velocity += dt * gravity;
   // (6) contacts up to a search distance: the margin plus what two bodies can close in a step
   const double search = settings_.margin_cells * dx + 2.0 * dt * max_point_speed() + 0.1 * dx;
-  std::vector<Contact<Dim>> found = detect_contacts<Dim>(bodies_, walls_, search);
+  ContactReduction reduction;
+  if (settings_.points_per_patch > 0)
+    reduction.max_points_2d = reduction.max_points_3d = settings_.points_per_patch;
+  else if (settings_.points_per_patch == 0)
+    reduction.max_points_2d = reduction.max_points_3d = 1 << 20;  // every candidate
+  std::vector<Contact<Dim>> found = detect_contacts<Dim>(bodies_, walls_, search, reduction);
   std::vector<Contact<Dim>> contacts;
   contacts.reserve(found.size());
-  for (const auto& c : found) {
+  for (Contact<Dim> c : found) {
     // only contacts that touch a dynamic body carry an unknown
     const bool a_dyn = c.body_a >= 0 && bodies_[c.body_a].is_dynamic();
     const bool b_dyn = c.body_b >= 0 && bodies_[c.body_b].is_dynamic();
-    if (a_dyn || b_dyn) contacts.push_back(c);
+    if (!a_dyn && !b_dyn) continue;
+    // the pair's coefficients as the scene contract combines them, a wall counting as a body
+    // with domain.wall_friction and domain.wall_restitution: sqrt(mu_a mu_b), max(e_a, e_b)
+    const double mu_a = c.body_a >= 0 ? bodies_[c.body_a].friction : walls_.friction;
+    const double mu_b = c.body_b >= 0 ? bodies_[c.body_b].friction : walls_.friction;
+    const double e_a = c.body_a >= 0 ? bodies_[c.body_a].restitution : walls_.restitution;
+    const double e_b = c.body_b >= 0 ? bodies_[c.body_b].restitution : walls_.restitution;
+    c.friction = std::sqrt(mu_a * mu_b);
+    c.restitution = std::max(e_a, e_b);
+    contacts.push_back(c);
   }
   stats.contacts = static_cast<int>(contacts.size());
   for (const auto& c : contacts) stats.max_penetration = std::max(stats.max_penetration, -c.phi);

@@ -28,6 +28,10 @@ struct RigidWorldSettings {
   /// Start each solve from the previous step's forces of matching contacts (same pair, wall
   /// face and a point within dx / 2). Not in the paper; it saves iterations on resting stacks.
   bool warm_start = true;
+  /// Contact points kept per normal patch of a pair: < 0 the reduction of collision.hpp as it
+  /// is (ContactReduction defaults: 2 in 2D, 4 in 3D), 0 every candidate within the search
+  /// distance, > 0 that many.
+  int points_per_patch = -1;
   static RigidWorldSettings from_scene(const SceneDesc& scene);
 };
 
