@@ -14,6 +14,7 @@
 #include "reference/errors.hpp"
 #include "reference/particles.hpp"
 #include "reference/pressure_projection.hpp"
+#include "reference/rigid_world.hpp"
 #include "reference/shape.hpp"
 #include "reference/stokes_system.hpp"
 #include "reference/stress_grid.hpp"
@@ -60,6 +61,11 @@ bool all_finite(const VectorX& v) {
 /// carried 10-23 m/s into the particles of pour-into-bowl-3d (impact speed 3-4 m/s).
 constexpr double kTrustedLiquidFaceFraction = 0.1;
 
+/// With moving bodies a step moves no body point by more than this fraction of a cell: the
+/// contact constraints are linear in the velocities at the step's start positions (section
+/// 3.2), so their error grows with the rotation and travel within a step.
+constexpr double kBodyCellFraction = 0.5;
+
 /// Layers of faces beyond the particles' reach that get u* by extrapolation before a solve with
 /// stress unknowns: a stress control volume with W_L^s > 0 reaches at most one cell into the air.
 constexpr int kAirVelocityLayers = 2;
@@ -86,10 +92,13 @@ class Simulation : public AnySimulation {
   double liquid_potential_energy() const override;
 
  private:
-  /// One step of Algorithm 1 of length dt (the liquid part; lines 3, 6, 12 and 13 concern
-  /// dynamic bodies, which this build does not simulate).
+  /// One step of Algorithm 1 of length dt: the liquid part, and for scenes with moving bodies
+  /// (no liquid yet) the body lines 3, 6, 8, 10, 12 and 13 through RigidWorld.
   void step(double dt);
-  /// The CFL-limited step size: min(max_dt, cfl dx / max speed).
+  /// The body part of a step: RigidWorld::step, with its statistics added to the frame's.
+  void step_bodies(double dt);
+  /// The CFL-limited step size: min(max_dt, cfl dx / max speed), and with moving bodies at most
+  /// kBodyCellFraction dx / (largest |v| + |omega| R of a body point).
   double cfl_dt() const;
   /// Liquid level set and the liquid weights W_L^p, W_L^u from the particles (lines 4-5).
   void update_liquid_weights();
@@ -137,6 +146,8 @@ class Simulation : public AnySimulation {
   int frame_ = 0;
   double time_ = 0.0;
   FrameStats stats_;
+  // rigid bodies with contact (scenes with dynamic or kinematic bodies and no liquid)
+  std::unique_ptr<RigidWorld<Dim>> rigid_;
 };
 
 template <int Dim>
@@ -221,6 +232,12 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   update_liquid_weights();
   liquid_weights_current_ = true;
   pressure_ = VectorX::Zero(grid_.num_cells());
+  // moving bodies: the rigid world (require_supported has refused them next to a liquid)
+  for (const auto& b : scene.bodies)
+    if (b.motion != "static") {
+      rigid_ = std::make_unique<RigidWorld<Dim>>(scene);
+      break;
+    }
   stats_.frame = 0;
   stats_.time = 0.0;
   stats_.solver.scheme = scene.solver.scheme;
@@ -257,11 +274,35 @@ double Simulation<Dim>::cfl_dt() const {
   const double speed = std::max(max_particle_speed(particles_),
                                 u_.size() ? u_.template lpNorm<Eigen::Infinity>() : 0.0);
   const double max_dt = scene_.time.max_dt;
-  return speed > 0.0 ? std::min(max_dt, scene_.time.cfl * grid_.dx() / speed) : max_dt;
+  double dt = speed > 0.0 ? std::min(max_dt, scene_.time.cfl * grid_.dx() / speed) : max_dt;
+  // a body point moves at most a fraction of a cell per step (contacts are linearised in time)
+  const double body_speed = rigid_ ? rigid_->max_point_speed() : 0.0;
+  if (body_speed > 0.0) dt = std::min(dt, kBodyCellFraction * grid_.dx() / body_speed);
+  return dt;
+}
+
+template <int Dim>
+void Simulation<Dim>::step_bodies(double dt) {
+  const RigidStepStats s = rigid_->step(dt, time_, gravity_);
+  stats_.contact_count = std::max(stats_.contact_count, s.contacts);
+  stats_.max_penetration = std::max(stats_.max_penetration, s.max_penetration);
+  stats_.solver.iterations += s.iterations;
+  stats_.solver.staggered_iterations += s.staggered_iterations;
+  stats_.solver.max_relative_residual =
+      std::max(stats_.solver.max_relative_residual, s.max_relative_residual);
+  stats_.solver.converged = stats_.solver.converged && s.converged;
+  stats_.solver.dofs_contact = std::max(stats_.solver.dofs_contact, s.dofs_contact);
+  stats_.solver.dofs_friction = std::max(stats_.solver.dofs_friction, s.dofs_friction);
+  stats_.timing_solve += s.solve_seconds;
 }
 
 template <int Dim>
 void Simulation<Dim>::step(double dt) {
+  // (3), (6), (8), (10), (12), (13) for the bodies; a scene with bodies has no liquid yet
+  if (rigid_) {
+    step_bodies(dt);
+    if (scene_.liquids.empty()) return;
+  }
   // (1) map velocity from particles to grid (APIC)
   particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
   // (2) add external force (gravity) on the faces that carry mass
@@ -466,7 +507,8 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
   for (std::size_t p = 0; p < particles_.size(); ++p)
     energy += 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
   s.kinetic_energy_liquid = energy;
-  s.kinetic_energy_bodies = 0.0;
+  s.kinetic_energy_bodies = rigid_ ? rigid_->kinetic_energy() : 0.0;
+  s.bodies = rigid_ ? rigid_->body_stats() : std::vector<BodyStats>{};
   // probes: grid velocity and cell pressure interpolated at the probe
   s.probes.clear();
   for (const auto& probe : scene_.probes) {
@@ -502,6 +544,15 @@ Image Simulation<Dim>::render(const RenderSpec& spec) const {
     solid.shape = shape;
     view.solids.push_back(solid);
   }
+  // moving bodies at their current pose: dynamic in blue, kinematic in green
+  if (rigid_)
+    for (const auto& b : rigid_->bodies()) {
+      if (!b.moves()) continue;
+      RenderSolid<Dim> solid;
+      solid.shape = b.posed_shape();
+      solid.color = b.is_dynamic() ? Rgb{70, 110, 180} : Rgb{110, 160, 90};
+      view.solids.push_back(solid);
+    }
   view.boundary = boundary_;
   view.time = time_;
   return render_frame<Dim>(view, spec);
