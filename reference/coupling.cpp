@@ -27,6 +27,40 @@ bool in_group(const CouplingBody<Dim>& body, BodyGroup group) {
   return body.two_way == (group == BodyGroup::two_way);
 }
 
+/// Lattice coordinates [lo, hi] (inclusive) of the points origin + (c + shift) dx, c in
+/// [0, dims), that lie within `margin` of the box; the whole range on periodic axes (the box may
+/// wrap) and for unbounded or empty boxes.
+template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> lattice_range(const MacGrid<Dim>& grid, const Box<Dim>& box,
+                                              const Vec<Dim>& shift, const VecI<Dim>& dims,
+                                              double margin) {
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = dims - VecI<Dim>::Ones();
+  if (box.isEmpty()) return {lo, hi};
+  for (int a = 0; a < Dim; ++a) {
+    if (grid.periodic(a) || !std::isfinite(box.min()[a]) || !std::isfinite(box.max()[a])) continue;
+    const double from = (box.min()[a] - margin - grid.origin()[a]) / grid.dx() - shift[a];
+    const double to = (box.max()[a] + margin - grid.origin()[a]) / grid.dx() - shift[a];
+    lo[a] = std::max(lo[a], static_cast<int>(std::floor(std::max(from, -1.0))));
+    hi[a] = std::min(hi[a], static_cast<int>(std::ceil(std::min(to, static_cast<double>(dims[a])))));
+  }
+  return {lo, hi};
+}
+
+/// Calls fn(c) for every c in [lo, hi] (inclusive), x fastest.
+template <int Dim, class Fn>
+void for_range(const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
+  for (int a = 0; a < Dim; ++a)
+    if (hi[a] < lo[a]) return;
+  VecI<Dim> c = lo;
+  while (true) {
+    fn(c);
+    int a = 0;
+    while (a < Dim && c[a] == hi[a]) c[a] = lo[a], ++a;
+    if (a == Dim) return;
+    ++c[a];
+  }
+}
+
 }  // namespace
 
 template <int Dim>
@@ -173,14 +207,29 @@ BodyCouplingOperator<Dim>::BodyCouplingOperator(const MacGrid<Dim>& grid,
   rows_ = body_rows(bodies_, group, &num_rows_);
   surface_cells_.assign(bodies_.size(), {});
   surface_stress_.assign(bodies_.size(), {});
-  // the surface: cells and stress DOFs whose column does not cancel
+  // the surface: cells and stress DOFs whose column does not cancel, searched within two cells
+  // of the body's bounds (face control volumes reach one cell beyond a cell; the shrinkage only
+  // moves the surface inward)
+  const double margin = 2.0 * grid_.dx();
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     if (rows_[i] < 0) continue;
+    const int body = static_cast<int>(i);
+    const Box<Dim> bounds = bodies_[i].shape->bounds();
     Block column;
-    for (int c = 0; c < grid_.num_cells(); ++c)
-      if (pressure_column(static_cast<int>(i), c, column)) surface_cells_[i].push_back(c);
-    for (int k = 0; k < stress_.num_dofs(); ++k)
-      if (stress_column(static_cast<int>(i), k, column)) surface_stress_[i].push_back(k);
+    const auto [lo, hi] = lattice_range<Dim>(grid_, bounds, Vec<Dim>::Constant(0.5), grid_.cells(), margin);
+    for_range<Dim>(lo, hi, [&](const VecI<Dim>& c) {
+      const int cell = grid_.cell_index(c);
+      if (pressure_column(body, cell, column)) surface_cells_[i].push_back(cell);
+    });
+    std::sort(surface_cells_[i].begin(), surface_cells_[i].end());
+    for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
+      const auto [slo, shi] = lattice_range<Dim>(grid_, bounds, StressGrid<Dim>::shift(k), stress_.dims(k), margin);
+      for_range<Dim>(slo, shi, [&](const VecI<Dim>& c) {
+        const int dof = stress_.index(k, c);
+        if (stress_column(body, dof, column)) surface_stress_[i].push_back(dof);
+      });
+    }
+    std::sort(surface_stress_[i].begin(), surface_stress_[i].end());
   }
 }
 

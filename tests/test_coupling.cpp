@@ -6,6 +6,7 @@
 #include <memory>
 #include <vector>
 
+#include "reference/contact_system.hpp"
 #include "reference/coupling.hpp"
 #include "reference/deformation_rate.hpp"
 #include "reference/gradient.hpp"
@@ -392,4 +393,85 @@ TEST_CASE("Buoyancy: J_p of a hydrostatic pressure is Archimedes' force", "[unit
     CHECK(err[2] < 5e-3);
     CHECK(order > 1.5);
   }
+}
+
+namespace {
+
+template <int Dim>
+RigidBody<Dim> make_rigid(const std::string& motion, const ShapeSpec& shape, const BodyVec<Dim>& v) {
+  BodySpec spec;
+  spec.name = motion;
+  spec.motion = motion;
+  spec.shape = shape;
+  spec.density = 500.0;
+  const ShapePtr<Dim> rest = make_shape<Dim>(shape, "test");
+  RigidBody<Dim> body(spec, rest, mass_properties<Dim>(shape, *rest, spec.density));
+  body.set_generalized_velocity(v);
+  return body;
+}
+
+template <int Dim>
+void check_rigid_bodies() {
+  const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 16 : 8);
+  ShapeSpec box;
+  box.type = "box";
+  box.center.assign(Dim, 0.4);
+  box.half_size.assign(Dim, 0.15);
+  box.half_size[0] = 0.2;
+  ShapeSpec ball;
+  ball.type = "sphere";
+  ball.center.assign(Dim, 0.7);
+  ball.radius = 0.12;
+  const BodyVec<Dim> v1 = BodyVec<Dim>::LinSpaced(0.1, 0.6), v2 = BodyVec<Dim>::LinSpaced(-1.0, 1.0);
+  std::vector<RigidBody<Dim>> bodies = {make_rigid<Dim>("kinematic", ball, v2),
+                                        make_rigid<Dim>("dynamic", box, v1),
+                                        make_rigid<Dim>("static", box, BodyVec<Dim>::Zero()),
+                                        make_rigid<Dim>("dynamic", ball, v2)};
+  // pose the first dynamic box: moved and rotated
+  bodies[1].position = Vec<Dim>::Constant(0.45);
+  bodies[1].orientation = [] {
+    if constexpr (Dim == 2) return 0.47;
+    else return Eigen::Quaterniond(some_rotation<3>());
+  }();
+  bodies[2].position = Vec<Dim>::Constant(0.2);
+  const std::vector<CouplingBody<Dim>> view = coupling_bodies(bodies);
+  REQUIRE(view.size() == 4);
+  CHECK(view[1].two_way);
+  CHECK_FALSE(view[0].two_way);
+  CHECK_FALSE(view[2].two_way);
+  CHECK(view[3].two_way);
+  // the posed box equals an independently posed rotated box
+  Vec<Dim> half = Vec<Dim>::Constant(0.15);
+  half[0] = 0.2;
+  const RotatedBox<Dim> reference(bodies[1].position, half, bodies[1].rotation());
+  const auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+  const SolidWeights<Dim> w = solid_weights<Dim>(grid, {view[1]}, {}, boundary, 0.0);
+  const SolidWeights<Dim> w_ref = solid_weights<Dim>(
+      grid, {CouplingBody<Dim>{std::make_shared<RotatedBox<Dim>>(reference), bodies[1].position, true}},
+      {}, boundary, 0.0);
+  CHECK((w.body_face[0] - w_ref.body_face[0]).cwiseAbs().maxCoeff() < 1e-9);
+  CHECK(w.body_face[0].maxCoeff() == 1.0);
+  // two-way rows follow the DOF order of the contact system
+  int rows = 0;
+  const std::vector<int> two = body_rows(view, BodyGroup::two_way, &rows);
+  ContactParameters params;
+  params.dt = 0.01;
+  params.dx = grid.dx();
+  const ContactSystem<Dim> contacts(bodies, {}, params);
+  REQUIRE(contacts.body_dof.size() == two.size());
+  for (std::size_t i = 0; i < two.size(); ++i) CHECK(contacts.body_dof[i] == two[i]);
+  CHECK(rows == contacts.num_body_dofs());
+  CHECK((group_velocities(bodies, BodyGroup::two_way) - contacts.v_star).cwiseAbs().maxCoeff() == 0.0);
+  // one-way rows: the kinematic ball, then the static box
+  const VectorX v_one = group_velocities(bodies, BodyGroup::one_way);
+  REQUIRE(v_one.size() == 2 * kBodyDofs<Dim>);
+  CHECK((v_one.template head<kBodyDofs<Dim>>() - v2).cwiseAbs().maxCoeff() == 0.0);
+  CHECK(v_one.template tail<kBodyDofs<Dim>>().cwiseAbs().maxCoeff() == 0.0);
+}
+
+}  // namespace
+
+TEST_CASE("Rigid bodies: posed shapes, groups and velocities", "[unit][coupling]") {
+  check_rigid_bodies<2>();
+  check_rigid_bodies<3>();
 }
