@@ -119,7 +119,7 @@ class MatrixFreeStokesOperator : public LinearOperator {
   const VectorX& face_coefficients() const { return face_coefficient_; }
   /// B x: the generalised force G W_L^p p + D^T M W_L^s tau_full of x = (tau, p) on every face
   /// (num_faces). The velocity update is u* - dt P^-1 (W_L^u)^-1 B x; the rigid-body terms of
-  /// eq. (24) aggregate the same force (J_s = -Q W_F^u D^T M, J_p = -Q W_F^u G, section 4.4.1).
+  /// eq. (24) aggregate the same force (J_s = -Q W_S^u D^T M, J_p = -Q W_S^u G, section 4.4.1; reference/coupling.hpp).
   VectorX face_force(const VectorX& x) const;
   /// Column i of B: the faces unknown i acts on and the coefficients B_fi, as (face, B_fi) pairs.
   std::vector<std::pair<int, double>> stencil(int i) const;
