@@ -505,10 +505,16 @@ TEST_CASE("every built-in scene parses, is supported and is labelled builtin:NAM
     CHECK(s.name == name);
     CHECK(s.source_label == "builtin:" + name);
     CHECK_FALSE(s.description.empty());
-    CHECK(s.render.color_by == "speed");
+    // scenes colour by speed unless they show viscosity (a scene with several viscosities)
+    CHECK((s.render.color_by == "speed" || s.render.color_by == "viscosity"));
     CHECK_NOTHROW(require_supported(s));
   }
-  for (const char* required : {"default", "dam-break-2d", "dam-break-3d", "pour-into-bowl-2d", "pour-into-bowl-3d"})
+  for (const char* required :
+       {"default", "dam-break-2d", "dam-break-3d", "pour-into-bowl-2d", "pour-into-bowl-3d",
+        "viscous-sphere-wall-2d", "viscous-sphere-wall-3d", "viscous-pour-2d", "viscous-pour-3d",
+        "viscous-coiling-2d", "viscous-coiling-3d", "box-stack-2d", "box-stack-3d",
+        "box-pyramid-2d", "box-pyramid-3d", "incline-2d", "incline-3d", "bouncing-balls-2d",
+        "bouncing-balls-3d", "bunny-into-bowl-2d", "bunny-into-bowl-3d"})
     CHECK(names.count(required) == 1);
   // the specified sizes
   const SceneDesc d = load_scene("default", {});
