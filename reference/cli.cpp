@@ -7,6 +7,7 @@
 
 #include "reference/runner.hpp"
 
+#include <algorithm>
 #include <iomanip>
 
 #include "reference/embedded_data.hpp"
@@ -156,6 +157,9 @@ int cmd_check(const std::vector<std::string>& args, std::ostream& out) {
 
 int cmd_list(const std::vector<std::string>& args, std::ostream& out) {
   if (!args.empty()) throw InputError("list: unexpected argument \"" + args[0].substr(0, 80) + "\" (list takes no arguments)");
+  // names padded to the longest one, so the columns line up
+  std::size_t width = 0;
+  for (const auto& f : embedded_scenes()) width = std::max(width, std::string(f.name).size());
   for (const auto& f : embedded_scenes()) {
     // dim and description from the scene itself
     std::string dim = "?", description;
@@ -164,7 +168,7 @@ int cmd_list(const std::vector<std::string>& args, std::ostream& out) {
       if (j.contains("dim") && j["dim"].is_number_integer()) dim = std::to_string(j["dim"].get<int>()) + "D";
       if (j.contains("description") && j["description"].is_string()) description = j["description"].get<std::string>();
     }
-    out << std::left << std::setw(20) << std::string(f.name) << " " << dim << "  " << description << "\n";
+    out << std::left << std::setw(static_cast<int>(width)) << std::string(f.name) << " " << dim << "  " << description << "\n";
   }
   return 0;
 }

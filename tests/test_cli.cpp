@@ -128,11 +128,16 @@ TEST_CASE("--version, --help and list", "[unit]") {
   std::istringstream lines(r.out);
   std::string line;
   int n = 0;
+  std::size_t dim_column = std::string::npos;
   while (std::getline(lines, line)) {
     std::istringstream words(line);
     std::string name, dim;
     words >> name >> dim;
     CHECK((dim == "2D" || dim == "3D"));
+    // the columns line up: the dimension starts at the same offset on every line
+    const std::size_t column = line.find(" " + dim + "  ");
+    if (dim_column == std::string::npos) dim_column = column;
+    CHECK(column == dim_column);
     CHECK(line.size() > name.size() + 10);  // a description follows
     ++n;
   }
