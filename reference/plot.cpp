@@ -319,6 +319,8 @@ int draw_color_bar(Image& img, int x, int y, int w, int h, Rgb (*map)(double), d
 
 ColorScale make_color_scale(const std::string& color_by, const std::vector<double>& values) {
   ColorScale scale;
+  // no liquid sample: nothing is coloured and no colour bar is drawn
+  if (values.empty()) return scale;
   if (color_by == "speed" || color_by == "viscosity") {
     scale.active = true;
     scale.map = colormap_viridis;

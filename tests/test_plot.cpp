@@ -235,3 +235,16 @@ TEST_CASE("legend lists the labelled series in their colours", "[unit]") {
   const Image bare = plot_lines(spec);
   CHECK(bare.rgb != img.rgb);
 }
+
+TEST_CASE("colour scales: active for the fields over liquid, inactive without liquid", "[unit]") {
+  const std::vector<double> speeds{0.0, 0.5, 1.0, 2.0};
+  for (const char* field : {"speed", "viscosity", "pressure"}) {
+    CAPTURE(field);
+    const ColorScale scale = make_color_scale(field, speeds);
+    CHECK(scale.active);
+    CHECK(scale.hi > scale.lo);
+    // a picture without liquid (rigid bodies only) gets no colour bar
+    CHECK_FALSE(make_color_scale(field, {}).active);
+  }
+  CHECK_FALSE(make_color_scale("none", speeds).active);
+}
