@@ -4,40 +4,6 @@
 
 namespace monolith {
 
-namespace {
-
-/// The lattice cell standing for lattice cell l along one axis of 2 n lattice cells: wrapped on
-/// a periodic axis, mirrored across the ends otherwise (the rule of volume_fractions.cpp).
-int map_lattice_cell(int l, int cells2, bool periodic) {
-  if (periodic) return ((l % cells2) + cells2) % cells2;
-  if (l < 0) return -l - 1;
-  if (l >= cells2) return 2 * cells2 - l - 1;
-  return l;
-}
-
-/// Fraction where phi < 0 of the 2^Dim lattice cells with lower corners lower + {0,1}^Dim.
-template <int Dim>
-double cube_fraction(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                     const VecI<Dim>& lower, const VectorX& phi) {
-  double sum = 0.0;
-  for (int sub = 0; sub < (1 << Dim); ++sub) {
-    // the lattice cell of this sub-cube after wrapping or mirroring
-    VecI<Dim> l;
-    for (int a = 0; a < Dim; ++a)
-      l[a] = map_lattice_cell(lower[a] + ((sub >> a) & 1), 2 * grid.cells()[a], grid.periodic(a));
-    std::array<double, (1 << Dim)> corners;
-    for (int k = 0; k < (1 << Dim); ++k) {
-      VecI<Dim> point;
-      for (int a = 0; a < Dim; ++a) point[a] = l[a] + ((k >> a) & 1);
-      corners[k] = phi[lattice.index(point)];
-    }
-    sum += lattice_cell_negative_fraction<Dim>(corners);
-  }
-  return sum / (1 << Dim);
-}
-
-}  // namespace
-
 template <int Dim>
 VecI<Dim> stress_control_volume_lower(const StressGrid<Dim>& stress, int index) {
   const auto [k, c] = stress.coord(index);
@@ -55,7 +21,8 @@ VectorX stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLat
   VectorX w(stress.num_dofs());
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < stress.num_dofs(); ++i)
-    w[i] = cube_fraction<Dim>(grid, lattice, stress_control_volume_lower(stress, i), phi);
+    w[i] = lattice_cube_negative_fraction<Dim>(grid, lattice, stress_control_volume_lower(stress, i),
+                                              phi);
   return w;
 }
 

@@ -69,48 +69,6 @@ double tetrahedron_fraction(const std::array<double, 4>& phi) {
   return abs_det(a0, a1, a2, b2) + abs_det(a0, a1, b1, b2) + abs_det(a0, b0, b1, b2);
 }
 
-/// Lattice point index along one axis of a lattice cell's corner, wrapped or mirrored.
-struct AxisMap {
-  int cells2 = 0;  // lattice cells along the axis (2 grid cells)
-  bool periodic = false;
-  /// the lattice cell that stands for lattice cell l (mirrored across non-periodic ends)
-  int cell(int l) const {
-    if (periodic) return ((l % cells2) + cells2) % cells2;
-    if (l < 0) return -l - 1;
-    if (l >= cells2) return 2 * cells2 - l - 1;
-    return l;
-  }
-};
-
-/// Fraction where phi < 0 of the union of the 2^Dim lattice cells with lower corners
-/// lower + {0,1}^Dim.
-template <int Dim>
-double control_volume_fraction(const SampleLattice<Dim>& lattice,
-                               const std::array<AxisMap, Dim>& maps, const VecI<Dim>& lower,
-                               const VectorX& phi) {
-  double sum = 0.0;
-  for (int sub = 0; sub < (1 << Dim); ++sub) {
-    // the lattice cell of this sub-cube, after wrapping or mirroring
-    VecI<Dim> l;
-    for (int a = 0; a < Dim; ++a) l[a] = maps[a].cell(lower[a] + ((sub >> a) & 1));
-    std::array<double, (1 << Dim)> corners;
-    for (int k = 0; k < (1 << Dim); ++k) {
-      VecI<Dim> point;
-      for (int a = 0; a < Dim; ++a) point[a] = l[a] + ((k >> a) & 1);
-      corners[k] = phi[lattice.index(point)];
-    }
-    sum += lattice_cell_negative_fraction<Dim>(corners);
-  }
-  return sum / (1 << Dim);
-}
-
-template <int Dim>
-std::array<AxisMap, Dim> axis_maps(const MacGrid<Dim>& grid) {
-  std::array<AxisMap, Dim> maps;
-  for (int a = 0; a < Dim; ++a) maps[a] = AxisMap{2 * grid.cells()[a], grid.periodic(a)};
-  return maps;
-}
-
 }  // namespace
 
 template <>
@@ -164,16 +122,42 @@ VectorX solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<D
   return phi;
 }
 
+int map_lattice_cell(int l, int cells2, bool periodic) {
+  if (periodic) return ((l % cells2) + cells2) % cells2;
+  if (l < 0) return -l - 1;
+  if (l >= cells2) return 2 * cells2 - l - 1;
+  return l;
+}
+
+template <int Dim>
+double lattice_cube_negative_fraction(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                      const VecI<Dim>& lower, const VectorX& phi) {
+  double sum = 0.0;
+  for (int sub = 0; sub < (1 << Dim); ++sub) {
+    // the lattice cell of this sub-cube, after wrapping or mirroring
+    VecI<Dim> l;
+    for (int a = 0; a < Dim; ++a)
+      l[a] = map_lattice_cell(lower[a] + ((sub >> a) & 1), 2 * grid.cells()[a], grid.periodic(a));
+    std::array<double, (1 << Dim)> corners;
+    for (int k = 0; k < (1 << Dim); ++k) {
+      VecI<Dim> point;
+      for (int a = 0; a < Dim; ++a) point[a] = l[a] + ((k >> a) & 1);
+      corners[k] = phi[lattice.index(point)];
+    }
+    sum += lattice_cell_negative_fraction<Dim>(corners);
+  }
+  return sum / (1 << Dim);
+}
+
 template <int Dim>
 VectorX cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                 const VectorX& phi) {
-  const auto maps = axis_maps(grid);
   VectorX w(grid.num_cells());
   // the cell control volume is the 2^Dim lattice cells starting at lattice point 2c
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < grid.num_cells(); ++i) {
     const VecI<Dim> lower = 2 * grid.cell_coord(i);
-    w[i] = control_volume_fraction<Dim>(lattice, maps, lower, phi);
+    w[i] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
   }
   return w;
 }
@@ -181,7 +165,6 @@ VectorX cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Di
 template <int Dim>
 VectorX face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                 const VectorX& phi) {
-  const auto maps = axis_maps(grid);
   VectorX w(grid.num_faces());
   // the face control volume starts half a cell before the face along its normal
 #pragma omp parallel for schedule(static)
@@ -189,7 +172,7 @@ VectorX face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Di
     const auto [axis, coord] = grid.face_coord(f);
     VecI<Dim> lower = 2 * coord;
     lower[axis] -= 1;
-    w[f] = control_volume_fraction<Dim>(lattice, maps, lower, phi);
+    w[f] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
   }
   return w;
 }
@@ -250,6 +233,8 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
 
 #define MONOLITH_INSTANTIATE(D)                                                                   \
   template double lattice_cell_negative_fraction<D>(const std::array<double, (1 << D)>&);         \
+  template double lattice_cube_negative_fraction<D>(const MacGrid<D>&, const SampleLattice<D>&,   \
+                                                    const VecI<D>&, const VectorX&);              \
   template VectorX solid_phi_on_lattice<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
                                            const std::vector<ShapePtr<D>>&, double);              \
   template VectorX cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,         \

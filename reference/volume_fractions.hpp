@@ -48,6 +48,18 @@ double simplex_negative_fraction<3>(const std::array<double, 4>& phi);
 template <int Dim>
 double lattice_cell_negative_fraction(const std::array<double, (1 << Dim)>& corner_phi);
 
+/// The lattice cell standing for lattice cell l along one axis of `cells2` lattice cells (two per
+/// grid cell): wrapped on a periodic axis, mirrored across the ends otherwise, so control volumes
+/// that stick out of the domain see the mirror image (wall/open) or the other side (periodic).
+int map_lattice_cell(int l, int cells2, bool periodic);
+
+/// Fraction where phi < 0 (phi on the half lattice) of the cube of 2^Dim lattice cells with lower
+/// corners lower + {0,1}^Dim, each lattice cell mapped by map_lattice_cell: the control volume
+/// fraction shared by cells, faces and stress DOFs.
+template <int Dim>
+double lattice_cube_negative_fraction(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                      const VecI<Dim>& lower, const VectorX& phi);
+
 /// Signed distance to the union of the solids, shifted inward by the shrinkage zeta of section
 /// 4.4.6: returns min_k d_k(x) + shrink_in_metres at every lattice point (positive outside the
 /// solids; +infinity everywhere when there is no solid).
