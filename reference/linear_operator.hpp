@@ -38,6 +38,39 @@ class LinearOperator {
   std::vector<VectorX> no_null_space_;
 };
 
+/// One SOR sweep (section 4.3) over colour groups, shared by the matrix-free operators: `groups`
+/// (any indexable container of std::vector<int> row lists) in order, or last group first when
+/// `reverse`. Every row i with diagonal[i] != 0 (and active[i] != 0 when `active` is given) gets
+///   x_i <- (1 - omega) x_i + omega (rhs_i - off_diagonal(i)) / diagonal_i,
+/// where off_diagonal(i) returns sum_{j != i} A_ij x_j at the current x. With `independent` (no
+/// two rows of one group couple) each group is relaxed in parallel; otherwise serially in list
+/// order, and in reverse list order on a backward sweep so forward then backward stays symmetric.
+template <class Groups, class OffDiagonal>
+void colour_sweep(const Groups& groups, bool independent, bool reverse, const VectorX& diagonal,
+                  const VectorX& rhs, VectorX& x, double omega, const std::vector<char>* active,
+                  const OffDiagonal& off_diagonal) {
+  auto relax = [&](int i) {
+    if (diagonal[i] == 0.0 || (active && !(*active)[i])) return;
+    const double off = off_diagonal(i);
+    x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal[i];
+  };
+  const int num_groups = static_cast<int>(groups.size());
+  for (int step = 0; step < num_groups; ++step) {
+    const std::vector<int>& list = groups[reverse ? num_groups - 1 - step : step];
+    const int count = static_cast<int>(list.size());
+    if (independent) {
+      // rows of one group share no coupling: independent updates in any order
+#pragma omp parallel for schedule(static)
+      for (int m = 0; m < count; ++m) relax(list[m]);
+    } else if (!reverse) {
+      // the colouring is broken (e.g. an odd periodic axis): serial, in list order
+      for (int m = 0; m < count; ++m) relax(list[m]);
+    } else {
+      for (int m = count - 1; m >= 0; --m) relax(list[m]);
+    }
+  }
+}
+
 /// An explicit sparse matrix as a LinearOperator: sweeps run over the rows in index order.
 class SparseMatrixOperator : public LinearOperator {
  public:

@@ -237,46 +237,30 @@ void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const 
 }
 
 template <int Dim>
-void MatrixFreePressureOperator<Dim>::relax_colour(int colour, const VectorX& rhs, VectorX& x,
-                                                   double omega, bool reverse,
-                                                   const std::vector<char>* active) const {
-  const std::vector<int>& list = colour_dofs_[colour];
-  const int count = static_cast<int>(list.size());
-  auto relax = [&](int i) {
-    if (diagonal_[i] == 0.0 || (active && !(*active)[i])) return;
-    double off = 0.0;
-    for (int j = 0; j < kNeighbours; ++j) {
-      const int s = i * kNeighbours + j;
-      const int n = neighbour_[s];
-      if (n >= 0) off -= coefficient_[s] * liquid_[i] * liquid_[n] * x[n];
-    }
-    x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
-  };
-  if (colouring_valid_) {
-    // dofs of one colour only couple to the other colour: independent updates in any order
-#pragma omp parallel for schedule(static)
-    for (int m = 0; m < count; ++m) relax(list[m]);
-  } else if (!reverse) {
-    // an odd periodic axis couples a colour to itself: serial, in list order
-    for (int m = 0; m < count; ++m) relax(list[m]);
-  } else {
-    // and in reverse order for the backward sweep, so that the SSOR preconditioner stays symmetric
-    for (int m = count - 1; m >= 0; --m) relax(list[m]);
+double MatrixFreePressureOperator<Dim>::off_diagonal_product(int i, const VectorX& x) const {
+  // sum_{j != i} A_ij x_j with A_ij = -k_f W_i W_j over the neighbours of i
+  double off = 0.0;
+  for (int j = 0; j < kNeighbours; ++j) {
+    const int s = i * kNeighbours + j;
+    const int n = neighbour_[s];
+    if (n >= 0) off -= coefficient_[s] * liquid_[i] * liquid_[n] * x[n];
   }
+  return off;
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                     const std::vector<char>* active) const {
-  relax_colour(0, rhs, x, omega, false, active);
-  relax_colour(1, rhs, x, omega, false, active);
+  // dofs of one colour only couple to the other colour (unless an odd periodic axis breaks it)
+  colour_sweep(colour_dofs_, colouring_valid_, false, diagonal_, rhs, x, omega, active,
+               [&](int i) { return off_diagonal_product(i, x); });
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                      const std::vector<char>* active) const {
-  relax_colour(1, rhs, x, omega, true, active);
-  relax_colour(0, rhs, x, omega, true, active);
+  colour_sweep(colour_dofs_, colouring_valid_, true, diagonal_, rhs, x, omega, active,
+               [&](int i) { return off_diagonal_product(i, x); });
 }
 
 template <int Dim>

@@ -91,8 +91,8 @@ class MatrixFreePressureOperator : public LinearOperator {
 
  private:
   static constexpr int kNeighbours = 2 * Dim;
-  void relax_colour(int colour, const VectorX& rhs, VectorX& x, double omega, bool reverse,
-                    const std::vector<char>* active) const;
+  /// sum_{j != i} A_ij x_j (the row of i without its diagonal), for the SOR sweeps.
+  double off_diagonal_product(int i, const VectorX& x) const;
   const MacGrid<Dim>* grid_;
   int num_dofs_ = 0;
   std::vector<int> cell_of_dof_;

@@ -316,39 +316,18 @@ double MatrixFreeStokesOperator<Dim>::row_product(int i, const VectorX& x) const
 }
 
 template <int Dim>
-void MatrixFreeStokesOperator<Dim>::relax_group(int group, const VectorX& rhs, VectorX& x,
-                                                double omega, bool reverse,
-                                                const std::vector<char>* active) const {
-  const std::vector<int>& list = groups_[group];
-  const int count = static_cast<int>(list.size());
-  auto relax = [&](int i) {
-    if (diagonal_[i] == 0.0 || (active && !(*active)[i])) return;
-    const double off = row_product(i, x) - diagonal_[i] * x[i];
-    x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
-  };
-  if (colouring_valid_) {
-    // unknowns of one group share no face: independent updates
-#pragma omp parallel for schedule(static)
-    for (int m = 0; m < count; ++m) relax(list[m]);
-  } else if (!reverse) {
-    for (int m = 0; m < count; ++m) relax(list[m]);
-  } else {
-    for (int m = count - 1; m >= 0; --m) relax(list[m]);
-  }
-}
-
-template <int Dim>
 void MatrixFreeStokesOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                   const std::vector<char>* active) const {
-  for (int g = 0; g < static_cast<int>(groups_.size()); ++g)
-    relax_group(g, rhs, x, omega, false, active);
+  // unknowns of one group share no face
+  colour_sweep(groups_, colouring_valid_, false, diagonal_, rhs, x, omega, active,
+               [&](int i) { return row_product(i, x) - diagonal_[i] * x[i]; });
 }
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                    const std::vector<char>* active) const {
-  for (int g = static_cast<int>(groups_.size()) - 1; g >= 0; --g)
-    relax_group(g, rhs, x, omega, true, active);
+  colour_sweep(groups_, colouring_valid_, true, diagonal_, rhs, x, omega, active,
+               [&](int i) { return row_product(i, x) - diagonal_[i] * x[i]; });
 }
 
 template <int Dim>

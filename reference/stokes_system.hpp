@@ -126,8 +126,6 @@ class MatrixFreeStokesOperator : public LinearOperator {
 
  private:
   double row_product(int i, const VectorX& x) const;
-  void relax_group(int group, const VectorX& rhs, VectorX& x, double omega, bool reverse,
-                   const std::vector<char>* active) const;
   int size_ = 0;
   int num_faces_ = 0;
   VectorX face_coefficient_;
