@@ -169,24 +169,42 @@ MassProperties<Dim> bowl_properties(const Vec<Dim>& c, double radius, double r_i
 /// The closed forms and exact integrals of the dimension-specific shapes (polygon, bunny,
 /// mesh); returns false when the type has none.
 bool dimension_properties(const ShapeSpec& spec, double density, MassProperties<2>* out) {
+  std::vector<Vec<2>> outline;
+  Vec<2> pivot;
+  if (!unrotated_geometry(spec, &outline, &pivot)) return false;
+  *out = rotate<2>(polygon_mass_properties(outline, density), spec, pivot);
+  return true;
+}
+
+bool dimension_properties(const ShapeSpec& spec, double density, MassProperties<3>* out) {
+  TriangleMesh m;
+  Vec<3> pivot;
+  if (!unrotated_geometry(spec, &m, &pivot)) return false;
+  *out = rotate<3>(triangle_mesh_mass_properties(m.vertices, m.triangles, density), spec, pivot);
+  return true;
+}
+
+}  // namespace
+
+bool unrotated_geometry(const ShapeSpec& spec, std::vector<Vec<2>>* outline, Vec<2>* pivot) {
   if (spec.type == "polygon") {
-    std::vector<Vec<2>> pts;
-    for (const auto& q : spec.points) pts.emplace_back(q[0], q[1]);
+    // the vertices as given, rotated about their mean
+    outline->clear();
+    for (const auto& q : spec.points) outline->emplace_back(q[0], q[1]);
     Vec<2> centroid = Vec<2>::Zero();
-    for (const auto& q : pts) centroid += q;
-    centroid /= static_cast<double>(pts.size());
-    *out = rotate<2>(polygon_mass_properties(pts, density), spec, centroid);
+    for (const auto& q : *outline) centroid += q;
+    *pivot = centroid / static_cast<double>(outline->size());
     return true;
   }
   if (spec.type == "bunny") {
-    const Vec<2> c = to_vec<2>(spec.center);
-    *out = rotate<2>(polygon_mass_properties(bunny_outline(c, spec.size), density), spec, c);
+    *pivot = to_vec<2>(spec.center);
+    *outline = bunny_outline(*pivot, spec.size);
     return true;
   }
   return false;
 }
 
-bool dimension_properties(const ShapeSpec& spec, double density, MassProperties<3>* out) {
+bool unrotated_geometry(const ShapeSpec& spec, TriangleMesh* mesh, Vec<3>* pivot) {
   if (spec.type == "mesh") {
     // the unrotated mesh, as make_shape reads it (flipped if inward-oriented)
     ShapeSpec plain = spec;
@@ -194,21 +212,17 @@ bool dimension_properties(const ShapeSpec& spec, double density, MassProperties<
     const ShapePtr<3> shape = make_shape<3>(plain, "mesh");
     const auto* mesh_shape = dynamic_cast<const MeshShape*>(shape.get());
     if (!mesh_shape) return false;
-    const TriangleMesh& m = mesh_shape->sdf().mesh();
-    const Vec<3> pivot = spec.translate.empty() ? Vec<3>::Zero() : to_vec<3>(spec.translate);
-    *out = rotate<3>(triangle_mesh_mass_properties(m.vertices, m.triangles, density), spec, pivot);
+    *mesh = mesh_shape->sdf().mesh();
+    *pivot = spec.translate.empty() ? Vec<3>(Vec<3>::Zero()) : to_vec<3>(spec.translate);
     return true;
   }
   if (spec.type == "bunny") {
-    const Vec<3> c = to_vec<3>(spec.center);
-    const TriangleMesh m = placed_bunny_mesh(c, spec.size);
-    *out = rotate<3>(triangle_mesh_mass_properties(m.vertices, m.triangles, density), spec, c);
+    *pivot = to_vec<3>(spec.center);
+    *mesh = placed_bunny_mesh(*pivot, spec.size);
     return true;
   }
   return false;
 }
-
-}  // namespace
 
 std::vector<Vec<2>> bunny_outline(const Vec<2>& center, double size) {
   const auto& raw = bunny_silhouette_points();

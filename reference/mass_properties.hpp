@@ -96,6 +96,17 @@ MassProperties<Dim> integrate_mass_properties(const Shape<Dim>& shape, const Box
 /// bounding-box centre at `center`).
 std::vector<Vec<2>> bunny_outline(const Vec<2>& center, double size);
 
+struct TriangleMesh;
+
+/// The geometry of a 2D "polygon" or "bunny" spec before its rotation: the outline points (as
+/// make_shape places them) and the pivot of the spec's rotation (the vertex mean for a polygon,
+/// the centre for the bunny); false for any other type. Shared by the mass properties and the
+/// body surface samples so both see the same outline.
+bool unrotated_geometry(const ShapeSpec& spec, std::vector<Vec<2>>* outline, Vec<2>* pivot);
+/// The same for a 3D "mesh" (as make_shape reads it, flipped if inward-oriented; pivot: the
+/// translation) or "bunny" (pivot: the centre) spec: the unrotated triangle mesh.
+bool unrotated_geometry(const ShapeSpec& spec, TriangleMesh* mesh, Vec<3>* pivot);
+
 /// Exact mass properties of a simple polygon (either orientation).
 MassProperties<2> polygon_mass_properties(const std::vector<Vec<2>>& points, double density);
 

@@ -257,43 +257,21 @@ void rotate_points(std::vector<Vec<Dim>>* pts, const ShapeSpec& spec, const Vec<
 /// Samples of the dimension-specific shapes (2D polygon and bunny outline, 3D mesh and bunny);
 /// false when the type is not one of them.
 bool dimension_samples(const ShapeSpec& spec, double spacing, std::vector<Vec<2>>* out) {
-  if (spec.type == "polygon") {
-    std::vector<Vec<2>> v;
-    for (const auto& q : spec.points) v.emplace_back(q[0], q[1]);
-    Vec<2> centroid = Vec<2>::Zero();
-    for (const auto& q : v) centroid += q;
-    centroid /= static_cast<double>(v.size());
-    *out = polyline_samples(v, spacing);
-    rotate_points<2>(out, spec, centroid);
-    return true;
-  }
-  if (spec.type == "bunny") {
-    const Vec<2> c = to_vec<2>(spec.center);
-    *out = polyline_samples(bunny_outline(c, spec.size), spacing);
-    rotate_points<2>(out, spec, c);
-    return true;
-  }
-  return false;
+  std::vector<Vec<2>> outline;
+  Vec<2> pivot;
+  if (!unrotated_geometry(spec, &outline, &pivot)) return false;
+  *out = polyline_samples(outline, spacing);
+  rotate_points<2>(out, spec, pivot);
+  return true;
 }
 
 bool dimension_samples(const ShapeSpec& spec, double spacing, std::vector<Vec<3>>* out) {
-  if (spec.type == "mesh") {
-    ShapeSpec plain = spec;
-    plain.rotation.clear();
-    const ShapePtr<3> shape = make_shape<3>(plain, "mesh");
-    const auto* mesh_shape = dynamic_cast<const MeshShape*>(shape.get());
-    if (!mesh_shape) return false;
-    *out = mesh_samples(mesh_shape->sdf().mesh(), spacing);
-    rotate_points<3>(out, spec, spec.translate.empty() ? Vec<3>(Vec<3>::Zero()) : to_vec<3>(spec.translate));
-    return true;
-  }
-  if (spec.type == "bunny") {
-    const Vec<3> c = to_vec<3>(spec.center);
-    *out = mesh_samples(placed_bunny_mesh(c, spec.size), spacing);
-    rotate_points<3>(out, spec, c);
-    return true;
-  }
-  return false;
+  TriangleMesh m;
+  Vec<3> pivot;
+  if (!unrotated_geometry(spec, &m, &pivot)) return false;
+  *out = mesh_samples(m, spacing);
+  rotate_points<3>(out, spec, pivot);
+  return true;
 }
 
 }  // namespace
