@@ -59,8 +59,9 @@ void colour_sweep(const Groups& groups, bool independent, bool reverse, const Ve
     const std::vector<int>& list = groups[reverse ? num_groups - 1 - step : step];
     const int count = static_cast<int>(list.size());
     if (independent) {
-      // rows of one group share no coupling: independent updates in any order
-#pragma omp parallel for schedule(static)
+      // rows of one group share no coupling: independent updates in any order (threads only
+      // pay off on large groups; the result is the same either way)
+#pragma omp parallel for schedule(static) if (count > 512)
       for (int m = 0; m < count; ++m) relax(list[m]);
     } else if (!reverse) {
       // the colouring is broken (e.g. an odd periodic axis): serial, in list order
@@ -68,6 +69,18 @@ void colour_sweep(const Groups& groups, bool independent, bool reverse, const Ve
     } else {
       for (int m = count - 1; m >= 0; --m) relax(list[m]);
     }
+  }
+}
+
+/// y = A x for a row-major sparse A (y resized to rows), row-parallel: every row is written by
+/// one thread, so the result does not depend on the thread count.
+inline void sparse_row_product(const SparseMatrix& a, const VectorX& x, VectorX& y) {
+  y.resize(a.rows());
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < a.rows(); ++i) {
+    double s = 0.0;
+    for (SparseMatrix::InnerIterator it(a, i); it; ++it) s += it.value() * x[it.col()];
+    y[i] = s;
   }
 }
 
@@ -80,16 +93,7 @@ class SparseMatrixOperator : public LinearOperator {
     diagonal_ = a_.diagonal();
   }
   int size() const override { return static_cast<int>(a_.rows()); }
-  void apply(const VectorX& x, VectorX& y) const override {
-    y.resize(a_.rows());
-    // row-parallel product (row-major storage: every row is written by one thread)
-#pragma omp parallel for schedule(static)
-    for (int i = 0; i < a_.rows(); ++i) {
-      double s = 0.0;
-      for (SparseMatrix::InnerIterator it(a_, i); it; ++it) s += it.value() * x[it.col()];
-      y[i] = s;
-    }
-  }
+  void apply(const VectorX& x, VectorX& y) const override { sparse_row_product(a_, x, y); }
   VectorX diagonal() const override {
     return diagonal_;
   }

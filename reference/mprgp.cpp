@@ -167,6 +167,13 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
     result.breakdown = true;
     result.message = why;
   };
+  // a search direction d needs d^T A d > 0 and finite; otherwise the solve stops, naming it
+  auto positive_curvature = [&](double curvature, const std::string& name) {
+    if (std::isfinite(curvature) && curvature > 0.0) return true;
+    fail(std::isfinite(curvature) ? name + " <= 0 (operator not positive definite)"
+                                  : "non-finite value in " + name);
+    return false;
+  };
 
   exact_gradient();
   classify();
@@ -204,11 +211,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
       // x is proportional: trial conjugate gradient step along p (supported on F)
       a.apply(p, ap);
       const double pap = p.dot(ap);
-      if (!std::isfinite(pap) || pap <= 0.0) {
-        fail(std::isfinite(pap) ? "p^T A p <= 0 (operator not positive definite)"
-                                : "non-finite value in p^T A p");
-        break;
-      }
+      if (!positive_curvature(pap, "p^T A p")) break;
       const double alpha_cg = g.dot(p) / pap;
       const double alpha_f = box.feasible_step(x, p);
       if (alpha_cg < alpha_f) {
@@ -267,11 +270,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
       ++result.proportioning_steps;
       a.apply(beta, ap);
       const double dad = beta.dot(ap);
-      if (!std::isfinite(dad) || dad <= 0.0) {
-        fail(std::isfinite(dad) ? "d^T A d <= 0 (operator not positive definite)"
-                                : "non-finite value in d^T A d");
-        break;
-      }
+      if (!positive_curvature(dad, "d^T A d")) break;
       const double alpha_cg = g.dot(beta) / dad;
       // with two-sided bounds the step may reach the opposite bound: stop there
       const double alpha_f = box.feasible_step(x, beta);
@@ -344,52 +343,32 @@ ColouredSparseOperator::ColouredSparseOperator(SparseMatrix a, Colouring colours
 int ColouredSparseOperator::size() const { return static_cast<int>(a_.rows()); }
 
 void ColouredSparseOperator::apply(const VectorX& x, VectorX& y) const {
-  y.resize(a_.rows());
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < a_.rows(); ++i) {
-    double s = 0.0;
-    for (SparseMatrix::InnerIterator it(a_, i); it; ++it) s += it.value() * x[it.col()];
-    y[i] = s;
-  }
+  sparse_row_product(a_, x, y);
 }
 
 VectorX ColouredSparseOperator::diagonal() const { return diagonal_; }
 
-void ColouredSparseOperator::relax_row(int i, const VectorX& rhs, VectorX& x, double omega) const {
-  if (diagonal_[i] == 0.0) return;
+double ColouredSparseOperator::off_diagonal_product(int i, const VectorX& x) const {
   // stored zeros are skipped: the colouring ignores them, so their x_j may be written by another
   // thread of the same colour at this moment
   double off = 0.0;
   for (SparseMatrix::InnerIterator it(a_, i); it; ++it)
     if (it.col() != i && it.value() != 0.0) off += it.value() * x[it.col()];
-  x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
+  return off;
 }
 
 void ColouredSparseOperator::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                            const std::vector<char>* active) const {
   // colours in order; the rows of one colour read only other colours' values
-  for (const auto& rows : colours_.colours) {
-    const int m = static_cast<int>(rows.size());
-#pragma omp parallel for schedule(static) if (m > 512)
-    for (int k = 0; k < m; ++k) {
-      const int i = rows[k];
-      if (!active || (*active)[i]) relax_row(i, rhs, x, omega);
-    }
-  }
+  colour_sweep(colours_.colours, true, false, diagonal_, rhs, x, omega, active,
+               [&](int i) { return off_diagonal_product(i, x); });
 }
 
 void ColouredSparseOperator::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                             const std::vector<char>* active) const {
   // colours and rows in reverse order: the transpose of the forward sweep (symmetric SSOR)
-  for (int c = colours_.num_colours() - 1; c >= 0; --c) {
-    const auto& rows = colours_.colours[c];
-    const int m = static_cast<int>(rows.size());
-#pragma omp parallel for schedule(static) if (m > 512)
-    for (int k = m - 1; k >= 0; --k) {
-      const int i = rows[k];
-      if (!active || (*active)[i]) relax_row(i, rhs, x, omega);
-    }
-  }
+  colour_sweep(colours_.colours, true, true, diagonal_, rhs, x, omega, active,
+               [&](int i) { return off_diagonal_product(i, x); });
 }
 
 }  // namespace monolith

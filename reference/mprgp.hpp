@@ -114,7 +114,8 @@ class ColouredSparseOperator : public LinearOperator {
   const Colouring& colouring() const { return colours_; }
 
  private:
-  void relax_row(int i, const VectorX& rhs, VectorX& x, double omega) const;
+  /// sum_{j != i} A_ij x_j over the nonzero stored entries of row i.
+  double off_diagonal_product(int i, const VectorX& x) const;
   SparseMatrix a_;
   Colouring colours_;
   VectorX diagonal_;
