@@ -283,10 +283,7 @@ void MatrixFreeStokesOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
   VectorX v(num_faces_);
 #pragma omp parallel for schedule(static)
   for (int f = 0; f < num_faces_; ++f) {
-    double s = 0.0;
-    if (face_coefficient_[f] != 0.0)
-      for (int e = face_start_[f]; e < face_start_[f + 1]; ++e) s += face_coef_[e] * x[face_unknown_[e]];
-    v[f] = face_coefficient_[f] * s;
+    v[f] = face_coefficient_[f] != 0.0 ? face_coefficient_[f] * face_product(f, x) : 0.0;
   }
   // y_i = sum_f B_fi v_f + (1/2 N^-1 W^s x)_i (one writer per unknown)
   y.resize(size_);
@@ -301,6 +298,14 @@ void MatrixFreeStokesOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
 }
 
 template <int Dim>
+double MatrixFreeStokesOperator<Dim>::face_product(int f, const VectorX& x) const {
+  // (B x)_f from the unknowns acting on face f
+  double s = 0.0;
+  for (int e = face_start_[f]; e < face_start_[f + 1]; ++e) s += face_coef_[e] * x[face_unknown_[e]];
+  return s;
+}
+
+template <int Dim>
 double MatrixFreeStokesOperator<Dim>::row_product(int i, const VectorX& x) const {
   // (A x)_i from the faces of unknown i only
   double s = self_[i] * x[i];
@@ -308,9 +313,7 @@ double MatrixFreeStokesOperator<Dim>::row_product(int i, const VectorX& x) const
   for (int e = unknown_start_[i]; e < unknown_start_[i + 1]; ++e) {
     const int f = unknown_face_[e];
     if (face_coefficient_[f] == 0.0) continue;
-    double vf = 0.0;
-    for (int g = face_start_[f]; g < face_start_[f + 1]; ++g) vf += face_coef_[g] * x[face_unknown_[g]];
-    s += unknown_coef_[e] * face_coefficient_[f] * vf;
+    s += unknown_coef_[e] * face_coefficient_[f] * face_product(f, x);
   }
   return s;
 }
@@ -335,11 +338,7 @@ VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
   VectorX force(num_faces_);
   // one writer per face: gather the unknowns acting on it
 #pragma omp parallel for schedule(static)
-  for (int f = 0; f < num_faces_; ++f) {
-    double s = 0.0;
-    for (int e = face_start_[f]; e < face_start_[f + 1]; ++e) s += face_coef_[e] * x[face_unknown_[e]];
-    force[f] = s;
-  }
+  for (int f = 0; f < num_faces_; ++f) force[f] = face_product(f, x);
   return force;
 }
 

@@ -125,6 +125,8 @@ class MatrixFreeStokesOperator : public LinearOperator {
   std::vector<std::pair<int, double>> stencil(int i) const;
 
  private:
+  /// (B x)_f: row f of B times x.
+  double face_product(int f, const VectorX& x) const;
   double row_product(int i, const VectorX& x) const;
   int size_ = 0;
   int num_faces_ = 0;
