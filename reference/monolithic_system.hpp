@@ -1,0 +1,220 @@
+#pragma once
+/// \file monolithic_system.hpp
+/// The unified pressure-viscosity-contact system of eq. (24) (section 4.2) over (tau, p, lambda,
+/// z) for one step, the MLCP (26) and the friction LCP (25) as LinearOperators, and the
+/// PVC-unified solve (staggered projections, MPRGP). docs/coupling.md, "The unified system (24)",
+/// derives the scaling.
+///
+/// Scaling (section 4.1). With Jh_p, Jh_s the Jacobians of coupling.hpp (they keep the control
+/// volume dx^Dim: Jh p is a force in N) and alpha = 1 / dx^Dim, the paper's J_p = alpha Jh_p,
+/// J_s = alpha Jh_s, and every rigid block of eq. (24) is one product
+///     A_ij(rigid) = dt alpha B_i^T M_r^-1 B_j,
+///     B_1 = Jh_s W_L^s E S_tau^T,  B_2 = Jh_p W_L^p S_p^T,  B_3 = J_lambda^T,  B_4 = J_z^T,
+/// (nd rows: the two-way bodies' DOFs in ContactSystem order), e.g. the paper's
+/// (dt / alpha) W_L^p J_p^T M_r^-1 J_p W_L^p = dt alpha W_L^p Jh_p^T M_r^-1 Jh_p W_L^p and
+/// dt W_L^p J_p^T M_r^-1 J_lambda^T = dt alpha W_L^p Jh_p^T M_r^-1 J_lambda^T: the same dt alpha as
+/// ContactSystem's A33 = dt alpha J_lambda M_r^-1 J_lambda^T. lambda and z stay forces in N (2D:
+/// N/m). (alpha M_r)^-1 is never formed: M_r^-1 (ContactSystem::m_r_inverse, block diagonal) is
+/// applied to a body-space vector and the factor dt alpha multiplies the result (section 4.2).
+/// The products B_i^T M_r^-1 B_j x are evaluated right to left (sequential multiplication,
+/// section 4.4.3); the dense n x n blocks exist only in dense_matrix(), for small tests.
+
+#include <vector>
+
+#include "reference/common.hpp"
+#include "reference/contact_system.hpp"
+#include "reference/coupling.hpp"
+#include "reference/linear_operator.hpp"
+#include "reference/mac_grid.hpp"
+#include "reference/rigid_body.hpp"
+#include "reference/stokes_system.hpp"
+#include "reference/stress_grid.hpp"
+#include "reference/viscosity.hpp"
+
+namespace monolith {
+
+/// The sixteen blocks of eq. (24) for one step. Unknown blocks: 1 tau (active stress unknowns of
+/// StokesDofs, StressLayout numbering), 2 p (active pressure DOFs), 3 lambda (one per contact of
+/// the ContactSystem), 4 z ((Dim - 1) per contact). Holds copies of its inputs.
+template <int Dim>
+class MonolithicSystem {
+ public:
+  /// `w` must carry W_F^u / W_F^s of `solids` (solid_weights over coupling_bodies(bodies), moving
+  /// bodies included); `u_star` the face velocities after advection and forces; `contacts` the
+  /// ContactSystem of the same bodies (its v* is the two-way bodies' v*, its alpha must equal
+  /// 1 / dx^Dim: std::invalid_argument otherwise). One-way (fixed, kinematic) bodies enter b1,
+  /// b2 only (section 4.4.4).
+  MonolithicSystem(const MacGrid<Dim>& grid, StressForm form, const StokesWeights& w, double dt,
+                   const VectorX& u_star, const std::vector<RigidBody<Dim>>& bodies,
+                   const SolidWeights<Dim>& solids, const ContactSystem<Dim>& contacts);
+
+  int num_stress() const { return dofs_.num_stress(); }
+  int num_pressure() const { return dofs_.num_pressure(); }
+  int num_fluid() const { return dofs_.size(); }
+  int num_contacts() const { return contacts_.num_contacts(); }
+  int num_friction() const { return contacts_.num_friction_rows(); }
+  int num_body_dofs() const { return contacts_.num_body_dofs(); }
+  /// Size of block i (1..4).
+  int block_size(int i) const;
+
+  /// y = A_ij x for block row i and column j (1..4) of eq. (24):
+  ///   A_ij = F_ij + dt alpha B_i^T M_r^-1 B_j (file comment for B_i), F the fluid part
+  ///   F_11 = 1/2 N^-1 W_F^s W_L^s + dt W_L^s M D W_F^u P^-1 (W_L^u)^-1 D^T M W_L^s,
+  ///   F_12 = dt W_L^s M D W_F^u P^-1 (W_L^u)^-1 G W_L^p,
+  ///   F_22 = dt W_L^p G^T W_F^u P^-1 (W_L^u)^-1 G W_L^p (stokes_system.hpp, restricted to the
+  ///   active DOFs), zero in the other blocks. A_ji = A_ij^T. The rigid part is evaluated as
+  ///   B_i^T (M_r^-1 (B_j x)), never formed.
+  VectorX apply_block(int i, int j, const VectorX& x) const;
+  /// eq. (24): A11 tau = (1/2 N^-1 W^s + dt W_L^s M D K D^T M W_L^s + (dt/alpha) W_L^s J_s^T
+  /// M_r^-1 J_s W_L^s) tau, K = W_F^u P^-1 (W_L^u)^-1; n_tau x n_tau.
+  VectorX a11(const VectorX& tau) const { return apply_block(1, 1, tau); }
+  /// eq. (24): A12 p = (dt W_L^s M D K G W_L^p + (dt/alpha) W_L^s J_s^T M_r^-1 J_p W_L^p) p; n_tau x n_p.
+  VectorX a12(const VectorX& p) const { return apply_block(1, 2, p); }
+  /// eq. (24): A13 lambda = dt W_L^s J_s^T M_r^-1 J_lambda^T lambda; n_tau x nc.
+  VectorX a13(const VectorX& lambda) const { return apply_block(1, 3, lambda); }
+  /// eq. (24): A14 z = dt W_L^s J_s^T M_r^-1 J_z^T z; n_tau x nf.
+  VectorX a14(const VectorX& z) const { return apply_block(1, 4, z); }
+  /// eq. (24): A22 p = (dt W_L^p G^T K G W_L^p + (dt/alpha) W_L^p J_p^T M_r^-1 J_p W_L^p) p; n_p x n_p.
+  VectorX a22(const VectorX& p) const { return apply_block(2, 2, p); }
+  /// eq. (24): A23 lambda = dt W_L^p J_p^T M_r^-1 J_lambda^T lambda; n_p x nc.
+  VectorX a23(const VectorX& lambda) const { return apply_block(2, 3, lambda); }
+  /// eq. (24): A24 z = dt W_L^p J_p^T M_r^-1 J_z^T z; n_p x nf.
+  VectorX a24(const VectorX& z) const { return apply_block(2, 4, z); }
+  /// eq. (24): A33 lambda = dt alpha J_lambda M_r^-1 J_lambda^T lambda; nc x nc.
+  VectorX a33(const VectorX& lambda) const { return apply_block(3, 3, lambda); }
+  /// eq. (24): A34 z = dt alpha J_lambda M_r^-1 J_z^T z; nc x nf.
+  VectorX a34(const VectorX& z) const { return apply_block(3, 4, z); }
+  /// eq. (24): A44 z = dt alpha J_z M_r^-1 J_z^T z; nf x nf.
+  VectorX a44(const VectorX& z) const { return apply_block(4, 4, z); }
+
+  /// eq. (24): b1 = W_L^s M D W_F^u u* - W_L^s (J_{s,2}^T v*_2 + J_{s,1}^T v*_1) (paper's J_s,
+  /// i.e. alpha Jh_s; both groups, section 4.4.4), n_tau.
+  const VectorX& b1() const { return b1_; }
+  /// eq. (24): b2 = W_L^p G^T W_F^u u* - W_L^p (J_{p,2}^T v*_2 + J_{p,1}^T v*_1), n_p.
+  const VectorX& b2() const { return b2_; }
+  /// eq. (24): b3 = -alpha (C (J_lambda v* + g_n) - target) (ContactSystem::b3), nc.
+  VectorX b3() const { return contacts_.b3(); }
+  /// eq. (24): b4 = -alpha (J_z v* + g_t) (ContactSystem::b4), nf.
+  VectorX b4() const { return contacts_.b4(); }
+
+  /// The whole of eq. (24) densely, (n_tau + n_p + nc + nf) square, column by column through
+  /// apply_block: for small tests only.
+  Eigen::MatrixXd dense_matrix() const;
+  /// (b1, b2, b3, b4).
+  VectorX rhs() const;
+
+  /// eq. (26) right-hand side given z: (b1 - A14 z, b2 - A24 z, b3 - A34 z).
+  VectorX mlcp_rhs(const VectorX& z) const;
+  /// eq. (25) right-hand side given x = (tau, p, lambda): b4 - A14^T tau - A24^T p - A34^T lambda.
+  VectorX friction_rhs(const VectorX& x) const;
+
+  /// The generalised force on the two-way bodies (N and N m; 2D per metre) of the fluid part
+  /// x_f = (tau, p): B_1 tau + B_2 p = Jh_s W_L^s tau_full + Jh_p W_L^p p (eq. (21)), nd.
+  VectorX fluid_body_force(const VectorX& x_fluid) const;
+  /// eq. (21): v = v* + dt M_r^-1 (J_lambda^T lambda + J_z^T z + Jh_p W_L^p p + Jh_s W_L^s tau);
+  /// the alpha of (alpha M_r)^-1 and of the scaled forces cancels. nd, ContactSystem order.
+  VectorX body_velocities(const VectorX& x_fluid, const VectorX& lambda, const VectorX& z) const;
+  /// eq. (8) update of the face velocities: u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau)
+  /// on faces with W_F^u W_L^u > 0 (apply_stokes_update), num_faces.
+  VectorX fluid_velocities(const VectorX& x_fluid) const;
+  /// Cell pressures and all stress components of x_fluid = (tau, p).
+  VectorX pressure_cells(const VectorX& x_fluid) const;
+  VectorX stress_full(const VectorX& x_fluid) const;
+
+  const ExplicitStokesSystem& stokes() const { return stokes_; }
+  const StokesDofs& dofs() const { return dofs_; }
+  const ContactSystem<Dim>& contacts() const { return contacts_; }
+  /// B_1 = Jh_s W_L^s E S_tau^T and B_2 = Jh_p W_L^p S_p^T side by side: nd x (n_tau + n_p),
+  /// non-zero only in the body-surface columns.
+  const SparseMatrix& fluid_body_jacobian() const { return b_fluid_; }
+  double dt() const { return dt_; }
+  double alpha() const { return alpha_; }
+
+ private:
+  /// B_i x (body space, nd) for block j.
+  VectorX body_force(int j, const VectorX& x) const;
+  /// B_i^T f for block i.
+  VectorX body_force_transpose(int i, const VectorX& f) const;
+
+  MacGrid<Dim> grid_;
+  StressGrid<Dim> stress_;
+  StressLayout<Dim> layout_;
+  StokesWeights w_;
+  double dt_ = 0.0, alpha_ = 1.0;
+  VectorX u_star_;
+  StokesDofs dofs_;
+  ExplicitStokesSystem stokes_;
+  ContactSystem<Dim> contacts_;
+  SparseMatrix b_fluid_;      ///< nd x n_fluid
+  SparseMatrix b_fluid_t_;    ///< its transpose
+  SparseMatrix j_lambda_t_, j_z_t_;
+  VectorX b1_, b2_;
+};
+
+/// The MLCP (26) over x = (tau, p, lambda) as a LinearOperator, size n_tau + n_p + nc:
+///   A = S + R,  S = blockdiag(A_stokes, A33 (1 + gamma on its diagonal)) the sparse part,
+///   R = dt alpha [B_f^T M_r^-1 B_f, B_f^T M_r^-1 J_lambda^T; J_lambda M_r^-1 B_f, 0],
+/// B_f = [B_1 B_2] (MonolithicSystem). apply = S x + R x with R by sequential multiplication;
+/// diagonal = diag(S) + dt alpha diag(B_f^T M_r^-1 B_f) (column by column, never the n x n
+/// product); SSOR sweeps run on S only, in row order, honouring `active` (section 4.3: SOR on the
+/// remaining sparse part). gamma is the boost of section 4.4.5 on the contact rows only, so the
+/// fluid rows keep their exact equations. null_space: the Stokes null vectors (enclosed liquid)
+/// that the bodies do not see (B_f n = 0), extended by zeros.
+template <int Dim>
+class MonolithicOperator : public LinearOperator {
+ public:
+  MonolithicOperator(const MonolithicSystem<Dim>& system, double contact_boost = 0.0);
+  int size() const override { return size_; }
+  void apply(const VectorX& x, VectorX& y) const override;
+  VectorX diagonal() const override { return diagonal_; }
+  void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                     const std::vector<char>* active = nullptr) const override {
+    sparse_.forward_sweep(rhs, x, omega, active);
+  }
+  void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                      const std::vector<char>* active = nullptr) const override {
+    sparse_.backward_sweep(rhs, x, omega, active);
+  }
+  const std::vector<VectorX>& null_space() const override { return null_space_; }
+  /// The sparse part S.
+  const SparseMatrix& sparse_part() const { return sparse_.matrix(); }
+  /// The operator densely (column by column through apply), for small tests.
+  Eigen::MatrixXd dense_matrix() const;
+
+ private:
+  const MonolithicSystem<Dim>& system_;
+  int size_ = 0, num_fluid_ = 0;
+  SparseMatrixOperator sparse_;
+  VectorX diagonal_;
+  std::vector<VectorX> null_space_;
+};
+
+/// The friction LCP (25) as a LinearOperator over z: A44 with (1 + gamma) on its diagonal
+/// (section 4.4.5), nf x nf; A44 = dt alpha J_z M_r^-1 J_z^T is sparse (contact graph).
+template <int Dim>
+SparseMatrixOperator friction_operator(const MonolithicSystem<Dim>& system, double contact_boost);
+
+struct PvcUnifiedResult {
+  VectorX stress;      ///< tau, all StressGrid components, Pa
+  VectorX pressure;    ///< cell field, Pa
+  VectorX lambda;      ///< nc normal forces (N; 2D N/m)
+  VectorX z;           ///< nf friction forces
+  VectorX x;           ///< the MLCP unknowns (tau, p, lambda) at exit
+  VectorX u;           ///< updated face velocities (eq. (8))
+  VectorX body_velocity;  ///< two-way bodies' (v, omega), ContactSystem order (eq. (21))
+  int staggered_iterations = 0;  ///< MLCP (26) solves
+  long mprgp_iterations = 0;     ///< summed over all MPRGP solves
+  bool converged = true;         ///< every MPRGP solve converged
+  double last_change = 0.0;      ///< relative change of lambda in the last staggered iteration
+};
+
+/// PVC-unified (section 4.2): MPRGP on (26) with lambda >= 0 and free tau, p; when some mu > 0,
+/// staggered projections: (26) with z = 0, then up to settings.max_iterations - 1 times the
+/// friction LCP (25) with -mu lambda <= z <= mu lambda followed by (26) given z, stopping when
+/// lambda changes by <= settings.tolerance (relative, inf-norm); always ends on (26).
+/// settings.diagonal_boost is gamma on the contact rows (section 4.4.5).
+template <int Dim>
+PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
+                                   const StaggeredSettings& settings);
+
+}  // namespace monolith
