@@ -19,6 +19,7 @@
 #include "reference/stress_weights.hpp"
 #include "reference/viscosity.hpp"
 #include "reference/volume_fractions.hpp"
+#include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
 
@@ -36,21 +37,13 @@ template <int Dim>
 void bench_grid(int n, double eta, int repeats) {
   const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), {});
   const SampleLattice<Dim> lattice = half_lattice(grid);
-  const StressGrid<Dim> stress(grid);
   std::array<BoundaryType, 2 * Dim> boundary;
   boundary.fill(BoundaryType::wall);
   boundary[3] = BoundaryType::open;
   const VectorX solid_phi = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
   VectorX phi(lattice.size());
   for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - 0.6;
-  StokesWeights w;
-  w.pressure.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
-  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, phi);
-  w.pressure.liquid_face = liquid_face_weights(grid, lattice, phi, w.pressure.liquid_cell);
-  w.pressure.face_density = VectorX::Constant(grid.num_faces(), 1000.0);
-  w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
-  w.liquid_stress = stress_liquid_weights(stress, lattice, phi);
-  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  const StokesWeights w = monolith::testing::stokes_weights(grid, solid_phi, phi, boundary, 1000.0, eta);
   const double dt = 0.01;
   VectorX u_star(grid.num_faces());
   for (int f = 0; f < grid.num_faces(); ++f) {

@@ -10,17 +10,15 @@
 #include "reference/collision.hpp"
 #include "reference/rigid_body.hpp"
 #include "reference/shape.hpp"
+#include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::as_std;
+using monolith::testing::box_spec;
 using Catch::Matchers::WithinAbs;
 using Catch::Matchers::WithinRel;
 
 namespace {
-
-template <int Dim>
-std::vector<double> as_std(const Vec<Dim>& v) {
-  return std::vector<double>(v.data(), v.data() + Dim);
-}
 
 template <int Dim>
 RigidBody<Dim> make_body(const ShapeSpec& shape, const std::string& motion = "dynamic",
@@ -35,16 +33,6 @@ RigidBody<Dim> make_body(const ShapeSpec& shape, const std::string& motion = "dy
   ShapePtr<Dim> s = make_shape<Dim>(shape, "test");
   const auto props = mass_properties<Dim>(shape, *s, spec.density);
   return RigidBody<Dim>(spec, std::move(s), props, spacing);
-}
-
-template <int Dim>
-ShapeSpec box(const Vec<Dim>& c, const Vec<Dim>& h, std::vector<double> rotation = {}) {
-  ShapeSpec s;
-  s.type = "box";
-  s.center = as_std<Dim>(c);
-  s.half_size = as_std<Dim>(h);
-  s.rotation = std::move(rotation);
-  return s;
 }
 
 template <int Dim>
@@ -156,7 +144,7 @@ TEMPLATE_TEST_CASE_SIG("box resting on the floor: the face contact reduces to th
   Vec<Dim> c = Vec<Dim>::Constant(0.5);
   c[1] = 0.1 + 0.001;
   // fine samples: hundreds of points on the bottom face before the reduction
-  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box<Dim>(c, h), "dynamic", 0.005)};
+  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box_spec<Dim>(c, h), "dynamic", 0.005)};
   const auto walls = detect_contacts<Dim>(bodies, unit_walls<Dim>(), 0.01);
   check_bottom_corners<Dim>(walls, c, h, 0.0);
   for (const auto& k : walls) {
@@ -167,7 +155,7 @@ TEMPLATE_TEST_CASE_SIG("box resting on the floor: the face contact reduces to th
   Vec<Dim> fc = Vec<Dim>::Constant(0.5), fh = Vec<Dim>::Constant(0.4);
   fc[1] = -0.05;
   fh[1] = 0.05;
-  bodies.push_back(make_body<Dim>(box<Dim>(fc, fh), "static", 0.005));
+  bodies.push_back(make_body<Dim>(box_spec<Dim>(fc, fh), "static", 0.005));
   const auto both = detect_contacts<Dim>(bodies, no_walls<Dim>(), 0.01);
   check_bottom_corners<Dim>(both, c, h, 0.0);
   for (const auto& k : both) {
@@ -187,8 +175,8 @@ TEMPLATE_TEST_CASE_SIG("stacked boxes: corners between the boxes and on the floo
   // upper box slightly smaller in x so that the lower box's corners are not the patch extremes
   Vec<Dim> hu = h;
   hu[0] = 0.08;
-  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box<Dim>(lower, h)),
-                                     make_body<Dim>(box<Dim>(upper, hu))};
+  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box_spec<Dim>(lower, h)),
+                                     make_body<Dim>(box_spec<Dim>(upper, hu))};
   const auto contacts = detect_contacts<Dim>(bodies, unit_walls<Dim>(), 0.01);
   std::vector<Contact<Dim>> between, floor;
   for (const auto& k : contacts) (k.body_b == -1 ? floor : between).push_back(k);
@@ -213,7 +201,7 @@ TEST_CASE("rotated box on an edge or a corner: contacts at the touching edge onl
   // 2D: a square turned 45 degrees touches the floor with one corner
   const double h = 0.1, gap = 0.003;
   std::vector<RigidBody<2>> b2{
-      make_body<2>(box<2>(Vec<2>(0.5, h * std::sqrt(2.0) + gap), Vec<2>(h, h), {0.25 * M_PI}))};
+      make_body<2>(box_spec<2>(Vec<2>(0.5, h * std::sqrt(2.0) + gap), Vec<2>(h, h), {0.25 * M_PI}))};
   const auto c2 = detect_contacts<2>(b2, unit_walls<2>(), 0.01);
   REQUIRE(c2.size() == 1);
   CHECK_THAT(c2[0].phi, WithinAbs(gap, 1e-12));
@@ -221,7 +209,7 @@ TEST_CASE("rotated box on an edge or a corner: contacts at the touching edge onl
   // 3D: turned 45 degrees about z, it touches the floor along an edge parallel to z: the two
   // ends of the edge
   std::vector<RigidBody<3>> b3{make_body<3>(
-      box<3>(Vec<3>(0.5, h * std::sqrt(2.0) + gap, 0.5), Vec<3>(h, h, 0.15), {0, 0, 0.25 * M_PI}))};
+      box_spec<3>(Vec<3>(0.5, h * std::sqrt(2.0) + gap, 0.5), Vec<3>(h, h, 0.15), {0, 0, 0.25 * M_PI}))};
   const auto c3 = detect_contacts<3>(b3, unit_walls<3>(), 0.01);
   REQUIRE(c3.size() == 2);
   for (const auto& k : c3) {
@@ -278,27 +266,27 @@ TEMPLATE_TEST_CASE_SIG("separated bodies and non-dynamic pairs give no contacts"
                        "[unit][collision]", ((int Dim), Dim), 2, 3) {
   Vec<Dim> a = Vec<Dim>::Constant(0.3), b = Vec<Dim>::Constant(0.3);
   b[0] = 0.3 + 0.2 + 0.011;
-  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box<Dim>(a, Vec<Dim>::Constant(0.1))),
-                                     make_body<Dim>(box<Dim>(b, Vec<Dim>::Constant(0.1)))};
+  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box_spec<Dim>(a, Vec<Dim>::Constant(0.1))),
+                                     make_body<Dim>(box_spec<Dim>(b, Vec<Dim>::Constant(0.1)))};
   CHECK(detect_contacts<Dim>(bodies, unit_walls<Dim>(), 0.01).empty());
   // touching, but both fixed / kinematic: no contacts
   b[0] = 0.5;
   Vec<Dim> floor_c = Vec<Dim>::Constant(0.5);
   floor_c[1] = 0.05;
-  std::vector<RigidBody<Dim>> still{make_body<Dim>(box<Dim>(a, Vec<Dim>::Constant(0.1)), "static"),
-                                    make_body<Dim>(box<Dim>(b, Vec<Dim>::Constant(0.1)), "static")};
+  std::vector<RigidBody<Dim>> still{make_body<Dim>(box_spec<Dim>(a, Vec<Dim>::Constant(0.1)), "static"),
+                                    make_body<Dim>(box_spec<Dim>(b, Vec<Dim>::Constant(0.1)), "static")};
   CHECK(detect_contacts<Dim>(still, unit_walls<Dim>(), 0.01).empty());
   BodySpec kin;
   kin.motion = "kinematic";
   kin.has_path = true;
   kin.path.axis = std::vector<double>(Dim, 1.0);
-  kin.shape = box<Dim>(b, Vec<Dim>::Constant(0.1));
+  kin.shape = box_spec<Dim>(b, Vec<Dim>::Constant(0.1));
   kin.density = 1.0;
   ShapePtr<Dim> ks = make_shape<Dim>(kin.shape, "test");
   still[1] = RigidBody<Dim>(kin, ks, mass_properties<Dim>(kin.shape, *ks, 1.0), 0.01);
   CHECK(detect_contacts<Dim>(still, unit_walls<Dim>(), 0.01).empty());
   // a dynamic body against the kinematic one: the dynamic body is a
-  still[0] = make_body<Dim>(box<Dim>(a, Vec<Dim>::Constant(0.1)));
+  still[0] = make_body<Dim>(box_spec<Dim>(a, Vec<Dim>::Constant(0.1)));
   const auto k = detect_contacts<Dim>(std::vector<RigidBody<Dim>>{still[1], still[0]},
                                       no_walls<Dim>(), 0.01);
   REQUIRE(!k.empty());
@@ -315,7 +303,7 @@ TEMPLATE_TEST_CASE_SIG("sphere against a box: one exact contact from the centre"
   c[1] = 0.2 + 0.1 + 0.004;
   Vec<Dim> bc = Vec<Dim>::Constant(0.5);
   bc[1] = 0.1;
-  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box<Dim>(bc, Vec<Dim>::Constant(0.1)), "static"),
+  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box_spec<Dim>(bc, Vec<Dim>::Constant(0.1)), "static"),
                                      make_body<Dim>(sphere<Dim>(c, 0.1))};
   const auto k = detect_contacts<Dim>(bodies, no_walls<Dim>(), 0.01);
   REQUIRE(k.size() == 1);
@@ -327,7 +315,7 @@ TEMPLATE_TEST_CASE_SIG("sphere against a box: one exact contact from the centre"
   top[1] = 0.2;
   CHECK((k[0].point - top).norm() < 1e-12);
   // the sphere as body b (a static ball under a dynamic box)
-  std::vector<RigidBody<Dim>> swapped{make_body<Dim>(box<Dim>(c, Vec<Dim>::Constant(0.1))),
+  std::vector<RigidBody<Dim>> swapped{make_body<Dim>(box_spec<Dim>(c, Vec<Dim>::Constant(0.1))),
                                       make_body<Dim>(sphere<Dim>(bc, 0.1), "static")};
   swapped[0].position[1] = 0.2 + 0.1 + 0.004;
   const auto s = detect_contacts<Dim>(swapped, no_walls<Dim>(), 0.01);
@@ -347,8 +335,8 @@ TEMPLATE_TEST_CASE_SIG("the contact set is symmetric in the order of the bodies 
   a[1] = 0.3 + 0.0;
   b[1] = 0.15;
   const std::vector<double> tilt = Dim == 2 ? std::vector<double>{0.05} : std::vector<double>{0.03, 0.1, 0.05};
-  const RigidBody<Dim> top = make_body<Dim>(box<Dim>(a, Vec<Dim>::Constant(0.1), tilt));
-  const RigidBody<Dim> bottom = make_body<Dim>(box<Dim>(b, Vec<Dim>::Constant(0.06)));
+  const RigidBody<Dim> top = make_body<Dim>(box_spec<Dim>(a, Vec<Dim>::Constant(0.1), tilt));
+  const RigidBody<Dim> bottom = make_body<Dim>(box_spec<Dim>(b, Vec<Dim>::Constant(0.06)));
   const auto ab = detect_contacts<Dim>({top, bottom}, no_walls<Dim>(), 0.01);
   const auto ba = detect_contacts<Dim>({bottom, top}, no_walls<Dim>(), 0.01);
   REQUIRE(!ab.empty());
@@ -406,8 +394,8 @@ TEMPLATE_TEST_CASE_SIG("equal stacked boxes: edges that line up give the corners
   Vec<Dim> lower = Vec<Dim>::Constant(0.5), upper = Vec<Dim>::Constant(0.5);
   lower[1] = 0.1;
   upper[1] = 0.3 + 0.001;
-  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box<Dim>(lower, h)),
-                                     make_body<Dim>(box<Dim>(upper, h))};
+  std::vector<RigidBody<Dim>> bodies{make_body<Dim>(box_spec<Dim>(lower, h)),
+                                     make_body<Dim>(box_spec<Dim>(upper, h))};
   const auto contacts = detect_contacts<Dim>(bodies, no_walls<Dim>(), 0.01);
   Vec<Dim> c = upper;
   c[1] = 0.2;
@@ -432,8 +420,8 @@ TEST_CASE("parallel edges of diagonal neighbours: the two ends of the edge, norm
   const double h = 0.05, g = 0.001;
   const double off = 2.0 * h + g / std::sqrt(2.0);
   std::vector<RigidBody<3>> bodies{
-      make_body<3>(box<3>(Vec<3>(0.5, 0.5, 0.5), Vec<3>(h, h, h))),
-      make_body<3>(box<3>(Vec<3>(0.5, 0.5 + off, 0.5 + off), Vec<3>(h, h, h)))};
+      make_body<3>(box_spec<3>(Vec<3>(0.5, 0.5, 0.5), Vec<3>(h, h, h))),
+      make_body<3>(box_spec<3>(Vec<3>(0.5, 0.5 + off, 0.5 + off), Vec<3>(h, h, h)))};
   const auto c = detect_contacts<3>(bodies, no_walls<3>(), 0.01);
   REQUIRE(c.size() == 2u);
   for (const auto& k : c) {
@@ -497,7 +485,7 @@ TEMPLATE_TEST_CASE_SIG("a box on a static halfspace body: its corners", "[unit][
   const Vec<Dim> h = Vec<Dim>::Constant(0.1);
   Vec<Dim> c = Vec<Dim>::Constant(0.5);
   c[1] = 0.3 + 0.002;
-  const std::vector<RigidBody<Dim>> bodies{ground, make_body<Dim>(box<Dim>(c, h))};
+  const std::vector<RigidBody<Dim>> bodies{ground, make_body<Dim>(box_spec<Dim>(c, h))};
   const auto contacts = detect_contacts<Dim>(bodies, no_walls<Dim>(), 0.01);
   check_bottom_corners<Dim>(contacts, c, h, 0.2);
   for (const auto& k : contacts) {
@@ -567,7 +555,7 @@ TEST_CASE("detection does not depend on the number of threads", "[unit][collisio
       if ((i + j) % 3 == 0) {
         bodies.push_back(make_body<3>(sphere<3>(c, 0.05)));
       } else {
-        bodies.push_back(make_body<3>(box<3>(c, Vec<3>::Constant(0.05), {0.02 * i, 0.01 * j, 0.03})));
+        bodies.push_back(make_body<3>(box_spec<3>(c, Vec<3>::Constant(0.05), {0.02 * i, 0.01 * j, 0.03})));
       }
     }
   }
@@ -607,7 +595,7 @@ TEMPLATE_TEST_CASE_SIG("a sphere in a groove (one concave body): one contact per
     h[0] = 0.15;
     std::vector<double> rot = Dim == 2 ? std::vector<double>{s * 0.25 * M_PI}
                                        : std::vector<double>{0.0, 0.0, s * 0.25 * M_PI};
-    groove.shapes.push_back(box<Dim>(c, h, rot));
+    groove.shapes.push_back(box_spec<Dim>(c, h, rot));
   }
   std::vector<RigidBody<Dim>> bodies{make_body<Dim>(groove, "static", 0.01)};
   Vec<Dim> centre = Vec<Dim>::Constant(0.5);

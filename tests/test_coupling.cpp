@@ -19,6 +19,7 @@ using namespace monolith;
 using monolith::testing::random_vector;
 using monolith::testing::TestBall;
 using monolith::testing::TestBox;
+using monolith::testing::unit_grid;
 
 namespace {
 
@@ -58,12 +59,6 @@ std::array<BoundaryType, 2 * Dim> all_boundaries(BoundaryType type) {
   std::array<BoundaryType, 2 * Dim> b;
   b.fill(type);
   return b;
-}
-
-template <int Dim>
-MacGrid<Dim> unit_grid(int n) {
-  std::array<bool, Dim> periodic{};
-  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
 }
 
 /// A body at centre c: box, ball or rotated box (kind 0, 1, 2), centre of mass off the

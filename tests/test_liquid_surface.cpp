@@ -25,12 +25,6 @@ LiquidSpec water_spec(const Vec<Dim>& centre) {
 }
 
 template <int Dim>
-MacGrid<Dim> unit_grid(int n) {
-  std::array<bool, Dim> periodic{};
-  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
-}
-
-template <int Dim>
 int default_per_cell() {
   return Dim == 2 ? 4 : 8;
 }

@@ -15,39 +15,17 @@
 #include "reference/mass_properties.hpp"
 #include "reference/shape.hpp"
 #include "reference/shape_tools.hpp"
+#include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::as_std;
+using monolith::testing::box_spec;
+using monolith::testing::kPi;
+using monolith::testing::round_spec;
 using Catch::Matchers::WithinRel;
 using Catch::Matchers::WithinAbs;
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-
-template <int Dim>
-std::vector<double> as_std(const Vec<Dim>& v) {
-  return std::vector<double>(v.data(), v.data() + Dim);
-}
-
-template <int Dim>
-ShapeSpec box_spec(const Vec<Dim>& c, const Vec<Dim>& h, std::vector<double> rotation = {}) {
-  ShapeSpec s;
-  s.type = "box";
-  s.center = as_std<Dim>(c);
-  s.half_size = as_std<Dim>(h);
-  s.rotation = std::move(rotation);
-  return s;
-}
-
-template <int Dim>
-ShapeSpec round_spec(const std::string& type, const Vec<Dim>& c, double r, double t = 0.0) {
-  ShapeSpec s;
-  s.type = type;
-  s.center = as_std<Dim>(c);
-  s.radius = r;
-  s.thickness = t;
-  return s;
-}
 
 template <int Dim>
 MassProperties<Dim> props_of(const ShapeSpec& spec, double density) {

@@ -35,13 +35,6 @@ LiquidSpec liquid_spec(const Vec<Dim>& centre, double density = 1000.0) {
 }
 
 template <int Dim>
-MacGrid<Dim> unit_grid(int n, bool periodic_x = false) {
-  std::array<bool, Dim> periodic{};
-  periodic[0] = periodic_x;
-  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
-}
-
-template <int Dim>
 std::array<BoundaryType, 2 * Dim> walls() {
   std::array<BoundaryType, 2 * Dim> b;
   b.fill(BoundaryType::wall);

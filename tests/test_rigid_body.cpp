@@ -13,19 +13,15 @@
 #include "reference/scene.hpp"
 #include "reference/shape.hpp"
 #include "reference/shape_tools.hpp"
+#include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::as_std;
+using monolith::testing::kPi;
 using Catch::Matchers::WithinAbs;
 using Catch::Matchers::WithinRel;
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-
-template <int Dim>
-std::vector<double> as_std(const Vec<Dim>& v) {
-  return std::vector<double>(v.data(), v.data() + Dim);
-}
 
 template <int Dim>
 BodySpec box_body(const Vec<Dim>& c, const Vec<Dim>& h, std::vector<double> rotation = {},

@@ -11,38 +11,18 @@
 #include "reference/errors.hpp"
 #include "reference/shape.hpp"
 #include "reference/shape_tools.hpp"
+#include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::as_std;
+using monolith::testing::box_spec;
+using monolith::testing::round_spec;
 
 namespace {
 
 template <int Dim>
 std::vector<double> rep(double value) {
   return std::vector<double>(Dim, value);
-}
-
-template <int Dim>
-std::vector<double> as_std(const Vec<Dim>& v) {
-  return std::vector<double>(v.data(), v.data() + Dim);
-}
-
-template <int Dim>
-ShapeSpec box_spec(const Vec<Dim>& c, const Vec<Dim>& h) {
-  ShapeSpec s;
-  s.type = "box";
-  s.center = as_std<Dim>(c);
-  s.half_size = as_std<Dim>(h);
-  return s;
-}
-
-template <int Dim>
-ShapeSpec round_spec(const std::string& type, const Vec<Dim>& c, double r, double t = 0.0) {
-  ShapeSpec s;
-  s.type = type;
-  s.center = as_std<Dim>(c);
-  s.radius = r;
-  s.thickness = t;
-  return s;
 }
 
 /// A rotation value of the given angle: 2D the angle, 3D about the axis (1, 2, 3)/|.|.

@@ -13,6 +13,7 @@
 
 using namespace monolith;
 using monolith::testing::random_vector;
+using monolith::testing::stokes_weights;
 using monolith::testing::TestBall;
 using monolith::testing::TestBox;
 
@@ -60,17 +61,10 @@ StokesCase<Dim> make_case(const CaseOptions& o) {
     liquid_phi[k] = o.free_surface ? x[1] - 0.62 - 0.08 * std::sin(2.0 * M_PI * x[0]) : -1.0;
   }
   // the weights of eq. (8)
-  PressureWeights& pw = sc.w.pressure;
-  pw.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
-  pw.liquid_cell = liquid_cell_weights(grid, lattice, liquid_phi);
-  pw.liquid_face = liquid_face_weights(grid, lattice, liquid_phi, pw.liquid_cell);
-  pw.face_density = VectorX::Constant(grid.num_faces(), 1000.0);
+  sc.w = stokes_weights(grid, solid_phi, liquid_phi, boundary, 1000.0, o.eta);
   if (o.vary_density)
-    pw.face_density += 200.0 * random_vector(grid.num_faces(), o.seed + 7);
-  sc.w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
-  sc.w.liquid_stress = stress_liquid_weights(stress, lattice, liquid_phi);
+    sc.w.pressure.face_density += 200.0 * random_vector(grid.num_faces(), o.seed + 7);
   // eta smooth in space, the same for all components at one position
-  sc.w.viscosity.resize(stress.num_dofs());
   for (int d = 0; d < stress.num_dofs(); ++d) {
     const auto [k, c] = stress.coord(d);
     const Vec<Dim> x = stress.position(k, c);
@@ -382,16 +376,9 @@ TEMPLATE_TEST_CASE_SIG("Couette profile: tau_xy = eta s in the interior and on t
   boundary[2] = boundary[3] = BoundaryType::wall;
   const double rho = 1000.0, eta = 1.0, s = 2.0;
   const double dt = 0.01 * rho * grid.dx() * grid.dx() / eta;
-  StokesWeights w;
   const VectorX no_solid = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
   const VectorX full = VectorX::Constant(lattice.size(), -1.0);
-  w.pressure.fluid_face = fluid_face_weights(grid, lattice, no_solid, boundary);
-  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, full);
-  w.pressure.liquid_face = liquid_face_weights(grid, lattice, full, w.pressure.liquid_cell);
-  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
-  w.fluid_stress = stress_fluid_weights(stress, lattice, no_solid, boundary);
-  w.liquid_stress = stress_liquid_weights(stress, lattice, full);
-  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  const StokesWeights w = stokes_weights(grid, no_solid, full, boundary, rho, eta);
   VectorX u_star = VectorX::Zero(grid.num_faces());
   for (int f = 0; f < grid.num_faces(); ++f) {
     const auto [a, c] = grid.face_coord(f);
@@ -462,14 +449,7 @@ TEMPLATE_TEST_CASE_SIG("enclosed and periodic liquid: the (0, n_p) null space, P
     boundary.fill(periodic ? BoundaryType::periodic : BoundaryType::wall);
     const VectorX no_solid = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
     const VectorX full = VectorX::Constant(lattice.size(), -1.0);
-    StokesWeights w;
-    w.pressure.fluid_face = fluid_face_weights(grid, lattice, no_solid, boundary);
-    w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, full);
-    w.pressure.liquid_face = liquid_face_weights(grid, lattice, full, w.pressure.liquid_cell);
-    w.pressure.face_density = VectorX::Constant(grid.num_faces(), 1000.0);
-    w.fluid_stress = stress_fluid_weights(stress, lattice, no_solid, boundary);
-    w.liquid_stress = stress_liquid_weights(stress, lattice, full);
-    w.viscosity = VectorX::Constant(stress.num_dofs(), 3.0);
+    const StokesWeights w = stokes_weights(grid, no_solid, full, boundary, 1000.0, 3.0);
     const double dt = 0.01;
     const VectorX u_star = random_vector(grid.num_faces(), 4);
     for (StressForm form : {StressForm::full, StressForm::reduced}) {
@@ -518,14 +498,7 @@ TEMPLATE_TEST_CASE_SIG("a rigidly rotating free blob keeps its velocity exactly"
   VectorX phi(lattice.size());
   for (int k = 0; k < lattice.size(); ++k) phi[k] = (lattice.position(lattice.coord(k)) - centre).norm() - 0.3;
   const VectorX no_solid = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
-  StokesWeights w;
-  w.pressure.fluid_face = fluid_face_weights(grid, lattice, no_solid, boundary);
-  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, phi);
-  w.pressure.liquid_face = liquid_face_weights(grid, lattice, phi, w.pressure.liquid_cell);
-  w.pressure.face_density = VectorX::Constant(grid.num_faces(), 1000.0);
-  w.fluid_stress = stress_fluid_weights(stress, lattice, no_solid, boundary);
-  w.liquid_stress = stress_liquid_weights(stress, lattice, phi);
-  w.viscosity = VectorX::Constant(stress.num_dofs(), 50.0);
+  const StokesWeights w = stokes_weights(grid, no_solid, phi, boundary, 1000.0, 50.0);
   Mat<Dim> W = Mat<Dim>::Zero();
   W(0, 1) = 2.0, W(1, 0) = -2.0;
   if constexpr (Dim == 3) W(0, 2) = 1.0, W(2, 0) = -1.0;

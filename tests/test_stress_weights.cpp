@@ -8,24 +8,12 @@
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::sample_lattice;
+using monolith::testing::unit_grid;
 using monolith::testing::TestBall;
 using monolith::testing::TestBox;
 
 namespace {
-
-template <int Dim>
-MacGrid<Dim> unit_grid(int n, bool periodic_x = false) {
-  std::array<bool, Dim> periodic{};
-  periodic[0] = periodic_x;
-  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
-}
-
-template <int Dim, class F>
-VectorX sample(const SampleLattice<Dim>& lattice, F&& f) {
-  VectorX phi(lattice.size());
-  for (int k = 0; k < lattice.size(); ++k) phi[k] = f(lattice.position(lattice.coord(k)));
-  return phi;
-}
 
 template <int Dim>
 std::array<BoundaryType, 2 * Dim> all(BoundaryType t) {
@@ -52,7 +40,7 @@ TEMPLATE_TEST_CASE_SIG("stress control-volume fractions of a ball converge at se
     const auto grid = unit_grid<Dim>(n);
     const StressGrid<Dim> stress(grid);
     const auto lattice = half_lattice(grid);
-    const VectorX phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) { return ball.distance(x); });
+    const VectorX phi = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return ball.distance(x); });
     const VectorX w = stress_liquid_weights(stress, lattice, phi);
     REQUIRE(w.minCoeff() >= 0.0);
     REQUIRE(w.maxCoeff() <= 1.0);
@@ -78,7 +66,7 @@ TEMPLATE_TEST_CASE_SIG("diagonal stress weights equal the cell weights", "[unit]
   const auto lattice = half_lattice(grid);
   const TestBall<Dim> liquid(Vec<Dim>::Constant(0.45), 0.33);
   const TestBox<Dim> solid(Vec<Dim>::Constant(0.8), Vec<Dim>::Constant(0.17));
-  const VectorX liquid_phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) { return liquid.distance(x); });
+  const VectorX liquid_phi = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return liquid.distance(x); });
   const VectorX solid_phi = solid_phi_on_lattice<Dim>(grid, lattice, {std::make_shared<TestBox<Dim>>(solid)}, 0.0);
   const VectorX wl = stress_liquid_weights(stress, lattice, liquid_phi);
   const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all<Dim>(BoundaryType::wall));
@@ -106,8 +94,8 @@ TEMPLATE_TEST_CASE_SIG("stress weights wrap on a periodic axis", "[unit]", ((int
              (Dim == 3 ? 0.1 * std::cos(2.0 * M_PI * x[Dim - 1]) : 0.0);
     };
   };
-  const VectorX w0 = stress_liquid_weights(stress, lattice, sample<Dim>(lattice, surface(0.0)));
-  const VectorX w1 = stress_liquid_weights(stress, lattice, sample<Dim>(lattice, surface(grid.dx())));
+  const VectorX w0 = stress_liquid_weights(stress, lattice, sample_lattice<Dim>(lattice, surface(0.0)));
+  const VectorX w1 = stress_liquid_weights(stress, lattice, sample_lattice<Dim>(lattice, surface(grid.dx())));
   double worst = 0.0;
   int seam = 0;
   for (int i = 0; i < stress.num_dofs(); ++i) {
@@ -129,7 +117,7 @@ TEMPLATE_TEST_CASE_SIG("boundary stress control volumes mirror; walls keep the i
   const auto lattice = half_lattice(grid);
   // liquid below a tilted plane that does not depend on x: mirroring across x = 0 and x = 1 makes
   // a boundary node's liquid fraction that of the interior node beside it in x... identical
-  const VectorX phi = sample<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.43 - 0.1 * x[Dim - 1]; });
+  const VectorX phi = sample_lattice<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.43 - 0.1 * x[Dim - 1]; });
   const VectorX wl = stress_liquid_weights(stress, lattice, phi);
   const VectorX no_solid = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
   std::array<BoundaryType, 2 * Dim> mixed = all<Dim>(BoundaryType::wall);
@@ -176,7 +164,7 @@ TEMPLATE_TEST_CASE_SIG("a solid wall through a row of nodes gives them W_F^s = 1
   const StressGrid<Dim> stress(grid);
   const auto lattice = half_lattice(grid);
   const double wall = 3.0 / n;
-  const VectorX solid_phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) { return x[1] - wall; });
+  const VectorX solid_phi = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return x[1] - wall; });
   const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all<Dim>(BoundaryType::periodic));
   int checked = 0;
   for (int i = 0; i < stress.num_dofs(); ++i) {
@@ -241,7 +229,7 @@ TEMPLATE_TEST_CASE_SIG("every stress control volume sits where its DOF is: exact
   g[0] = 0.37;
   if constexpr (Dim == 3) g[1] = -0.21;
   const double a = 0.41;
-  const VectorX phi = sample<Dim>(lattice, [&](const Vec<Dim>& x) {
+  const VectorX phi = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) {
     double top = a;
     for (int d = 0; d + 1 < Dim; ++d) top += g[d] * x[d];
     return x[Dim - 1] - top;
@@ -282,7 +270,7 @@ TEST_CASE("per-DOF stress fractions of a disk converge at second order in L1", "
     const StressGrid<2> stress(grid);
     const auto lattice = half_lattice(grid);
     const VectorX w = stress_liquid_weights(
-        stress, lattice, sample<2>(lattice, [&](const Vec<2>& x) { return disk.distance(x); }));
+        stress, lattice, sample_lattice<2>(lattice, [&](const Vec<2>& x) { return disk.distance(x); }));
     const double h = grid.dx();
     std::array<double, 3> sum{};
     for (int i = 0; i < stress.num_dofs(); ++i) {

@@ -16,8 +16,6 @@ using namespace monolith::testing;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
 /// A box of `cells` cells of width dx filled with liquid below the level set `liquid_phi`
 /// (everywhere if it is empty), boundaries as given, no solids, density rho, viscosity eta.
 template <int Dim>
@@ -35,14 +33,7 @@ struct Channel {
     VectorX phi(lattice.size());
     for (int k = 0; k < lattice.size(); ++k)
       phi[k] = liquid_phi ? liquid_phi(lattice.position(lattice.coord(k))) : -1.0;
-    const StressGrid<Dim> stress(grid);
-    w.pressure.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
-    w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, phi);
-    w.pressure.liquid_face = liquid_face_weights(grid, lattice, phi, w.pressure.liquid_cell);
-    w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
-    w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
-    w.liquid_stress = stress_liquid_weights(stress, lattice, phi);
-    w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+    w = stokes_weights(grid, solid_phi, phi, boundary, rho, eta);
   }
 
   /// One backward-Euler step of the unsteady Stokes problem: u += dt f on the fluid faces along

@@ -4,25 +4,13 @@
 #include <random>
 
 #include "reference/volume_fractions.hpp"
+#include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::sample_lattice;
+using monolith::testing::unit_grid;
 
 namespace {
-
-template <int Dim>
-MacGrid<Dim> unit_grid(int n, bool periodic_x = false) {
-  std::array<bool, Dim> periodic{};
-  periodic[0] = periodic_x;
-  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
-}
-
-/// phi sampled on the half lattice from a function of position.
-template <int Dim, class F>
-VectorX sample(const SampleLattice<Dim>& lattice, F f) {
-  VectorX phi(lattice.size());
-  for (int k = 0; k < lattice.size(); ++k) phi[k] = f(lattice.position(lattice.coord(k)));
-  return phi;
-}
 
 template <int Dim>
 double ball_volume(double r) {
@@ -101,7 +89,7 @@ TEMPLATE_TEST_CASE_SIG("ball fractions converge to the exact volume at second or
   for (int n : levels) {
     const auto grid = unit_grid<Dim>(n);
     const auto lattice = half_lattice(grid);
-    const VectorX phi = sample<Dim>(lattice, ball);
+    const VectorX phi = sample_lattice<Dim>(lattice, ball);
     const VectorX wc = cell_negative_fractions(grid, lattice, phi);
     const VectorX wf = face_negative_fractions(grid, lattice, phi);
     REQUIRE(wc.minCoeff() >= 0.0);
@@ -137,7 +125,7 @@ TEMPLATE_TEST_CASE_SIG("lattice-aligned box: exact fractions, full and empty cel
   // sides sit 1e-10 outside the lattice planes so that no lattice triangle has phi = 0 at all
   // its corners (a zero-measure ambiguity of phi = 0 counted as outside)
   const Vec<Dim> lo = Vec<Dim>::Constant(0.25 - 1e-10), hi = Vec<Dim>::Constant(0.6875 + 1e-10);
-  const VectorX phi = sample<Dim>(
+  const VectorX phi = sample_lattice<Dim>(
       lattice, [&](const Vec<Dim>& x) { return ((lo - x).cwiseMax(x - hi)).maxCoeff(); });
   const VectorX wc = cell_negative_fractions(grid, lattice, phi);
   CHECK(wc.sum() * grid.cell_volume() == Approx(std::pow(hi[0] - lo[0], Dim)).epsilon(1e-8));
@@ -180,7 +168,7 @@ TEMPLATE_TEST_CASE_SIG("weights: solid shrinkage, walls, open and periodic bound
     const auto grid = unit_grid<Dim>(n, true);
     const auto lattice = half_lattice(grid);
     // liquid where x < 0.25 or x > 0.75 (distance to the periodic slab)
-    const VectorX phi = sample<Dim>(lattice, [](const Vec<Dim>& x) {
+    const VectorX phi = sample_lattice<Dim>(lattice, [](const Vec<Dim>& x) {
       return std::min(x[0] - 0.25, 0.75 - x[0]) < 0.0 ? -1.0 : 1.0;
     });
     const VectorX wlp = liquid_cell_weights(grid, lattice, phi);
@@ -194,7 +182,7 @@ TEMPLATE_TEST_CASE_SIG("weights: solid shrinkage, walls, open and periodic bound
     const auto grid = unit_grid<Dim>(n);
     const auto lattice = half_lattice(grid);
     const double zeta = 0.01 * grid.dx();
-    const VectorX plain = sample<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.5; });
+    const VectorX plain = sample_lattice<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.5; });
     const VectorX shifted = plain.array() + zeta;
     const VectorX wf0 =
         VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, plain);
@@ -204,7 +192,7 @@ TEMPLATE_TEST_CASE_SIG("weights: solid shrinkage, walls, open and periodic bound
     // a liquid layer that fills only the lower half of the cell row j = 2: faces y = 3 dx have
     // W_L^u = 0 geometrically but sit beside liquid cells, so they are clamped
     const double h = 2.5 / n - 1e-9;
-    const VectorX phi = sample<Dim>(lattice, [h](const Vec<Dim>& x) { return x[1] - h; });
+    const VectorX phi = sample_lattice<Dim>(lattice, [h](const Vec<Dim>& x) { return x[1] - h; });
     const VectorX wlp = liquid_cell_weights(grid, lattice, phi);
     const VectorX raw = face_negative_fractions(grid, lattice, phi);
     const VectorX wlu = liquid_face_weights(grid, lattice, phi, wlp);

@@ -5,13 +5,64 @@
 
 #include <algorithm>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "reference/common.hpp"
 #include "reference/pressure_projection.hpp"
+#include "reference/scene.hpp"
 #include "reference/shape.hpp"
+#include "reference/stokes_system.hpp"
+#include "reference/stress_weights.hpp"
 #include "reference/volume_fractions.hpp"
 
 namespace monolith::testing {
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// The unit square / cube split into n cells per axis (periodic along x when asked).
+template <int Dim>
+MacGrid<Dim> unit_grid(int n, bool periodic_x = false) {
+  std::array<bool, Dim> periodic{};
+  periodic[0] = periodic_x;
+  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+}
+
+/// f(position) at every point of a sample lattice (a level set on the half lattice).
+template <int Dim, class F>
+VectorX sample_lattice(const SampleLattice<Dim>& lattice, F&& f) {
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) phi[k] = f(lattice.position(lattice.coord(k)));
+  return phi;
+}
+
+/// A vector as the std::vector a ShapeSpec field holds.
+template <int Dim>
+std::vector<double> as_std(const Vec<Dim>& v) {
+  return std::vector<double>(v.data(), v.data() + Dim);
+}
+
+/// The scene spec of a box (centre c, half sizes h, optional rotation value).
+template <int Dim>
+ShapeSpec box_spec(const Vec<Dim>& c, const Vec<Dim>& h, std::vector<double> rotation = {}) {
+  ShapeSpec s;
+  s.type = "box";
+  s.center = as_std<Dim>(c);
+  s.half_size = as_std<Dim>(h);
+  s.rotation = std::move(rotation);
+  return s;
+}
+
+/// The scene spec of a round shape ("sphere", "bowl", "shell", ...) of radius r and thickness t.
+template <int Dim>
+ShapeSpec round_spec(const std::string& type, const Vec<Dim>& c, double r, double t = 0.0) {
+  ShapeSpec s;
+  s.type = type;
+  s.center = as_std<Dim>(c);
+  s.radius = r;
+  s.thickness = t;
+  return s;
+}
 
 /// A ball (a disk in 2D) with its exact signed distance.
 template <int Dim>
@@ -71,6 +122,27 @@ PressureWeights flat_surface_weights(const MacGrid<Dim>& grid,
   w.liquid_cell = liquid_cell_weights(grid, lattice, phi);
   w.liquid_face = liquid_face_weights(grid, lattice, phi, w.liquid_cell);
   w.face_density = VectorX::Constant(grid.num_faces(), rho);
+  return w;
+}
+
+/// The weights of eq. (8) (section 3.1.2) from level sets on the half lattice of `grid`: solid
+/// where solid_phi < 0, liquid where liquid_phi < 0, sides as `boundary` says, uniform density
+/// rho and viscosity eta.
+template <int Dim>
+StokesWeights stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
+                             const VectorX& liquid_phi,
+                             const std::array<BoundaryType, 2 * Dim>& boundary, double rho,
+                             double eta) {
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const StressGrid<Dim> stress(grid);
+  StokesWeights w;
+  w.pressure.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
+  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, liquid_phi);
+  w.pressure.liquid_face = liquid_face_weights(grid, lattice, liquid_phi, w.pressure.liquid_cell);
+  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
+  w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
+  w.liquid_stress = stress_liquid_weights(stress, lattice, liquid_phi);
+  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
   return w;
 }
 
