@@ -46,14 +46,14 @@ MacGrid<Dim> unit_grid(int n) {
 /// A dynamic box of the given centre, half sizes and density, moving with v (linear, then angular).
 template <int Dim>
 RigidBody<Dim> make_box(const Vec<Dim>& centre, const Vec<Dim>& half, double density,
-                        double friction = 0.0) {
+                        double friction = 0.0, const std::string& motion = "dynamic") {
   ShapeSpec box;
   box.type = "box";
   box.center.assign(centre.data(), centre.data() + Dim);
   box.half_size.assign(half.data(), half.data() + Dim);
   BodySpec spec;
   spec.name = "box";
-  spec.motion = "dynamic";
+  spec.motion = motion;
   spec.shape = box;
   spec.density = density;
   spec.friction = friction;
@@ -339,16 +339,32 @@ void check_free_fall(int n) {
   v0[1] += kGravity * 0.01;
   Vec<Dim> centre = c0, half = Vec<Dim>::Constant(0.12);
   centre[0] += 0.2;
-  std::vector<RigidBody<Dim>> bodies = {make_box<Dim>(centre, half, 700.0)};
+  // a dynamic box cutting the surface on one side, a kinematic one (one-way, section 4.4.4:
+  // right-hand side only) on the other, both moving with the liquid
+  Vec<Dim> centre_kinematic = c0;
+  centre_kinematic[0] -= 0.25;
+  std::vector<RigidBody<Dim>> bodies = {make_box<Dim>(centre, half, 700.0),
+                                        make_box<Dim>(centre_kinematic, half, 700.0, 0.0, "kinematic")};
   BodyVec<Dim> gv = BodyVec<Dim>::Zero();
   gv.template head<Dim>() = v0;
-  bodies[0].set_generalized_velocity(gv);
+  for (RigidBody<Dim>& b : bodies) b.set_generalized_velocity(gv);
   const Scene<Dim> s = make_scene<Dim>(
       n, bodies, [c0](const Vec<Dim>& x) { return (x - c0).norm() - 0.3; }, 0.3,
       BoundaryType::open, v0, {});
   const MonolithicSystem<Dim> sys(s.grid, StressForm::full, s.w, s.dt, s.u_star, s.bodies,
                                   s.solids, s.contacts);
   REQUIRE(sys.fluid_body_jacobian().nonZeros() > 0);
+  REQUIRE(sys.num_body_dofs() == kBodyDofs<Dim>);  // only the dynamic box has unknowns
+  // b1, b2 vanish only with the one-way body's term: its velocity enters the right-hand side
+  CHECK(sys.b2().cwiseAbs().maxCoeff() <= 1e-12 * v0.norm() / s.grid.dx());
+  CHECK(sys.b1().cwiseAbs().maxCoeff() <= 1e-12 * v0.norm() / s.grid.dx());
+  {
+    std::vector<RigidBody<Dim>> resting = s.bodies;
+    resting[1].set_generalized_velocity(BodyVec<Dim>::Zero());
+    const MonolithicSystem<Dim> control(s.grid, StressForm::full, s.w, s.dt, s.u_star, resting,
+                                        s.solids, s.contacts);
+    CHECK(control.b2().cwiseAbs().maxCoeff() > 0.1 * v0.norm() / s.grid.dx());
+  }
   StaggeredSettings settings;
   settings.mprgp.tolerance = 1e-10;
   const PvcUnifiedResult r = solve_pvc_unified<Dim>(sys, settings);
