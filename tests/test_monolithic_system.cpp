@@ -225,11 +225,24 @@ void check_reductions(int n) {
     CHECK((sys.b1() - ref.b1).cwiseAbs().maxCoeff() == 0.0);
     CHECK((sys.b2() - ref.b2).cwiseAbs().maxCoeff() == 0.0);
     CHECK(ref.b2.cwiseAbs().maxCoeff() > 0.0);
+    // and the solve is the Stokes solve: CHOLMOD on A, u from eq. (8)
+    StaggeredSettings settings;
+    settings.mprgp.tolerance = 1e-10;
+    settings.mprgp.max_iterations = 20000;
+    const PvcUnifiedResult r = solve_pvc_unified<Dim>(sys, settings);
+    CHECK(r.converged);
+    const VectorX x = cholmod_solve(ref.A, ref.b);
+    CHECK((r.x - x).cwiseAbs().maxCoeff() <= 1e-7 * x.cwiseAbs().maxCoeff());
+    CHECK(r.body_velocity.size() == 0);
+    VectorX u = s.u_star;
+    apply_stokes_update<Dim>(s.grid, layout, s.w, s.dt, scatter_stokes_pressure(dofs, x, s.grid.num_cells()),
+                             scatter_stress<Dim>(layout, dofs, x), u);
+    CHECK((r.u - u).cwiseAbs().maxCoeff() <= 1e-6 * u.cwiseAbs().maxCoeff());
   }
   // without liquid: the lambda, z blocks are ContactSystem's a33, a34, a44, b3, b4
   {
     Vec<Dim> centre = Vec<Dim>::Constant(0.5), half = Vec<Dim>::Constant(0.2);
-    centre[1] = 0.19;
+    centre[1] = 0.2 - 0.3 / n;  // penetrating the floor by 0.3 dx, beyond the margin
     std::vector<RigidBody<Dim>> bodies = {make_box<Dim>(centre, half, 300.0, 0.4)};
     BodyVec<Dim> v = BodyVec<Dim>::LinSpaced(-0.3, 0.2);
     bodies[0].set_generalized_velocity(v);
@@ -252,6 +265,19 @@ void check_reductions(int n) {
     CHECK(max_abs<Dim>(a.bottomRightCorner(nz, nz) - a44) <= 1e-12 * scale);
     CHECK((sys.b3() - s.contacts.b3()).cwiseAbs().maxCoeff() == 0.0);
     CHECK((sys.b4() - s.contacts.b4()).cwiseAbs().maxCoeff() == 0.0);
+    // and the solve is ContactSystem's staggered projections
+    StaggeredSettings settings;
+    settings.max_iterations = 50;
+    settings.tolerance = 1e-8;
+    settings.mprgp.tolerance = 1e-10;
+    settings.mprgp.max_iterations = 20000;
+    const PvcUnifiedResult r = solve_pvc_unified<Dim>(sys, settings);
+    const StaggeredResult ref = solve_staggered_projections<Dim>(s.contacts, settings);
+    REQUIRE(ref.lambda.maxCoeff() > 0.0);
+    INFO("lambda " << r.lambda.transpose() << " reference " << ref.lambda.transpose());
+    CHECK((r.lambda - ref.lambda).cwiseAbs().maxCoeff() <= 1e-6 * ref.lambda.cwiseAbs().maxCoeff());
+    const VectorX v_ref = s.contacts.velocity_update(ref.lambda, ref.z);
+    CHECK((r.body_velocity - v_ref).cwiseAbs().maxCoeff() <= 1e-6 * v_ref.cwiseAbs().maxCoeff());
   }
 }
 
