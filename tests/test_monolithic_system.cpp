@@ -184,6 +184,31 @@ void check_spd_and_apply(int n) {
   op.apply(x, y);
   CHECK((y - m * x).cwiseAbs().maxCoeff() <= 1e-12 * scale * x.cwiseAbs().sum());
   CHECK((op.diagonal() - m.diagonal()).cwiseAbs().maxCoeff() <= 1e-12 * scale);
+  // SSOR runs on the sparse part S = blockdiag(A_stokes, A33) only, honouring the active mask
+  const int nfl = sys.num_fluid();
+  CHECK(max_abs<Dim>(sparse.topLeftCorner(nfl, nfl) - Eigen::MatrixXd(sys.stokes().A)) == 0.0);
+  CHECK(max_abs<Dim>(sparse.topRightCorner(nfl, n26 - nfl)) == 0.0);
+  CHECK(max_abs<Dim>(sparse.bottomRightCorner(n26 - nfl, n26 - nfl) - Eigen::MatrixXd(s.contacts.a33())) <=
+        1e-12 * scale);
+  {
+    std::vector<char> active(n26, 1);
+    for (int i = 0; i < n26; i += 3) active[i] = 0;
+    const VectorX rhs = testing::random_vector(n26, 9);
+    VectorX x1 = testing::random_vector(n26, 10), x2 = x1;
+    const VectorX x0 = x1;
+    op.forward_sweep(rhs, x1, 1.0, &active);
+    op.backward_sweep(rhs, x1, 1.0, &active);
+    // the reference: Gauss-Seidel on S by rows, forward then backward
+    const Eigen::MatrixXd& sm = sparse;
+    auto relax = [&](int i) {
+      if (!active[i] || sm(i, i) == 0.0) return;
+      x2[i] = (rhs[i] - sm.row(i).dot(x2) + sm(i, i) * x2[i]) / sm(i, i);
+    };
+    for (int i = 0; i < n26; ++i) relax(i);
+    for (int i = n26 - 1; i >= 0; --i) relax(i);
+    CHECK((x1 - x2).cwiseAbs().maxCoeff() <= 1e-10 * x2.cwiseAbs().maxCoeff());
+    for (int i = 0; i < n26; i += 3) CHECK(x1[i] == x0[i]);
+  }
   // the rhs of (26) and (25) given the other unknowns are the block rows of (24)
   const VectorX z = testing::random_vector(sys.num_friction(), 8);
   const VectorX b = sys.rhs();
