@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/SparseCore>
 #include <cstdint>
+#include <vector>
 
 namespace monolith {
 
@@ -29,6 +30,21 @@ using VectorX = Eigen::VectorXd;
 /// parallelises over rows; convert to column-major for CHOLMOD.
 using SparseMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
 using Triplet = Eigen::Triplet<double, int>;
+
+/// 1 / v for v > 0, else 0: the entries of the diagonal inverses (W_L^u)^-1, P^-1 and N^-1 of
+/// eq. (8), which are zero where the weight, density or viscosity is (those rows carry nothing).
+inline double reciprocal_or_zero(double v) { return v > 0.0 ? 1.0 / v : 0.0; }
+
+/// The n x n diagonal sparse matrix diag(d) (n = d.size()), for the named diagonal factors of
+/// the explicit systems.
+inline SparseMatrix sparse_diagonal(const VectorX& d) {
+  SparseMatrix m(d.size(), d.size());
+  std::vector<Triplet> t;
+  t.reserve(d.size());
+  for (int i = 0; i < d.size(); ++i) t.emplace_back(i, i, d[i]);
+  m.setFromTriplets(t.begin(), t.end());
+  return m;
+}
 
 /// Unit vector along `axis`.
 template <int Dim>

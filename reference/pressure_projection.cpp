@@ -9,21 +9,8 @@ namespace monolith {
 
 namespace {
 
-/// Diagonal sparse matrix from its diagonal.
-SparseMatrix diagonal_matrix(const VectorX& d) {
-  SparseMatrix m(d.size(), d.size());
-  std::vector<Triplet> t;
-  t.reserve(d.size());
-  for (int i = 0; i < d.size(); ++i) t.emplace_back(i, i, d[i]);
-  m.setFromTriplets(t.begin(), t.end());
-  return m;
-}
-
-/// (W_L^u)^-1 entry: 0 where W_L^u = 0 (such faces have no liquid cell beside them, so the
-/// matching row of G W_L^p is zero anyway).
-double inverse_or_zero(double v) {
-  return v > 0.0 ? 1.0 / v : 0.0;
-}
+// (W_L^u)^-1 entries are reciprocal_or_zero: 0 where W_L^u = 0 (such faces have no liquid cell
+// beside them, so the matching row of G W_L^p is zero anyway).
 
 /// Per-face coefficient dt W_F^u P^-1 (W_L^u)^-1 / dx^2 of the stencil form of A.
 VectorX face_coefficients(const PressureWeights& w, double dt, double dx) {
@@ -31,7 +18,7 @@ VectorX face_coefficients(const PressureWeights& w, double dt, double dx) {
   for (int f = 0; f < k.size(); ++f) {
     const double wf = w.fluid_face[f];
     k[f] = wf > 0.0 && w.face_density[f] > 0.0
-               ? dt * wf * inverse_or_zero(w.liquid_face[f]) / (w.face_density[f] * dx * dx)
+               ? dt * wf * reciprocal_or_zero(w.liquid_face[f]) / (w.face_density[f] * dx * dx)
                : 0.0;
   }
   return k;
@@ -155,12 +142,12 @@ ExplicitPressureSystem assemble_explicit_pressure(const MacGrid<Dim>& grid,
   ExplicitPressureSystem sys;
   // the named matrices of eq. (8)
   sys.G = gradient_matrix(grid);
-  sys.W_F_u = diagonal_matrix(w.fluid_face);
-  sys.W_L_p = diagonal_matrix(w.liquid_cell);
-  sys.W_L_u_inv = diagonal_matrix(w.liquid_face.unaryExpr(&inverse_or_zero));
+  sys.W_F_u = sparse_diagonal(w.fluid_face);
+  sys.W_L_p = sparse_diagonal(w.liquid_cell);
+  sys.W_L_u_inv = sparse_diagonal(w.liquid_face.unaryExpr(&reciprocal_or_zero));
   VectorX p_inv(grid.num_faces());
-  for (int f = 0; f < grid.num_faces(); ++f) p_inv[f] = inverse_or_zero(w.face_density[f]);
-  sys.P_inv = diagonal_matrix(p_inv);
+  for (int f = 0; f < grid.num_faces(); ++f) p_inv[f] = reciprocal_or_zero(w.face_density[f]);
+  sys.P_inv = sparse_diagonal(p_inv);
   // selection of the active DOFs
   std::vector<Triplet> t;
   for (int i = 0; i < dofs.size(); ++i) t.emplace_back(i, dofs.cell_of_dof[i], 1.0);

@@ -10,23 +10,12 @@ namespace monolith {
 
 namespace {
 
-SparseMatrix diagonal_matrix(const VectorX& d) {
-  SparseMatrix m(d.size(), d.size());
-  std::vector<Triplet> t;
-  t.reserve(d.size());
-  for (int i = 0; i < d.size(); ++i) t.emplace_back(i, i, d[i]);
-  m.setFromTriplets(t.begin(), t.end());
-  return m;
-}
-
-double inverse_or_zero(double v) { return v > 0.0 ? 1.0 / v : 0.0; }
-
 /// C_f = dt W_F^u P^-1 (W_L^u)^-1 per face (0 where the face carries no fluid, liquid or density).
 VectorX stokes_face_coefficients(const PressureWeights& w, double dt) {
   VectorX c(w.fluid_face.size());
   for (int f = 0; f < c.size(); ++f)
     c[f] = w.fluid_face[f] > 0.0 && w.face_density[f] > 0.0
-               ? dt * w.fluid_face[f] * inverse_or_zero(w.liquid_face[f]) / w.face_density[f]
+               ? dt * w.fluid_face[f] * reciprocal_or_zero(w.liquid_face[f]) / w.face_density[f]
                : 0.0;
   return c;
 }
@@ -93,14 +82,14 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
   // the named matrices of eq. (8)
   sys.G = gradient_matrix(grid);
   sys.D = deformation_rate_matrix(stress);
-  sys.M = diagonal_matrix(stress_multiplicity(stress));
+  sys.M = sparse_diagonal(stress_multiplicity(stress));
   sys.N_inv = inverse_viscosity_matrix(layout, w.viscosity);
-  sys.W_F_u = diagonal_matrix(w.pressure.fluid_face);
-  sys.W_L_u_inv = diagonal_matrix(w.pressure.liquid_face.unaryExpr(&inverse_or_zero));
-  sys.P_inv = diagonal_matrix(w.pressure.face_density.unaryExpr(&inverse_or_zero));
-  sys.W_L_p = diagonal_matrix(w.pressure.liquid_cell);
-  sys.W_F_s = diagonal_matrix(w.fluid_stress);
-  sys.W_L_s = diagonal_matrix(w.liquid_stress);
+  sys.W_F_u = sparse_diagonal(w.pressure.fluid_face);
+  sys.W_L_u_inv = sparse_diagonal(w.pressure.liquid_face.unaryExpr(&reciprocal_or_zero));
+  sys.P_inv = sparse_diagonal(w.pressure.face_density.unaryExpr(&reciprocal_or_zero));
+  sys.W_L_p = sparse_diagonal(w.pressure.liquid_cell);
+  sys.W_F_s = sparse_diagonal(w.fluid_stress);
+  sys.W_L_s = sparse_diagonal(w.liquid_stress);
   sys.E = layout.expansion();
   // selections of the active DOFs
   std::vector<Triplet> t;
@@ -114,7 +103,7 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
   // K = W_F^u P^-1 (W_L^u)^-1 and the full-layout N^-1 = M diag(1/eta)
   const SparseMatrix K = sys.W_F_u * sys.P_inv * sys.W_L_u_inv;
   const SparseMatrix N_full_inv =
-      sys.M * diagonal_matrix(w.viscosity.unaryExpr(&inverse_or_zero));
+      sys.M * sparse_diagonal(w.viscosity.unaryExpr(&reciprocal_or_zero));
   const SparseMatrix W_s = sys.W_F_s * sys.W_L_s;
   const SparseMatrix Dt = sys.D.transpose();
   const SparseMatrix Et = sys.E.transpose();
@@ -202,7 +191,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
         const double s = sign[c] * m[d] * w.liquid_stress[d];
         for (SparseMatrix::InnerIterator it(D, d); it; ++it)
           if (it.value() != 0.0) column.emplace_back(it.col(), s * it.value());
-        const double x = 0.5 * m[d] * inverse_or_zero(w.viscosity[d]) * w.fluid_stress[d] *
+        const double x = 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] *
                          w.liquid_stress[d];
         self_[i] += x;  // sign^2 = 1
       }
@@ -214,7 +203,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
         if (other >= 0) {
           const int d = dof[1];
           partner_[i] = other;
-          partner_coef_[i] = 0.5 * m[d] * inverse_or_zero(w.viscosity[d]) * w.fluid_stress[d] *
+          partner_coef_[i] = 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] *
                              w.liquid_stress[d];
         }
       }
@@ -421,7 +410,7 @@ double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
   const VectorX m = stress_multiplicity(stress);
   double viscous = 0.0;
   for (int d = 0; d < stress.num_dofs(); ++d)
-    viscous += m[d] * inverse_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d] *
+    viscous += m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d] *
                tau[d] * tau[d];
   return 0.5 * kinetic + 0.25 * dt * viscous;
 }

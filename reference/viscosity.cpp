@@ -4,12 +4,6 @@
 
 namespace monolith {
 
-namespace {
-
-double inverse_or_zero(double v) { return v > 0.0 ? 1.0 / v : 0.0; }
-
-}  // namespace
-
 template <int Dim>
 StressLayout<Dim>::StressLayout(const StressGrid<Dim>& stress, StressForm form)
     : stress_(stress), form_(form) {
@@ -106,7 +100,7 @@ SparseMatrix inverse_viscosity_matrix(const StressLayout<Dim>& layout, const Vec
   // N_full^-1 = M diag(1/eta), then E^T N_full^-1 E
   VectorX n_full(stress.num_dofs());
   const VectorX m = stress_multiplicity(stress);
-  for (int i = 0; i < stress.num_dofs(); ++i) n_full[i] = m[i] * inverse_or_zero(eta[i]);
+  for (int i = 0; i < stress.num_dofs(); ++i) n_full[i] = m[i] * reciprocal_or_zero(eta[i]);
   SparseMatrix nf(stress.num_dofs(), stress.num_dofs());
   nf.reserve(Eigen::VectorXi::Constant(stress.num_dofs(), 1));
   for (int i = 0; i < stress.num_dofs(); ++i) nf.insert(i, i) = n_full[i];
