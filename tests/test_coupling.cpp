@@ -16,6 +16,7 @@
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::all_boundaries;
 using monolith::testing::random_vector;
 using monolith::testing::TestBall;
 using monolith::testing::TestBox;
@@ -52,13 +53,6 @@ Mat<2> some_rotation<2>() {
 template <>
 Mat<3> some_rotation<3>() {
   return Eigen::AngleAxisd(0.6, Eigen::Vector3d(1.0, 2.0, 0.5).normalized()).toRotationMatrix();
-}
-
-template <int Dim>
-std::array<BoundaryType, 2 * Dim> all_boundaries(BoundaryType type) {
-  std::array<BoundaryType, 2 * Dim> b;
-  b.fill(type);
-  return b;
 }
 
 /// A body at centre c: box, ball or rotated box (kind 0, 1, 2), centre of mass off the

@@ -8,19 +8,13 @@
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::all_boundaries;
 using monolith::testing::sample_lattice;
 using monolith::testing::unit_grid;
 using monolith::testing::TestBall;
 using monolith::testing::TestBox;
 
 namespace {
-
-template <int Dim>
-std::array<BoundaryType, 2 * Dim> all(BoundaryType t) {
-  std::array<BoundaryType, 2 * Dim> b;
-  b.fill(t);
-  return b;
-}
 
 double ball_volume(int dim, double r) { return dim == 2 ? M_PI * r * r : 4.0 / 3.0 * M_PI * r * r * r; }
 
@@ -69,7 +63,7 @@ TEMPLATE_TEST_CASE_SIG("diagonal stress weights equal the cell weights", "[unit]
   const VectorX liquid_phi = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return liquid.distance(x); });
   const VectorX solid_phi = solid_phi_on_lattice<Dim>(grid, lattice, {std::make_shared<TestBox<Dim>>(solid)}, 0.0);
   const VectorX wl = stress_liquid_weights(stress, lattice, liquid_phi);
-  const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all<Dim>(BoundaryType::wall));
+  const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all_boundaries<Dim>(BoundaryType::wall));
   const VectorX cell_liquid = liquid_cell_weights(grid, lattice, liquid_phi);
   const VectorX cell_fluid = VectorX::Ones(grid.num_cells()) - cell_negative_fractions(grid, lattice, solid_phi);
   REQUIRE(cell_liquid.maxCoeff() > 0.5);
@@ -120,7 +114,7 @@ TEMPLATE_TEST_CASE_SIG("boundary stress control volumes mirror; walls keep the i
   const VectorX phi = sample_lattice<Dim>(lattice, [](const Vec<Dim>& x) { return x[1] - 0.43 - 0.1 * x[Dim - 1]; });
   const VectorX wl = stress_liquid_weights(stress, lattice, phi);
   const VectorX no_solid = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
-  std::array<BoundaryType, 2 * Dim> mixed = all<Dim>(BoundaryType::wall);
+  std::array<BoundaryType, 2 * Dim> mixed = all_boundaries<Dim>(BoundaryType::wall);
   mixed[1] = BoundaryType::open;  // x = 1 open
   const VectorX wf = stress_fluid_weights(stress, lattice, no_solid, mixed);
   int checked = 0;
@@ -147,7 +141,7 @@ TEMPLATE_TEST_CASE_SIG("boundary stress control volumes mirror; walls keep the i
   }
   CHECK(checked > 0);
   // the fluid parts of the node/edge control volumes of a closed box tile it exactly
-  const VectorX wall = stress_fluid_weights(stress, lattice, no_solid, all<Dim>(BoundaryType::wall));
+  const VectorX wall = stress_fluid_weights(stress, lattice, no_solid, all_boundaries<Dim>(BoundaryType::wall));
   for (int k = Dim; k < StressGrid<Dim>::kComponents; ++k)
     CHECK(wall.segment(stress.offset(k), stress.num_dofs(k)).sum() * grid.cell_volume() ==
           Approx(1.0).epsilon(1e-13));
@@ -165,7 +159,7 @@ TEMPLATE_TEST_CASE_SIG("a solid wall through a row of nodes gives them W_F^s = 1
   const auto lattice = half_lattice(grid);
   const double wall = 3.0 / n;
   const VectorX solid_phi = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return x[1] - wall; });
-  const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all<Dim>(BoundaryType::periodic));
+  const VectorX wf = stress_fluid_weights(stress, lattice, solid_phi, all_boundaries<Dim>(BoundaryType::periodic));
   int checked = 0;
   for (int i = 0; i < stress.num_dofs(); ++i) {
     const auto [k, c] = stress.coord(i);

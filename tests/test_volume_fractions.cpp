@@ -7,6 +7,7 @@
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::all_boundaries;
 using monolith::testing::sample_lattice;
 using monolith::testing::unit_grid;
 
@@ -15,13 +16,6 @@ namespace {
 template <int Dim>
 double ball_volume(double r) {
   return Dim == 2 ? M_PI * r * r : 4.0 / 3.0 * M_PI * r * r * r;
-}
-
-template <int Dim>
-std::array<BoundaryType, 2 * Dim> all(BoundaryType t) {
-  std::array<BoundaryType, 2 * Dim> b;
-  b.fill(t);
-  return b;
 }
 
 /// A ball SDF off the grid symmetry lines.
@@ -151,7 +145,7 @@ TEMPLATE_TEST_CASE_SIG("weights: solid shrinkage, walls, open and periodic bound
     const auto lattice = half_lattice(grid);
     const VectorX solid_phi = solid_phi_on_lattice(grid, lattice, {}, 0.01 * grid.dx());
     REQUIRE(std::isinf(solid_phi[0]));
-    auto boundary = all<Dim>(BoundaryType::wall);
+    auto boundary = all_boundaries<Dim>(BoundaryType::wall);
     boundary[3] = BoundaryType::open;  // y+
     const VectorX wf = fluid_face_weights(grid, lattice, solid_phi, boundary);
     const VectorX ws = solid_face_weights(wf);

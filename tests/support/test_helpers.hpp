@@ -36,6 +36,14 @@ VectorX sample_lattice(const SampleLattice<Dim>& lattice, F&& f) {
   return phi;
 }
 
+/// The same boundary type on every side of the domain.
+template <int Dim>
+std::array<BoundaryType, 2 * Dim> all_boundaries(BoundaryType type) {
+  std::array<BoundaryType, 2 * Dim> b;
+  b.fill(type);
+  return b;
+}
+
 /// A vector as the std::vector a ShapeSpec field holds.
 template <int Dim>
 std::vector<double> as_std(const Vec<Dim>& v) {
