@@ -20,19 +20,10 @@ namespace {
 template <int Dim>
 StokesWeights full_box(const MacGrid<Dim>& grid, const std::array<BoundaryType, 2 * Dim>& boundary,
                        double rho, double eta) {
-  const StressGrid<Dim> stress(grid);
   const SampleLattice<Dim> lattice = half_lattice(grid);
   const VectorX no_solid = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
   const VectorX liquid = VectorX::Constant(lattice.size(), -1.0);
-  StokesWeights w;
-  w.pressure.fluid_face = fluid_face_weights(grid, lattice, no_solid, boundary);
-  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, liquid);
-  w.pressure.liquid_face = liquid_face_weights(grid, lattice, liquid, w.pressure.liquid_cell);
-  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
-  w.fluid_stress = stress_fluid_weights(stress, lattice, no_solid, boundary);
-  w.liquid_stress = stress_liquid_weights(stress, lattice, liquid);
-  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
-  return w;
+  return uniform_stokes_weights(grid, no_solid, liquid, boundary, rho, eta);
 }
 
 VectorX random_field(int n, unsigned seed) {

@@ -32,22 +32,13 @@ class Ball : public Shape<2> {
 /// Weights of eq. (8): liquid below y = level (level > 1: full), a solid ball if `solid`.
 StokesWeights weights(const MacGrid<2>& grid, const std::array<BoundaryType, 4>& boundary, double level,
                       bool solid, double rho, double eta) {
-  const StressGrid<2> stress(grid);
   const SampleLattice<2> lattice = half_lattice(grid);
   std::vector<ShapePtr<2>> solids;
   if (solid) solids.push_back(std::make_shared<Ball>(Vec<2>(0.6, 0.3), 0.15));
   const VectorX solid_phi = solid_phi_on_lattice<2>(grid, lattice, solids, 0.0);
   VectorX liquid(lattice.size());
   for (int k = 0; k < lattice.size(); ++k) liquid[k] = lattice.position(lattice.coord(k))[1] - level;
-  StokesWeights w;
-  w.pressure.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
-  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, liquid);
-  w.pressure.liquid_face = liquid_face_weights(grid, lattice, liquid, w.pressure.liquid_cell);
-  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
-  w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
-  w.liquid_stress = stress_liquid_weights(stress, lattice, liquid);
-  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
-  return w;
+  return uniform_stokes_weights(grid, solid_phi, liquid, boundary, rho, eta);
 }
 
 std::string str(double v) {

@@ -5,6 +5,8 @@
 
 #include "reference/deformation_rate.hpp"
 #include "reference/gradient.hpp"
+#include "reference/stress_weights.hpp"
+#include "reference/volume_fractions.hpp"
 
 namespace monolith {
 
@@ -446,7 +448,29 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   return result;
 }
 
+template <int Dim>
+StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
+                                     const VectorX& liquid_phi,
+                                     const std::array<BoundaryType, 2 * Dim>& boundary,
+                                     double rho, double eta) {
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const StressGrid<Dim> stress(grid);
+  StokesWeights w;
+  w.pressure.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
+  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, liquid_phi);
+  w.pressure.liquid_face = liquid_face_weights(grid, lattice, liquid_phi, w.pressure.liquid_cell);
+  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
+  w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
+  w.liquid_stress = stress_liquid_weights(stress, lattice, liquid_phi);
+  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  return w;
+}
+
 #define MONOLITH_INSTANTIATE(D)                                                                  \
+  template StokesWeights uniform_stokes_weights<D>(const MacGrid<D>&, const VectorX&,            \
+                                                   const VectorX&,                               \
+                                                   const std::array<BoundaryType, 2 * D>&,       \
+                                                   double, double);                              \
   template StokesDofs select_stokes_dofs<D>(const MacGrid<D>&, const StressLayout<D>&,           \
                                             const StokesWeights&, double, StokesUnknowns);       \
   template ExplicitStokesSystem assemble_explicit_stokes<D>(const MacGrid<D>&,                   \

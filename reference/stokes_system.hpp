@@ -19,6 +19,7 @@
 /// dt/rho div tau (eq. (4)). W^s = W_F^s W_L^s (stress_weights.hpp), E the expansion of
 /// StressLayout (identity in the full form).
 
+#include <array>
 #include <string>
 #include <utility>
 #include <vector>
@@ -28,6 +29,7 @@
 #include "reference/mac_grid.hpp"
 #include "reference/pcg.hpp"
 #include "reference/pressure_projection.hpp"
+#include "reference/scene.hpp"
 #include "reference/stress_grid.hpp"
 #include "reference/viscosity.hpp"
 
@@ -40,6 +42,16 @@ struct StokesWeights {
   VectorX liquid_stress;     ///< W_L^s per StressGrid DOF
   VectorX viscosity;         ///< eta per StressGrid DOF, Pa s (0 = inviscid there)
 };
+
+/// The weights of eq. (8) (section 3.1.2) from level sets on half_lattice(grid): solid where
+/// solid_phi < 0, liquid where liquid_phi < 0, domain sides as `boundary` says, one density rho
+/// (the diagonal of P) and one viscosity eta everywhere. W_L^u is clamped as liquid_face_weights
+/// does. For teaching cases, tests and benchmarks; the simulator builds its own from particles.
+template <int Dim>
+StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
+                                     const VectorX& liquid_phi,
+                                     const std::array<BoundaryType, 2 * Dim>& boundary,
+                                     double rho, double eta);
 
 /// Which unknowns a solve has: both (PV: eq. (8)) or stress only (the "VC" step of PC-VC-PC:
 /// eq. (8) with p fixed at zero). Pressure only is solve_pressure (pressure_projection.hpp).

@@ -133,25 +133,14 @@ PressureWeights flat_surface_weights(const MacGrid<Dim>& grid,
   return w;
 }
 
-/// The weights of eq. (8) (section 3.1.2) from level sets on the half lattice of `grid`: solid
-/// where solid_phi < 0, liquid where liquid_phi < 0, sides as `boundary` says, uniform density
-/// rho and viscosity eta.
+/// The weights of eq. (8) with one density and one viscosity: uniform_stokes_weights
+/// (reference/stokes_system.hpp).
 template <int Dim>
 StokesWeights stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
                              const VectorX& liquid_phi,
                              const std::array<BoundaryType, 2 * Dim>& boundary, double rho,
                              double eta) {
-  const SampleLattice<Dim> lattice = half_lattice(grid);
-  const StressGrid<Dim> stress(grid);
-  StokesWeights w;
-  w.pressure.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
-  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, liquid_phi);
-  w.pressure.liquid_face = liquid_face_weights(grid, lattice, liquid_phi, w.pressure.liquid_cell);
-  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
-  w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
-  w.liquid_stress = stress_liquid_weights(stress, lattice, liquid_phi);
-  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
-  return w;
+  return uniform_stokes_weights(grid, solid_phi, liquid_phi, boundary, rho, eta);
 }
 
 }  // namespace monolith::testing
