@@ -246,6 +246,9 @@ StaggeredResult solve_staggered_projections(const ContactSystem<Dim>& system,
   const ColouredSparseOperator a44(system.a44(), expand_colouring(colours, Dim - 1));
   const DiagonalBoost a44_boosted(a44, settings.diagonal_boost);
   const VectorX b4 = system.b4();
+  // ||A|| once per operator for all the staggered solves (each would estimate it again)
+  const MprgpSettings normal_settings = with_norm_estimate(a33_boosted, settings.mprgp);
+  const MprgpSettings friction_settings = with_norm_estimate(a44_boosted, settings.mprgp);
   VectorX lower(nf), upper(nf);
   for (int k = 0; k < std::max(1, settings.max_iterations); ++k) {
     // eq. (25): friction with the pyramid bounds of the current lambda
@@ -256,11 +259,11 @@ StaggeredResult solve_staggered_projections(const ContactSystem<Dim>& system,
         upper[(Dim - 1) * c + j] = bound;
       }
     const VectorX rhs_z = b4 - a34t * result.lambda;
-    record(mprgp_solve(a44_boosted, rhs_z, lower, upper, result.z, settings.mprgp));
+    record(mprgp_solve(a44_boosted, rhs_z, lower, upper, result.z, friction_settings));
     // eq. (26) without tau and p: normal forces given the friction
     const VectorX previous = result.lambda;
     const VectorX rhs_l = b3 - a34 * result.z;
-    record(mprgp_solve(a33_boosted, rhs_l, zero_n, inf_n, result.lambda, settings.mprgp));
+    record(mprgp_solve(a33_boosted, rhs_l, zero_n, inf_n, result.lambda, normal_settings));
     ++result.staggered_iterations;
     // stop when lambda has settled
     const double scale = std::max(inf_norm(result.lambda), 1e-300);

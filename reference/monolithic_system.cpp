@@ -302,8 +302,10 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   PvcUnifiedResult r;
   r.x = VectorX::Zero(nf + nc);
   r.z = VectorX::Zero(nz);
+  // ||A|| once per operator for all the staggered solves (each would estimate it again)
+  const MprgpSettings mlcp_settings = with_norm_estimate(op, settings.mprgp);
   auto solve_mlcp = [&]() {
-    const MprgpResult m = mprgp_solve(op, system.mlcp_rhs(r.z), lower, upper, r.x, settings.mprgp);
+    const MprgpResult m = mprgp_solve(op, system.mlcp_rhs(r.z), lower, upper, r.x, mlcp_settings);
     r.mprgp_iterations += m.iterations;
     r.converged = r.converged && m.converged;
     ++r.staggered_iterations;
@@ -312,6 +314,7 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   const bool friction = nc > 0 && system.contacts().mu.maxCoeff() > 0.0;
   if (friction) {
     const SparseMatrixOperator fop = friction_operator(system, gamma);
+    const MprgpSettings friction_settings = with_norm_estimate(fop, settings.mprgp);
     for (int k = 1; k < std::max(1, settings.max_iterations); ++k) {
       // eq. (25): z given (tau, p, lambda), -mu lambda <= z <= mu lambda
       const VectorX lambda_old = r.x.tail(nc);
@@ -322,7 +325,7 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
           zl[(Dim - 1) * c + j] = -bound;
           zu[(Dim - 1) * c + j] = bound;
         }
-      const MprgpResult m = mprgp_solve(fop, system.friction_rhs(r.x), zl, zu, r.z, settings.mprgp);
+      const MprgpResult m = mprgp_solve(fop, system.friction_rhs(r.x), zl, zu, r.z, friction_settings);
       r.mprgp_iterations += m.iterations;
       r.converged = r.converged && m.converged;
       // eq. (26) given z

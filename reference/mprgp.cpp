@@ -371,4 +371,10 @@ void ColouredSparseOperator::backward_sweep(const VectorX& rhs, VectorX& x, doub
                [&](int i) { return off_diagonal_product(i, x); });
 }
 
+MprgpSettings with_norm_estimate(const LinearOperator& a, MprgpSettings settings) {
+  if (!(settings.norm_estimate > 0.0))
+    settings.norm_estimate = estimate_operator_norm(a, settings.power_iterations);
+  return settings;
+}
+
 }  // namespace monolith

@@ -68,6 +68,12 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
 /// margin keeps alpha_bar = step_scale / ||A|| under 2 / ||A||).
 double estimate_operator_norm(const LinearOperator& a, int iterations = 30);
 
+/// `settings` with norm_estimate filled in for `a` (power iteration, as mprgp_solve would do) when
+/// it is not set: a caller that solves with the same operator several times (the staggered
+/// projections of section 4.2) estimates ||A|| once instead of once per solve. The solves are
+/// unchanged (the estimate is deterministic).
+MprgpSettings with_norm_estimate(const LinearOperator& a, MprgpSettings settings);
+
 /// Section 4.4.5 (the paper uses gamma = 1e-4 on A_33 and A_44 of eq. (24)): the operator A with
 /// its diagonal scaled by (1 + gamma), i.e. A + gamma diag(A)
 /// (n x n, SPD for gamma > 0 whenever A is SPSD with a positive diagonal). apply, diagonal and

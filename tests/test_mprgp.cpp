@@ -743,3 +743,27 @@ TEST_CASE("MPRGP runs on the matrix-free pressure operator (red-black sweeps) as
   pressure_bound_on_both_back_ends<2>();
   pressure_bound_on_both_back_ends<3>();
 }
+
+TEST_CASE("with_norm_estimate: one estimate reused gives the same solve as estimating inside",
+          "[unit]") {
+  std::mt19937 rng(5);
+  const int n = 8;
+  const Dense a = random_spd(n, 1e2, rng);
+  const VectorX b = a * (1.5 * random_vec(n, rng));
+  const VectorX l = VectorX::Constant(n, -0.5), u = VectorX::Constant(n, 0.5);
+  SparseMatrixOperator op(to_sparse(a));
+  const MprgpSettings inside;
+  const MprgpSettings reused = with_norm_estimate(op, inside);
+  CHECK(reused.norm_estimate > 0.0);
+  CHECK(reused.norm_estimate == estimate_operator_norm(op, inside.power_iterations));
+  // an estimate already given is kept
+  MprgpSettings given;
+  given.norm_estimate = 3.5;
+  CHECK(with_norm_estimate(op, given).norm_estimate == 3.5);
+  VectorX x1 = VectorX::Zero(n), x2 = VectorX::Zero(n);
+  const MprgpResult r1 = mprgp_solve(op, b, l, u, x1, inside);
+  const MprgpResult r2 = mprgp_solve(op, b, l, u, x2, reused);
+  CHECK(r1.converged);
+  CHECK(r1.iterations == r2.iterations);
+  CHECK((x1 - x2).cwiseAbs().maxCoeff() == 0.0);
+}
