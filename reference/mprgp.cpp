@@ -163,6 +163,12 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
       z = phi;
     project_out(z);
   };
+  // new free set or exact gradient: reclassify, precondition, restart the CG directions at z
+  auto restart = [&]() {
+    classify();
+    precondition();
+    p = z;
+  };
   auto fail = [&](const std::string& why) {
     result.breakdown = true;
     result.message = why;
@@ -176,9 +182,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   };
 
   exact_gradient();
-  classify();
-  precondition();
-  p = z;
+  restart();
 
   bool verified = true;  // g is exact (not a recurrence) at the next convergence test
   for (;;) {
@@ -196,9 +200,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
       }
       // recompute g without the recurrence's drift, test again, restart the directions
       exact_gradient();
-      classify();
-      precondition();
-      p = z;
+      restart();
       verified = true;
       continue;
     }
@@ -260,9 +262,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
           box.project(x);
           exact_gradient();
         }
-        classify();
-        precondition();
-        p = z;
+        restart();
       }
     } else {
       // proportioning step along the chopped gradient (releases variables from their bounds)
@@ -283,9 +283,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
         box.project(x);
         exact_gradient();
       }
-      classify();
-      precondition();
-      p = z;
+      restart();
     }
     if (observer) observer(kind, x, g);
   }
