@@ -61,6 +61,32 @@ void for_range(const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
   }
 }
 
+/// A body's SDF on the lattice shifted by zeta (solid_phi_on_lattice of one shape), evaluated
+/// only within 2 dx of its bounds: farther out the distance to the bounds box (plus zeta), a
+/// positive lower bound of the true distance, stands in. The fractions, which read only signs
+/// and the values next to sign changes, are the same; a 3D mesh body costs its own box of
+/// samples instead of the whole lattice in every step.
+template <int Dim>
+VectorX body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
+                            double shrink_in_metres, double far) {
+  const Box<Dim> box = shape.bounds();
+  const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
+  VectorX phi(lattice.size());
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < lattice.size(); ++k) {
+    const Vec<Dim> x = lattice.position(lattice.coord(k));
+    if (bounded) {
+      const double outside = (x - x.cwiseMax(box.min()).cwiseMin(box.max())).norm();
+      if (outside > far) {
+        phi[k] = outside + shrink_in_metres;
+        continue;
+      }
+    }
+    phi[k] = shape.distance(x) + shrink_in_metres;
+  }
+  return phi;
+}
+
 }  // namespace
 
 template <int Dim>
@@ -87,7 +113,8 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
   w.static_face = face_negative_fractions(grid, lattice, union_phi);
   VectorX sum = w.static_face;
   for (const CouplingBody<Dim>& body : bodies) {
-    const VectorX phi = solid_phi_on_lattice<Dim>(grid, lattice, {body.shape}, shrink_in_metres);
+    const VectorX phi =
+        body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, 2.0 * grid.dx());
     w.body_face.push_back(face_negative_fractions(grid, lattice, phi));
     sum += w.body_face.back();
     union_phi = union_phi.cwiseMin(phi);
@@ -119,6 +146,7 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
 
   // W_F^s from the union of all solids
   w.fluid_stress = stress_fluid_weights(StressGrid<Dim>(grid), lattice, union_phi, boundary);
+  w.lattice_phi = std::move(union_phi);
   return w;
 }
 

@@ -68,6 +68,10 @@ struct SolidWeights {
   /// static), shrunk by zeta; equals 1 - (sum of the stress-control-volume fractions) wherever
   /// bodies do not overlap.
   VectorX fluid_stress;
+  /// The signed distance of the union of all solids (bodies and static) on half_lattice(grid),
+  /// shifted by zeta: solid_phi_on_lattice of them all, except that far (> 2 dx) from a body's
+  /// bounds its distance is replaced by the distance to those bounds (same signs).
+  VectorX lattice_phi;
 };
 
 /// Section 4.4.6 / 3.1.2: the weights above for bodies (shrunk by `shrink_in_metres` = zeta,

@@ -50,13 +50,15 @@ RigidWorld<Dim>::RigidWorld(std::vector<RigidBody<Dim>> bodies, const Walls<Dim>
 }
 
 template <int Dim>
-RigidStepStats RigidWorld<Dim>::step(double dt, double t, const Vec<Dim>& gravity) {
-  RigidStepStats stats;
-  const double dx = settings_.dx;
-  // (3) external force on the dynamic bodies: v* = v + dt g
+void RigidWorld<Dim>::apply_gravity(double dt, const Vec<Dim>& gravity) {
   for (auto& b : bodies_)
     if (b.is_dynamic()) b.velocity += dt * gravity;
-  // (6) contacts up to a search distance: the margin plus what two bodies can close in a step
+}
+
+template <int Dim>
+std::vector<Contact<Dim>> RigidWorld<Dim>::find_contacts(double dt, RigidStepStats& stats) const {
+  const double dx = settings_.dx;
+  // the margin plus what two bodies can close in a step
   const double search = settings_.margin_cells * dx + 2.0 * dt * max_point_speed() + 0.1 * dx;
   ContactReduction reduction;
   if (settings_.points_per_patch > 0)
@@ -82,16 +84,58 @@ RigidStepStats RigidWorld<Dim>::step(double dt, double t, const Vec<Dim>& gravit
     contacts.push_back(c);
   }
   stats.contacts = static_cast<int>(contacts.size());
+  stats.max_penetration = 0.0;
   for (const auto& c : contacts) stats.max_penetration = std::max(stats.max_penetration, -c.phi);
+  return contacts;
+}
 
-  // (8) J_lambda, J_z, M_r, C at v*; restitution only above two steps of gravity
+template <int Dim>
+ContactParameters RigidWorld<Dim>::contact_parameters(double dt, const Vec<Dim>& gravity) const {
   ContactParameters params;
   params.dt = dt;
-  params.dx = dx;
+  params.dx = settings_.dx;
   params.baumgarte = settings_.baumgarte;
   params.margin_cells = settings_.margin_cells;
   params.restitution_threshold = 2.0 * gravity.norm() * dt;
-  ContactSystem<Dim> system(bodies_, contacts, params);
+  return params;
+}
+
+template <int Dim>
+void RigidWorld<Dim>::set_velocities(const VectorX& v, const std::vector<int>& body_dof) {
+  for (std::size_t i = 0; i < bodies_.size() && i < body_dof.size(); ++i)
+    if (body_dof[i] >= 0)
+      bodies_[i].set_generalized_velocity(v.template segment<kBodyDofs<Dim>>(body_dof[i]));
+}
+
+template <int Dim>
+void RigidWorld<Dim>::integrate(double dt, double t, const char* after) {
+  for (auto& b : bodies_) b.integrate(dt, t + dt);
+  for (const auto& b : bodies_)
+    if (!b.position.allFinite() || !b.velocity.allFinite() || !b.angular_velocity.allFinite()) {
+      std::ostringstream msg;
+      msg << "t = " << t + dt << " s: non-finite state of body \"" << b.name << "\" after " << after;
+      throw SimulationError(msg.str());
+    }
+}
+
+template <int Dim>
+void RigidWorld<Dim>::remember(std::vector<Contact<Dim>> contacts, const ContactSystem<Dim>& system,
+                               const StaggeredResult& solve) {
+  contacts_ = std::move(contacts);
+  system_ = system;
+  solve_ = solve;
+}
+
+template <int Dim>
+RigidStepStats RigidWorld<Dim>::step(double dt, double t, const Vec<Dim>& gravity) {
+  RigidStepStats stats;
+  const double dx = settings_.dx;
+  // (3) external force on the dynamic bodies: v* = v + dt g
+  apply_gravity(dt, gravity);
+  // (6) contacts up to a search distance
+  std::vector<Contact<Dim>> contacts = find_contacts(dt, stats);
+  // (8) J_lambda, J_z, M_r, C at v*
+  ContactSystem<Dim> system(bodies_, contacts, contact_parameters(dt, gravity));
   const int nc = system.num_contacts();
   stats.dofs_contact = nc;
   stats.dofs_friction = system.mu.size() && system.mu.maxCoeff() > 0.0 ? system.num_friction_rows() : 0;
@@ -131,22 +175,9 @@ RigidStepStats RigidWorld<Dim>::step(double dt, double t, const Vec<Dim>& gravit
   stats.converged = solve.converged;
 
   // (12) contact and friction forces on the dynamic bodies, eq. (13)
-  if (nc > 0) {
-    const VectorX v = system.velocity_update(solve.lambda, solve.z);
-    for (std::size_t i = 0; i < bodies_.size(); ++i)
-      if (system.body_dof[i] >= 0)
-        bodies_[i].set_generalized_velocity(v.template segment<kBodyDofs<Dim>>(system.body_dof[i]));
-  }
+  if (nc > 0) set_velocities(system.velocity_update(solve.lambda, solve.z), system.body_dof);
   // (13) positions (kinematic bodies follow their path)
-  for (auto& b : bodies_) b.integrate(dt, t + dt);
-  for (std::size_t i = 0; i < bodies_.size(); ++i) {
-    const auto& b = bodies_[i];
-    if (!b.position.allFinite() || !b.velocity.allFinite() || !b.angular_velocity.allFinite()) {
-      std::ostringstream msg;
-      msg << "t = " << t + dt << " s: non-finite state of body \"" << b.name << "\" after the contact solve";
-      throw SimulationError(msg.str());
-    }
-  }
+  integrate(dt, t, "the contact solve");
   contacts_ = std::move(contacts);
   system_ = std::move(system);
   solve_ = std::move(solve);

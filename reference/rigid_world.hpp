@@ -63,6 +63,27 @@ class RigidWorld {
   /// Throws SimulationError on a non-finite body state.
   RigidStepStats step(double dt, double t, const Vec<Dim>& gravity);
 
+  // The pieces of step(), in its order, for the coupled liquid-body step of Simulation:
+  /// Algorithm 1, line 3 for the bodies: v* = v + dt g on the dynamic bodies.
+  void apply_gravity(double dt, const Vec<Dim>& gravity);
+  /// Line 6: the contacts at the current pose up to the search distance epsilon + 2 dt (largest
+  /// body point speed) + dx / 10, only those touching a dynamic body, each with its pair's
+  /// friction sqrt(mu_a mu_b) and restitution max(e_a, e_b). Sets stats.contacts and
+  /// stats.max_penetration.
+  std::vector<Contact<Dim>> find_contacts(double dt, RigidStepStats& stats) const;
+  /// The ContactParameters of a step of dt (restitution only above two steps of gravity).
+  ContactParameters contact_parameters(double dt, const Vec<Dim>& gravity) const;
+  /// Line 12: the dynamic bodies take the generalised velocities v (ContactSystem layout:
+  /// body i's block starts at body_dof[i], -1 for bodies without DOFs).
+  void set_velocities(const VectorX& v, const std::vector<int>& body_dof);
+  /// Line 13: positions (kinematic bodies follow their path to t + dt). Throws SimulationError
+  /// on a non-finite body state (`after` names what came before).
+  void integrate(double dt, double t, const char* after);
+  /// Keeps the contacts and forces of this step for the next step's warm start and for
+  /// last_contacts() / last_solve().
+  void remember(std::vector<Contact<Dim>> contacts, const ContactSystem<Dim>& system,
+                const StaggeredResult& solve);
+
   const std::vector<RigidBody<Dim>>& bodies() const { return bodies_; }
   std::vector<RigidBody<Dim>>& bodies() { return bodies_; }
   const Walls<Dim>& walls() const { return walls_; }

@@ -1096,21 +1096,6 @@ void require_supported(const SceneDesc& scene) {
       problems.push_back(label + ": " + index_at("liquids", i) +
                          ".viscosity.model: herschel-bulkley liquids are not supported yet (non-Newtonian outer loop, "
                          "section 5) (\"newtonian\" with any eta >= 0 is supported)");
-  // moving bodies run with frictional contact (RigidWorld) in scenes without liquid; next to a
-  // liquid they need the monolithic rigid-liquid coupling
-  for (std::size_t i = 0; i < scene.bodies.size() && !scene.liquids.empty(); ++i) {
-    const std::string& m = scene.bodies[i].motion;
-    if (m == "dynamic")
-      problems.push_back(label + ": " + index_at("bodies", i) +
-                         ".motion: dynamic bodies are not supported yet next to a liquid (two-way rigid-liquid "
-                         "coupling) (\"static\" bodies are supported with liquids, and dynamic bodies in scenes "
-                         "without liquids; note that motion defaults to \"dynamic\")");
-    else if (m == "kinematic")
-      problems.push_back(label + ": " + index_at("bodies", i) +
-                         ".motion: kinematic bodies are not supported yet next to a liquid (one-way coupling, "
-                         "section 4.4.4) (\"static\" bodies are supported with liquids, and kinematic bodies "
-                         "in scenes without liquids)");
-  }
   if (!problems.empty()) throw InputError(problems);
 }
 

@@ -11,7 +11,9 @@
 #include <limits>
 #include <sstream>
 
+#include "reference/coupling.hpp"
 #include "reference/errors.hpp"
+#include "reference/monolithic_system.hpp"
 #include "reference/particles.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/rigid_world.hpp"
@@ -47,6 +49,38 @@ std::vector<double> to_std(const Vec<Dim>& x) {
 
 bool all_finite(const VectorX& v) {
   return v.allFinite();
+}
+
+/// Index of the shape with the smallest signed distance at x (shapes not empty).
+template <int Dim>
+std::size_t nearest_shape(const std::vector<ShapePtr<Dim>>& shapes, const Vec<Dim>& x) {
+  std::size_t best = 0;
+  double d = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < shapes.size(); ++k) {
+    const double dk = shapes[k]->distance(x);
+    if (dk < d) {
+      d = dk;
+      best = k;
+    }
+  }
+  return best;
+}
+
+/// The SolidField of a set of solids: the union's distance (min over the shapes) and the
+/// gradient of the nearest one. Empty for no shapes.
+template <int Dim>
+SolidField<Dim> make_solid_field(const std::vector<ShapePtr<Dim>>& shapes) {
+  SolidField<Dim> field;
+  if (shapes.empty()) return field;
+  field.distance = [shapes](const Vec<Dim>& x) {
+    double d = std::numeric_limits<double>::infinity();
+    for (const auto& s : shapes) d = std::min(d, s->distance(x));
+    return d;
+  };
+  field.gradient = [shapes](const Vec<Dim>& x) {
+    return shapes[nearest_shape<Dim>(shapes, x)]->gradient(x);
+  };
+  return field;
 }
 
 /// Faces whose weight W_F^u W_L^u in the energy of eq. (8) (W_L^u the geometric liquid fraction,
@@ -102,10 +136,22 @@ class Simulation : public AnySimulation {
   double cfl_dt() const;
   /// Liquid level set and the liquid weights W_L^p, W_L^u from the particles (lines 4-5).
   void update_liquid_weights();
-  /// On faces whose centre lies inside a static solid, removes the velocity component into the
-  /// solid (v <- v - min(v.n, 0) n with n the solid's outward normal), so particles near a solid
-  /// are not carried into it.
+  /// On faces whose centre lies inside a solid, removes the velocity component into the solid
+  /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
+  /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
+  /// particles near a solid are not carried into it.
   void constrain_velocity_in_solids();
+  /// Sections 3.1.2, 4.4.6 with moving bodies: W_F^u, W_F^s and the solid level set from every
+  /// body at its current pose (fixed bodies included, as one-way bodies), shrunk by zeta, and the
+  /// SolidField of the particles (static shapes and posed bodies).
+  void update_moving_solids();
+  /// Lines 6-12 of Algorithm 1 with moving bodies next to a liquid: contacts, the coupled
+  /// pressure / viscosity / contact solve of the scene's scheme (section 6), and the new body
+  /// velocities (eq. (21)). Updates u_ to the solved face velocities.
+  void solve_coupled(double dt);
+  /// Velocity of the solid at x: the point velocity of the moving body whose (unshrunk) SDF is
+  /// smallest there when that is a moving body, zero otherwise.
+  Vec<Dim> solid_velocity(const Vec<Dim>& x) const;
   /// Throws SimulationError if the state holds a non-finite value.
   void check_finite(const char* after) const;
   /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
@@ -146,8 +192,11 @@ class Simulation : public AnySimulation {
   int frame_ = 0;
   double time_ = 0.0;
   FrameStats stats_;
-  // rigid bodies with contact (scenes with dynamic or kinematic bodies and no liquid)
+  // rigid bodies with contact (scenes with dynamic or kinematic bodies)
   std::unique_ptr<RigidWorld<Dim>> rigid_;
+  /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
+  bool coupled_ = false;
+  SolidWeights<Dim> solid_weights_;  ///< of the last update_moving_solids
 };
 
 template <int Dim>
@@ -173,31 +222,19 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
     if (scene.bodies[i].motion == "static")
       solid_shapes_.push_back(
           make_shape<Dim>(scene.bodies[i].shape, "bodies[" + std::to_string(i) + "].shape"));
-  if (!solid_shapes_.empty()) {
-    const auto shapes = solid_shapes_;
-    solids_.distance = [shapes](const Vec<Dim>& x) {
-      double d = std::numeric_limits<double>::infinity();
-      for (const auto& s : shapes) d = std::min(d, s->distance(x));
-      return d;
-    };
-    solids_.gradient = [shapes](const Vec<Dim>& x) {
-      // gradient of the nearest solid (the one attaining the minimum)
-      std::size_t best = 0;
-      double d = std::numeric_limits<double>::infinity();
-      for (std::size_t k = 0; k < shapes.size(); ++k) {
-        const double dk = shapes[k]->distance(x);
-        if (dk < d) {
-          d = dk;
-          best = k;
-        }
-      }
-      return shapes[best]->gradient(x);
-    };
-  }
+  solids_ = make_solid_field<Dim>(solid_shapes_);
   // W_F^u from the solid level set shrunk by zeta (section 4.4.6)
   solid_phi_ =
       solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
   weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
+  // moving bodies: the rigid world; next to a liquid they enter the weights of every step
+  // (W_F^u, W_F^s from their pose) and the particles never start inside them
+  for (const auto& b : scene.bodies)
+    if (b.motion != "static") {
+      rigid_ = std::make_unique<RigidWorld<Dim>>(scene);
+      break;
+    }
+  coupled_ = rigid_ && !scene.liquids.empty();
 
   // viscosity: which solves the scheme runs, and the stress DOFs with W_F^s (static solids)
   liquid_eta_ = liquid_viscosities(scene.liquids);
@@ -208,6 +245,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   if (sequence_ != SolveSequence::pressure)
     stress_fluid_ = stress_fluid_weights(stress_grid_, lattice_, solid_phi_, boundary_);
   stress_ = VectorX::Zero(stress_grid_.num_dofs());
+  if (coupled_) update_moving_solids();
 
   // liquids: particles seeded in each liquid's shape
   std::vector<ShapePtr<Dim>> liquid_shapes;
@@ -232,12 +270,6 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   update_liquid_weights();
   liquid_weights_current_ = true;
   pressure_ = VectorX::Zero(grid_.num_cells());
-  // moving bodies: the rigid world (require_supported has refused them next to a liquid)
-  for (const auto& b : scene.bodies)
-    if (b.motion != "static") {
-      rigid_ = std::make_unique<RigidWorld<Dim>>(scene);
-      break;
-    }
   stats_.frame = 0;
   stats_.time = 0.0;
   stats_.solver.scheme = scene.solver.scheme;
@@ -249,7 +281,8 @@ void Simulation<Dim>::update_liquid_weights() {
   liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
-  const VectorX phi = solid_shapes_.empty()
+  const bool solids = !solid_shapes_.empty() || coupled_;
+  const VectorX phi = !solids
                           ? liquid_phi_
                           : extend_liquid_into_solids(grid_, liquid_phi_, solid_phi_,
                                                       kLiquidSolidReach * grid_.dx());
@@ -263,7 +296,7 @@ void Simulation<Dim>::update_liquid_weights() {
   }
   cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
   // the reported volume is that of the particles' own level set (the extension lies in solids)
-  liquid_volume_ = (solid_shapes_.empty() ? weights_.liquid_cell
+  liquid_volume_ = (!solids ? weights_.liquid_cell
                                           : liquid_cell_weights(grid_, lattice_, liquid_phi_))
                        .sum() *
                    grid_.cell_volume();
@@ -298,20 +331,25 @@ void Simulation<Dim>::step_bodies(double dt) {
 
 template <int Dim>
 void Simulation<Dim>::step(double dt) {
-  // (3), (6), (8), (10), (12), (13) for the bodies; a scene with bodies has no liquid yet
-  if (rigid_) {
+  // a scene of bodies without liquid: (3), (6), (8), (10), (12), (13) through RigidWorld
+  if (rigid_ && scene_.liquids.empty()) {
     step_bodies(dt);
-    if (scene_.liquids.empty()) return;
+    return;
   }
   // (1) map velocity from particles to grid (APIC)
   particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
-  // (2) add external force (gravity) on the faces that carry mass
+  // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   for (int f = 0; f < grid_.num_faces(); ++f)
     if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+  if (coupled_) rigid_->apply_gravity(dt, gravity_);
   // (4) liquid/air domain: level set from the particles on the half lattice
-  // (5) volume fractions W_L^p, W_L^u (W_F^u is fixed: the solids are static); the particles
-  // have not moved since the end of the last frame if that is where we are
-  if (!liquid_weights_current_) update_liquid_weights();
+  // (5) volume fractions: W_F^u, W_F^s from the solids at the bodies' pose (section 4.4.6),
+  // W_L^p, W_L^u, W_L^s from the liquid; the particles and bodies have not moved since the end
+  // of the last frame if that is where we are
+  if (!liquid_weights_current_) {
+    if (coupled_) update_moving_solids();
+    update_liquid_weights();
+  }
   liquid_weights_current_ = false;
   weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
   // with stress unknowns, D reads the velocity of the air faces next to the surface (b1 of
@@ -323,14 +361,19 @@ void Simulation<Dim>::step(double dt) {
     for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
     extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
   }
-  // (7)-(10) active DOFs, assembly (or stencil set-up) and the SSOR-PCG solves; (11) velocity
-  // update u = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau)
+  // (6) contacts, (7)-(10) active DOFs, assembly (or stencil set-up) and the solves of the
+  // scheme; (11) velocity update u = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau) and
+  // (12) the bodies' velocities (eq. (21))
   const auto solve_start = Clock::now();
-  solve_liquid(dt);
+  if (coupled_)
+    solve_coupled(dt);
+  else
+    solve_liquid(dt);
   stats_.timing_solve += seconds_since(solve_start);
-  check_finite("the pressure/viscosity solve");
+  check_finite("the pressure/viscosity/contact solve");
   // extrapolate the velocity from the trusted liquid faces into air and solid, then zero the
-  // normal velocity on walls and fully solid faces, and remove the inflow into solids
+  // normal velocity on walls and give fully solid faces their solid's velocity (zero for
+  // static solids), and remove the inflow into solids
   std::vector<char> valid(grid_.num_faces(), 0);
   for (int f = 0; f < grid_.num_faces(); ++f)
     valid[f] =
@@ -343,11 +386,22 @@ void Simulation<Dim>::step(double dt) {
     const auto [axis, coord] = grid_.face_coord(f);
     const bool wall = grid_.is_boundary_face(axis, coord) &&
                       boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
-    if (wall || weights_.fluid_face[f] == 0.0) u_[f] = 0.0;
+    if (wall)
+      u_[f] = 0.0;
+    else if (weights_.fluid_face[f] == 0.0)
+      u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
   }
   constrain_velocity_in_solids();
+  // (13) body positions; the particles then see the solids at the new pose
+  if (coupled_) {
+    rigid_->integrate(dt, time_, "the coupled solve");
+    std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
+    for (const auto& b : rigid_->bodies())
+      if (b.moves()) shapes.push_back(b.posed_shape());
+    solids_ = make_solid_field<Dim>(shapes);
+  }
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
-  // leaving through open faces are removed
+  // leaving through open faces are removed, particles that end up inside a solid are pushed out
   grid_to_particles(particles_, grid_, u_);
   advect_particles(particles_, grid_, u_, dt, solids_, boundary_);
   // (15) position correction for volume preservation
@@ -358,6 +412,84 @@ void Simulation<Dim>::step(double dt) {
     project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
   }
   check_finite("advection");
+}
+
+template <int Dim>
+void Simulation<Dim>::update_moving_solids() {
+  // every body is a coupling body (fixed ones one-way at zero velocity), so the weights are
+  // indexed like the bodies of the contact system; the static shapes are those fixed bodies
+  solid_weights_ = solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
+                                      scene_.solver.shrink * grid_.dx());
+  solid_phi_ = solid_weights_.lattice_phi;
+  weights_.fluid_face = solid_weights_.fluid_face;
+  if (sequence_ != SolveSequence::pressure) stress_fluid_ = solid_weights_.fluid_stress;
+  std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
+  for (const auto& b : rigid_->bodies())
+    if (b.moves()) shapes.push_back(b.posed_shape());
+  solids_ = make_solid_field<Dim>(shapes);
+}
+
+template <int Dim>
+Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x) const {
+  if (!rigid_) return Vec<Dim>::Zero();
+  const auto& bodies = rigid_->bodies();
+  double best = std::numeric_limits<double>::infinity();
+  int which = -1;
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    const double d = bodies[i].distance(x);
+    if (d < best) {
+      best = d;
+      which = static_cast<int>(i);
+    }
+  }
+  for (const auto& s : solid_shapes_)
+    if (s->distance(x) < best) return Vec<Dim>::Zero();
+  if (which < 0 || !bodies[which].moves()) return Vec<Dim>::Zero();
+  return bodies[which].point_velocity(x);
+}
+
+template <int Dim>
+void Simulation<Dim>::solve_coupled(double dt) {
+  RigidStepStats contact_stats;
+  const std::vector<Contact<Dim>> contacts = rigid_->find_contacts(dt, contact_stats);
+  stats_.contact_count = std::max(stats_.contact_count, contact_stats.contacts);
+  stats_.max_penetration = std::max(stats_.max_penetration, contact_stats.max_penetration);
+  // the weights of eq. (24): W_F from the bodies' pose, W_L from the liquid; the P.. C schemes
+  // and inviscid liquids have no stress unknowns (eta = 0 leaves every stress DOF inactive)
+  StokesWeights w;
+  w.pressure = weights_;
+  w.fluid_stress = solid_weights_.fluid_stress;
+  const bool stress = sequence_ != SolveSequence::pressure;
+  w.liquid_stress = stress ? stress_liquid_ : VectorX::Zero(stress_grid_.num_dofs());
+  w.viscosity = stress ? stress_eta_ : VectorX::Zero(stress_grid_.num_dofs());
+  const ContactSystem<Dim> system(rigid_->bodies(), contacts,
+                                  rigid_->contact_parameters(dt, gravity_));
+  const MonolithicSystem<Dim> mono(grid_, StressForm::reduced, w, dt, u_, rigid_->bodies(),
+                                   solid_weights_, system);
+  StaggeredSettings ss;
+  ss.max_iterations = std::max(1, scene_.solver.staggered_iterations);
+  ss.tolerance = scene_.solver.tolerance;
+  ss.diagonal_boost = scene_.solver.diagonal_boost;
+  ss.mprgp.tolerance = scene_.solver.tolerance;
+  ss.mprgp.max_iterations = scene_.solver.max_iterations;
+  const PvcUnifiedResult r = solve_pvc_unified(mono, ss);
+  u_ = r.u;
+  pressure_ = r.pressure;
+  stress_ = r.stress;
+  rigid_->set_velocities(r.body_velocity, system.body_dof);
+  StaggeredResult kept;
+  kept.lambda = r.lambda;
+  kept.z = r.z;
+  rigid_->remember(contacts, system, kept);
+  // statistics
+  stats_.solver.iterations += r.mprgp_iterations;
+  stats_.solver.staggered_iterations += r.staggered_iterations;
+  stats_.solver.converged = stats_.solver.converged && r.converged;
+  stats_.solver.dofs_pressure = std::max<long>(stats_.solver.dofs_pressure, mono.num_pressure());
+  stats_.solver.dofs_stress = std::max<long>(stats_.solver.dofs_stress, mono.num_stress());
+  stats_.solver.dofs_contact = std::max<long>(stats_.solver.dofs_contact, mono.num_contacts());
+  if (mono.num_contacts() > 0 && system.mu.maxCoeff() > 0.0)
+    stats_.solver.dofs_friction = std::max<long>(stats_.solver.dofs_friction, mono.num_friction());
 }
 
 template <int Dim>
@@ -433,7 +565,7 @@ void Simulation<Dim>::constrain_velocity_in_solids() {
     const Vec<Dim> x = grid_.face_center(axis, coord);
     const Vec<Dim> n = solids_.gradient(x);
     Vec<Dim> v = grid_.interpolate_velocity(u_old, x);
-    const double vn = v.dot(n);
+    const double vn = (v - (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero())).dot(n);
     if (vn < 0.0) v -= vn * n;
     u_[f] = v[axis];
   }
@@ -478,7 +610,8 @@ FrameStats Simulation<Dim>::advance_frame() {
   stats_.frame = frame_;
   stats_.time = frame_end;
   if (stats_.steps == 0) stats_.dt_min = 0.0;
-  // the liquid weights of the final state (reused by the next step)
+  // the solid and liquid weights of the final state (reused by the next step)
+  if (coupled_) update_moving_solids();
   update_liquid_weights();
   liquid_weights_current_ = true;
   fill_state_stats(stats_);

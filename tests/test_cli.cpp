@@ -212,7 +212,8 @@ TEST_CASE("check accepts good scenes and lists every problem of bad ones", "[uni
   j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"k", 1.0}, {"tau0", 5.0}};
   const Result u = cli({"check", write_file("unsupported.json", j.dump())});
   CHECK(u.code == 2);
-  CHECK(u.err.find("bodies[0].motion: dynamic bodies are not supported yet") != std::string::npos);
+  // a dynamic body next to the liquid is supported (two-way coupling): only the liquid is named
+  CHECK(u.err.find("bodies[0].motion") == std::string::npos);
   CHECK(u.err.find("liquids[0].viscosity.model: herschel-bulkley liquids are not supported yet") != std::string::npos);
 }
 
@@ -316,13 +317,11 @@ TEST_CASE("a simulation failure exits with 3 and keeps what was written", "[unit
 
 TEST_CASE("run refuses unsupported physics and unwritable output with exit 2", "[unit]") {
   json j = json::parse(kGood2);
-  j["bodies"][0]["motion"] = "kinematic";
-  j["bodies"][0]["density"] = 10;
-  j["bodies"][0]["path"] = {{"axis", {1, 0}}, {"amplitude", 0.1}, {"frequency", 1}};
-  const std::string scene = write_file("kin.json", j.dump());
-  const Result r = fake_cli({"run", scene, "--out", (temp_dir() / "kin").string()});
+  j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"k", 1.0}, {"tau0", 5.0}};
+  const std::string scene = write_file("hb.json", j.dump());
+  const Result r = fake_cli({"run", scene, "--out", (temp_dir() / "hb").string()});
   CHECK(r.code == 2);
-  CHECK(r.err.find("bodies[0].motion: kinematic bodies are not supported yet") != std::string::npos);
+  CHECK(r.err.find("liquids[0].viscosity.model: herschel-bulkley liquids are not supported yet") != std::string::npos);
   // an output path under a regular file cannot be created
   const std::string file = write_file("plain-file", "x");
   const std::string good = write_file("good.json", kGood2);
