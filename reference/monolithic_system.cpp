@@ -14,7 +14,8 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
                                         const StokesWeights& w, double dt, const VectorX& u_star,
                                         const std::vector<RigidBody<Dim>>& bodies,
                                         const SolidWeights<Dim>& solids,
-                                        const ContactSystem<Dim>& contacts)
+                                        const ContactSystem<Dim>& contacts,
+                                        StokesUnknowns unknowns)
     : grid_(grid), stress_(grid), layout_(stress_, form), w_(w), dt_(dt), u_star_(u_star),
       contacts_(contacts) {
   // alpha = 1 / dx^Dim, shared with the contact blocks (section 4.1)
@@ -22,7 +23,7 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   if (std::abs(contacts.alpha - alpha_) > 1e-12 * alpha_)
     throw std::invalid_argument("MonolithicSystem: ContactSystem alpha differs from 1/dx^Dim");
   // the liquid blocks: eq. (8) restricted to the active DOFs
-  dofs_ = select_stokes_dofs<Dim>(grid, layout_, w, dt, StokesUnknowns::pressure_and_stress);
+  dofs_ = select_stokes_dofs<Dim>(grid, layout_, w, dt, unknowns);
   stokes_ = assemble_explicit_stokes<Dim>(grid, layout_, w, dofs_, dt, u_star);
   const int nd = contacts.num_body_dofs();
 
@@ -164,6 +165,31 @@ VectorX MonolithicSystem<Dim>::friction_rhs(const VectorX& x) const {
 }
 
 template <int Dim>
+VectorX MonolithicSystem<Dim>::fluid_rhs(const VectorX& lambda, const VectorX& z) const {
+  VectorX b(num_fluid());
+  b << b1_, b2_;
+  if (num_body_dofs() == 0 || num_fluid() == 0) return b;
+  // dt alpha B_f^T M_r^-1 (J_lambda^T lambda + J_z^T z), in body space first
+  VectorX force = VectorX::Zero(num_body_dofs());
+  if (lambda.size() == num_contacts() && num_contacts() > 0) force += j_lambda_t_ * lambda;
+  if (z.size() == num_friction() && num_friction() > 0) force += j_z_t_ * z;
+  b -= (dt_ * alpha_) * (b_fluid_t_ * (contacts_.m_r_inverse * force));
+  return b;
+}
+
+template <int Dim>
+VectorX MonolithicSystem<Dim>::contact_rhs(const VectorX& x_fluid, const VectorX& z) const {
+  VectorX b = b3();
+  if (num_body_dofs() == 0 || num_contacts() == 0) return b;
+  // b3 - dt alpha J_lambda M_r^-1 (B_f x_f + J_z^T z)
+  VectorX force = VectorX::Zero(num_body_dofs());
+  if (x_fluid.size() == num_fluid() && num_fluid() > 0) force += b_fluid_ * x_fluid;
+  if (z.size() == num_friction() && num_friction() > 0) force += j_z_t_ * z;
+  b -= (dt_ * alpha_) * (contacts_.j_lambda * (contacts_.m_r_inverse * force));
+  return b;
+}
+
+template <int Dim>
 VectorX MonolithicSystem<Dim>::fluid_body_force(const VectorX& x_fluid) const {
   return b_fluid_ * x_fluid;
 }
@@ -281,6 +307,38 @@ Eigen::MatrixXd MonolithicOperator<Dim>::dense_matrix() const {
 }
 
 template <int Dim>
+FluidBodyOperator<Dim>::FluidBodyOperator(const MonolithicSystem<Dim>& system)
+    : system_(system), size_(system.num_fluid()), sparse_(system.stokes().A) {
+  // diagonal: diag(A_stokes) + dt alpha diag(B_f^T M_r^-1 B_f), column by column of B_f
+  diagonal_ = sparse_.diagonal();
+  const SparseMatrix& bf = system.fluid_body_jacobian();
+  if (system.num_body_dofs() > 0) {
+    const SparseMatrix mb = system.contacts().m_r_inverse * bf;
+    const SparseMatrix prod = bf.cwiseProduct(mb);
+    const double scale = system.dt() * system.alpha();
+    for (int k = 0; k < prod.outerSize(); ++k)
+      for (SparseMatrix::InnerIterator it(prod, k); it; ++it) diagonal_[it.col()] += scale * it.value();
+  }
+  // the Stokes null vectors the bodies do not feel
+  const double scale = std::max(1.0, bf.cwiseAbs().sum());
+  for (const VectorX& n : system.dofs().null_space) {
+    if (system.num_body_dofs() > 0 &&
+        system.fluid_body_force(n).cwiseAbs().maxCoeff() > 1e-12 * scale)
+      continue;
+    null_space_.push_back(n);
+  }
+}
+
+template <int Dim>
+void FluidBodyOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
+  sparse_.apply(x, y);
+  if (system_.num_body_dofs() == 0) return;
+  // dt alpha B_f^T (M_r^-1 (B_f x)), right to left
+  const VectorX g = system_.contacts().m_r_inverse * system_.fluid_body_force(x);
+  y += (system_.dt() * system_.alpha()) * (system_.fluid_body_jacobian().transpose() * g);
+}
+
+template <int Dim>
 SparseMatrixOperator friction_operator(const MonolithicSystem<Dim>& system, double contact_boost) {
   SparseMatrix a44 = system.contacts().a44();
   for (int k = 0; k < a44.outerSize(); ++k)
@@ -308,6 +366,11 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
     const MprgpResult m = mprgp_solve(op, system.mlcp_rhs(r.z), lower, upper, r.x, mlcp_settings);
     r.mprgp_iterations += m.iterations;
     r.converged = r.converged && m.converged;
+    r.max_relative_residual = std::max(r.max_relative_residual, m.relative_residual);
+    if (m.breakdown && !r.breakdown) {
+      r.breakdown = true;
+      r.message = m.message;
+    }
     ++r.staggered_iterations;
   };
   solve_mlcp();
@@ -328,6 +391,11 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
       const MprgpResult m = mprgp_solve(fop, system.friction_rhs(r.x), zl, zu, r.z, friction_settings);
       r.mprgp_iterations += m.iterations;
       r.converged = r.converged && m.converged;
+      r.max_relative_residual = std::max(r.max_relative_residual, m.relative_residual);
+      if (m.breakdown && !r.breakdown) {
+        r.breakdown = true;
+        r.message = m.message;
+      }
       // eq. (26) given z
       solve_mlcp();
       const VectorX lambda_new = r.x.tail(nc);
@@ -350,6 +418,8 @@ template class MonolithicSystem<2>;
 template class MonolithicSystem<3>;
 template class MonolithicOperator<2>;
 template class MonolithicOperator<3>;
+template class FluidBodyOperator<2>;
+template class FluidBodyOperator<3>;
 template SparseMatrixOperator friction_operator<2>(const MonolithicSystem<2>&, double);
 template SparseMatrixOperator friction_operator<3>(const MonolithicSystem<3>&, double);
 template PvcUnifiedResult solve_pvc_unified<2>(const MonolithicSystem<2>&, const StaggeredSettings&);

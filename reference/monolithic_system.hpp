@@ -19,6 +19,7 @@
 /// The products B_i^T M_r^-1 B_j x are evaluated right to left (sequential multiplication,
 /// section 4.4.3); the dense n x n blocks exist only in dense_matrix(), for small tests.
 
+#include <string>
 #include <vector>
 
 #include "reference/common.hpp"
@@ -43,10 +44,12 @@ class MonolithicSystem {
   /// bodies included); `u_star` the face velocities after advection and forces; `contacts` the
   /// ContactSystem of the same bodies (its v* is the two-way bodies' v*, its alpha must equal
   /// 1 / dx^Dim: std::invalid_argument otherwise). One-way (fixed, kinematic) bodies enter b1,
-  /// b2 only (section 4.4.4).
+  /// b2 only (section 4.4.4). `unknowns` = stress_only drops the pressure block (p fixed at
+  /// zero: the "VC" solve of PC-VC-PC-unified, section 6.2); n_p = 0 then.
   MonolithicSystem(const MacGrid<Dim>& grid, StressForm form, const StokesWeights& w, double dt,
                    const VectorX& u_star, const std::vector<RigidBody<Dim>>& bodies,
-                   const SolidWeights<Dim>& solids, const ContactSystem<Dim>& contacts);
+                   const SolidWeights<Dim>& solids, const ContactSystem<Dim>& contacts,
+                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
 
   int num_stress() const { return dofs_.num_stress(); }
   int num_pressure() const { return dofs_.num_pressure(); }
@@ -107,6 +110,15 @@ class MonolithicSystem {
   VectorX mlcp_rhs(const VectorX& z) const;
   /// eq. (25) right-hand side given x = (tau, p, lambda): b4 - A14^T tau - A24^T p - A34^T lambda.
   VectorX friction_rhs(const VectorX& x) const;
+  /// The fluid block rows of eq. (24) given the contact forces (section 6, the "P" / "PV" solve
+  /// of the partitioned schemes): (b1, b2) - (A13, A23) lambda - (A14, A24) z
+  /// = (b1, b2) - dt alpha B_f^T M_r^-1 (J_lambda^T lambda + J_z^T z), n_tau + n_p. Empty
+  /// lambda / z count as zero.
+  VectorX fluid_rhs(const VectorX& lambda, const VectorX& z) const;
+  /// The normal-contact block row of eq. (24) given the fluid and friction unknowns (the "C"
+  /// solve): b3 - A13^T tau - A23^T p - A34 z = b3 - dt alpha J_lambda M_r^-1 (B_f x_f +
+  /// J_z^T z), nc. Empty x_fluid / z count as zero.
+  VectorX contact_rhs(const VectorX& x_fluid, const VectorX& z) const;
 
   /// The generalised force on the two-way bodies (N and N m; 2D per metre) of the fluid part
   /// x_f = (tau, p): B_1 tau + B_2 p = Jh_s W_L^s tau_full + Jh_p W_L^p p (eq. (21)), nd.
@@ -189,6 +201,41 @@ class MonolithicOperator : public LinearOperator {
   std::vector<VectorX> null_space_;
 };
 
+/// The fluid-body block A_ff of eq. (24) over x_f = (tau, p), size n_tau + n_p:
+///   A_ff = [A11 A12; A12^T A22] = A_stokes + dt alpha B_f^T M_r^-1 B_f
+/// (symmetric positive semi-definite; definite unless the liquid is enclosed and the bodies do not
+/// feel the enclosed group's constant pressure), i.e. the liquid two-way coupled with the
+/// bodies but without contact: the "P" / "PV" / "VC" solve of the partitioned schemes of
+/// section 6 (and the unified schemes when there are no contacts). apply = A_stokes x + the rigid
+/// part by sequential multiplication (section 4.4.3); diagonal = diag(A_stokes) + dt alpha
+/// diag(B_f^T M_r^-1 B_f); SSOR sweeps run on A_stokes only (section 4.3, as MonolithicOperator);
+/// null_space: the Stokes null vectors the bodies do not see. MonolithicOperator restricted to
+/// its fluid rows and columns.
+template <int Dim>
+class FluidBodyOperator : public LinearOperator {
+ public:
+  explicit FluidBodyOperator(const MonolithicSystem<Dim>& system);
+  int size() const override { return size_; }
+  void apply(const VectorX& x, VectorX& y) const override;
+  VectorX diagonal() const override { return diagonal_; }
+  void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                     const std::vector<char>* active = nullptr) const override {
+    sparse_.forward_sweep(rhs, x, omega, active);
+  }
+  void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                      const std::vector<char>* active = nullptr) const override {
+    sparse_.backward_sweep(rhs, x, omega, active);
+  }
+  const std::vector<VectorX>& null_space() const override { return null_space_; }
+
+ private:
+  const MonolithicSystem<Dim>& system_;
+  int size_ = 0;
+  SparseMatrixOperator sparse_;
+  VectorX diagonal_;
+  std::vector<VectorX> null_space_;
+};
+
 /// The friction LCP (25) as a LinearOperator over z: A44 with (1 + gamma) on its diagonal
 /// (section 4.4.5), nf x nf; A44 = dt alpha J_z M_r^-1 J_z^T is sparse (contact graph).
 template <int Dim>
@@ -206,6 +253,9 @@ struct PvcUnifiedResult {
   long mprgp_iterations = 0;     ///< summed over all MPRGP solves
   bool converged = true;         ///< every MPRGP solve converged
   double last_change = 0.0;      ///< relative change of lambda in the last staggered iteration
+  double max_relative_residual = 0.0;  ///< largest MPRGP relative residual at exit
+  bool breakdown = false;        ///< some MPRGP solve broke down (message says which)
+  std::string message;
 };
 
 /// PVC-unified (section 4.2): MPRGP on (26) with lambda >= 0 and free tau, p; when some mu > 0,
