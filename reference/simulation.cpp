@@ -320,6 +320,8 @@ void Simulation<Dim>::step_bodies(double dt) {
   stats_.contact_count = std::max(stats_.contact_count, s.contacts);
   stats_.max_penetration = std::max(stats_.max_penetration, s.max_penetration);
   stats_.solver.iterations += s.iterations;
+  stats_.solver.contact_iterations += s.iterations;
+  stats_.solver.contact_seconds += s.solve_seconds;
   stats_.solver.staggered_iterations += s.staggered_iterations;
   stats_.solver.max_relative_residual =
       std::max(stats_.solver.max_relative_residual, s.max_relative_residual);
@@ -365,10 +367,12 @@ void Simulation<Dim>::step(double dt) {
   // scheme; (11) velocity update u = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau) and
   // (12) the bodies' velocities (eq. (21))
   const auto solve_start = Clock::now();
-  if (coupled_)
+  if (coupled_) {
     solve_coupled(dt);
-  else
+  } else {
     solve_liquid(dt);
+    stats_.solver.fluid_seconds += seconds_since(solve_start);
+  }
   stats_.timing_solve += seconds_since(solve_start);
   check_finite("the pressure/viscosity/contact solve");
   // extrapolate the velocity from the trusted liquid faces into air and solid, then zero the
@@ -483,6 +487,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   rigid_->remember(contacts, system, kept);
   // statistics
   stats_.solver.iterations += r.mprgp_iterations;
+  stats_.solver.coupled_iterations += r.mprgp_iterations;
   stats_.solver.staggered_iterations += r.staggered_iterations;
   stats_.solver.converged = stats_.solver.converged && r.converged;
   stats_.solver.dofs_pressure = std::max<long>(stats_.solver.dofs_pressure, mono.num_pressure());
@@ -542,6 +547,7 @@ void Simulation<Dim>::record_solve(const PcgResult& pcg, long pressure_dofs, lon
     throw SimulationError(msg.str());
   }
   stats_.solver.iterations += pcg.iterations;
+  stats_.solver.fluid_iterations += pcg.iterations;
   stats_.solver.staggered_iterations += 1;
   stats_.solver.max_relative_residual =
       std::max(stats_.solver.max_relative_residual, pcg.relative_residual);

@@ -63,7 +63,14 @@ json FrameStats::to_json() const {
                   {{"pressure", solver.dofs_pressure},
                    {"stress", solver.dofs_stress},
                    {"contact", solver.dofs_contact},
-                   {"friction", solver.dofs_friction}}}};
+                   {"friction", solver.dofs_friction}}},
+                 {"phases",
+                  {{"fluid", {{"iterations", solver.fluid_iterations},
+                              {"seconds", number(solver.fluid_seconds)}}},
+                   {"contact", {{"iterations", solver.contact_iterations},
+                                {"seconds", number(solver.contact_seconds)}}},
+                   {"coupled", {{"iterations", solver.coupled_iterations},
+                                {"seconds", number(solver.coupled_seconds)}}}}}};
   // timing
   j["timing"] = {{"total", number(timing_total)}, {"solve", number(timing_solve)}};
   return j;

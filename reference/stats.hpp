@@ -32,6 +32,11 @@ struct SolverStats {
   double max_relative_residual = 0.0;
   bool converged = true;          ///< all solves of the frame converged
   long dofs_pressure = 0, dofs_stress = 0, dofs_contact = 0, dofs_friction = 0;  ///< max
+  /// The phases of the paper's Tables 1-3, summed over the frame's steps: separate liquid
+  /// solves (P, PV or VC without contact rows), separate contact solves (C), and unified solves
+  /// (PC, PVC; the VC step of PC-VC-PC-unified counts here): iterations and wall time.
+  long fluid_iterations = 0, contact_iterations = 0, coupled_iterations = 0;
+  double fluid_seconds = 0.0, contact_seconds = 0.0, coupled_seconds = 0.0;
 };
 
 struct FrameStats {
