@@ -240,14 +240,15 @@ int main(int argc, char** argv) {
   }
 
   nb.md("## The library: solve_pvc_unified\n"
-        "The same loop, with the same settings, is solve_pvc_unified (section 4.2). It must give "
-        "the same numbers.");
+        "The same loop, with the same settings, is solve_pvc_unified (section 4.2). Its MPRGP may "
+        "work on an equivalently rescaled QP (the same minimiser, other iterates), so the two agree "
+        "to the solvers' tolerance rather than bit for bit.");
   const PvcUnifiedResult lib = solve_pvc_unified<2>(sys, settings);
   nb.md("solve_pvc_unified: " + std::to_string(lib.staggered_iterations) + " MLCP solves, " +
         std::to_string(lib.mprgp_iterations) + " MPRGP iterations in all, last change " + sci(lib.last_change));
-  nb.check_true("as many rounds as by hand", lib.staggered_iterations == rounds);
-  nb.check("max |x_lib - x_hand| / max |x_hand|", (lib.x - h.x).cwiseAbs().maxCoeff() / h.x.cwiseAbs().maxCoeff(), 1e-14);
-  nb.check("max |z_lib - z_hand| / max |z_hand|", (lib.z - h.z).cwiseAbs().maxCoeff() / h.z.cwiseAbs().maxCoeff(), 1e-14);
+  nb.check_true("the library converged too", lib.converged && lib.last_change <= settings.tolerance);
+  nb.check("max |x_lib - x_hand| / max |x_hand|", (lib.x - h.x).cwiseAbs().maxCoeff() / h.x.cwiseAbs().maxCoeff(), 1e-9);
+  nb.check("max |z_lib - z_hand| / max |z_hand|", (lib.z - h.z).cwiseAbs().maxCoeff() / h.z.cwiseAbs().maxCoeff(), 1e-9);
 
   nb.md("## A box that sticks\n"
         "The same box sliding at only 0.01 m/s: one step of friction (at most mu g dt ~ 0.05 m/s) "
@@ -258,7 +259,7 @@ int main(int argc, char** argv) {
   {
     const PvcUnifiedResult r = solve_pvc_unified<2>(sys_slow, settings);
     nb.check("sticking: by hand and solve_pvc_unified agree, max |dx| / max |x|",
-             (r.x - h_slow.x).cwiseAbs().maxCoeff() / h_slow.x.cwiseAbs().maxCoeff(), 1e-14);
+             (r.x - h_slow.x).cwiseAbs().maxCoeff() / h_slow.x.cwiseAbs().maxCoeff(), 1e-9);
     const VectorX slip_slow = check_kkt(nb, sys_slow, settings, r.x, r.z, r.last_change, "sticking: ");
     nb.md("rounds " + std::to_string(r.staggered_iterations) + ", lambda = " + vec_str(r.lambda) + ", z = " +
           vec_str(r.z) + ", mu lambda = " + vec_str(kMu * r.lambda) + ", slip = " + vec_str(slip_slow) + " m/s");
