@@ -347,13 +347,53 @@ SparseMatrixOperator friction_operator(const MonolithicSystem<Dim>& system, doub
   return SparseMatrixOperator(a44);
 }
 
+JacobiScaledOperator::JacobiScaledOperator(const LinearOperator& a) : a_(a) {
+  const VectorX d = a.diagonal();
+  scale_.resize(d.size());
+  diagonal_.resize(d.size());
+  for (int i = 0; i < d.size(); ++i) {
+    scale_[i] = d[i] > 0.0 ? 1.0 / std::sqrt(d[i]) : 1.0;
+    diagonal_[i] = d[i] > 0.0 ? 1.0 : d[i];
+  }
+  for (const VectorX& n : a.null_space()) {
+    const VectorX m = n.cwiseQuotient(scale_);
+    null_space_.push_back(m / m.norm());
+  }
+}
+
+void JacobiScaledOperator::apply(const VectorX& x, VectorX& y) const {
+  a_.apply(scale_.cwiseProduct(x), y);
+  y.array() *= scale_.array();
+}
+
+void JacobiScaledOperator::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                         const std::vector<char>* active) const {
+  // a sweep of S A S on (rhs, x) is a sweep of A on (S^-1 rhs, S x)
+  VectorX xs = scale_.cwiseProduct(x);
+  a_.forward_sweep(rhs.cwiseQuotient(scale_), xs, omega, active);
+  x = xs.cwiseQuotient(scale_);
+}
+
+void JacobiScaledOperator::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                          const std::vector<char>* active) const {
+  VectorX xs = scale_.cwiseProduct(x);
+  a_.backward_sweep(rhs.cwiseQuotient(scale_), xs, omega, active);
+  x = xs.cwiseQuotient(scale_);
+}
+
 template <int Dim>
 PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
-                                   const StaggeredSettings& settings) {
+                                   const StaggeredSettings& settings,
+                                   const PvcUnifiedOptions& options) {
   const double inf = std::numeric_limits<double>::infinity();
   const int nf = system.num_fluid(), nc = system.num_contacts(), nz = system.num_friction();
   const double gamma = settings.diagonal_boost;
-  const MonolithicOperator<Dim> op(system, gamma);
+  const MonolithicOperator<Dim> unscaled(system, gamma);
+  // MPRGP runs on S A S (options.jacobi_scaling) or on A (S = I)
+  const JacobiScaledOperator scaled(unscaled);
+  const LinearOperator& op = options.jacobi_scaling ? static_cast<const LinearOperator&>(scaled)
+                                                    : static_cast<const LinearOperator&>(unscaled);
+  const VectorX s = options.jacobi_scaling ? scaled.scale() : VectorX(VectorX::Ones(nf + nc));
   // bounds of (26): tau, p free, lambda >= 0
   VectorX lower = VectorX::Constant(nf + nc, -inf), upper = VectorX::Constant(nf + nc, inf);
   lower.tail(nc).setZero();
@@ -363,7 +403,11 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   // ||A|| once per operator for all the staggered solves (each would estimate it again)
   const MprgpSettings mlcp_settings = with_norm_estimate(op, settings.mprgp);
   auto solve_mlcp = [&]() {
-    const MprgpResult m = mprgp_solve(op, system.mlcp_rhs(r.z), lower, upper, r.x, mlcp_settings);
+    // in y = S^-1 x with right-hand side S b (the bounds 0 and +-inf are unchanged)
+    VectorX y = r.x.cwiseQuotient(s);
+    const MprgpResult m =
+        mprgp_solve(op, s.cwiseProduct(system.mlcp_rhs(r.z)), lower, upper, y, mlcp_settings);
+    r.x = s.cwiseProduct(y);
     r.mprgp_iterations += m.iterations;
     r.converged = r.converged && m.converged;
     r.max_relative_residual = std::max(r.max_relative_residual, m.relative_residual);
@@ -422,7 +466,9 @@ template class FluidBodyOperator<2>;
 template class FluidBodyOperator<3>;
 template SparseMatrixOperator friction_operator<2>(const MonolithicSystem<2>&, double);
 template SparseMatrixOperator friction_operator<3>(const MonolithicSystem<3>&, double);
-template PvcUnifiedResult solve_pvc_unified<2>(const MonolithicSystem<2>&, const StaggeredSettings&);
-template PvcUnifiedResult solve_pvc_unified<3>(const MonolithicSystem<3>&, const StaggeredSettings&);
+template PvcUnifiedResult solve_pvc_unified<2>(const MonolithicSystem<2>&, const StaggeredSettings&,
+                                               const PvcUnifiedOptions&);
+template PvcUnifiedResult solve_pvc_unified<3>(const MonolithicSystem<3>&, const StaggeredSettings&,
+                                               const PvcUnifiedOptions&);
 
 }  // namespace monolith
