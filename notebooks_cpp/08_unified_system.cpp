@@ -202,6 +202,14 @@ int main(int argc, char** argv) {
                    "^T (max difference / max |A|)", err / scale, 1e-13);
     }
 
+  {
+    // the MLCP (26) over (tau, p, lambda) is the leading block of (24): what notebook 09 solves
+    const MonolithicOperator<2> op(sys, 0.0);
+    const int n26 = op.size();
+    nb.check("the MLCP operator (26) is the leading (tau, p, lambda) block of A: max difference / max |A|",
+             (op.dense_matrix() - A.topLeftCorner(n26, n26)).cwiseAbs().maxCoeff() / scale, 1e-13);
+  }
+
   nb.md("## (alpha M_r)^-1 is never formed\n"
         "Every rigid contribution is dt alpha B_i^T M_r^-1 B_j with B_1 = Jh_s W_L^s E S_tau^T, B_2 = "
         "Jh_p W_L^p S_p^T (body-surface columns only), B_3 = J_lambda^T, B_4 = J_z^T. apply_block "
