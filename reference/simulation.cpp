@@ -11,9 +11,9 @@
 #include <limits>
 #include <sstream>
 
+#include "reference/coupled_schemes.hpp"
 #include "reference/coupling.hpp"
 #include "reference/errors.hpp"
-#include "reference/monolithic_system.hpp"
 #include "reference/particles.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/rigid_world.hpp"
@@ -454,47 +454,60 @@ Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x) const {
 
 template <int Dim>
 void Simulation<Dim>::solve_coupled(double dt) {
+  CoupledStepInput<Dim> in;
+  in.grid = grid_;
+  in.dt = dt;
+  in.u_star = u_;
+  in.bodies = rigid_->bodies();
+  in.solids = solid_weights_;
+  // (6) contacts at the step's start pose, with the pair's friction and restitution
   RigidStepStats contact_stats;
-  const std::vector<Contact<Dim>> contacts = rigid_->find_contacts(dt, contact_stats);
+  in.contacts = rigid_->find_contacts(dt, contact_stats);
+  in.contact_params = rigid_->contact_parameters(dt, gravity_);
   stats_.contact_count = std::max(stats_.contact_count, contact_stats.contacts);
   stats_.max_penetration = std::max(stats_.max_penetration, contact_stats.max_penetration);
   // the weights of eq. (24): W_F from the bodies' pose, W_L from the liquid; the P.. C schemes
   // and inviscid liquids have no stress unknowns (eta = 0 leaves every stress DOF inactive)
-  StokesWeights w;
-  w.pressure = weights_;
-  w.fluid_stress = solid_weights_.fluid_stress;
+  in.weights.pressure = weights_;
+  in.weights.fluid_stress = solid_weights_.fluid_stress;
   const bool stress = sequence_ != SolveSequence::pressure;
-  w.liquid_stress = stress ? stress_liquid_ : VectorX::Zero(stress_grid_.num_dofs());
-  w.viscosity = stress ? stress_eta_ : VectorX::Zero(stress_grid_.num_dofs());
-  const ContactSystem<Dim> system(rigid_->bodies(), contacts,
-                                  rigid_->contact_parameters(dt, gravity_));
-  const MonolithicSystem<Dim> mono(grid_, StressForm::reduced, w, dt, u_, rigid_->bodies(),
-                                   solid_weights_, system);
+  in.weights.liquid_stress = stress ? stress_liquid_ : VectorX::Zero(stress_grid_.num_dofs());
+  in.weights.viscosity = stress ? stress_eta_ : VectorX::Zero(stress_grid_.num_dofs());
+  // (7)-(11) the scheme's solves (section 6)
   StaggeredSettings ss;
   ss.max_iterations = std::max(1, scene_.solver.staggered_iterations);
   ss.tolerance = scene_.solver.tolerance;
   ss.diagonal_boost = scene_.solver.diagonal_boost;
   ss.mprgp.tolerance = scene_.solver.tolerance;
   ss.mprgp.max_iterations = scene_.solver.max_iterations;
-  const PvcUnifiedResult r = solve_pvc_unified(mono, ss);
+  const CoupledSolveResult r =
+      solve_coupled_step<Dim>(in, parse_coupling_scheme(scene_.solver.scheme), ss);
   u_ = r.u;
   pressure_ = r.pressure;
   stress_ = r.stress;
-  rigid_->set_velocities(r.body_velocity, system.body_dof);
+  // (12) the bodies' velocities (eq. (21))
+  rigid_->set_velocities(r.body_velocity, r.body_dof);
+  const ContactSystem<Dim> system(in.bodies, in.contacts, in.contact_params);
   StaggeredResult kept;
   kept.lambda = r.lambda;
   kept.z = r.z;
-  rigid_->remember(contacts, system, kept);
-  // statistics
-  stats_.solver.iterations += r.mprgp_iterations;
-  stats_.solver.coupled_iterations += r.mprgp_iterations;
-  stats_.solver.staggered_iterations += r.staggered_iterations;
-  stats_.solver.converged = stats_.solver.converged && r.converged;
-  stats_.solver.dofs_pressure = std::max<long>(stats_.solver.dofs_pressure, mono.num_pressure());
-  stats_.solver.dofs_stress = std::max<long>(stats_.solver.dofs_stress, mono.num_stress());
-  stats_.solver.dofs_contact = std::max<long>(stats_.solver.dofs_contact, mono.num_contacts());
-  if (mono.num_contacts() > 0 && system.mu.maxCoeff() > 0.0)
-    stats_.solver.dofs_friction = std::max<long>(stats_.solver.dofs_friction, mono.num_friction());
+  rigid_->remember(in.contacts, system, kept);
+  // statistics: the phases of the paper's Tables 1-3
+  SolverStats& st = stats_.solver;
+  st.iterations += r.fluid_iterations + r.contact_iterations + r.coupled_iterations;
+  st.fluid_iterations += r.fluid_iterations;
+  st.contact_iterations += r.contact_iterations;
+  st.coupled_iterations += r.coupled_iterations;
+  st.fluid_seconds += r.fluid_seconds;
+  st.contact_seconds += r.contact_seconds;
+  st.coupled_seconds += r.coupled_seconds;
+  st.staggered_iterations += r.staggered_iterations;
+  st.converged = st.converged && r.converged;
+  st.max_relative_residual = std::max(st.max_relative_residual, r.max_relative_residual);
+  st.dofs_pressure = std::max(st.dofs_pressure, r.pressure_dofs);
+  st.dofs_stress = std::max(st.dofs_stress, r.stress_dofs);
+  st.dofs_contact = std::max(st.dofs_contact, r.contact_dofs);
+  st.dofs_friction = std::max(st.dofs_friction, r.friction_dofs);
 }
 
 template <int Dim>
