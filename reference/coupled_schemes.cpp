@@ -163,13 +163,15 @@ class ContactSolve {
   bool friction() const { return friction_; }
 
   /// Up to `rounds` friction-normal rounds (one normal solve without friction), warm-started
-  /// from x.lambda, x.z; stops when lambda changes by <= the tolerance. Returns the rounds done.
-  int solve(Unknowns& x, int rounds, long& iterations, CoupledSolveResult& r) const {
+  /// from x.lambda, x.z (`cold`: every QP from zero, the friction bounds still from the current
+  /// lambda); stops when lambda changes by <= the tolerance. Returns the rounds done.
+  int solve(Unknowns& x, int rounds, bool cold, long& iterations, CoupledSolveResult& r) const {
     const int nc = s_.num_contacts(), nz = s_.num_friction();
     if (nc == 0) return 0;
     const double inf = std::numeric_limits<double>::infinity();
     const VectorX zero_n = VectorX::Zero(nc), inf_n = VectorX::Constant(nc, inf);
     if (!friction_) {
+      if (cold) x.lambda.setZero();
       const MprgpResult m = mprgp_solve(*a33_boosted_, s_.contact_rhs(x.x_fluid, x.z), zero_n, inf_n,
                                         x.lambda, normal_settings_);
       record_mprgp(m, r, "contact solve");
@@ -189,12 +191,14 @@ class ContactSolve {
           upper[(Dim - 1) * i + j] = bound;
         }
       xl << x.x_fluid, x.lambda;
+      if (cold) x.z.setZero();
       const MprgpResult mz = mprgp_solve(*a44_boosted_, s_.friction_rhs(xl), lower, upper, x.z,
                                          friction_settings_);
       record_mprgp(mz, r, "friction solve");
       iterations += mz.iterations;
       // the normal QP given (tau, p, z)
       const VectorX previous = x.lambda;
+      if (cold) x.lambda.setZero();
       const MprgpResult mn = mprgp_solve(*a33_boosted_, s_.contact_rhs(x.x_fluid, x.z), zero_n,
                                          inf_n, x.lambda, normal_settings_);
       record_mprgp(mn, r, "contact solve");
@@ -230,6 +234,7 @@ Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& 
   // fluid rows)
   PvcUnifiedOptions options;
   options.jacobi_scaling = true;
+  options.compute_updates = false;  // finish() updates from the unknowns
   const PvcUnifiedResult u = solve_pvc_unified(s, settings, options);
   if (u.breakdown) throw SimulationError("unified solve: MPRGP broke down: " + u.message);
   r.converged = r.converged && u.converged;
@@ -286,7 +291,8 @@ void count_dofs(const MonolithicSystem<Dim>& s, CoupledSolveResult& r) {
 /// P-C, C-P, PV-C, C-PV and the iterative schemes on one system.
 template <int Dim>
 Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme,
-                           const StaggeredSettings& settings, CoupledSolveResult& r) {
+                           const StaggeredSettings& settings, const CoupledSchemeOptions& options,
+                           CoupledSolveResult& r) {
   // the operators, timed with their solves (the unified solves' timings include theirs too)
   auto t0 = Clock::now();
   const FluidBodyOperator<Dim> fluid(s);
@@ -300,9 +306,9 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
     r.fluid_iterations += fluid_solve(s, fluid, settings, x, r);
     r.fluid_seconds += seconds_since(t0);
   };
-  auto run_contact = [&](int rounds) {
+  auto run_contact = [&](int rounds, bool cold = false) {
     const auto t0 = Clock::now();
-    const int done = contact.solve(x, rounds, r.contact_iterations, r);
+    const int done = contact.solve(x, rounds, cold, r.contact_iterations, r);
     r.contact_seconds += seconds_since(t0);
     return done;
   };
@@ -325,6 +331,8 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
       bool settled = false;
       for (int k = 0; k < rounds; ++k) {
         const VectorX fluid_before = x.x_fluid, lambda_before = x.lambda;
+        // cold start: each solve from zero, given the other block's latest values
+        if (!options.warm_start) x.x_fluid.setZero();
         run_fluid();
         ++r.staggered_iterations;
         if (s.num_contacts() == 0) {
@@ -333,7 +341,7 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
           r.last_change = 0.0;
           break;
         }
-        run_contact(1);
+        run_contact(1, !options.warm_start);
         r.last_change = std::max(relative_change(x.x_fluid, fluid_before),
                                  relative_change(x.lambda, lambda_before));
         if (r.last_change <= settings.tolerance) {
@@ -352,7 +360,8 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
 
 template <int Dim>
 CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme,
-                                      const StaggeredSettings& settings) {
+                                      const StaggeredSettings& settings,
+                                      const CoupledSchemeOptions& options) {
   const auto t_start = Clock::now();
   if (in.u_star.size() != in.grid.num_faces())
     throw std::invalid_argument("solve_coupled_step: u_star must have one entry per face");
@@ -408,7 +417,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     x = unified_solve(*s, settings, r, r.coupled_iterations);
     r.coupled_seconds = seconds_since(t0);
   } else {
-    x = partitioned_solve(*s, scheme, settings, r);
+    x = partitioned_solve(*s, scheme, settings, options, r);
   }
   finish(*s, x, r);
   r.total_seconds = seconds_since(t_start);
@@ -416,8 +425,10 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
 }
 
 template CoupledSolveResult solve_coupled_step<2>(const CoupledStepInput<2>&, CouplingScheme,
-                                                  const StaggeredSettings&);
+                                                  const StaggeredSettings&,
+                                                  const CoupledSchemeOptions&);
 template CoupledSolveResult solve_coupled_step<3>(const CoupledStepInput<3>&, CouplingScheme,
-                                                  const StaggeredSettings&);
+                                                  const StaggeredSettings&,
+                                                  const CoupledSchemeOptions&);
 
 }  // namespace monolith

@@ -117,6 +117,15 @@ struct CoupledSolveResult {
   double last_change = 0.0;
 };
 
+/// Options of solve_coupled_step beyond StaggeredSettings.
+struct CoupledSchemeOptions {
+  /// PC-iterative / PVC-iterative: start every fluid and contact solve from the previous
+  /// round's unknowns (true), or from zero (false: each round's solves cost about as much as
+  /// a one-pass scheme's, as the per-solve iteration counts of the paper's Tables 1 and 3
+  /// suggest). The fixed point is the same.
+  bool warm_start = true;
+};
+
 /// One step's pressure / viscosity / contact solves under `scheme` (section 6). Builds
 /// MonolithicSystem (eq. (24)) once: PV schemes with StressForm::reduced and the input viscosity,
 /// PC schemes with the viscosity zeroed (no stress unknowns). Then, with "fluid" and "contact"
@@ -129,12 +138,13 @@ struct CoupledSolveResult {
 ///   - PC-iterative / PVC-iterative: block Gauss-Seidel on eq. (24), i.e. staggered projections
 ///     on the unified formulation: rounds of (fluid solve given lambda, z; friction QP (25) given
 ///     x_f, lambda when some mu > 0; normal QP given x_f, z), each warm-started from the previous
-///     round, up to settings.max_iterations rounds, stopping when both lambda and x_f change by
+///     round (cold with options.warm_start = false), up to settings.max_iterations rounds, stopping when both lambda and x_f change by
 ///     <= settings.tolerance (relative, inf-norm) in a round. Every round ends on the contact
 ///     solve, so the returned bodies satisfy the contact conditions and the liquid's
 ///     incompressibility is off by the last round's change. The fixed point is the one of
 ///     PC-unified / PVC-unified: each block's equations hold given the others.
-///   - PC-unified / PVC-unified: solve_pvc_unified (MPRGP on (26), friction staggered); with no
+///   - PC-unified / PVC-unified: solve_pvc_unified (MPRGP on (26), friction staggered; on the
+///     Jacobi-scaled MLCP, PvcUnifiedOptions::jacobi_scaling, a departure explained there); with no
 ///     contacts SSOR-PCG on FluidBodyOperator instead (section 6: SOR-CG when there are no box
 ///     constraints).
 ///   - PC-VC-PC-unified (section 6.2): PC-unified -> u1, v1; VC-unified: MonolithicSystem with
@@ -147,6 +157,7 @@ struct CoupledSolveResult {
 /// breakdown, std::invalid_argument on inconsistent input.
 template <int Dim>
 CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme,
-                                      const StaggeredSettings& settings);
+                                      const StaggeredSettings& settings,
+                                      const CoupledSchemeOptions& options = {});
 
 }  // namespace monolith

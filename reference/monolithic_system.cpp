@@ -451,6 +451,7 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   // eq. (8) and eq. (21) updates
   const VectorX xf = r.x.head(nf);
   r.lambda = r.x.tail(nc);
+  if (!options.compute_updates) return r;
   r.stress = system.stress_full(xf);
   r.pressure = system.pressure_cells(xf);
   r.u = system.fluid_velocities(xf);

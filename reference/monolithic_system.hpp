@@ -282,6 +282,9 @@ struct PvcUnifiedOptions {
   /// Off by default, so solve_pvc_unified(system, settings) keeps its iterates bit for bit;
   /// solve_coupled_step (coupled_schemes.hpp) turns it on.
   bool jacobi_scaling = false;
+  /// Fill u, body_velocity, stress and pressure of the result (eqs. (8), (21)); a caller that
+  /// updates from x itself (solve_coupled_step) turns it off.
+  bool compute_updates = true;
 };
 
 struct PvcUnifiedResult {
