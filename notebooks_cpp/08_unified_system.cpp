@@ -41,7 +41,7 @@ json tank_scene(int dim, double side, int cells) {
   std::vector<int> n(dim, cells);
   half[1] = 0.1 * side;
   if (dim == 2) {
-    // the lowest corner of the tilted box sits 0.12 dx beyond the wall's margin
+    // the left corner of the tilted box sits 0.02 m (0.12 dx) beyond the wall
     const double reach = half[0] * std::cos(0.5) + half[1] * std::sin(0.5);
     centre[0] = reach - 0.02 * side;
   } else {
@@ -149,10 +149,11 @@ int main(int argc, char** argv) {
         "A 1 m x 1 m tank of 6 x 6 cells (dx = 1/6 m, walls on every side) holds water "
         "(rho = 1000 kg/m^3, eta = 0.5 Pa s) up to y = 0.55 m. A box of 0.3 m x 0.2 m and density "
         "500 kg/m^3, tilted by 0.5 rad, floats at the surface and leans on the left wall with its "
-        "lowest corner (0.02 m beyond the wall, more than the margin of 0.1 dx), moving at -0.2 m/s "
-        "into it (tilted this much, the box's lower edge makes more than the contact cone's 0.45 rad "
-        "with the wall, so detect_contacts keeps the corner alone). dt = 0.01 s; u* = dt g on every face (the liquid at rest before gravity) and "
-        "v* = v + dt g. Friction mu = 0.4 with the wall.");
+        "left corner (0.02 m beyond the wall, more than the margin of 0.1 dx), moving at -0.2 m/s "
+        "into it. Its sides make 0.5 rad with the wall, more than the 0.45 rad of a box's contact "
+        "cone (ContactReduction::box_cone_cosine = 0.9), so detect_contacts keeps the corner alone. "
+        "dt = 0.01 s; u* = dt g on every face (the liquid at rest before gravity) and v* = v + dt g. "
+        "Friction mu = 0.4 with the wall.");
   const notebook::CoupledStep<2> s = tank_step<2>(1.0, 6);
   for (std::size_t c = 0; c < s.contacts.size(); ++c) {
     const Contact<2>& k = s.contacts[c];
@@ -318,7 +319,7 @@ int main(int argc, char** argv) {
   nb.md("## Figure: the sparsity pattern of A\n"
         "Blue: entries of the Stokes part F (sparse, the (tau, p) corner). Orange: entries that only "
         "the rigid part dt alpha B^T M_r^-1 B creates; they fill whole rows and columns of the "
-        "body-surface unknowns and the lambda, z blocks (sections 4.4.3). Red: block boundaries "
+        "body-surface unknowns and the lambda, z blocks (section 4.4.3). Red: block boundaries "
         "tau | p | lambda | z.");
   {
     int rigid_only = 0;
@@ -350,8 +351,9 @@ int main(int argc, char** argv) {
     for (int k = 0; k < ev3.size(); ++k) zero += ev3[k] < 1e-10 * ev3.maxCoeff();
     nb.md("Eigenvalues: smallest " + sci(ev3.minCoeff()) + ", largest " + sci(ev3.maxCoeff()) + "; " +
           std::to_string(zero) + " below 1e-10 of the largest. Four contacts with two friction rows "
-          "each are 12 rows on nd = 6 body DOFs: (24) is only semi-definite here, which is why the "
-          "solver splits it into (26) and (25) and boosts their diagonals by 1 + gamma (section 4.4.5).");
+          "each are 12 rows on nd = 6 body DOFs: (24) is only semi-definite here (redundant "
+          "contact rows; the solver's (26) and (25) get the diagonal boost 1 + gamma of section "
+          "4.4.5 on their contact rows).");
     nb.check("3D semi-definite: -lambda_min / lambda_max", -ev3.minCoeff() / ev3.maxCoeff(), 1e-12);
     nb.check_true("3D: the null space has dimension (nc + nf) - nd = 6",
                   zero == sys3.num_contacts() + sys3.num_friction() - sys3.num_body_dofs());
