@@ -230,19 +230,21 @@ namespace {
 template <int Dim>
 SparseMatrix assemble_sparse_part(const MonolithicSystem<Dim>& s, double gamma) {
   const int nf = s.num_fluid(), nc = s.num_contacts();
-  std::vector<Triplet> t;
   const SparseMatrix& a = s.stokes().A;
-  for (int k = 0; k < a.outerSize(); ++k)
-    for (SparseMatrix::InnerIterator it(a, k); it; ++it) t.emplace_back(it.row(), it.col(), it.value());
-  if (nc > 0) {
-    const SparseMatrix a33 = s.contacts().a33();
-    for (int k = 0; k < a33.outerSize(); ++k)
-      for (SparseMatrix::InnerIterator it(a33, k); it; ++it)
-        t.emplace_back(nf + it.row(), nf + it.col(),
-                       it.row() == it.col() ? (1.0 + gamma) * it.value() : it.value());
-  }
+  SparseMatrix a33 = nc > 0 ? s.contacts().a33() : SparseMatrix(0, 0);
+  a33.makeCompressed();
+  // both blocks are row-major: copy them row by row in column order (no triplet sort)
+  Eigen::VectorXi row_sizes(nf + nc);
+  for (int i = 0; i < nf; ++i) row_sizes[i] = static_cast<int>(a.innerVector(i).nonZeros());
+  for (int i = 0; i < nc; ++i) row_sizes[nf + i] = static_cast<int>(a33.innerVector(i).nonZeros());
   SparseMatrix m(nf + nc, nf + nc);
-  m.setFromTriplets(t.begin(), t.end());
+  m.reserve(row_sizes);
+  for (int i = 0; i < nf; ++i)
+    for (SparseMatrix::InnerIterator it(a, i); it; ++it) m.insert(i, it.col()) = it.value();
+  for (int i = 0; i < nc; ++i)
+    for (SparseMatrix::InnerIterator it(a33, i); it; ++it)
+      m.insert(nf + i, nf + it.col()) = it.col() == i ? (1.0 + gamma) * it.value() : it.value();
+  m.makeCompressed();
   return m;
 }
 
