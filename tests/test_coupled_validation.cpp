@@ -82,46 +82,6 @@ TEST_CASE("buoyancy: a body of the liquid's density stays put, up to its discret
   }
 }
 
-namespace {
-
-/// The absolute tilt (degrees) of a square, folded into [-45, 45): the square looks the same
-/// every 90 degrees.
-double folded_tilt(double radians) {
-  double deg = radians * 180.0 / kPi;
-  deg = std::fmod(deg + 45.0, 90.0);
-  if (deg < 0) deg += 90.0;
-  return deg - 45.0;
-}
-
-/// A square log (side L = 0.25) of density s rho released at tilt `start` (degrees) in a pool
-/// 0.5 m deep with viscosity eta, PVC-unified. Returns the final absolute tilt (degrees; the
-/// mean over the last 0.5 s) and whether every solve converged.
-std::pair<double, bool> square_log(int n, double s, double start, double eta, double seconds) {
-  const double fps = 20, L = 0.25;
-  json j = base_scene(2, {1.0, 1.0}, n, "PVC-unified", fps);
-  j["liquids"].push_back(pool(2, 0.5, eta));
-  j["bodies"].push_back({{"name", "log"},
-                         {"density", s * kRho},
-                         {"shape", {{"type", "box"}, {"center", {0.5, 0.5 - s * L + L / 2}},
-                                    {"half_size", {L / 2, L / 2}}, {"rotation", start * kPi / 180.0}}}});
-  const int frames = static_cast<int>(std::lround(seconds * fps));
-  const std::vector<FrameStats> st = run_frames(j, frames);
-  bool converged = true;
-  double sum = 0.0;
-  int count = 0;
-  for (int f = 1; f <= frames; ++f) {
-    converged = converged && st[f].solver.converged;
-    // the reported orientation is relative to the scene's pose
-    if (f > frames - 10) {
-      sum += folded_tilt(start * kPi / 180.0 + st[f].bodies[0].orientation[0]);
-      ++count;
-    }
-  }
-  return {sum / count, converged};
-}
-
-}  // namespace
-
 TEST_CASE("a floating square log takes the tilt that minimises its potential energy (2D)",
           "[validation][coupling]") {
   // source: metacentric stability (docs/validation.md derives it; e.g. Erdos, Schibler & Herndon,
@@ -134,13 +94,13 @@ TEST_CASE("a floating square log takes the tilt that minimises its potential ene
   // coupling.md): tolerance 3 deg.
   const int n = 40;
   {
-    const auto [tilt, converged] = square_log(n, 0.5, 25.0, 10.0, 3.0);
+    const auto [tilt, converged] = square_log(2, n, 0.5, 25.0, 10.0, 3.0);
     WARN("square log s = 0.5 released at 25 deg: settles at " << tilt << " deg (energy minimum 45)");
     CHECK(converged);
     CHECK(std::abs(std::abs(tilt) - 45.0) <= 3.0);
   }
   {
-    const auto [tilt, converged] = square_log(n, 0.15, 20.0, 10.0, 3.0);
+    const auto [tilt, converged] = square_log(2, n, 0.15, 20.0, 10.0, 3.0);
     WARN("square log s = 0.15 released at 20 deg: settles at " << tilt << " deg (energy minimum 0)");
     CHECK(converged);
     CHECK(std::abs(tilt) <= 3.0);
@@ -208,28 +168,16 @@ TEST_CASE("a heavy disk dropped into a tank: liquid volume kept, penetration wit
   // runs, docs/validation.md "Volume"), 0.11 dx (the margin plus 10 %).
   const int n = 32;
   const double dx = 1.0 / n;
-  json j = base_scene(2, {1.0, 1.0}, n, "PC-unified", 20);
-  j["liquids"].push_back(pool(2, 0.4));
-  j["bodies"].push_back({{"name", "stone"},
-                         {"density", 3000.0},
-                         {"shape", {{"type", "sphere"}, {"center", {0.5, 0.65}}, {"radius", 0.08}}}});
-  const std::vector<FrameStats> s = run_frames(j, 30);
-  double drift = 0.0, pen = 0.0;
-  bool landed = false;
-  for (std::size_t f = 1; f < s.size(); ++f) {
-    CHECK(s[f].solver.converged);
-    drift = std::max(drift, std::abs(s[f].liquid_volume / s[0].liquid_volume - 1.0));
-    pen = std::max(pen, s[f].max_penetration);
-    landed = landed || s[f].contact_count > 0;
-  }
-  WARN("2D stone into a pool: worst volume drift " << 100 * drift << " %, max penetration "
-                                                  << pen / dx << " dx, final height "
-                                                  << s.back().bodies[0].position[1]);
-  CHECK(landed);
-  CHECK(drift <= 0.01);
-  CHECK(pen <= 0.11 * dx);
+  const DropResult r = run_drop(2, n, 30);
+  WARN("2D stone into a pool: worst volume drift " << 100 * r.volume_drift << " %, max penetration "
+                                                  << r.penetration / dx << " dx, final height "
+                                                  << r.final_height);
+  CHECK(r.converged);
+  CHECK(r.landed);
+  CHECK(r.volume_drift <= 0.01);
+  CHECK(r.penetration <= 0.11 * dx);
   // it rests on the floor: centre at r minus at most the margin
-  CHECK(std::abs(s.back().bodies[0].position[1] - 0.08) <= 0.11 * dx);
+  CHECK(std::abs(r.final_height - 0.08) <= 0.11 * dx);
 }
 
 TEST_CASE("a heavy disk settling between two walls reaches Faxen's terminal velocity (2D)",

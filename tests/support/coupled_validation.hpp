@@ -338,3 +338,81 @@ inline SpinResult run_spin_down(int dim, int n, double seconds) {
 }
 
 }  // namespace monolith::validation
+
+namespace monolith::validation {
+
+struct DropResult {
+  double volume_drift = 0.0;   ///< largest |V_L / V_L(0) - 1| over the run
+  double penetration = 0.0;    ///< largest contacts.max_penetration (m)
+  double final_height = 0.0;   ///< centre height at the end (m)
+  bool landed = false, converged = true;
+};
+
+/// A stone (disk / ball r = 0.08, density 3000) released at rest with its centre at 0.65 m above
+/// the floor of a pool 0.4 m deep, PC-unified, 20 fps.
+inline DropResult run_drop(int dim, int n, int frames) {
+  nlohmann::json j = base_scene(dim, std::vector<double>(dim, 1.0), n, "PC-unified", 20);
+  j["liquids"].push_back(pool(dim, 0.4));
+  j["bodies"].push_back({{"name", "stone"},
+                         {"density", 3000.0},
+                         {"shape", {{"type", "sphere"}, {"center", point(dim, 0.5, 0.65)}, {"radius", 0.08}}}});
+  const std::vector<FrameStats> s = run_frames(j, frames);
+  DropResult r;
+  for (std::size_t f = 1; f < s.size(); ++f) {
+    r.converged = r.converged && s[f].solver.converged;
+    r.volume_drift = std::max(r.volume_drift, std::abs(s[f].liquid_volume / s[0].liquid_volume - 1.0));
+    r.penetration = std::max(r.penetration, s[f].max_penetration);
+    r.landed = r.landed || s[f].contact_count > 0;
+  }
+  r.final_height = s.back().bodies[0].position[1];
+  return r;
+}
+
+}  // namespace monolith::validation
+
+namespace monolith::validation {
+
+/// The absolute tilt (degrees) of a square, folded into [-45, 45): the square looks the same
+/// every 90 degrees.
+inline double folded_tilt(double radians) {
+  double deg = std::fmod(radians * 180.0 / kPi + 45.0, 90.0);
+  if (deg < 0) deg += 90.0;
+  return deg - 45.0;
+}
+
+/// A square log (side L = 0.25; in 3D a prism 0.9 m long along z, 0.05 m from the end walls)
+/// of density s rho released at tilt `start` (degrees, about z) in a pool 0.5 m deep with
+/// viscosity eta, PVC-unified, 20 fps. Returns the final absolute tilt (degrees; the mean over
+/// the last 0.5 s) and whether every solve converged.
+inline std::pair<double, bool> square_log(int dim, int n, double s, double start, double eta,
+                                          double seconds) {
+  const double fps = 20, L = 0.25;
+  nlohmann::json j = base_scene(dim, std::vector<double>(dim, 1.0), n, "PVC-unified", fps);
+  j["liquids"].push_back(pool(dim, 0.5, eta));
+  const double angle = start * kPi / 180.0;
+  j["bodies"].push_back(
+      {{"name", "log"},
+       {"density", s * kRho},
+       {"shape", {{"type", "box"},
+                  {"center", point(dim, 0.5, 0.5 - s * L + L / 2)},
+                  {"half_size", dim == 2 ? nlohmann::json{L / 2, L / 2} : nlohmann::json{L / 2, L / 2, 0.45}},
+                  {"rotation", dim == 2 ? nlohmann::json(angle) : nlohmann::json{0.0, 0.0, angle}}}}});
+  const int frames = static_cast<int>(std::lround(seconds * fps));
+  const std::vector<FrameStats> st = run_frames(j, frames);
+  bool converged = true;
+  double sum = 0.0;
+  int count = 0;
+  for (int f = 1; f <= frames; ++f) {
+    converged = converged && st[f].solver.converged;
+    if (f <= frames - 10) continue;
+    // the reported orientation is relative to the scene's pose (2D: angle; 3D: quaternion
+    // [w, x, y, z], a rotation about z by 2 atan2(z, w))
+    const auto& o = st[f].bodies[0].orientation;
+    const double turned = dim == 2 ? o[0] : 2.0 * std::atan2(o[3], o[0]);
+    sum += folded_tilt(angle + turned);
+    ++count;
+  }
+  return {sum / count, converged};
+}
+
+}  // namespace monolith::validation
