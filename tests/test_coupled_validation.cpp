@@ -270,3 +270,16 @@ TEST_CASE("buoyancy: a floating plate settles at Archimedes' draft (3D, 16^3)", 
   CHECK(std::abs(r.error) <= 0.25 * dx);
   CHECK(r.range <= 1.5 * dx);
 }
+
+TEST_CASE("the concentric-sphere wall factor equals the stream-function solution", "[unit][validation]") {
+  // source: Stokes flow between concentric spheres, the inner one translating (Happel & Brenner
+  // 1965, chapter 4): the closed form of concentric_sphere_factor against the 4 x 4 solve of
+  // the stream function's boundary-value problem; lambda -> 0 gives Stokes' drag. Measured
+  // agreement 1e-15 relative; bound 1e-12.
+  for (double lambda : {0.1, 0.25, 0.375, 0.5}) {
+    CAPTURE(lambda);
+    CHECK(concentric_sphere_factor(lambda) ==
+          Approx(concentric_sphere_factor_from_stream_function(lambda)).epsilon(1e-12));
+  }
+  CHECK(concentric_sphere_factor(1e-6) == Approx(1.0).epsilon(1e-5));
+}

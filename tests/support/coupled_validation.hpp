@@ -416,3 +416,65 @@ inline std::pair<double, bool> square_log(int dim, int n, double s, double start
 }
 
 }  // namespace monolith::validation
+
+namespace monolith::validation {
+
+/// Stokes drag on a sphere (radius a) moving at the centre of a fixed spherical container
+/// (radius b), lambda = a / b, as a multiple of 6 pi mu a U (Cunningham 1910, Williams 1915;
+/// Happel & Brenner 1965, chapter 4):
+///   K = (1 - l^5) / (1 - 9/4 l + 5/2 l^3 - 9/4 l^5 + l^6).
+/// It is the Stokeslet coefficient C of the stream function sin^2(theta) (A r^4 + B r^2 + C r +
+/// D / r) with f(a) = U a^2 / 2, f'(a) = U a, f(b) = f'(b) = 0, over its unbounded value 3 a U / 4
+/// (drag 8 pi mu C); the test checks the two agree.
+inline double concentric_sphere_factor(double lambda) {
+  const double l = lambda, l3 = l * l * l, l5 = l3 * l * l, l6 = l5 * l;
+  return (1.0 - l5) / (1.0 - 2.25 * l + 2.5 * l3 - 2.25 * l5 + l6);
+}
+
+/// The same factor from the 4 x 4 boundary-value problem of the stream function (a = 1).
+inline double concentric_sphere_factor_from_stream_function(double lambda) {
+  const double a = 1.0, b = 1.0 / lambda, U = 1.0;
+  Eigen::Matrix4d M;
+  M << std::pow(a, 4), a * a, a, 1.0 / a,  //
+      4 * a * a * a, 2 * a, 1.0, -1.0 / (a * a),  //
+      std::pow(b, 4), b * b, b, 1.0 / b,  //
+      4 * b * b * b, 2 * b, 1.0, -1.0 / (b * b);
+  const Eigen::Vector4d rhs(U * a * a / 2, U * a, 0.0, 0.0);
+  const Eigen::Vector4d c = M.fullPivLu().solve(rhs);
+  return std::abs(c[2]) / (0.75 * a * U);
+}
+
+/// A ball a = 0.15 of density 2000 settling from the centre of a fixed spherical shell of inner
+/// radius 0.4 filled with liquid of viscosity eta = 1000 Pa s (3D, n cells per metre, 100 fps,
+/// PVC-unified); returns the mean downward speed over the last 40 % of the frames.
+inline SettlingResult run_settling_ball(int n, double seconds) {
+  const double fps = 100;
+  nlohmann::json j = base_scene(3, {1.0, 1.0, 1.0}, n, "PVC-unified", fps, true, false);
+  j["liquids"].push_back({{"name", "inside"},
+                          {"shape", {{"type", "sphere"}, {"center", point(3, 0.5, 0.5)}, {"radius", 0.4}}},
+                          {"density", kRho},
+                          {"viscosity", {{"eta", 1000.0}}}});
+  j["bodies"].push_back({{"name", "container"},
+                         {"motion", "static"},
+                         {"shape", {{"type", "shell"}, {"center", point(3, 0.5, 0.5)}, {"radius", 0.45},
+                                    {"thickness", 0.05}}}});
+  j["bodies"].push_back({{"name", "ball"},
+                         {"density", 2000.0},
+                         {"shape", {{"type", "sphere"}, {"center", point(3, 0.5, 0.5)}, {"radius", 0.15}}}});
+  const int frames = static_cast<int>(std::lround(seconds * fps));
+  const std::vector<FrameStats> s = run_frames(j, frames);
+  SettlingResult r;
+  int count = 0;
+  for (int f = 1; f <= frames; ++f) {
+    r.converged = r.converged && s[f].solver.converged;
+    r.sideways = std::max({r.sideways, std::abs(s[f].bodies[1].velocity[0]), std::abs(s[f].bodies[1].velocity[2])});
+    if (f > frames - (2 * frames) / 5) {
+      r.velocity -= s[f].bodies[1].velocity[1];
+      ++count;
+    }
+  }
+  r.velocity /= count;
+  return r;
+}
+
+}  // namespace monolith::validation
