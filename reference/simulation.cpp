@@ -51,34 +51,47 @@ bool all_finite(const VectorX& v) {
   return v.allFinite();
 }
 
-/// Index of the shape with the smallest signed distance at x (shapes not empty).
+/// A shape's signed distance where it matters: farther than `far` from its bounds box, the
+/// distance to that box (a positive lower bound of the true distance) stands in for it. The
+/// particle pipeline reads the solid distance only for its sign and near the surface (push-out,
+/// position correction), while an exact query of a mesh body far from it walks the triangle
+/// hierarchy: every particle in every substep would pay for it.
 template <int Dim>
-std::size_t nearest_shape(const std::vector<ShapePtr<Dim>>& shapes, const Vec<Dim>& x) {
-  std::size_t best = 0;
-  double d = std::numeric_limits<double>::infinity();
-  for (std::size_t k = 0; k < shapes.size(); ++k) {
-    const double dk = shapes[k]->distance(x);
-    if (dk < d) {
-      d = dk;
-      best = k;
-    }
+double bounded_distance(const Shape<Dim>& shape, const Box<Dim>& box, double far,
+                        const Vec<Dim>& x) {
+  if (!box.isEmpty() && box.min().allFinite() && box.max().allFinite()) {
+    const double outside = (x - x.cwiseMax(box.min()).cwiseMin(box.max())).norm();
+    if (outside > far) return outside;
   }
-  return best;
+  return shape.distance(x);
 }
 
-/// The SolidField of a set of solids: the union's distance (min over the shapes) and the
-/// gradient of the nearest one. Empty for no shapes.
+/// The SolidField of a set of solids: the union's distance (min over the shapes, each through
+/// bounded_distance with far = 2 dx) and the gradient of the nearest one. Empty for no shapes.
 template <int Dim>
-SolidField<Dim> make_solid_field(const std::vector<ShapePtr<Dim>>& shapes) {
+SolidField<Dim> make_solid_field(const std::vector<ShapePtr<Dim>>& shapes, double dx) {
   SolidField<Dim> field;
   if (shapes.empty()) return field;
-  field.distance = [shapes](const Vec<Dim>& x) {
+  std::vector<Box<Dim>> boxes;
+  for (const auto& s : shapes) boxes.push_back(s->bounds());
+  const double far = 2.0 * dx;
+  field.distance = [shapes, boxes, far](const Vec<Dim>& x) {
     double d = std::numeric_limits<double>::infinity();
-    for (const auto& s : shapes) d = std::min(d, s->distance(x));
+    for (std::size_t k = 0; k < shapes.size(); ++k)
+      d = std::min(d, bounded_distance<Dim>(*shapes[k], boxes[k], far, x));
     return d;
   };
-  field.gradient = [shapes](const Vec<Dim>& x) {
-    return shapes[nearest_shape<Dim>(shapes, x)]->gradient(x);
+  field.gradient = [shapes, boxes, far](const Vec<Dim>& x) {
+    std::size_t best = 0;
+    double d = std::numeric_limits<double>::infinity();
+    for (std::size_t k = 0; k < shapes.size(); ++k) {
+      const double dk = bounded_distance<Dim>(*shapes[k], boxes[k], far, x);
+      if (dk < d) {
+        d = dk;
+        best = k;
+      }
+    }
+    return shapes[best]->gradient(x);
   };
   return field;
 }
@@ -149,8 +162,8 @@ class Simulation : public AnySimulation {
   /// pressure / viscosity / contact solve of the scene's scheme (section 6), and the new body
   /// velocities (eq. (21)). Updates u_ to the solved face velocities.
   void solve_coupled(double dt);
-  /// Velocity of the solid at x: the point velocity of the moving body whose (unshrunk) SDF is
-  /// smallest there when that is a moving body, zero otherwise.
+  /// Velocity of the solid at a point x inside the solids: the point velocity of the moving
+  /// body whose (unshrunk) SDF is smallest there when that is a moving body, zero otherwise.
   Vec<Dim> solid_velocity(const Vec<Dim>& x) const;
   /// Throws SimulationError if the state holds a non-finite value.
   void check_finite(const char* after) const;
@@ -222,7 +235,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
     if (scene.bodies[i].motion == "static")
       solid_shapes_.push_back(
           make_shape<Dim>(scene.bodies[i].shape, "bodies[" + std::to_string(i) + "].shape"));
-  solids_ = make_solid_field<Dim>(solid_shapes_);
+  solids_ = make_solid_field<Dim>(solid_shapes_, grid_.dx());
   // W_F^u from the solid level set shrunk by zeta (section 4.4.6)
   solid_phi_ =
       solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
@@ -402,7 +415,7 @@ void Simulation<Dim>::step(double dt) {
     std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
     for (const auto& b : rigid_->bodies())
       if (b.moves()) shapes.push_back(b.posed_shape());
-    solids_ = make_solid_field<Dim>(shapes);
+    solids_ = make_solid_field<Dim>(shapes, grid_.dx());
   }
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
   // leaving through open faces are removed, particles that end up inside a solid are pushed out
@@ -430,7 +443,7 @@ void Simulation<Dim>::update_moving_solids() {
   std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
   for (const auto& b : rigid_->bodies())
     if (b.moves()) shapes.push_back(b.posed_shape());
-  solids_ = make_solid_field<Dim>(shapes);
+  solids_ = make_solid_field<Dim>(shapes, grid_.dx());
 }
 
 template <int Dim>
@@ -440,6 +453,11 @@ Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x) const {
   double best = std::numeric_limits<double>::infinity();
   int which = -1;
   for (std::size_t i = 0; i < bodies.size(); ++i) {
+    // a point outside a body's bounds is not inside it (and only inside points matter here)
+    const Box<Dim> box = bodies[i].bounds();
+    if (box.min().allFinite() && box.max().allFinite() &&
+        (x.array() < box.min().array()).any() | (x.array() > box.max().array()).any())
+      continue;
     const double d = bodies[i].distance(x);
     if (d < best) {
       best = d;

@@ -108,23 +108,23 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
       sys.M * sparse_diagonal(w.viscosity.unaryExpr(&reciprocal_or_zero));
   const SparseMatrix W_s = sys.W_F_s * sys.W_L_s;
   const SparseMatrix Dt = sys.D.transpose();
-  const SparseMatrix Et = sys.E.transpose();
   const SparseMatrix St_tau = sys.S_tau.transpose();
   const SparseMatrix St_p = sys.S_p.transpose();
-  // the stress force on the faces, D^T M W_L^s (num_faces x num_stress_dofs)
-  const SparseMatrix F_s = Dt * sys.M * sys.W_L_s;
+  // the stress force of the active unknowns on the faces, F_s = D^T M W_L^s E S_tau^T
+  // (num_faces x n_tau): restricting to the active unknowns first keeps every product below as
+  // small as the active stress set (empty for an inviscid liquid)
+  const SparseMatrix R = sys.E * St_tau;
+  const SparseMatrix F_s = Dt * SparseMatrix(sys.M * sys.W_L_s * R);
   const SparseMatrix F_sT = F_s.transpose();
   // A11 = S E^T (1/2 N^-1 W^s + dt W_L^s M D K D^T M W_L^s) E S^T
-  const SparseMatrix viscous = N_full_inv * W_s;
-  const SparseMatrix coupling = F_sT * K * F_s;
-  const SparseMatrix A11_full = 0.5 * viscous + dt * coupling;
-  sys.A11 = sys.S_tau * (Et * A11_full * sys.E) * St_tau;
+  const SparseMatrix viscous = SparseMatrix(R.transpose() * N_full_inv * W_s) * R;
+  sys.A11 = 0.5 * viscous + dt * SparseMatrix(F_sT * K * F_s);
   // b1 = S E^T W_L^s M D W_F^u u*
-  sys.b1 = sys.S_tau * (Et * (F_sT * (sys.W_F_u * u_star)));
+  sys.b1 = F_sT * (sys.W_F_u * u_star);
   if (dofs.num_pressure() > 0) {
     // A12 = S E^T dt W_L^s M D K G W_L^p S_p^T
     const SparseMatrix GW = sys.G * sys.W_L_p;
-    sys.A12 = sys.S_tau * (Et * (dt * (F_sT * K * GW))) * St_p;
+    sys.A12 = dt * SparseMatrix(F_sT * K * GW) * St_p;
     // A22 and b2 are the pressure system's (the same expression, so eta = 0 reproduces
     // solve_pressure bit for bit)
     const ExplicitPressureSystem pressure =
