@@ -69,7 +69,7 @@ TEST_CASE("buoyancy: a body of the liquid's density stays put, up to its discret
   const double dx = 1.0 / n, r = 0.1, seconds = 1.0;
   for (double shrink : {0.01, 0.0}) {
     CAPTURE(shrink);
-    const NeutralResult res = run_neutral_disk(n, r, shrink, seconds);
+    const NeutralResult res = run_neutral<2>(n, r, shrink, seconds);
     const double predicted = kG * res.deficit * seconds * seconds / 4.0;
     WARN("2D neutral disk, zeta = " << shrink << " dx: buoyancy deficit (V - V_h) / V = "
                                     << res.deficit << ", drift over 1 s " << res.drift / dx
@@ -182,8 +182,8 @@ TEST_CASE("a heavy disk dropped into a tank: liquid volume kept, penetration wit
 
 TEST_CASE("a heavy disk settling between two walls reaches Faxen's terminal velocity (2D)",
           "[validation][coupling]") {
-  // source: Faxen's drag on a cylinder midway between two plane walls (Happel & Brenner 1965,
-  // faxen_terminal_velocity): a = 0.125 between walls 1 m apart (k = 0.25), density 2000 in
+  // source: Faxen's drag on a cylinder midway between two plane walls (Faxen 1946, as quoted by
+  // Happel & Brenner 1965; faxen_terminal_velocity): a = 0.125 between walls 1 m apart (k = 0.25), density 2000 in
   // eta = 1000 Pa s: U = 0.02192 m/s, Reynolds number rho U 2a / eta = 0.005. Liquid 1.8 m deep,
   // disk centre at 1 m. The liquid's own start-up (rho h^2 / eta = 0.25 s) is mostly over by
   // 0.05 s; the mean velocity over the frames t = 0.07 .. 0.1 s is compared. Measured: 32 cells per metre

@@ -159,34 +159,41 @@ struct NeutralResult {
   double sideways = 0.0;  ///< horizontal displacement (m)
 };
 
-/// A disk of the liquid's density at mid depth of a 0.5 m pool (2D, n cells per metre).
-inline NeutralResult run_neutral_disk(int n, double r, double shrink, double seconds) {
+/// A disk / ball of the liquid's density at mid depth of a 0.5 m pool (n cells per metre),
+/// PC-unified, 20 fps.
+template <int Dim>
+NeutralResult run_neutral(int n, double r, double shrink, double seconds) {
   const double fps = 20;
-  nlohmann::json j = base_scene(2, {1.0, 1.0}, n, "PC-unified", fps);
+  nlohmann::json j = base_scene(Dim, std::vector<double>(Dim, 1.0), n, "PC-unified", fps);
   j["solver"]["shrink"] = shrink;
-  j["liquids"].push_back(pool(2, 0.5));
+  j["liquids"].push_back(pool(Dim, 0.5));
   j["bodies"].push_back({{"name", "neutral"},
                          {"density", kRho},
-                         {"shape", {{"type", "sphere"}, {"center", {0.5, 0.25}}, {"radius", r}}}});
+                         {"shape", {{"type", "sphere"}, {"center", point(Dim, 0.5, 0.25)}, {"radius", r}}}});
   NeutralResult out;
-  // V_h: dx^2 times the sum of the body's weights on the y-faces (the buoyancy of p = rho g depth)
+  // V_h: dx^Dim times the sum of the body's weights on the y-faces (the buoyancy of a
+  // hydrostatic pressure, docs/coupling.md)
   const SceneDesc scene = parse_scene(j, "neutral.json", ".");
-  const MacGrid<2> grid(Vec<2>::Zero(), 1.0 / n, VecI<2>::Constant(n), {false, false});
-  CouplingBody<2> cb;
-  cb.shape = make_shape<2>(scene.bodies[0].shape, "neutral");
-  cb.center = Vec<2>(0.5, 0.25);
-  std::array<BoundaryType, 4> walls;
+  std::array<bool, Dim> periodic{};
+  const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+  CouplingBody<Dim> cb;
+  cb.shape = make_shape<Dim>(scene.bodies[0].shape, "neutral");
+  cb.center = Vec<Dim>::Constant(0.5);
+  cb.center[1] = 0.25;
+  std::array<BoundaryType, 2 * Dim> walls;
   walls.fill(BoundaryType::wall);
   walls[3] = BoundaryType::open;
-  const SolidWeights<2> w = solid_weights<2>(grid, {cb}, {}, walls, shrink / n);
+  const SolidWeights<Dim> w = solid_weights<Dim>(grid, {cb}, {}, walls, shrink / n);
   double vh = 0.0;
   for (int f = 0; f < grid.num_faces(); ++f)
     if (grid.face_coord(f).first == 1) vh += w.body_face[0][f];
   vh *= grid.cell_volume();
-  out.deficit = 1.0 - vh / (kPi * r * r);
+  out.deficit = 1.0 - vh / (Dim == 2 ? kPi * r * r : 4.0 / 3.0 * kPi * r * r * r);
   const std::vector<FrameStats> s = run_frames(j, static_cast<int>(std::lround(seconds * fps)));
   out.drift = s.back().bodies[0].position[1] - 0.25;
-  out.sideways = s.back().bodies[0].position[0] - 0.5;
+  out.sideways = 0.0;
+  for (int a = 0; a < Dim; ++a)
+    if (a != 1) out.sideways = std::max(out.sideways, std::abs(s.back().bodies[0].position[a] - 0.5));
   return out;
 }
 
@@ -196,8 +203,8 @@ namespace monolith::validation {
 
 /// Faxen's drag on a circular cylinder (radius a) moving parallel to and midway between two
 /// plane walls 2 h apart, at low Reynolds number, per unit length: F = 4 pi mu U / K(k), k = a / h,
-/// K = ln(1/k) - 0.9157 + 1.7244 k^2 - 1.7302 k^4 + 2.4056 k^6 - 4.5913 k^8 (Faxen 1946; Happel &
-/// Brenner, Low Reynolds Number Hydrodynamics, 1965, section 7-5). Returns the terminal velocity
+/// K = ln(1/k) - 0.9157 + 1.7244 k^2 - 1.7302 k^4 + 2.4056 k^6 - 4.5913 k^8 (Faxen 1946, as
+/// quoted by Happel & Brenner, Low Reynolds Number Hydrodynamics, 1965). Returns the terminal velocity
 /// of a cylinder of density excess drho under gravity g: (drho g pi a^2) K / (4 pi mu).
 inline double faxen_terminal_velocity(double a, double h, double mu, double drho, double g) {
   const double k = a / h, k2 = k * k;
