@@ -57,7 +57,7 @@ RunSummary run(const std::string& name, int frames) {
 
 TEST_CASE("2D paper scenes run to their last frame under their own scheme", "[validation]") {
   // Source: the runs of docs/scenes.md ("Measured per scene"). Measured: worst volume drift
-  // 3.0 % (the liquid bunny of Fig. 2 during its impact; every other scene below 0.6 %),
+  // 3.0 % (the liquid bunny of Fig. 2 during its impact; every other scene below 1.6 %),
   // penetration at most 0.28 dx (Fig. 16, 61 contacts), at least 96 % of the frames converged
   // (the boat: 72 of 75). Tolerances: 6 % drift, half a cell of penetration, 80 % of the frames.
   for (const auto& stem : kStems) {
