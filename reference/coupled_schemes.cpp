@@ -369,6 +369,9 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   // P.. C schemes: inviscid (viscosity zeroed, so no stress unknowns)
   StokesWeights inviscid = in.weights;
   inviscid.viscosity.setZero();
+  // Algorithm 2 (section 5) for non-Newtonian liquids: rounds of (viscosity, viscous solve)
+  const bool non_newtonian = options.initial_viscosity && options.update_viscosity;
+  const int viscosity_rounds = std::max(1, settings.max_iterations);
 
   if (scheme == CouplingScheme::pc_vc_pc_unified) {
     // section 6.2: PC-unified -> (u1, v1), VC-unified -> (u2, v2), PC-unified -> final
@@ -382,11 +385,28 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     const VectorX p1 = s1->pressure_cells(x1.x_fluid);
     const std::vector<int>& dof = s1->contacts().body_dof;
 
-    const auto s2 = build_system(in, in.weights, StressForm::full, StokesUnknowns::stress_only, u1,
-                                 with_velocities(in.bodies, dof, v1));
-    const auto t2 = Clock::now();
-    const Unknowns x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
-    r.viscosity_coupled_seconds = seconds_since(t2);
+    std::unique_ptr<MonolithicSystem<Dim>> s2;
+    Unknowns x2;
+    if (!non_newtonian) {
+      s2 = build_system(in, in.weights, StressForm::full, StokesUnknowns::stress_only, u1,
+                        with_velocities(in.bodies, dof, v1));
+      const auto t2 = Clock::now();
+      x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
+      r.viscosity_coupled_seconds = seconds_since(t2);
+    } else {
+      // Algorithm 2 around VC-unified, every round from (u1, v1) with eta^k
+      StokesWeights w = in.weights;
+      VectorX eta = options.initial_viscosity(u1);
+      for (int k = 0; k < viscosity_rounds; ++k) {
+        w.viscosity = eta;
+        s2 = build_system(in, w, StressForm::full, StokesUnknowns::stress_only, u1,
+                          with_velocities(in.bodies, dof, v1));
+        const auto t2 = Clock::now();
+        x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
+        r.viscosity_coupled_seconds += seconds_since(t2);
+        eta = options.update_viscosity(s2->stress_full(x2.x_fluid), w.viscosity);
+      }
+    }
     const VectorX u2 = s2->fluid_velocities(x2.x_fluid);
     const VectorX v2 = s2->body_velocities(x2.x_fluid, x2.lambda, x2.z);
     const VectorX tau2 = s2->stress_full(x2.x_fluid);
@@ -408,6 +428,30 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   }
 
   const bool viscous = scheme_uses_viscosity(scheme);
+  if (viscous && non_newtonian) {
+    // Algorithm 2 around the scheme's solve: every round from u* with eta^k
+    StokesWeights w = in.weights;
+    VectorX eta = options.initial_viscosity(in.u_star);
+    std::unique_ptr<MonolithicSystem<Dim>> s;
+    Unknowns x;
+    for (int k = 0; k < viscosity_rounds; ++k) {
+      w.viscosity = eta;
+      s = build_system(in, w, StressForm::reduced, StokesUnknowns::pressure_and_stress, in.u_star,
+                       in.bodies);
+      if (scheme == CouplingScheme::pvc_unified) {
+        const auto t0 = Clock::now();
+        x = unified_solve(*s, settings, r, r.coupled_iterations);
+        r.coupled_seconds += seconds_since(t0);
+      } else {
+        x = partitioned_solve(*s, scheme, settings, options, r);
+      }
+      eta = options.update_viscosity(s->stress_full(x.x_fluid), w.viscosity);
+    }
+    count_dofs(*s, r);
+    finish(*s, x, r);
+    r.total_seconds = seconds_since(t_start);
+    return r;
+  }
   const auto s = build_system(in, viscous ? in.weights : inviscid, StressForm::reduced,
                               StokesUnknowns::pressure_and_stress, in.u_star, in.bodies);
   count_dofs(*s, r);

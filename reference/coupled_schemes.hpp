@@ -22,6 +22,7 @@
 /// Explicit back end only: MonolithicSystem assembles A_stokes as a sparse matrix. The
 /// matrix-free production path is issue 7.
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -124,6 +125,12 @@ struct CoupledSchemeOptions {
   /// a one-pass scheme's, as the per-solve iteration counts of the paper's Tables 1 and 3
   /// suggest). The fixed point is the same.
   bool warm_start = true;
+  /// Algorithm 2 (section 5, non-Newtonian liquids), used when both are set and the scheme has
+  /// stress unknowns: initial_viscosity(u*) gives eta^1 (lines 1, 3), update_viscosity(tau, eta^k)
+  /// gives eta^(k+1) from the solved stress (lines 6, 3); NonNewtonianViscosity
+  /// (herschel_bulkley.hpp) provides both. The viscosity of in.weights is then ignored.
+  std::function<VectorX(const VectorX& u_star)> initial_viscosity;
+  std::function<VectorX(const VectorX& stress, const VectorX& viscosity)> update_viscosity;
 };
 
 /// One step's pressure / viscosity / contact solves under `scheme` (section 6). Builds
@@ -151,6 +158,14 @@ struct CoupledSchemeOptions {
 ///     stress unknowns only (StressForm::full, p fixed at 0), u* = u1, body v* = v1 (the
 ///     ContactSystem rebuilt with v1), solved as the unified MLCP -> u2, v2; PC-unified from
 ///     u2, v2 -> final u, v, lambda, z. pressure = p1 + p3, stress = tau2.
+/// Non-Newtonian liquids (options.initial_viscosity / update_viscosity set, section 5): the
+/// viscous solve of the scheme (the whole solve of PV-C, C-PV, PVC-iterative, PVC-unified; the
+/// VC-unified solve of PC-VC-PC-unified) runs settings.max_iterations times, round k with the
+/// viscosity eta^k and each followed by the viscosity update, so the step ends with tau, p,
+/// lambda optimal for the last viscosity. Departure: the paper interleaves one viscosity update
+/// with each friction round of one staggered solve; solve_pvc_unified has no entry for a
+/// warm-started friction force, so here every viscosity round runs the scheme's own friction
+/// rounds (up to max_iterations^2 friction solves per step). Without friction the two agree.
 /// settings: max_iterations = staggered rounds (>= 1), tolerance = their stopping tolerance and
 /// the inner PCG tolerance is settings.mprgp.tolerance, with settings.mprgp.max_iterations;
 /// diagonal_boost = gamma on the contact rows. Throws SimulationError (errors.hpp) on a solver

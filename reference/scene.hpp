@@ -161,8 +161,9 @@ SceneDesc load_scene(const std::string& path_or_name, const std::vector<std::str
 nlohmann::json apply_overrides(nlohmann::json j, const std::string& label,
                                const std::vector<std::string>& overrides);
 
-/// Throws InputError listing what the scene asks for that this build does not support yet
-/// (herschel-bulkley liquids, dynamic and kinematic bodies), each with its key path.
+/// Throws InputError listing what the scene asks for that this build does not support yet, each
+/// with its key path. Every physics of the format is supported now (herschel-bulkley liquids
+/// since issue 6), so it accepts every parsed scene.
 void require_supported(const SceneDesc& scene);
 
 /// Peak memory estimate in bytes used to refuse scenes up front (docs/scene-format.md).

@@ -14,6 +14,7 @@
 #include "reference/coupled_schemes.hpp"
 #include "reference/coupling.hpp"
 #include "reference/errors.hpp"
+#include "reference/herschel_bulkley.hpp"
 #include "reference/particles.hpp"
 #include "reference/pressure_projection.hpp"
 #include "reference/rigid_world.hpp"
@@ -172,6 +173,11 @@ class Simulation : public AnySimulation {
   /// Lines 7-11 of Algorithm 1 for the liquid: the solves of solve_sequence(scheme) on u_, their
   /// statistics added to stats_.
   void solve_liquid(double dt);
+  /// solve_liquid for scenes with a herschel-bulkley liquid (section 5): the unified or decoupled
+  /// sequence with Algorithm 2 around its viscous solve (staggered_iterations rounds).
+  void solve_liquid_non_newtonian(double dt);
+  /// Algorithm 2's model for the current weights (W_F^s, W_L^s, the liquids' mass fractions).
+  NonNewtonianViscosity<Dim> non_newtonian_model() const;
   /// Adds one solve's iterations, residual and DOF counts to stats_; throws SimulationError on a
   /// breakdown (`what` names the solve).
   void record_solve(const PcgResult& pcg, long pressure_dofs, long stress_dofs, const char* what);
@@ -193,6 +199,10 @@ class Simulation : public AnySimulation {
   SolveSequence sequence_ = SolveSequence::pressure;
   StressGrid<Dim> stress_grid_;
   VectorX stress_fluid_, stress_liquid_, stress_eta_, cell_eta_, stress_;
+  // non-Newtonian liquids (section 5): the liquids' models and mass fractions per stress DOF;
+  // cell_eta_ is then the effective viscosity of the last solve (its cell-centred diagonal DOFs)
+  bool non_newtonian_ = false;
+  ViscosityMixture mixture_;
   // liquid state
   Particles<Dim> particles_;
   VectorX liquid_phi_;
@@ -251,8 +261,12 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
 
   // viscosity: which solves the scheme runs, and the stress DOFs with W_F^s (static solids)
   liquid_eta_ = liquid_viscosities(scene.liquids);
-  const bool viscous = std::any_of(liquid_eta_.begin(), liquid_eta_.end(),
-                                   [](double eta) { return eta > 0.0; });
+  non_newtonian_ = has_non_newtonian(scene.liquids);
+  const bool viscous = non_newtonian_ || std::any_of(liquid_eta_.begin(), liquid_eta_.end(),
+                                                     [](double eta) { return eta > 0.0; });
+  if (non_newtonian_)
+    for (const auto& l : scene.liquids)
+      mixture_.models.push_back(HerschelBulkley::from_spec(l.viscosity));
   sequence_ = solve_sequence(scene.solver.scheme, viscous);
   stress_grid_ = StressGrid<Dim>(grid_);
   if (sequence_ != SolveSequence::pressure)
@@ -306,8 +320,25 @@ void Simulation<Dim>::update_liquid_weights() {
   if (sequence_ != SolveSequence::pressure) {
     stress_liquid_ = stress_liquid_weights(stress_grid_, lattice_, phi);
     stress_eta_ = stress_viscosity(stress_grid_, particles_, liquid_eta_);
+    if (non_newtonian_) {
+      mixture_.fractions = liquid_stress_fractions(stress_grid_, particles_,
+                                                   static_cast<int>(mixture_.models.size()));
+      // n = 1, tau0 = 0 for all: the Newtonian path's eta per DOF (bit for bit the same run)
+      if (mixture_.is_newtonian()) {
+        std::vector<double> k;
+        for (const auto& m : mixture_.models) k.push_back(m.k);
+        mixture_.constant = stress_viscosity(stress_grid_, particles_, k);
+      }
+    }
   }
-  cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
+  if (!non_newtonian_) {
+    cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
+  } else if (cell_eta_.size() != grid_.num_cells()) {
+    // before the first solve: each liquid at rest, the limiting viscosity eta0 of eq. (27)
+    std::vector<double> eta0;
+    for (const auto& m : mixture_.models) eta0.push_back(m.limiting_viscosity());
+    cell_eta_ = cell_viscosity(grid_, particles_, eta0);
+  }
   // the reported volume is that of the particles' own level set (the extension lies in solids)
   liquid_volume_ = (!solids ? weights_.liquid_cell
                                           : liquid_cell_weights(grid_, lattice_, liquid_phi_))
@@ -498,8 +529,26 @@ void Simulation<Dim>::solve_coupled(double dt) {
   ss.diagonal_boost = scene_.solver.diagonal_boost;
   ss.mprgp.tolerance = scene_.solver.tolerance;
   ss.mprgp.max_iterations = scene_.solver.max_iterations;
+  // non-Newtonian liquids: Algorithm 2 alongside the scheme's staggered rounds (section 5)
+  CoupledSchemeOptions options;
+  std::unique_ptr<NonNewtonianViscosity<Dim>> model;
+  VectorX eta;
+  if (non_newtonian_ && stress) {
+    model = std::make_unique<NonNewtonianViscosity<Dim>>(stress_grid_, solid_weights_.fluid_stress,
+                                                         stress_liquid_, mixture_);
+    options.initial_viscosity = [&](const VectorX& u_star) {
+      eta = model->initial_viscosity(solid_weights_.fluid_face, u_star);
+      return eta;
+    };
+    options.update_viscosity = [&](const VectorX& tau, const VectorX& used) {
+      eta = model->update(tau, used);
+      return eta;
+    };
+  }
   const CoupledSolveResult r =
-      solve_coupled_step<Dim>(in, parse_coupling_scheme(scene_.solver.scheme), ss);
+      solve_coupled_step<Dim>(in, parse_coupling_scheme(scene_.solver.scheme), ss, options);
+  if (eta.size() == stress_grid_.num_dofs())
+    cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
   u_ = r.u;
   pressure_ = r.pressure;
   stress_ = r.stress;
@@ -538,6 +587,10 @@ void Simulation<Dim>::solve_liquid(double dt) {
     record_solve(solve.pcg, solve.dofs, 0, "pressure");
     return;
   }
+  if (non_newtonian_) {
+    solve_liquid_non_newtonian(dt);
+    return;
+  }
   StokesWeights w;
   w.pressure = weights_;
   w.fluid_stress = stress_fluid_;
@@ -567,6 +620,60 @@ void Simulation<Dim>::solve_liquid(double dt) {
   record_solve(second.pcg, second.dofs, 0, "second pressure");
   pressure_ = first.pressure + second.pressure;
   stress_ = viscous.stress;
+}
+
+template <int Dim>
+NonNewtonianViscosity<Dim> Simulation<Dim>::non_newtonian_model() const {
+  return NonNewtonianViscosity<Dim>(stress_grid_, stress_fluid_, stress_liquid_, mixture_);
+}
+
+template <int Dim>
+void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
+  StokesWeights w;
+  w.pressure = weights_;
+  w.fluid_stress = stress_fluid_;
+  w.liquid_stress = stress_liquid_;
+  NonNewtonianViscosity<Dim> model = non_newtonian_model();
+  const int rounds = std::max(1, scene_.solver.staggered_iterations);
+  VectorX eta;
+  if (sequence_ == SolveSequence::unified) {
+    // Algorithm 2 around the unified solve: each round eq. (29) in (tau, p) from the same u*
+    // with N(eta^k), so each round ends with tau, p optimal for the current viscosity
+    const VectorX u_star = u_;
+    eta = run_algorithm2<Dim>(model, weights_.fluid_face, u_star, rounds, [&](const VectorX& e) {
+      w.viscosity = e;
+      u_ = u_star;
+      const StokesSolveResult solve =
+          solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
+                       scene_.solver.backend, pcg_settings_, u_);
+      record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
+      pressure_ = solve.pressure;
+      stress_ = solve.stress;
+      return solve.stress;
+    });
+  } else {
+    // PC-VC-PC: Algorithm 2 around the viscosity solve, from the first pressure solve's u
+    const PressureSolveResult first =
+        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
+    record_solve(first.pcg, first.dofs, 0, "first pressure");
+    const VectorX u_first = u_;
+    eta = run_algorithm2<Dim>(model, weights_.fluid_face, u_first, rounds, [&](const VectorX& e) {
+      w.viscosity = e;
+      u_ = u_first;
+      const StokesSolveResult viscous =
+          solve_stokes(grid_, w, dt, StokesUnknowns::stress_only, StressForm::full,
+                       scene_.solver.backend, pcg_settings_, u_);
+      record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
+      stress_ = viscous.stress;
+      return viscous.stress;
+    });
+    const PressureSolveResult second =
+        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
+    record_solve(second.pcg, second.dofs, 0, "second pressure");
+    pressure_ = first.pressure + second.pressure;
+  }
+  // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
+  cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
 }
 
 template <int Dim>

