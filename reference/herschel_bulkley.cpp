@@ -124,13 +124,17 @@ NonNewtonianViscosity<Dim>::NonNewtonianViscosity(const StressGrid<Dim>& stress,
 
 template <int Dim>
 VectorX NonNewtonianViscosity<Dim>::initial_viscosity(const VectorX& fluid_face,
-                                                      const VectorX& u_star) {
+                                                      const VectorX& u_star, const VectorX& warm) {
+  residuals_.clear();
+  if (warm.size() == stress_.num_dofs()) {
+    s_ = warm;
+    return mixture_.viscosity(s_);
+  }
   // line 1: gamma_dot^1 = (W_F^s)^-1 D W_F^u u* on the active DOFs
   VectorX rate = d_ * fluid_face.cwiseProduct(u_star);
   for (int i = 0; i < rate.size(); ++i) rate[i] = active_[i] ? rate[i] / fluid_stress_[i] : 0.0;
   // line 3: eq. (27) at the interpolated norm
   s_ = shear_rate_norm(stress_, rate, active_);
-  residuals_.clear();
   return mixture_.viscosity(s_);
 }
 
@@ -170,8 +174,9 @@ VectorX NonNewtonianViscosity<Dim>::update(const VectorX& tau, const VectorX& et
 template <int Dim>
 VectorX run_algorithm2(NonNewtonianViscosity<Dim>& model, const VectorX& fluid_face,
                        const VectorX& u_star, int iterations,
-                       const std::function<VectorX(const VectorX& eta)>& solve) {
-  VectorX eta = model.initial_viscosity(fluid_face, u_star);
+                       const std::function<VectorX(const VectorX& eta)>& solve,
+                       const VectorX& warm) {
+  VectorX eta = model.initial_viscosity(fluid_face, u_star, warm);
   for (int k = 0; k < std::max(1, iterations); ++k) {
     // lines 4-5 with N^k, then line 6 and the next eta
     const VectorX tau = solve(eta);
@@ -185,7 +190,7 @@ VectorX run_algorithm2(NonNewtonianViscosity<Dim>& model, const VectorX& fluid_f
                                    const std::vector<char>&);                                     \
   template class NonNewtonianViscosity<D>;                                                        \
   template VectorX run_algorithm2(NonNewtonianViscosity<D>&, const VectorX&, const VectorX&, int, \
-                                  const std::function<VectorX(const VectorX&)>&);
+                                  const std::function<VectorX(const VectorX&)>&, const VectorX&);
 
 MONOLITH_INSTANTIATE_HERSCHEL_BULKLEY(2)
 MONOLITH_INSTANTIATE_HERSCHEL_BULKLEY(3)

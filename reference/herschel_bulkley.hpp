@@ -109,8 +109,12 @@ class NonNewtonianViscosity {
   NonNewtonianViscosity(const StressGrid<Dim>& stress, const VectorX& fluid_stress,
                         const VectorX& liquid_stress, ViscosityMixture mixture);
   /// Line 1 and line 3 for k = 1: gamma_dot^1 = (W_F^s)^-1 D W_F^u u* on the active DOFs,
-  /// eta^1.
-  VectorX initial_viscosity(const VectorX& fluid_face, const VectorX& u_star);
+  /// eta^1. With `warm` (one shear rate s per stress DOF, e.g. the previous step's
+  /// shear_rate()) line 1 is replaced by s^1 = warm: the iteration's fixed point is the same,
+  /// only its start differs (docs/non-newtonian.md: with 2 rounds from u* a steady flow is not
+  /// a fixed point of the time stepping, the wall rate of u* carries dt g / dx).
+  VectorX initial_viscosity(const VectorX& fluid_face, const VectorX& u_star,
+                            const VectorX& warm = VectorX());
   /// Line 6 and line 3 for k + 1: gamma_dot^(k+1) = tau / (2 eta) on the active DOFs with
   /// eta > 0 (tau all StressGrid components, eta the viscosity it was solved with), and the
   /// next viscosity. Records the residual of the pair (tau, eta) (residuals()).
@@ -134,13 +138,14 @@ class NonNewtonianViscosity {
   std::vector<double> residuals_;
 };
 
-/// Algorithm 2 around a solve: eta^1 from u*, then `iterations` times (at least 1)
+/// Algorithm 2 around a solve: eta^1 from u* (or `warm`, initial_viscosity), then `iterations` times (at least 1)
 /// tau = solve(eta^k) and eta^(k+1) = update(tau, eta^k). `solve` returns tau (all StressGrid
 /// components) optimal for the viscosity it is given (eq. (29) with N fixed). Returns the
 /// viscosity of the final flow, eta^(iterations + 1) (the colour of `color_by: viscosity`).
 template <int Dim>
 VectorX run_algorithm2(NonNewtonianViscosity<Dim>& model, const VectorX& fluid_face,
                        const VectorX& u_star, int iterations,
-                       const std::function<VectorX(const VectorX& eta)>& solve);
+                       const std::function<VectorX(const VectorX& eta)>& solve,
+                       const VectorX& warm = VectorX());
 
 }  // namespace monolith
