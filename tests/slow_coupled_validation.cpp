@@ -142,8 +142,8 @@ TEST_CASE("slow: a ball settling at the centre of a spherical container (3D, 24^
 TEST_CASE("slow: a ball of the liquid's density stays put up to its buoyancy deficit (3D, 16^3)",
           "[validation][coupling][slow]") {
   // source: Archimedes with the discrete deficit of the 2D case (run_neutral): a ball r = 0.15
-  // (2.4 dx) at mid depth; with the added mass of a sphere (rho V / 2, Lamb, Hydrodynamics,
-  // section 92) it accelerates at 2 g deficit / 3 and sinks by g deficit t^2 / 3 at most.
+  // (2.4 dx) at mid depth; with the added mass of a sphere (rho V / 2; Lamb, Hydrodynamics)
+  // it accelerates at 2 g deficit / 3 and sinks by g deficit t^2 / 3 at most.
   // Measured (22 s): deficit 3.4 % (1.25 % the shrinkage 3 zeta / r, the rest the sampling of
   // a 2.4 dx ball), drift 1.70 dx against 1.77 dx predicted, sideways 0.006 dx. Asserted:
   // drift <= predicted + 0.25 dx, as in 2D.

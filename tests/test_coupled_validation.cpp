@@ -62,7 +62,7 @@ TEST_CASE("buoyancy: a body of the liquid's density stays put, up to its discret
   // buoyancy falls short by rho g (V - V_h), V_h = dx^2 sum over y-faces of W_S^u (exactly the
   // buoyancy of a hydrostatic pressure, docs/coupling.md). A disk r = 0.1 (3.2 dx) at mid depth
   // of a 0.5 m pool, 32^2 cells: (V - V_h) / V = deficit printed below; with the added mass of a
-  // circular cylinder (rho pi r^2, Lamb, Hydrodynamics, section 92) the body accelerates at
+  // circular cylinder (rho pi r^2; Lamb, Hydrodynamics) the body accelerates at
   // g deficit / 2 and sinks by g deficit t^2 / 4 (drag neglected: an upper bound).
   // Measured over 1 s: deficit 1.04 % (zeta = 0.01 dx) and 0.42 % (zeta = 0; the 2D disk's
   // second-order sampling error, docs/coupling.md); drift 0.96 dx and 0.52 dx against the
@@ -228,7 +228,7 @@ TEST_CASE("a disk spinning in a viscous liquid inside a ring spins down as the C
 
 TEST_CASE("the radial spin-down reference reaches the Couette torque in the quasi-steady limit",
           "[unit][validation]") {
-  // source: the steady Couette torques (Landau & Lifshitz, section 18): 2D 4 pi mu R1^2 R2^2 /
+  // source: the steady Couette torques (Landau & Lifshitz, Fluid Mechanics, Couette flow): 2D 4 pi mu R1^2 R2^2 /
   // (R2^2 - R1^2), 3D 8 pi mu R1^3 R2^3 / (R2^3 - R1^3) per unit omega. With a body much heavier
   // than the liquid the decay is exp(-T t / (I + I_L)), I_L the angular momentum of the Couette
   // liquid per unit omega (2D: pi rho R1^2 (R2^2 - R1^2) / 2; 3D: evaluated from the steady

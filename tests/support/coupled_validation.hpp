@@ -219,7 +219,7 @@ inline double faxen_terminal_velocity(double a, double h, double mu, double drho
 /// velocity is f(r, t) (2D) or f(r, t) sin(theta) (3D), with
 ///   2D: rho f_t = mu (f_rr + f_r / r - f / r^2),          torque 2 pi R1^2 mu (f_r - f / r)
 ///   3D: rho f_t = mu (f_rr + 2 f_r / r - 2 f / r^2),      torque 8 pi / 3 R1^3 mu (f_r - f / r)
-/// at r = R1 (Landau & Lifshitz, Fluid Mechanics, section 18 and problems; their steady states
+/// at r = R1 (Landau & Lifshitz, Fluid Mechanics, Couette flow and its problems; the steady states
 /// are the Couette torques 4 pi mu omega R1^2 R2^2 / (R2^2 - R1^2) and
 /// 8 pi mu omega R1^3 R2^3 / (R2^3 - R1^3)), f(R1) = omega R1, f(R2) = 0, I omega' = torque.
 /// Solved by backward Euler on `cells` radial cells; returns omega at the times asked (sorted).
