@@ -7,7 +7,7 @@
 /// Shear-rate norm. The scene's parameters (k, n, tau0, gamma0) have their rheological meaning:
 /// in steady simple shear u = (s y, 0) at rate s beyond yield the shear stress is tau0 + k s^n.
 /// The deformation rate there is D u with D_xy = D_yx = s/2, so ||D u||_F = s / sqrt(2): eq. (27)
-/// read with ||gamma_dot||_F would give tau_xy = tau0 / sqrt(2) + k s^n 2^((1-n)/2). We evaluate
+/// read with ||gamma_dot||_F would give tau_xy = sqrt(2) tau0 + k s^n 2^((1-n)/2). We evaluate
 /// (27) at the equivalent simple-shear rate
 ///     s = sqrt(2) ||D u||_F = sqrt(2 sum_ab (D u)_ab^2),
 /// and tau = 2 eta D u gives tau_xy = eta(s) s = tau0 + k s^n exactly (tests/test_herschel_bulkley).
