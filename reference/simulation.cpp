@@ -178,6 +178,8 @@ class Simulation : public AnySimulation {
   void solve_liquid_non_newtonian(double dt);
   /// Algorithm 2's model for the current weights (W_F^s, W_L^s, the liquids' mass fractions).
   NonNewtonianViscosity<Dim> non_newtonian_model() const;
+  /// The residuals of one step's viscosity rounds into stats_ (SolverStats::viscosity_residuals).
+  void record_viscosity_rounds(const std::vector<double>& residuals);
   /// Adds one solve's iterations, residual and DOF counts to stats_; throws SimulationError on a
   /// breakdown (`what` names the solve).
   void record_solve(const PcgResult& pcg, long pressure_dofs, long stress_dofs, const char* what);
@@ -549,6 +551,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
       solve_coupled_step<Dim>(in, parse_coupling_scheme(scene_.solver.scheme), ss, options);
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
+  if (model) record_viscosity_rounds(model->residuals());
   u_ = r.u;
   pressure_ = r.pressure;
   stress_ = r.stress;
@@ -674,6 +677,15 @@ void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
   }
   // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
   cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
+  record_viscosity_rounds(model.residuals());
+}
+
+template <int Dim>
+void Simulation<Dim>::record_viscosity_rounds(const std::vector<double>& residuals) {
+  if (residuals.empty()) return;
+  stats_.solver.viscosity_residuals = residuals;
+  stats_.solver.max_viscosity_residual =
+      std::max(stats_.solver.max_viscosity_residual, residuals.back());
 }
 
 template <int Dim>

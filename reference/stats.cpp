@@ -71,6 +71,10 @@ json FrameStats::to_json() const {
                                 {"seconds", number(solver.contact_seconds)}}},
                    {"coupled", {{"iterations", solver.coupled_iterations},
                                 {"seconds", number(solver.coupled_seconds)}}}}}};
+  // non-Newtonian liquids only: the residuals of Algorithm 2 (section 5)
+  if (!solver.viscosity_residuals.empty())
+    j["solver"]["viscosity"] = {{"residuals", vector(solver.viscosity_residuals)},
+                                {"max_final_residual", number(solver.max_viscosity_residual)}};
   // timing
   j["timing"] = {{"total", number(timing_total)}, {"solve", number(timing_solve)}};
   return j;

@@ -37,6 +37,12 @@ struct SolverStats {
   /// (PC, PVC; the VC step of PC-VC-PC-unified counts here): iterations and wall time.
   long fluid_iterations = 0, contact_iterations = 0, coupled_iterations = 0;
   double fluid_seconds = 0.0, contact_seconds = 0.0, coupled_seconds = 0.0;
+  /// Non-Newtonian liquids (Algorithm 2, section 5): the residual of each viscosity round of
+  /// the frame's last step (NonNewtonianViscosity::residuals, Fig. 9's convergence plot) and
+  /// the largest last-round residual over the frame's steps. Empty / 0 (and left out of the
+  /// JSON) for Newtonian liquids.
+  std::vector<double> viscosity_residuals;
+  double max_viscosity_residual = 0.0;
 };
 
 struct FrameStats {

@@ -506,6 +506,12 @@ TEST_CASE("a Bingham block holds its shape where a Newtonian one of the same k s
                                       << sa.kinetic_energy_liquid << " vs " << sb.kinetic_energy_liquid);
   CHECK(spread_b < 0.5 * spread_a);
   CHECK(sb.kinetic_energy_liquid < 0.5 * sa.kinetic_energy_liquid);
+  // stats.jsonl: the residual of each viscosity round (default staggered_iterations = 2) for
+  // the non-Newtonian liquid only
+  CHECK(sb.solver.viscosity_residuals.size() == 2);
+  CHECK(sb.solver.max_viscosity_residual > 0.0);
+  CHECK(sb.to_json()["solver"]["viscosity"]["residuals"].size() == 2);
+  CHECK_FALSE(sa.to_json()["solver"].contains("viscosity"));
 }
 
 namespace {
