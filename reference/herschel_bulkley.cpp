@@ -113,8 +113,18 @@ NonNewtonianViscosity<Dim>::NonNewtonianViscosity(const StressGrid<Dim>& stress,
                                                   const VectorX& fluid_stress,
                                                   const VectorX& liquid_stress,
                                                   ViscosityMixture mixture)
+    : NonNewtonianViscosity(stress,
+                            std::make_shared<const SparseMatrix>(deformation_rate_matrix(stress)),
+                            fluid_stress, liquid_stress, std::move(mixture)) {}
+
+template <int Dim>
+NonNewtonianViscosity<Dim>::NonNewtonianViscosity(const StressGrid<Dim>& stress,
+                                                  std::shared_ptr<const SparseMatrix> d,
+                                                  const VectorX& fluid_stress,
+                                                  const VectorX& liquid_stress,
+                                                  ViscosityMixture mixture)
     : stress_(stress),
-      d_(deformation_rate_matrix(stress)),
+      d_(std::move(d)),
       fluid_stress_(fluid_stress),
       active_(stress.num_dofs(), 0),
       mixture_(std::move(mixture)) {
@@ -131,7 +141,7 @@ VectorX NonNewtonianViscosity<Dim>::initial_viscosity(const VectorX& fluid_face,
     return mixture_.viscosity(s_);
   }
   // line 1: gamma_dot^1 = (W_F^s)^-1 D W_F^u u* on the active DOFs
-  VectorX rate = d_ * fluid_face.cwiseProduct(u_star);
+  VectorX rate = *d_ * fluid_face.cwiseProduct(u_star);
   for (int i = 0; i < rate.size(); ++i) rate[i] = active_[i] ? rate[i] / fluid_stress_[i] : 0.0;
   // line 3: eq. (27) at the interpolated norm
   s_ = shear_rate_norm(stress_, rate, active_);

@@ -18,6 +18,7 @@
 /// two lattices differ), over the active DOFs only (W_F^s W_L^s > 0).
 
 #include <functional>
+#include <memory>
 #include <vector>
 
 #include "reference/common.hpp"
@@ -108,6 +109,11 @@ class NonNewtonianViscosity {
   /// product > 0), `mixture` the liquids.
   NonNewtonianViscosity(const StressGrid<Dim>& stress, const VectorX& fluid_stress,
                         const VectorX& liquid_stress, ViscosityMixture mixture);
+  /// The same with D (deformation_rate_matrix(stress)) given, so a caller that keeps it (the
+  /// simulator, every step on one grid) does not rebuild it.
+  NonNewtonianViscosity(const StressGrid<Dim>& stress, std::shared_ptr<const SparseMatrix> d,
+                        const VectorX& fluid_stress, const VectorX& liquid_stress,
+                        ViscosityMixture mixture);
   /// Line 1 and line 3 for k = 1: gamma_dot^1 = (W_F^s)^-1 D W_F^u u* on the active DOFs,
   /// eta^1. With `warm` (one shear rate s per stress DOF, e.g. the previous step's
   /// shear_rate()) line 1 is replaced by s^1 = warm: the iteration's fixed point is the same,
@@ -130,7 +136,7 @@ class NonNewtonianViscosity {
 
  private:
   StressGrid<Dim> stress_;
-  SparseMatrix d_;
+  std::shared_ptr<const SparseMatrix> d_;
   VectorX fluid_stress_;
   std::vector<char> active_;
   ViscosityMixture mixture_;

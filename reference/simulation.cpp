@@ -13,6 +13,7 @@
 
 #include "reference/coupled_schemes.hpp"
 #include "reference/coupling.hpp"
+#include "reference/deformation_rate.hpp"
 #include "reference/errors.hpp"
 #include "reference/herschel_bulkley.hpp"
 #include "reference/particles.hpp"
@@ -205,6 +206,7 @@ class Simulation : public AnySimulation {
   // cell_eta_ is then the effective viscosity of the last solve (its cell-centred diagonal DOFs)
   bool non_newtonian_ = false;
   ViscosityMixture mixture_;
+  std::shared_ptr<const SparseMatrix> deformation_rate_;  ///< D of eq. (8), built once
   // liquid state
   Particles<Dim> particles_;
   VectorX liquid_phi_;
@@ -271,6 +273,8 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
       mixture_.models.push_back(HerschelBulkley::from_spec(l.viscosity));
   sequence_ = solve_sequence(scene.solver.scheme, viscous);
   stress_grid_ = StressGrid<Dim>(grid_);
+  if (non_newtonian_ && sequence_ != SolveSequence::pressure)
+    deformation_rate_ = std::make_shared<const SparseMatrix>(deformation_rate_matrix(stress_grid_));
   if (sequence_ != SolveSequence::pressure)
     stress_fluid_ = stress_fluid_weights(stress_grid_, lattice_, solid_phi_, boundary_);
   stress_ = VectorX::Zero(stress_grid_.num_dofs());
@@ -536,8 +540,8 @@ void Simulation<Dim>::solve_coupled(double dt) {
   std::unique_ptr<NonNewtonianViscosity<Dim>> model;
   VectorX eta;
   if (non_newtonian_ && stress) {
-    model = std::make_unique<NonNewtonianViscosity<Dim>>(stress_grid_, solid_weights_.fluid_stress,
-                                                         stress_liquid_, mixture_);
+    model = std::make_unique<NonNewtonianViscosity<Dim>>(
+        stress_grid_, deformation_rate_, solid_weights_.fluid_stress, stress_liquid_, mixture_);
     options.initial_viscosity = [&](const VectorX& u_star) {
       eta = model->initial_viscosity(solid_weights_.fluid_face, u_star);
       return eta;
@@ -627,7 +631,8 @@ void Simulation<Dim>::solve_liquid(double dt) {
 
 template <int Dim>
 NonNewtonianViscosity<Dim> Simulation<Dim>::non_newtonian_model() const {
-  return NonNewtonianViscosity<Dim>(stress_grid_, stress_fluid_, stress_liquid_, mixture_);
+  return NonNewtonianViscosity<Dim>(stress_grid_, deformation_rate_, stress_fluid_, stress_liquid_,
+                                    mixture_);
 }
 
 template <int Dim>
