@@ -76,7 +76,7 @@ TEST_CASE("2D paper scenes run to their last frame under their own scheme", "[va
 TEST_CASE("3D paper scenes run their first frames", "[validation]") {
   // Two frames each (the bodies are falling or have just touched). Measured over three frames
   // (docs/scenes.md): volume drift at most 0.8 % (the liquid balls in the shells of Fig. 17),
-  // penetration at most 0.13 dx (the boat); tolerances 2 % and half a cell.
+  // penetration at most 0.10 dx; tolerances 2 % and half a cell.
   for (const auto& stem : kStems) {
     const std::string name = stem + "-3d";
     const RunSummary r = run(name, 2);
