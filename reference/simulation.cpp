@@ -115,8 +115,9 @@ constexpr double kTrustedLiquidFaceFraction = 0.1;
 /// 3.2), so their error grows with the rotation and travel within a step.
 constexpr double kBodyCellFraction = 0.5;
 
-/// Layers of faces beyond the particles' reach that get u* by extrapolation before a solve with
-/// stress unknowns: a stress control volume with W_L^s > 0 reaches at most one cell into the air.
+/// Layers of faces beyond the particles' reach that get u* by extrapolation before the solve: a
+/// stress control volume with W_L^s > 0 reaches at most one cell into the air, a surface cell's
+/// divergence one face.
 constexpr int kAirVelocityLayers = 2;
 
 }  // namespace
@@ -404,11 +405,14 @@ void Simulation<Dim>::step(double dt) {
   }
   liquid_weights_current_ = false;
   weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
-  // with stress unknowns, D reads the velocity of the air faces next to the surface (b1 of
-  // eq. (24)), which are not unknowns: extend u* there from the faces that carry mass, so the
-  // surface sees the liquid's own velocity (close to traction-free) rather than air at rest
-  // (a no-slip lid), as Batty & Bridson (2008) extrapolate before their viscosity solve
-  if (sequence_ != SolveSequence::pressure) {
+  // the solve reads u* on faces the particles did not reach: with stress unknowns D reads the
+  // air faces next to the surface (b1 of eq. (24)), and the weighted divergence of a surface
+  // cell (b2) reads its faces towards the air, whose W_L^u is small but not zero. Extend u*
+  // there from the faces that carry mass, so the surface sees the liquid's own velocity (close
+  // to traction-free) rather than air at rest (a no-slip lid, and a spurious divergence: a
+  // liquid ball in free fall felt a pressure of 1e-4 rho g dx), as Batty & Bridson (2008)
+  // extrapolate before their viscosity solve
+  {
     std::vector<char> carried(grid_.num_faces(), 0);
     for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
     extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
