@@ -13,6 +13,7 @@
 
 #include "reference/collision.hpp"
 #include "reference/contact_system.hpp"
+#include "reference/coupled_schemes.hpp"
 #include "reference/coupling.hpp"
 #include "reference/mac_grid.hpp"
 #include "reference/rigid_body.hpp"
@@ -73,10 +74,7 @@ CoupledStep<Dim> make_coupled_step(const monolith::SceneDesc& scene, const Phi& 
   const SampleLattice<Dim> lattice = half_lattice(s.grid);
   VectorX phi(lattice.size());
   for (int k = 0; k < lattice.size(); ++k) phi[k] = liquid_phi(lattice.position(lattice.coord(k)));
-  const VectorX no_solid = VectorX::Ones(lattice.size());
-  s.w = uniform_stokes_weights<Dim>(s.grid, no_solid, phi, boundary, rho, eta);
-  s.w.pressure.fluid_face = s.solids.fluid_face;
-  s.w.fluid_stress = s.solids.fluid_stress;
+  s.w = coupled_stokes_weights<Dim>(s.grid, s.solids, phi, rho, eta);
   s.u_star.resize(s.grid.num_faces());
   for (int a = 0; a < Dim; ++a)
     s.u_star.segment(s.grid.face_offset(a), s.grid.num_faces(a)).setConstant(u0[a]);

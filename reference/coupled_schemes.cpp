@@ -14,6 +14,8 @@
 #include "reference/monolithic_system.hpp"
 #include "reference/mprgp.hpp"
 #include "reference/pcg.hpp"
+#include "reference/stress_weights.hpp"
+#include "reference/volume_fractions.hpp"
 
 namespace monolith {
 
@@ -467,6 +469,30 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   r.total_seconds = seconds_since(t_start);
   return r;
 }
+
+template <int Dim>
+StokesWeights coupled_stokes_weights(const MacGrid<Dim>& grid, const SolidWeights<Dim>& solids,
+                                     const VectorX& liquid_phi, double rho, double eta) {
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const StressGrid<Dim> stress(grid);
+  StokesWeights w;
+  // W_F from the bodies and static solids
+  w.pressure.fluid_face = solids.fluid_face;
+  w.fluid_stress = solids.fluid_stress;
+  // W_L from the liquid level set
+  w.pressure.liquid_cell = liquid_cell_weights<Dim>(grid, lattice, liquid_phi);
+  w.pressure.liquid_face = liquid_face_weights<Dim>(grid, lattice, liquid_phi, w.pressure.liquid_cell);
+  w.liquid_stress = stress_liquid_weights<Dim>(stress, lattice, liquid_phi);
+  // one density and one viscosity
+  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
+  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  return w;
+}
+
+template StokesWeights coupled_stokes_weights<2>(const MacGrid<2>&, const SolidWeights<2>&,
+                                                 const VectorX&, double, double);
+template StokesWeights coupled_stokes_weights<3>(const MacGrid<3>&, const SolidWeights<3>&,
+                                                 const VectorX&, double, double);
 
 template CoupledSolveResult solve_coupled_step<2>(const CoupledStepInput<2>&, CouplingScheme,
                                                   const StaggeredSettings&,

@@ -84,6 +84,16 @@ struct CoupledStepInput {
   ContactParameters contact_params;
 };
 
+/// The weights of eq. (24) (section 3.1.2, 4.4.6) for a liquid beside bodies: W_L^p, W_L^u
+/// (clamped as liquid_face_weights does) and W_L^s from `liquid_phi` on half_lattice(grid)
+/// (liquid where < 0), W_F^u and W_F^s from `solids` (solid_weights of the posed bodies and
+/// static solids), one density rho (the diagonal of P, kg/m^3) and one viscosity eta (Pa s)
+/// everywhere. For tests, benchmarks and notebooks that pose one step in closed form; the
+/// simulator builds its weights from particles.
+template <int Dim>
+StokesWeights coupled_stokes_weights(const MacGrid<Dim>& grid, const SolidWeights<Dim>& solids,
+                                     const VectorX& liquid_phi, double rho, double eta);
+
 struct CoupledSolveResult {
   VectorX u;              ///< face velocities after the step's solves (eq. (8) update)
   VectorX pressure;       ///< cell pressures (Pa); for PC-VC-PC the sum of both pressure solves

@@ -90,15 +90,7 @@ CoupledStepInput<Dim> bowl_scene(int n, double eta) {
     const Vec<Dim> x = lattice.position(lattice.coord(k));
     phi[k] = std::max(x[1] - kLevel, r_in - (x - bowl_centre).norm());
   }
-  const StressGrid<Dim> stress(in.grid);
-  in.weights.pressure.fluid_face = in.solids.fluid_face;
-  in.weights.pressure.liquid_cell = liquid_cell_weights<Dim>(in.grid, lattice, phi);
-  in.weights.pressure.liquid_face =
-      liquid_face_weights<Dim>(in.grid, lattice, phi, in.weights.pressure.liquid_cell);
-  in.weights.pressure.face_density = VectorX::Constant(in.grid.num_faces(), kRho);
-  in.weights.fluid_stress = in.solids.fluid_stress;
-  in.weights.liquid_stress = stress_liquid_weights<Dim>(stress, lattice, phi);
-  in.weights.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
   in.u_star = VectorX::Zero(in.grid.num_faces());
   in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).setConstant(-0.3 + kGravity * kDt);
   // contacts as the rigid world finds them (margin 0.1 dx), no friction or restitution

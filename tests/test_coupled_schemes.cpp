@@ -74,17 +74,8 @@ CoupledStepInput<Dim> make_input(int n, std::vector<RigidBody<Dim>> bodies, cons
   CoupledStepInput<Dim> in{testing::unit_grid<Dim>(n), {}, kDt, {}, std::move(bodies), {}, contacts, {}};
   const auto boundary = testing::all_boundaries<Dim>(BoundaryType::wall);
   in.solids = solid_weights<Dim>(in.grid, coupling_bodies(in.bodies), {}, boundary, 0.01 * in.grid.dx());
-  const SampleLattice<Dim> lattice = half_lattice(in.grid);
-  const VectorX phi = testing::sample_lattice<Dim>(lattice, liquid_phi);
-  const StressGrid<Dim> stress(in.grid);
-  in.weights.pressure.fluid_face = in.solids.fluid_face;
-  in.weights.pressure.liquid_cell = liquid_cell_weights<Dim>(in.grid, lattice, phi);
-  in.weights.pressure.liquid_face =
-      liquid_face_weights<Dim>(in.grid, lattice, phi, in.weights.pressure.liquid_cell);
-  in.weights.pressure.face_density = VectorX::Constant(in.grid.num_faces(), kRho);
-  in.weights.fluid_stress = in.solids.fluid_stress;
-  in.weights.liquid_stress = stress_liquid_weights<Dim>(stress, lattice, phi);
-  in.weights.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  const VectorX phi = testing::sample_lattice<Dim>(half_lattice(in.grid), liquid_phi);
+  in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
   in.u_star.resize(in.grid.num_faces());
   for (int a = 0; a < Dim; ++a)
     in.u_star.segment(in.grid.face_offset(a), in.grid.num_faces(a)).setConstant(u0[a]);

@@ -11,6 +11,7 @@
 
 #include "reference/cholmod_solver.hpp"
 #include "reference/contact_system.hpp"
+#include "reference/coupled_schemes.hpp"
 #include "reference/coupling.hpp"
 #include "reference/mass_properties.hpp"
 #include "reference/monolithic_system.hpp"
@@ -96,14 +97,7 @@ Scene<Dim> make_scene(int n, std::vector<RigidBody<Dim>> bodies, const Phi& liqu
   const SampleLattice<Dim> lattice = half_lattice(s.grid);
   VectorX phi(lattice.size());
   for (int k = 0; k < lattice.size(); ++k) phi[k] = liquid_phi(lattice.position(lattice.coord(k)));
-  const StressGrid<Dim> stress(s.grid);
-  s.w.pressure.fluid_face = s.solids.fluid_face;
-  s.w.pressure.liquid_cell = liquid_cell_weights<Dim>(s.grid, lattice, phi);
-  s.w.pressure.liquid_face = liquid_face_weights<Dim>(s.grid, lattice, phi, s.w.pressure.liquid_cell);
-  s.w.pressure.face_density = VectorX::Constant(s.grid.num_faces(), kRho);
-  s.w.fluid_stress = s.solids.fluid_stress;
-  s.w.liquid_stress = stress_liquid_weights<Dim>(stress, lattice, phi);
-  s.w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  s.w = coupled_stokes_weights<Dim>(s.grid, s.solids, phi, kRho, eta);
   s.u_star.resize(s.grid.num_faces());
   for (int a = 0; a < Dim; ++a)
     s.u_star.segment(s.grid.face_offset(a), s.grid.num_faces(a)).setConstant(u0[a]);
