@@ -277,6 +277,26 @@ struct SettlingResult {
   bool converged = true;
 };
 
+/// The SettlingResult of body `body` over frames 1..frames of `s` (frame 0 the initial state):
+/// all solves converged, the largest horizontal speed (every component but y), the mean
+/// downward speed over the last 40 % of the frames.
+inline SettlingResult settling_result(const std::vector<FrameStats>& s, int frames, int body) {
+  SettlingResult r;
+  int count = 0;
+  for (int f = 1; f <= frames; ++f) {
+    const std::vector<double>& v = s[f].bodies[body].velocity;
+    r.converged = r.converged && s[f].solver.converged;
+    for (std::size_t a = 0; a < v.size(); ++a)
+      if (a != 1) r.sideways = std::max(r.sideways, std::abs(v[a]));
+    if (f > frames - (2 * frames) / 5) {
+      r.velocity -= v[1];
+      ++count;
+    }
+  }
+  r.velocity /= count;
+  return r;
+}
+
 /// A disk (a = 0.125, density 2000) settling in eta = 1000 Pa s between walls 1 m apart
 /// (domain 1 x 2 m, liquid 1.8 m deep, centre at 1 m), PVC-unified, frames at 100 fps.
 inline SettlingResult run_settling_disk(int n, double seconds) {
@@ -288,19 +308,7 @@ inline SettlingResult run_settling_disk(int n, double seconds) {
                          {"density", 2000.0},
                          {"shape", {{"type", "sphere"}, {"center", {0.5, 1.0}}, {"radius", 0.125}}}});
   const int frames = static_cast<int>(std::lround(seconds * fps));
-  const std::vector<FrameStats> s = run_frames(j, frames);
-  SettlingResult r;
-  int count = 0;
-  for (int f = 1; f <= frames; ++f) {
-    r.converged = r.converged && s[f].solver.converged;
-    r.sideways = std::max(r.sideways, std::abs(s[f].bodies[0].velocity[0]));
-    if (f > frames - (2 * frames) / 5) {
-      r.velocity -= s[f].bodies[0].velocity[1];
-      ++count;
-    }
-  }
-  r.velocity /= count;
-  return r;
+  return settling_result(run_frames(j, frames), frames, 0);
 }
 
 struct SpinResult {
@@ -471,19 +479,7 @@ inline SettlingResult run_settling_ball(int n, double seconds) {
                          {"density", 2000.0},
                          {"shape", {{"type", "sphere"}, {"center", point(3, 0.5, 0.5)}, {"radius", 0.15}}}});
   const int frames = static_cast<int>(std::lround(seconds * fps));
-  const std::vector<FrameStats> s = run_frames(j, frames);
-  SettlingResult r;
-  int count = 0;
-  for (int f = 1; f <= frames; ++f) {
-    r.converged = r.converged && s[f].solver.converged;
-    r.sideways = std::max({r.sideways, std::abs(s[f].bodies[1].velocity[0]), std::abs(s[f].bodies[1].velocity[2])});
-    if (f > frames - (2 * frames) / 5) {
-      r.velocity -= s[f].bodies[1].velocity[1];
-      ++count;
-    }
-  }
-  r.velocity /= count;
-  return r;
+  return settling_result(run_frames(j, frames), frames, 1);
 }
 
 }  // namespace monolith::validation
