@@ -7,6 +7,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <initializer_list>
 #include <map>
 #include <string>
 
@@ -57,16 +58,24 @@ Outcome run(const std::string& scheme, double eta = 0.0) {
   return o;
 }
 
+constexpr double kDx = 1.0 / 32;
+
+/// run() under each of `schemes` with viscosity eta, each outcome printed (drift, penetration).
+std::map<std::string, Outcome> run_schemes(std::initializer_list<const char*> schemes, double eta = 0.0) {
+  std::map<std::string, Outcome> r;
+  for (const char* scheme : schemes) r[scheme] = run(scheme, eta);
+  for (const auto& [name, o] : r)
+    WARN(name << ": volume drift " << 100 * o.volume_drift << " %, max penetration "
+              << o.max_penetration / kDx << " dx, converged " << o.converged);
+  return r;
+}
+
 }  // namespace
 
 TEST_CASE("P-C loses liquid volume, C-P lets the bowl penetrate the floor, PC-unified keeps both (2D, Fig. 2)",
           "[validation][coupling][schemes]") {
-  std::map<std::string, Outcome> r;
-  for (const char* scheme : {"P-C", "C-P", "PC-unified"}) r[scheme] = run(scheme);
-  const double dx = 1.0 / 32;
-  for (const auto& [name, o] : r)
-    WARN(name << ": volume drift " << 100 * o.volume_drift << " %, max penetration "
-              << o.max_penetration / dx << " dx, converged " << o.converged);
+  std::map<std::string, Outcome> r = run_schemes({"P-C", "C-P", "PC-unified"});
+  const double dx = kDx;
   // Measured (10 frames, 0.4 s; the splash into the bowl starts at frame 6):
   //   P-C -59.8 %, C-P -17.9 %, PC-unified -22.5 % volume; penetration P-C 0.105 dx,
   //   C-P 1.74 dx, PC-unified 0.101 dx (the contact margin is 0.1 dx).
@@ -87,12 +96,8 @@ TEST_CASE("PV-C loses liquid volume, C-PV lets the bowl penetrate the floor, PVC
           "[validation][coupling][schemes]") {
   // the same scene with a viscous liquid (eta = 2 Pa s), as Fig. 6 drops a viscous shape into a
   // light bowl on the ground (section 6.3.1)
-  std::map<std::string, Outcome> r;
-  for (const char* scheme : {"PV-C", "C-PV", "PVC-unified"}) r[scheme] = run(scheme, 2.0);
-  const double dx = 1.0 / 32;
-  for (const auto& [name, o] : r)
-    WARN(name << ": volume drift " << 100 * o.volume_drift << " %, max penetration "
-              << o.max_penetration / dx << " dx, converged " << o.converged);
+  std::map<std::string, Outcome> r = run_schemes({"PV-C", "C-PV", "PVC-unified"}, 2.0);
+  const double dx = kDx;
   // Measured (10 frames): PV-C -56.4 %, C-PV -19.4 %, PVC-unified -23.7 % volume;
   // penetration PV-C 0.102 dx, C-PV 1.56 dx, PVC-unified 0.104 dx.
   CHECK(r["PVC-unified"].converged);
