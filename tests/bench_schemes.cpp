@@ -22,23 +22,14 @@
 #include "reference/mass_properties.hpp"
 #include "reference/stress_weights.hpp"
 #include "reference/volume_fractions.hpp"
+#include "tests/support/body_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::make_body;
 
 namespace {
 
 constexpr double kRho = 1000.0, kGravity = -9.81, kDt = 0.01, kEta = 10.0, kLevel = 0.45;
-
-template <int Dim>
-RigidBody<Dim> make_body(const ShapeSpec& shape, double density) {
-  BodySpec spec;
-  spec.name = shape.type;
-  spec.motion = "dynamic";
-  spec.shape = shape;
-  spec.density = density;
-  const ShapePtr<Dim> rest = make_shape<Dim>(shape, "bench");
-  return RigidBody<Dim>(spec, rest, mass_properties<Dim>(shape, *rest, density));
-}
 
 template <int Dim>
 std::vector<double> point(double x, double y) {

@@ -18,52 +18,18 @@
 #include "reference/stokes_system.hpp"
 #include "reference/stress_weights.hpp"
 #include "reference/volume_fractions.hpp"
+#include "tests/support/body_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::floor_contacts;
+using monolith::testing::make_box;
 
 namespace {
 
 constexpr double kRho = 1000.0;
 constexpr double kGravity = -9.81;
 constexpr double kDt = 0.01;
-
-/// A dynamic box of the given centre, half sizes, density and friction.
-template <int Dim>
-RigidBody<Dim> make_box(const Vec<Dim>& centre, const Vec<Dim>& half, double density,
-                        double friction = 0.0) {
-  BodySpec spec;
-  spec.name = "box";
-  spec.motion = "dynamic";
-  spec.shape = testing::box_spec<Dim>(centre, half);
-  spec.density = density;
-  spec.friction = friction;
-  const ShapePtr<Dim> rest = make_shape<Dim>(spec.shape, "test");
-  return RigidBody<Dim>(spec, rest, mass_properties<Dim>(spec.shape, *rest, density));
-}
-
-/// Contacts of the bottom corners of box `body` with the floor wall (y = 0), or with `ceiling`
-/// of its top corners with the ceiling wall (y = 1).
-template <int Dim>
-std::vector<Contact<Dim>> floor_contacts(int body, const Vec<Dim>& centre, const Vec<Dim>& half,
-                                         double mu, bool ceiling = false) {
-  std::vector<Contact<Dim>> out;
-  for (int k = 0; k < (Dim == 2 ? 2 : 4); ++k) {
-    Contact<Dim> c;
-    c.body_a = body;
-    c.body_b = -1;
-    c.wall_face = ceiling ? 3 : 2;
-    c.point = centre;
-    c.point[0] += (k & 1) ? half[0] : -half[0];
-    if constexpr (Dim == 3) c.point[2] += (k & 2) ? half[2] : -half[2];
-    c.point[1] = ceiling ? 1.0 : 0.0;
-    c.normal = ceiling ? Vec<Dim>(-Vec<Dim>::Unit(1)) : Vec<Dim>(Vec<Dim>::Unit(1));
-    c.phi = ceiling ? 1.0 - (centre[1] + half[1]) : centre[1] - half[1];
-    c.friction = mu;
-    out.push_back(c);
-  }
-  return out;
-}
 
 /// The step input for a tank with walls on every side: liquid where liquid_phi < 0, density
 /// kRho, viscosity eta, u* = u0 on every face, the bodies (with their v*) and contacts.

@@ -17,9 +17,12 @@
 #include "reference/monolithic_system.hpp"
 #include "reference/stress_weights.hpp"
 #include "reference/volume_fractions.hpp"
+#include "tests/support/body_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::floor_contacts;
+using monolith::testing::make_box;
 
 namespace {
 
@@ -38,59 +41,13 @@ struct Scene {
   double dt = 0.01;
 };
 
-template <int Dim>
-MacGrid<Dim> unit_grid(int n) {
-  std::array<bool, Dim> periodic{};
-  return MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
-}
-
-/// A dynamic box of the given centre, half sizes and density, moving with v (linear, then angular).
-template <int Dim>
-RigidBody<Dim> make_box(const Vec<Dim>& centre, const Vec<Dim>& half, double density,
-                        double friction = 0.0, const std::string& motion = "dynamic") {
-  ShapeSpec box;
-  box.type = "box";
-  box.center.assign(centre.data(), centre.data() + Dim);
-  box.half_size.assign(half.data(), half.data() + Dim);
-  BodySpec spec;
-  spec.name = "box";
-  spec.motion = motion;
-  spec.shape = box;
-  spec.density = density;
-  spec.friction = friction;
-  const ShapePtr<Dim> rest = make_shape<Dim>(box, "test");
-  return RigidBody<Dim>(spec, rest, mass_properties<Dim>(box, *rest, density));
-}
-
-/// Contacts of the box's bottom corners with the floor wall (y = 0), gap = bottom height.
-template <int Dim>
-std::vector<Contact<Dim>> floor_contacts(const Vec<Dim>& centre, const Vec<Dim>& half, double mu) {
-  std::vector<Contact<Dim>> out;
-  const int corners = Dim == 2 ? 2 : 4;
-  for (int k = 0; k < corners; ++k) {
-    Contact<Dim> c;
-    c.body_a = 0;
-    c.body_b = -1;
-    c.wall_face = 2;
-    c.point = centre;
-    c.point[0] += (k & 1) ? half[0] : -half[0];
-    if constexpr (Dim == 3) c.point[2] += (k & 2) ? half[2] : -half[2];
-    c.point[1] = 0.0;
-    c.normal = Vec<Dim>::Unit(1);
-    c.phi = centre[1] - half[1];
-    c.friction = mu;
-    out.push_back(c);
-  }
-  return out;
-}
-
 /// Liquid of level set `liquid_phi(x)` and viscosity eta, bodies as given, u* = the uniform
 /// velocity u0 on every face (gravity included by the caller), boundaries all `boundary`.
 template <int Dim, class Phi>
 Scene<Dim> make_scene(int n, std::vector<RigidBody<Dim>> bodies, const Phi& liquid_phi, double eta,
                       BoundaryType boundary_type, const Vec<Dim>& u0,
                       const std::vector<Contact<Dim>>& contacts) {
-  Scene<Dim> s{unit_grid<Dim>(n), std::move(bodies), {}, {}, {}, {}, 0.01};
+  Scene<Dim> s{testing::unit_grid<Dim>(n), std::move(bodies), {}, {}, {}, {}, 0.01};
   std::array<BoundaryType, 2 * Dim> boundary;
   boundary.fill(boundary_type);
   s.solids = solid_weights<Dim>(s.grid, coupling_bodies(s.bodies), {}, boundary, 0.01 * s.grid.dx());
@@ -130,7 +87,7 @@ Scene<Dim> box_on_floor_scene(int n, double mu, double eta) {
   bodies[0].set_generalized_velocity(gv);
   return make_scene<Dim>(
       n, bodies, [](const Vec<Dim>& x) { return x[1] - 0.35; }, eta, BoundaryType::wall, v,
-      floor_contacts<Dim>(centre, half, mu));
+      floor_contacts<Dim>(0, centre, half, mu));
 }
 
 template <int Dim>
@@ -267,7 +224,7 @@ void check_reductions(int n) {
     bodies[0].set_generalized_velocity(v);
     const Scene<Dim> s = make_scene<Dim>(
         n, bodies, [](const Vec<Dim>&) { return 1.0; }, 0.5, BoundaryType::wall,
-        Vec<Dim>::Zero(), floor_contacts<Dim>(centre, half, 0.4));
+        Vec<Dim>::Zero(), floor_contacts<Dim>(0, centre, half, 0.4));
     const MonolithicSystem<Dim> sys(s.grid, StressForm::full, s.w, s.dt, s.u_star, s.bodies,
                                     s.solids, s.contacts);
     REQUIRE(sys.num_fluid() == 0);
