@@ -248,6 +248,29 @@ SparseMatrix assemble_sparse_part(const MonolithicSystem<Dim>& s, double gamma) 
   return m;
 }
 
+/// Adds dt alpha diag(B_f^T M_r^-1 B_f) to the first n_tau + n_p entries of `diagonal`, column
+/// by column of B_f (never the n x n product): the rigid part of the diagonal of A_ff (eq. (24))
+/// that MonolithicOperator and FluidBodyOperator share.
+template <int Dim>
+void add_rigid_diagonal(const MonolithicSystem<Dim>& system, VectorX& diagonal) {
+  if (system.num_body_dofs() == 0) return;
+  const SparseMatrix& bf = system.fluid_body_jacobian();
+  const SparseMatrix mb = system.contacts().m_r_inverse * bf;
+  const SparseMatrix prod = bf.cwiseProduct(mb);
+  const double scale = system.dt() * system.alpha();
+  for (int k = 0; k < prod.outerSize(); ++k)
+    for (SparseMatrix::InnerIterator it(prod, k); it; ++it) diagonal[it.col()] += scale * it.value();
+}
+
+/// true when the bodies do not feel the Stokes null vector n: no body DOFs, or
+/// max |B_f n| <= 1e-12 max(1, sum |B_f|).
+template <int Dim>
+bool bodies_blind_to(const MonolithicSystem<Dim>& system, const VectorX& n) {
+  if (system.num_body_dofs() == 0) return true;
+  const double scale = std::max(1.0, system.fluid_body_jacobian().cwiseAbs().sum());
+  return system.fluid_body_force(n).cwiseAbs().maxCoeff() <= 1e-12 * scale;
+}
+
 }  // namespace
 
 template <int Dim>
@@ -258,19 +281,10 @@ MonolithicOperator<Dim>::MonolithicOperator(const MonolithicSystem<Dim>& system,
       sparse_(assemble_sparse_part(system, contact_boost)) {
   // diagonal: diag(S) + dt alpha diag(B_f^T M_r^-1 B_f), column by column of B_f
   diagonal_ = sparse_.diagonal();
-  if (system.num_body_dofs() > 0) {
-    const SparseMatrix& bf = system.fluid_body_jacobian();
-    const SparseMatrix mb = system.contacts().m_r_inverse * bf;
-    const SparseMatrix prod = bf.cwiseProduct(mb);
-    const double scale = system.dt() * system.alpha();
-    for (int k = 0; k < prod.outerSize(); ++k)
-      for (SparseMatrix::InnerIterator it(prod, k); it; ++it) diagonal_[it.col()] += scale * it.value();
-  }
+  add_rigid_diagonal(system, diagonal_);
   // the Stokes null vectors the bodies do not feel
   for (const VectorX& n : system.dofs().null_space) {
-    const VectorX f = system.fluid_body_force(n);
-    const double scale = std::max(1.0, system.fluid_body_jacobian().cwiseAbs().sum());
-    if (system.num_body_dofs() > 0 && f.cwiseAbs().maxCoeff() > 1e-12 * scale) continue;
+    if (!bodies_blind_to(system, n)) continue;
     VectorX v = VectorX::Zero(size_);
     v.head(num_fluid_) = n;
     null_space_.push_back(v);
@@ -313,22 +327,10 @@ FluidBodyOperator<Dim>::FluidBodyOperator(const MonolithicSystem<Dim>& system)
     : system_(system), size_(system.num_fluid()), sparse_(system.stokes().A) {
   // diagonal: diag(A_stokes) + dt alpha diag(B_f^T M_r^-1 B_f), column by column of B_f
   diagonal_ = sparse_.diagonal();
-  const SparseMatrix& bf = system.fluid_body_jacobian();
-  if (system.num_body_dofs() > 0) {
-    const SparseMatrix mb = system.contacts().m_r_inverse * bf;
-    const SparseMatrix prod = bf.cwiseProduct(mb);
-    const double scale = system.dt() * system.alpha();
-    for (int k = 0; k < prod.outerSize(); ++k)
-      for (SparseMatrix::InnerIterator it(prod, k); it; ++it) diagonal_[it.col()] += scale * it.value();
-  }
+  add_rigid_diagonal(system, diagonal_);
   // the Stokes null vectors the bodies do not feel
-  const double scale = std::max(1.0, bf.cwiseAbs().sum());
-  for (const VectorX& n : system.dofs().null_space) {
-    if (system.num_body_dofs() > 0 &&
-        system.fluid_body_force(n).cwiseAbs().maxCoeff() > 1e-12 * scale)
-      continue;
-    null_space_.push_back(n);
-  }
+  for (const VectorX& n : system.dofs().null_space)
+    if (bodies_blind_to(system, n)) null_space_.push_back(n);
 }
 
 template <int Dim>
