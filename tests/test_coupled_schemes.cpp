@@ -42,9 +42,7 @@ CoupledStepInput<Dim> make_input(int n, std::vector<RigidBody<Dim>> bodies, cons
   in.solids = solid_weights<Dim>(in.grid, coupling_bodies(in.bodies), {}, boundary, 0.01 * in.grid.dx());
   const VectorX phi = testing::sample_lattice<Dim>(half_lattice(in.grid), liquid_phi);
   in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
-  in.u_star.resize(in.grid.num_faces());
-  for (int a = 0; a < Dim; ++a)
-    in.u_star.segment(in.grid.face_offset(a), in.grid.num_faces(a)).setConstant(u0[a]);
+  in.u_star = testing::uniform_face_velocity<Dim>(in.grid, u0);
   in.contact_params.dt = kDt;
   in.contact_params.dx = in.grid.dx();
   return in;

@@ -51,13 +51,9 @@ Scene<Dim> make_scene(int n, std::vector<RigidBody<Dim>> bodies, const Phi& liqu
   std::array<BoundaryType, 2 * Dim> boundary;
   boundary.fill(boundary_type);
   s.solids = solid_weights<Dim>(s.grid, coupling_bodies(s.bodies), {}, boundary, 0.01 * s.grid.dx());
-  const SampleLattice<Dim> lattice = half_lattice(s.grid);
-  VectorX phi(lattice.size());
-  for (int k = 0; k < lattice.size(); ++k) phi[k] = liquid_phi(lattice.position(lattice.coord(k)));
+  const VectorX phi = testing::sample_lattice<Dim>(half_lattice(s.grid), liquid_phi);
   s.w = coupled_stokes_weights<Dim>(s.grid, s.solids, phi, kRho, eta);
-  s.u_star.resize(s.grid.num_faces());
-  for (int a = 0; a < Dim; ++a)
-    s.u_star.segment(s.grid.face_offset(a), s.grid.num_faces(a)).setConstant(u0[a]);
+  s.u_star = testing::uniform_face_velocity<Dim>(s.grid, u0);
   ContactParameters params;
   params.dt = s.dt;
   params.dx = s.grid.dx();

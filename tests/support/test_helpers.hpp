@@ -36,6 +36,14 @@ VectorX sample_lattice(const SampleLattice<Dim>& lattice, F&& f) {
   return phi;
 }
 
+/// Face velocities (MacGrid face numbering) equal to component a of u on every face of axis a.
+template <int Dim>
+VectorX uniform_face_velocity(const MacGrid<Dim>& grid, const Vec<Dim>& u) {
+  VectorX v(grid.num_faces());
+  for (int a = 0; a < Dim; ++a) v.segment(grid.face_offset(a), grid.num_faces(a)).setConstant(u[a]);
+  return v;
+}
+
 /// The same boundary type on every side of the domain.
 template <int Dim>
 std::array<BoundaryType, 2 * Dim> all_boundaries(BoundaryType type) {
