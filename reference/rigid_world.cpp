@@ -119,10 +119,8 @@ void RigidWorld<Dim>::integrate(double dt, double t, const char* after) {
 }
 
 template <int Dim>
-void RigidWorld<Dim>::remember(std::vector<Contact<Dim>> contacts, const ContactSystem<Dim>& system,
-                               const StaggeredResult& solve) {
+void RigidWorld<Dim>::remember(std::vector<Contact<Dim>> contacts, const StaggeredResult& solve) {
   contacts_ = std::move(contacts);
-  system_ = system;
   solve_ = solve;
 }
 

@@ -79,10 +79,9 @@ class RigidWorld {
   /// Line 13: positions (kinematic bodies follow their path to t + dt). Throws SimulationError
   /// on a non-finite body state (`after` names what came before).
   void integrate(double dt, double t, const char* after);
-  /// Keeps the contacts and forces of this step for the next step's warm start and for
-  /// last_contacts() / last_solve().
-  void remember(std::vector<Contact<Dim>> contacts, const ContactSystem<Dim>& system,
-                const StaggeredResult& solve);
+  /// Keeps the contacts and forces of a step solved outside the world (the coupled step of
+  /// Simulation) for last_contacts() / last_solve() and the next step's warm start.
+  void remember(std::vector<Contact<Dim>> contacts, const StaggeredResult& solve);
 
   const std::vector<RigidBody<Dim>>& bodies() const { return bodies_; }
   std::vector<RigidBody<Dim>>& bodies() { return bodies_; }
@@ -91,7 +90,8 @@ class RigidWorld {
   /// The contacts of the last step and their forces (lambda, z of the last solve).
   const std::vector<Contact<Dim>>& last_contacts() const { return contacts_; }
   const StaggeredResult& last_solve() const { return solve_; }
-  /// The contact problem assembled in the last step (at v*).
+  /// The contact problem assembled in the last step() (at v*); steps solved outside the world
+  /// (remember) leave it as it was.
   const ContactSystem<Dim>& last_system() const { return system_; }
 
   /// Kinetic energy of the dynamic bodies (J; 2D per metre of depth).

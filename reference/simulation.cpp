@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <utility>
 
 #include "reference/coupled_schemes.hpp"
 #include "reference/coupling.hpp"
@@ -497,7 +498,7 @@ Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x) const {
     // a point outside a body's bounds is not inside it (and only inside points matter here)
     const Box<Dim> box = bodies[i].bounds();
     if (box.min().allFinite() && box.max().allFinite() &&
-        (x.array() < box.min().array()).any() | (x.array() > box.max().array()).any())
+        ((x.array() < box.min().array()).any() || (x.array() > box.max().array()).any()))
       continue;
     const double d = bodies[i].distance(x);
     if (d < best) {
@@ -565,11 +566,10 @@ void Simulation<Dim>::solve_coupled(double dt) {
   stress_ = r.stress;
   // (12) the bodies' velocities (eq. (21))
   rigid_->set_velocities(r.body_velocity, r.body_dof);
-  const ContactSystem<Dim> system(in.bodies, in.contacts, in.contact_params);
   StaggeredResult kept;
   kept.lambda = r.lambda;
   kept.z = r.z;
-  rigid_->remember(in.contacts, system, kept);
+  rigid_->remember(std::move(in.contacts), kept);
   // statistics: the phases of the paper's Tables 1-3
   SolverStats& st = stats_.solver;
   st.iterations += r.fluid_iterations + r.contact_iterations + r.coupled_iterations;
