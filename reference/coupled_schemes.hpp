@@ -141,6 +141,10 @@ struct CoupledSchemeOptions {
   /// (herschel_bulkley.hpp) provides both. The viscosity of in.weights is then ignored.
   std::function<VectorX(const VectorX& u_star)> initial_viscosity;
   std::function<VectorX(const VectorX& stress, const VectorX& viscosity)> update_viscosity;
+  /// The back end of the fluid blocks of eq. (24): "explicit" (assembled sparse matrices, the
+  /// reference oracle) or "matrixfree" (stencils applied on the fly, the production path;
+  /// solver.backend of the scene file).
+  std::string backend = "explicit";
 };
 
 /// One step's pressure / viscosity / contact solves under `scheme` (section 6). Builds

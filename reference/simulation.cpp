@@ -542,6 +542,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   ss.mprgp.max_iterations = scene_.solver.max_iterations;
   // non-Newtonian liquids: Algorithm 2 alongside the scheme's staggered rounds (section 5)
   CoupledSchemeOptions options;
+  options.backend = scene_.solver.backend;
   std::unique_ptr<NonNewtonianViscosity<Dim>> model;
   VectorX eta;
   if (non_newtonian_ && stress) {
