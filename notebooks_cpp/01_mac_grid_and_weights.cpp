@@ -73,6 +73,41 @@ int main(int argc, char** argv) {
   nb.check("min W_L^p (fractions are never negative), negated", -W_L_p.minCoeff(), 0.0);
   nb.check("max W_L^p - 1 (fractions never exceed one)", W_L_p.maxCoeff() - 1.0, 0.0);
 
+  nb.md("## W_L^u: the liquid fraction of the face control volumes\n"
+        "The same level set gives W_L^u on the faces (the cube of side dx centred on each face). A "
+        "face control volume covers only the near halves of its two cells, so a face can hold no "
+        "liquid while a neighbouring cell does; eq. (8) needs (W_L^u)^-1 there, and W_L^u is clamped "
+        "from below to kMinLiquidFaceFraction = 1e-4 on every face beside a cell with W_L^p > 0 "
+        "(a departure, docs/derivations.md). Faces far from the liquid keep W_L^u = 0.");
+  const VectorX W_L_u = liquid_face_weights<2>(grid, lattice, liquid, W_L_p);
+  {
+    Eigen::MatrixXd xf(ny, nx + 1);
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i <= nx; ++i) xf(ny - 1 - j, i) = W_L_u[grid.face_index(0, VecI<2>(i, j))];
+    nb.matrix("W_L^u on the x-faces, top row = highest y", xf, 4);
+  }
+  const VectorX raw_face = face_negative_fractions<2>(grid, lattice, liquid);
+  double clamp_violation = 0.0, far_from_liquid = 0.0, unclamped_change = 0.0;
+  int clamped = 0;
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    const auto [axis, coord] = grid.face_coord(f);
+    // the cells beside the face (outside the domain: none)
+    double beside = 0.0;
+    if (coord[axis] > 0) beside = std::max(beside, W_L_p[grid.face_cell_minus(axis, coord)]);
+    if (coord[axis] < grid.cells()[axis]) beside = std::max(beside, W_L_p[grid.face_cell_plus(axis, coord)]);
+    if (beside > 0.0) {
+      clamp_violation = std::max(clamp_violation, kMinLiquidFaceFraction - W_L_u[f]);
+      clamped += raw_face[f] < kMinLiquidFaceFraction;
+    } else {
+      far_from_liquid = std::max(far_from_liquid, std::abs(W_L_u[f]));
+    }
+    if (raw_face[f] >= kMinLiquidFaceFraction) unclamped_change = std::max(unclamped_change, std::abs(W_L_u[f] - raw_face[f]));
+  }
+  nb.md("Faces beside a wet cell whose own control volume holds less than the clamp: " + std::to_string(clamped) + ".");
+  nb.check("W_L^u >= 1e-4 on every face beside a cell with W_L^p > 0 (worst shortfall)", clamp_violation, 0.0);
+  nb.check("W_L^u = 0 on faces with no wet cell beside them, max |W_L^u|", far_from_liquid, 0.0);
+  nb.check("elsewhere W_L^u is the face's own liquid fraction, max difference", unclamped_change, 0.0);
+
   nb.md("## Solids, walls and the shrinkage zeta (section 4.4.6)\n"
         "W_F^u is the non-solid fraction of each face control volume; wall faces get 0. For "
         "volume fractions the solid's signed distance is shifted inward by zeta = 0.01 dx, so that "
@@ -92,6 +127,19 @@ int main(int argc, char** argv) {
   nb.check("shrinking the solid by zeta never lowers a fluid fraction", (W_F_u - W_F_u_shrunk).maxCoeff(), 0.0);
   nb.check_true("and raises the fraction of the faces the floor cuts",
                 W_F_u_shrunk[grid.face_index(0, VecI<2>(3, 0))] > W_F_u[grid.face_index(0, VecI<2>(3, 0))]);
+  const VectorX W_S_u = solid_face_weights(W_F_u);
+  {
+    Eigen::MatrixXd yf(ny + 1, nx);
+    for (int j = 0; j <= ny; ++j)
+      for (int i = 0; i < nx; ++i) yf(ny - j, i) = W_S_u[grid.face_index(1, VecI<2>(i, j))];
+    nb.matrix("W_S^u = 1 - W_F^u on the y-faces (floor below y = 0.12), top row = highest y", yf, 3);
+  }
+  nb.check("W_F^u + W_S^u = 1 on every face, max deviation", (W_F_u + W_S_u - VectorX::Ones(grid.num_faces())).cwiseAbs().maxCoeff(), 0.0);
+  // dx = 1/6: the x-face (3, 0) (centre y = dx/2) has the control volume y in [0, dx], the y-face
+  // (2, 1) (y = dx) the control volume [dx/2, 3dx/2]; the floor below y = 0.12 fills
+  // 0.12 / dx = 0.72 and (0.12 - dx/2) / dx = 0.22 of them (exact: the level set is linear)
+  nb.check("x-face (3, 0): W_S^u = 0.12 / dx = 0.72", std::abs(W_S_u[grid.face_index(0, VecI<2>(3, 0))] - 0.72), 1e-12);
+  nb.check("y-face (2, 1): W_S^u = (0.12 - dx/2) / dx = 0.22", std::abs(W_S_u[grid.face_index(1, VecI<2>(2, 1))] - 0.22), 1e-12);
 
   nb.md("## Second-order convergence of the fractions\n"
         "The liquid volume sum(W_L^p) dx^Dim of a disk (2D) or ball (3D) against the exact one.");

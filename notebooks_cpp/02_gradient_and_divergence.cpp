@@ -26,6 +26,19 @@ int main(int argc, char** argv) {
   const SparseMatrix G_small = gradient_matrix<2>(small);
   nb.matrix("G (dx = 1): rows are the 8 x-faces then the 9 y-faces, columns the 6 cells",
             Eigen::MatrixXd(G_small), 0);
+  {
+    // row f: +1 at the cell above the face, -1 at the cell below it, the outside cell omitted
+    const Eigen::MatrixXd Gd(G_small);
+    double worst = 0.0;
+    for (int f = 0; f < small.num_faces(); ++f) {
+      const auto [axis, coord] = small.face_coord(f);
+      Eigen::RowVectorXd expected = Eigen::RowVectorXd::Zero(small.num_cells());
+      if (coord[axis] > 0) expected[small.face_cell_minus(axis, coord)] = -1.0;
+      if (coord[axis] < small.cells()[axis]) expected[small.face_cell_plus(axis, coord)] = 1.0;
+      worst = std::max(worst, (Gd.row(f) - expected).cwiseAbs().maxCoeff());
+    }
+    nb.check("every row of G is (p_plus - p_minus) / dx with the outside cell omitted, max deviation", worst, 0.0);
+  }
 
   nb.md("## -G^T is the divergence\n"
         "For any face field u and face weights W, G^T W u summed cell by cell is minus the net "

@@ -61,6 +61,28 @@ int main(int argc, char** argv) {
   const SparseMatrix D2 = deformation_rate_matrix(s2);
   nb.matrix("D (dx = 1)", Eigen::MatrixXd(D2), 1);
   nb.check_true("D is 17 x 12", D2.rows() == 17 && D2.cols() == 12);
+  {
+    // a diagonal row: -1/dx and +1/dx on the two faces of its cell along its axis; D of a constant
+    // velocity is zero on every DOF whose faces all lie inside the domain
+    const Eigen::MatrixXd Dd(D2);
+    double worst_row = 0.0;
+    for (int a = 0; a < 2; ++a)
+      for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) {
+          const VecI<2> c(i, j);
+          Eigen::RowVectorXd expected = Eigen::RowVectorXd::Zero(g2.num_faces());
+          expected[g2.face_index(a, c)] = -1.0;
+          expected[g2.face_index(a, c + unit_offset<2>(a))] = 1.0;
+          worst_row = std::max(worst_row, (Dd.row(s2.index(a, c)) - expected).cwiseAbs().maxCoeff());
+        }
+    nb.check("rows tau_aa: (u_a(c + e_a) - u_a(c)) / dx, max deviation", worst_row, 0.0);
+    const VectorX constant = VectorX::Ones(g2.num_faces());
+    const int centre_node = s2.index(2, VecI<2>(1, 1));
+    nb.check("D of a constant field at the interior node (1, 1) and the cells", std::abs((D2 * constant)[centre_node]) +
+                 (D2 * constant).head(8).cwiseAbs().maxCoeff(), 0.0);
+    nb.check("the interior node's row: four entries +-1/2", std::abs(Dd.row(centre_node).cwiseAbs().sum() - 2.0) +
+                 std::abs(Dd.row(centre_node).cwiseAbs().maxCoeff() - 0.5), 1e-15);
+  }
 
   nb.md("## The factor 2: M, N and tau = 2 eta D u\n"
         "One off-diagonal DOF stands for tau_xy and tau_yx. It counts twice in ||tau||_F^2 and twice "
@@ -75,9 +97,19 @@ int main(int argc, char** argv) {
   nb.matrix("diagonal of N, full form (eta = 1): xx, yy, then xy", Eigen::MatrixXd(viscosity_matrix(full2, eta2)).diagonal().transpose(), 2);
   nb.matrix("E, reduced form (2D): rows xx, yy, xy DOFs; columns the xx, xy unknowns",
             Eigen::MatrixXd(red2.expansion()), 0);
+  const Eigen::MatrixXd n_full = Eigen::MatrixXd(viscosity_matrix(full2, eta2));
+  {
+    // N = eta / m: eta on the 8 diagonal DOFs (xx, yy at 4 cells), eta / 2 on the 9 xy nodes
+    Eigen::VectorXd expected(s2.num_dofs());
+    expected << Eigen::VectorXd::Constant(8, eta), Eigen::VectorXd::Constant(9, eta / 2.0);
+    nb.check("full N = diag(eta / m): max deviation", (n_full.diagonal() - expected).cwiseAbs().maxCoeff(), 1e-15);
+  }
   const Eigen::MatrixXd n_red = Eigen::MatrixXd(viscosity_matrix(red2, eta2));
   nb.matrix("diagonal of N, reduced form: tau_xx unknowns (eta/2: H merged in), then xy",
             n_red.diagonal().transpose(), 2);
+  // 2D reduced: tau_yy = -tau_xx, so tau_xx counts twice in ||tau||_F^2: N^-1 = 2 / eta, N = eta / 2
+  nb.check("reduced N: eta / 2 on every unknown (tau_xx with H merged in, tau_xy with m = 2), max deviation",
+           (n_red.diagonal().array() - eta / 2.0).abs().maxCoeff(), 1e-15);
   const Eigen::MatrixXd n_red_inv = Eigen::MatrixXd(inverse_viscosity_matrix(red2, eta2));
   const Eigen::MatrixXd E2 = Eigen::MatrixXd(red2.expansion());
   const Eigen::MatrixXd n_full_inv = Eigen::MatrixXd(inverse_viscosity_matrix(full2, eta2));
@@ -99,6 +131,9 @@ int main(int argc, char** argv) {
   Eigen::Matrix2d expected;
   expected << 2, -1, -1, 2;
   nb.check("N block = eta/3 [2 -1; -1 2]", (n3 - expected).cwiseAbs().maxCoeff(), 1e-14);
+  Eigen::Matrix2d expected_inv;
+  expected_inv << 2, 1, 1, 2;
+  nb.check("N^-1 block = [2 1; 1 2] / eta", (n3_inv - expected_inv / 3.0).cwiseAbs().maxCoeff(), 1e-15);
 
   nb.md("## At the optimum: tau = 2 eta D u_new\n"
         "A 6 x 6 periodic box of liquid (rho = 1000, eta = 2, dt = 0.01) with a random u*, solved "
