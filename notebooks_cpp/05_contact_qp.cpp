@@ -88,6 +88,25 @@ int main(int argc, char** argv) {
   nb.matrix("A44", Eigen::MatrixXd(sys.a44()), 2);
   nb.matrix("b3", Eigen::MatrixXd(sys.b3()), 2);
   nb.matrix("b4", Eigen::MatrixXd(sys.b4()), 2);
+  {
+    // the blocks are the products they are printed as (alpha = 1/dx^2 in 2D)
+    const Eigen::MatrixXd jl(sys.j_lambda), jz(sys.j_z), m_inv(sys.m_r_inverse);
+    const double dt_alpha = params.dt * sys.alpha;
+    const double a_scale = a33.cwiseAbs().maxCoeff();
+    nb.check("alpha = 1 / dx^2 = 1024", std::abs(sys.alpha - 1024.0), 0.0);
+    nb.check("A33 = dt alpha J_lambda M_r^-1 J_lambda^T, max difference / max |A33|",
+             (a33 - dt_alpha * jl * m_inv * jl.transpose()).cwiseAbs().maxCoeff() / a_scale, 1e-14);
+    nb.check("A34 = dt alpha J_lambda M_r^-1 J_z^T, max difference / max |A33|",
+             (Eigen::MatrixXd(sys.a34()) - dt_alpha * jl * m_inv * jz.transpose()).cwiseAbs().maxCoeff() / a_scale, 1e-14);
+    nb.check("A44 = dt alpha J_z M_r^-1 J_z^T, max difference / max |A33|",
+             (Eigen::MatrixXd(sys.a44()) - dt_alpha * jz * m_inv * jz.transpose()).cwiseAbs().maxCoeff() / a_scale, 1e-14);
+    nb.check("M_r M_r^-1 = I, max deviation",
+             (Eigen::MatrixXd(sys.m_r) * m_inv - Eigen::MatrixXd::Identity(m_inv.rows(), m_inv.cols())).cwiseAbs().maxCoeff(), 1e-12);
+    // b4 = -alpha J_z v* (the floor is at rest: no known tangential velocity)
+    const VectorX b4_expected = -sys.alpha * (jz * sys.v_star + sys.known_tangent_velocity);
+    nb.check("b4 = -alpha J_z v*, max difference / max |b4|",
+             (sys.b4() - b4_expected).cwiseAbs().maxCoeff() / sys.b4().cwiseAbs().maxCoeff(), 1e-14);
+  }
   const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(a33).eigenvalues();
   nb.check("A33 positive semi-definite: -lambda_min / lambda_max", -ev.minCoeff() / ev.maxCoeff(), 1e-12);
 
