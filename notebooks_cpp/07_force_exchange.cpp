@@ -52,12 +52,31 @@ int main(int argc, char** argv) {
       CouplingBody<2>{box_shape(Vec<2>(2.4, 1.9), Vec<2>(1.0, 0.7)), Vec<2>(2.4, 1.9), true}};
   const SolidWeights<2> w = solid_weights<2>(grid, bodies, {}, open, 0.01 * grid.dx());
   nb.matrix("W_S^u per face (one row)", Eigen::MatrixXd(w.solid_face.transpose()), 3);
+  nb.check("W_F^u + W_S^u = 1 on every face (open boundary), max deviation",
+           (w.fluid_face + w.solid_face - VectorX::Ones(grid.num_faces())).cwiseAbs().maxCoeff(), 1e-15);
 
   nb.md("## Q: face force densities to body force and torque\n"
         "Column f (normal to axis a, centre x_f) is dx^2 s(f) [e_a ; (x_f - c) x e_a] with the "
         "body's share s = W_{S,i}^u / W_S^u (1 here: one body). Rows: f_x, f_y, torque.");
   const SparseMatrix Q = aggregation_matrix<2>(grid, bodies, w, BodyGroup::two_way);
   nb.matrix("Q (3 x 49)", Eigen::MatrixXd(Q), 2);
+  {
+    // every column by the formula: s = 1 wherever the box covers part of the face control volume
+    const Eigen::MatrixXd Qd(Q);
+    const Vec<2> c(2.4, 1.9);
+    double worst = 0.0;
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      const auto [axis, coord] = grid.face_coord(f);
+      Eigen::Vector3d expected = Eigen::Vector3d::Zero();
+      if (w.body_face[0][f] > 0.0) {
+        const Vec<2> r = grid.face_center(axis, coord) - c;
+        expected[axis] = 1.0;                                // e_a, times dx^2 = 1
+        expected[2] = axis == 0 ? -r[1] : r[0];              // (x_f - c) x e_a in 2D
+      }
+      worst = std::max(worst, (Qd.col(f) - expected).cwiseAbs().maxCoeff());
+    }
+    nb.check("every column of Q is dx^2 [e_a ; (x_f - c) x e_a] on the body's faces, 0 elsewhere: max deviation", worst, 1e-15);
+  }
 
   nb.md("## J_p and J_s assembled over the surface\n"
         "BodyCouplingOperator visits only cells (stress DOFs) whose faces carry different body "
@@ -75,6 +94,24 @@ int main(int argc, char** argv) {
   nb.check("max |J_s + Q W_S^u D^T M|", (Js + QW * D.transpose() * M.asDiagonal()).cwiseAbs().maxCoeff(), 1e-12);
   nb.check("matrix-free J_p^T v equals the matrix",
            (op.apply_pressure_transpose(VectorX::Ones(3)) - Jp.transpose() * VectorX::Ones(3)).cwiseAbs().maxCoeff(), 1e-13);
+  {
+    std::srand(11);
+    const VectorX p = VectorX::Random(grid.num_cells()), tau = VectorX::Random(stress.num_dofs());
+    const VectorX v = VectorX::Random(3);
+    nb.check("matrix-free J_p p equals the matrix", (op.apply_pressure(p) - Jp * p).cwiseAbs().maxCoeff(), 1e-13);
+    nb.check("matrix-free J_s tau equals the matrix", (op.apply_stress(tau) - Js * tau).cwiseAbs().maxCoeff(), 1e-13);
+    nb.check("matrix-free J_s^T v equals the matrix",
+             (op.apply_stress_transpose(v) - Js.transpose() * v).cwiseAbs().maxCoeff(), 1e-13);
+    // J_p has non-zero columns on the body's surface cells only
+    std::vector<char> surface(grid.num_cells(), 0);
+    for (int cell : op.surface_cells()[0]) surface[cell] = 1;
+    double off_surface = 0.0;
+    for (int cell = 0; cell < grid.num_cells(); ++cell)
+      if (!surface[cell]) off_surface = std::max(off_surface, Jp.col(cell).cwiseAbs().maxCoeff());
+    nb.md("J_p has " + std::to_string(op.surface_cells()[0].size()) + " non-zero columns (the surface cells) of " +
+          std::to_string(grid.num_cells()) + ".");
+    nb.check("columns of J_p off the surface cells, max |entry|", off_surface, 0.0);
+  }
 
   nb.md("## Fig. 8: uniform motion feels no force\n"
         "Liquid fills the grid (W_L^p = 1; W_L^s = 1 on the interior stress DOFs, 0 on the "

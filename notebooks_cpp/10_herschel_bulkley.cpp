@@ -136,6 +136,7 @@ int main(int argc, char** argv) {
     t << "D_xy at node (4,4) = " << rate[node] << " (s/2 = " << s / 2 << "); s at that node = "
       << norm[node] << ", at cell (3,3) = " << norm[cell] << " (s = " << s << ").";
     nb.md(t.str());
+    nb.check("D_xy at an interior node equals s / 2", std::abs(rate[node] - s / 2.0), 1e-12);
     nb.check("s at an interior node equals the simple-shear rate", std::abs(norm[node] - s), 1e-12);
     nb.check("s at an interior cell centre (xy interpolated from 4 nodes)", std::abs(norm[cell] - s), 1e-12);
     const HerschelBulkley m{2.0, 0.5, 3.0, 1e-3};
@@ -146,12 +147,19 @@ int main(int argc, char** argv) {
        << "; taken literally at ||D||_F it would give " << literal
        << " = sqrt(2) tau0 + k s^n 2^((1-n)/2) (tau = 2 eta D, D_xy = s/2).";
     nb.md(u2.str());
+    nb.check("eta(s) s = tau0 + k s^n", std::abs(m.shear_stress(s) - (3.0 + 2.0 * std::sqrt(s))), 1e-12);
+    nb.check("the literal reading equals sqrt(2) tau0 + k s^n 2^((1-n)/2)",
+             std::abs(literal - (std::sqrt(2.0) * 3.0 + 2.0 * std::sqrt(s) * std::pow(2.0, 0.25))), 1e-12);
     nb.check("literal reading differs from tau0 + k s^n (by more than 10 %)",
              -std::abs(literal / m.shear_stress(s) - 1.0), -0.1);
   }
 
   // --- Algorithm 2 -------------------------------------------------------------------------------
   nb.md("## Algorithm 2: the residual per round (Fig. 9's convergence plot)\n\n"
+        "Eq. (28), the minimisation over p and the shear rate with N(rate) inside the energy, is "
+        "not quadratic and is never assembled. Algorithm 2 solves (29) instead: the quadratic "
+        "problem (8) with the viscosity N^k fixed (the Newtonian solvers, unchanged), then the "
+        "viscosity from the solved stress, round after round.\n\n"
         "One step (dt = 0.01 s) of a water-density channel between no-slip walls, from rest with "
         "u* = dt g along the channel (32 cells across), 10 rounds from u*. Residual of round k: "
         "||tau^(k+1) - 2 N(gamma_dot^(k+1)) gamma_dot^(k+1)||_F / ||tau^(k+1)||_F with "
