@@ -179,6 +179,8 @@ int main(int argc, char** argv) {
   }
   nb.check_true("every block is present", sys.num_stress() > 0 && sys.num_pressure() > 0 &&
                                               sys.num_contacts() == 1 && sys.num_friction() == 1);
+  nb.check_true("nd = 3 body DOFs (vx, vy, omega of the one dynamic box)", sys.num_body_dofs() == 3);
+  nb.check("alpha = 1/dx^2 = 36 (dx = 1/6 m), relative", std::abs(sys.alpha() / 36.0 - 1.0), 1e-14);
 
   nb.md("## The sixteen blocks\n"
         "MonolithicSystem::dense_matrix() assembles (24) column by column through apply_block(i, j, "
