@@ -3,6 +3,7 @@
 /// The interface every system operator implements (explicit sparse matrix or matrix-free
 /// stencil), so the solvers (pcg.hpp) are written once for both back ends (section 4.3).
 
+#include <cstddef>
 #include <vector>
 
 #include "reference/common.hpp"
@@ -33,6 +34,12 @@ class LinearOperator {
   /// Orthonormal basis of the null space of A (empty when A is definite). Solvers project it out
   /// of the right-hand side and of every iterate.
   virtual const std::vector<VectorX>& null_space() const { return no_null_space_; }
+  /// Bytes the operator holds (matrix or stencil coefficients, maps, scratch); 0 if not reported.
+  /// For the benchmark harness (memory per DOF).
+  virtual std::size_t memory_bytes() const { return 0; }
+  /// Bytes one apply must move at least (every array it streams through, once per pass); 0 if
+  /// not reported. For the benchmark harness (achieved bandwidth of the apply).
+  virtual double bytes_per_apply() const { return 0.0; }
 
  private:
   std::vector<VectorX> no_null_space_;
@@ -112,6 +119,19 @@ class SparseMatrixOperator : public LinearOperator {
   }
   const SparseMatrix& matrix() const {
     return a_;
+  }
+  /// CSR arrays (values, column indices, row starts), the diagonal and the null space.
+  std::size_t memory_bytes() const override {
+    std::size_t bytes = static_cast<std::size_t>(a_.nonZeros()) * (sizeof(double) + sizeof(int)) +
+                        static_cast<std::size_t>(a_.rows() + 1) * sizeof(int) +
+                        static_cast<std::size_t>(diagonal_.size()) * sizeof(double);
+    for (const VectorX& v : null_space_) bytes += static_cast<std::size_t>(v.size()) * sizeof(double);
+    return bytes;
+  }
+  /// One pass over the CSR arrays, x read once (at best) and y written once.
+  double bytes_per_apply() const override {
+    return static_cast<double>(a_.nonZeros()) * (sizeof(double) + sizeof(int)) +
+           static_cast<double>(a_.rows() + 1) * sizeof(int) + 2.0 * sizeof(double) * a_.rows();
   }
 
  private:

@@ -1,6 +1,7 @@
 #include "reference/stokes_system.hpp"
 
 #include <algorithm>
+#include <cstddef>
 #include <stdexcept>
 
 #include "reference/deformation_rate.hpp"
@@ -160,200 +161,494 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 
 // --- matrix-free back end -------------------------------------------------------------------
 
+namespace {
+
+/// out = sum over `terms` of coef * in_field(c + delta e_axis) for every entry c of the field
+/// `of` (zero where an input lies outside the domain, wrapped on periodic axes), then times
+/// scale entrywise if given. OpenMP over the rows along axis 0 of `of`: each row has one writer,
+/// and every entry sums its terms in the same order, whatever the thread count.
+template <int Dim, class FieldT, class TermT, std::size_t N>
+void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms,
+                  const std::array<FieldT, N>& fields, const std::array<const double*, N>& data,
+                  const std::array<bool, Dim>& periodic, const double* scale) {
+  const int n0 = of.dims[0];
+  int rows = 1;
+  for (int a = 1; a < Dim; ++a) rows *= of.dims[a];
+#pragma omp parallel for schedule(static)
+  for (int r = 0; r < rows; ++r) {
+    // the row's coordinates along axes 1..Dim-1
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % of.dims[a];
+      rest /= of.dims[a];
+    }
+    double* o = out + of.offset + static_cast<std::ptrdiff_t>(r) * n0;
+    for (int x = 0; x < n0; ++x) o[x] = 0.0;
+    for (const TermT& t : terms) {
+      // the input row: shifted along axes 1.., wrapped on periodic axes, or outside
+      const FieldT& f = fields[t.field];
+      int row = 0;
+      bool inside = true;
+      for (int a = Dim - 1; a >= 1 && inside; --a) {
+        int v = c[a] + (t.axis == a ? t.delta : 0);
+        if (v < 0 || v >= f.dims[a]) {
+          inside = periodic[a];
+          v = ((v % f.dims[a]) + f.dims[a]) % f.dims[a];
+        }
+        row = row * f.dims[a] + v;
+      }
+      if (!inside) continue;
+      // along axis 0: a contiguous interior, then the ends (wrapped or outside)
+      const int m0 = f.dims[0];
+      const double* in = data[t.field] + f.offset + static_cast<std::ptrdiff_t>(row) * m0;
+      const int shift = t.axis == 0 ? t.delta : 0;
+      const double coef = t.coef;
+      const int lo = std::max(0, -shift), hi = std::min(n0, m0 - shift);
+      for (int x = lo; x < hi; ++x) o[x] += coef * in[x + shift];
+      if (periodic[0]) {
+        for (int x = 0; x < lo; ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
+        for (int x = std::max(hi, lo); x < n0; ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
+      }
+    }
+    if (scale) {
+      const double* sc = scale + of.offset + static_cast<std::ptrdiff_t>(r) * n0;
+      for (int x = 0; x < n0; ++x) o[x] *= sc[x];
+    }
+  }
+}
+
+}  // namespace
+
 template <int Dim>
 MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid,
                                                         const StressLayout<Dim>& layout,
                                                         const StokesWeights& w,
                                                         const StokesDofs& dofs, double dt)
-    : size_(dofs.size()),
+    : periodic_(grid.periodic()),
+      eliminated_(layout.eliminated_component()),
+      size_(dofs.size()),
+      num_stress_(dofs.num_stress()),
       num_faces_(grid.num_faces()),
+      num_stress_dofs_(layout.grid().num_dofs()),
+      num_cells_(grid.num_cells()),
+      has_pressure_(dofs.num_pressure() > 0),
       face_coefficient_(stokes_face_coefficients(w.pressure, dt)),
       fluid_face_(w.pressure.fluid_face),
       null_space_(dofs.null_space) {
   const StressGrid<Dim>& stress = layout.grid();
-  const int ns = dofs.num_stress();
-  // the stencils of D (rows) and G (columns): where each unknown acts on the faces
-  const SparseMatrix D = deformation_rate_matrix(stress);
-  const SparseMatrix Gt = SparseMatrix(gradient_matrix(grid).transpose());
-  const VectorX m = stress_multiplicity(stress);
-  unknown_start_.assign(1, 0);
-  self_.setZero(size_);
-  partner_.assign(size_, -1);
-  partner_coef_.assign(size_, 0.0);
-  std::vector<std::pair<int, double>> column;
-  for (int i = 0; i < size_; ++i) {
-    column.clear();
-    if (i < ns) {
-      // stress unknown: column of D^T M W_L^s E, and its 1/2 N^-1 W^s entries
-      std::array<int, 2> dof;
-      std::array<double, 2> sign;
-      const int count = expansion_column(layout, dofs.unknown_of_dof[i], dof, sign);
-      for (int c = 0; c < count; ++c) {
-        const int d = dof[c];
-        const double s = sign[c] * m[d] * w.liquid_stress[d];
-        for (SparseMatrix::InnerIterator it(D, d); it; ++it)
-          if (it.value() != 0.0) column.emplace_back(it.col(), s * it.value());
-        const double x = 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] *
-                         w.liquid_stress[d];
-        self_[i] += x;  // sign^2 = 1
-      }
-      if constexpr (Dim == 3) {
-        // the other diagonal unknown of the cell shares the eliminated DOF: E^T X E couples them
-        const int lu = dofs.unknown_of_dof[i];
-        const int j = layout.component_of_unknown(lu);
-        const int other = count == 2 ? dofs.dof_of_unknown[layout.offset(1 - j) + (lu - layout.offset(j))] : -1;
-        if (other >= 0) {
-          const int d = dof[1];
-          partner_[i] = other;
-          partner_coef_[i] = 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] *
-                             w.liquid_stress[d];
-        }
-      }
+  const double inv_dx = 1.0 / grid.dx();
+  // the lattice blocks: faces per axis, stress components, cells
+  for (int a = 0; a < Dim; ++a) fields_[a] = {grid.face_offset(a), grid.face_dims(a)};
+  for (int k = 0; k < kComponents; ++k) fields_[Dim + k] = {stress.offset(k), stress.dims(k)};
+  fields_[kCellField] = {0, grid.cells()};
+  for (int j = 0; j < layout.num_components(); ++j) layout_field_.push_back(Dim + layout.component(j));
+  // B^T per grid DOF: the rows of D (eq. (8)) and of G^T, +-1/dx on faces around the DOF
+  for (int k = 0; k < kComponents; ++k) {
+    const auto [a, b] = StressGrid<Dim>::component_axes(k);
+    std::vector<Term>& t = terms_[Dim + k];
+    if (a == b) {
+      // diagonal: du_a/da across the cell
+      t.push_back({a, a, 1, inv_dx});
+      t.push_back({a, a, 0, -inv_dx});
     } else {
-      // pressure unknown: column of G W_L^p
-      const int cell = dofs.pressure.cell_of_dof[i - ns];
-      const double q = w.pressure.liquid_cell[cell];
-      for (SparseMatrix::InnerIterator it(Gt, cell); it; ++it)
-        if (it.value() != 0.0) column.emplace_back(it.col(), q * it.value());
+      // off-diagonal: 1/2 (du_a/db + du_b/da) from the four faces around the node/edge
+      t.push_back({a, a, 0, 0.5 * inv_dx});
+      t.push_back({a, b, -1, -0.5 * inv_dx});
+      t.push_back({b, b, 0, 0.5 * inv_dx});
+      t.push_back({b, a, -1, -0.5 * inv_dx});
     }
-    // merge repeated faces (a periodic axis of one or two cells)
-    std::sort(column.begin(), column.end());
-    for (size_t c = 0; c < column.size(); ++c) {
-      if (c > 0 && column[c].first == column[c - 1].first) {
-        unknown_coef_.back() += column[c].second;
-        continue;
-      }
-      unknown_face_.push_back(column[c].first);
-      unknown_coef_.push_back(column[c].second);
-    }
-    unknown_start_.push_back(static_cast<int>(unknown_face_.size()));
   }
-  // the transpose: unknowns per face, in increasing unknown order
-  face_start_.assign(num_faces_ + 1, 0);
-  for (int f : unknown_face_) ++face_start_[f + 1];
-  for (int f = 0; f < num_faces_; ++f) face_start_[f + 1] += face_start_[f];
-  face_unknown_.resize(unknown_face_.size());
-  face_coef_.resize(unknown_face_.size());
-  std::vector<int> fill(face_start_.begin(), face_start_.end() - 1);
-  for (int i = 0; i < size_; ++i)
-    for (int s = unknown_start_[i]; s < unknown_start_[i + 1]; ++s) {
-      const int slot = fill[unknown_face_[s]]++;
-      face_unknown_[slot] = i;
-      face_coef_[slot] = unknown_coef_[s];
+  if (has_pressure_)
+    for (int a = 0; a < Dim; ++a) {
+      // G^T: the cell is the plus cell of its lower face and the minus cell of its upper face
+      terms_[kCellField].push_back({a, a, 0, inv_dx});
+      terms_[kCellField].push_back({a, a, 1, -inv_dx});
     }
-  // diagonal: sum_f C_f B_fi^2 + the N part
+  // B per face: the transpose of those stencils (a DOF at c reaching face c + delta e_axis is
+  // reached from the face at -delta), the same entries on every boundary and periodic axis
+  for (int field = Dim; field < kFields; ++field)
+    for (const Term& t : terms_[field]) terms_[t.field].push_back({field, t.axis, -t.delta, t.coef});
+
+  // grid -> unknown maps, per unknown weights and 1/2 N^-1 W^s
+  const VectorX m = stress_multiplicity(stress);
+  auto half_n_inv_ws = [&](int d) {
+    return 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d];
+  };
+  unknown_of_dof_.assign(num_stress_dofs_, -1);
+  unknown_of_cell_.assign(num_cells_, -1);
+  location_.resize(size_);
+  weight_.resize(size_);
+  self_.setZero(size_);
+  for (int i = 0; i < num_stress_; ++i) {
+    const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);
+    const int k = stress.coord(d).first;
+    unknown_of_dof_[d] = i;
+    location_[i] = d;
+    weight_[i] = m[d] * w.liquid_stress[d];
+    self_[i] = half_n_inv_ws(d);
+    // reduced form: E adds the eliminated DOF of the cell with sign -1 (sign^2 = 1 here)
+    if (eliminated_ >= 0 && StressGrid<Dim>::is_diagonal(k))
+      self_[i] += half_n_inv_ws(stress.offset(eliminated_) + d - stress.offset(k));
+  }
+  for (int k = 0; k < dofs.num_pressure(); ++k) {
+    const int i = num_stress_ + k, cell = dofs.pressure.cell_of_dof[k];
+    unknown_of_cell_[cell] = i;
+    location_[i] = cell;
+    weight_[i] = w.pressure.liquid_cell[cell];
+  }
+  if (eliminated_ >= 0) {
+    // the eliminated DOF of each cell: its -M W_L^s and (3D, where it couples the two diagonal
+    // unknowns of the cell through E^T N^-1 E) its 1/2 N^-1 W^s
+    eliminated_weight_.resize(num_cells_);
+    if constexpr (Dim == 3) eliminated_coupling_.resize(num_cells_);
+    for (int c = 0; c < num_cells_; ++c) {
+      const int d = stress.offset(eliminated_) + c;
+      eliminated_weight_[c] = -m[d] * w.liquid_stress[d];
+      if constexpr (Dim == 3) eliminated_coupling_[c] = half_n_inv_ws(d);
+    }
+  }
+  // diagonal: 1/2 N^-1 W^s plus sum_f C_f B_fi^2 over the merged column of B
   diagonal_ = self_;
   for (int i = 0; i < size_; ++i)
-    for (int s = unknown_start_[i]; s < unknown_start_[i + 1]; ++s)
-      diagonal_[i] += face_coefficient_[unknown_face_[s]] * unknown_coef_[s] * unknown_coef_[s];
-  // colour groups: per unknown component (stress components, then pressure), red-black
-  const int num_groups = 2 * (layout.num_components() + 1);
-  groups_.assign(num_groups, {});
-  for (int i = 0; i < size_; ++i) {
-    int block = 0, parity = 0;
-    if (i < ns) {
-      const int lu = dofs.unknown_of_dof[i];
-      const int j = layout.component_of_unknown(lu);
-      block = j;
-      parity = stress.coord(layout.dof_of_unknown(lu)).second.sum() % 2;
-    } else {
-      block = layout.num_components();
-      parity = grid.cell_coord(dofs.pressure.cell_of_dof[i - ns]).sum() % 2;
-    }
-    groups_[2 * block + parity].push_back(i);
-  }
+    for (const auto& [f, b] : stencil(i)) diagonal_[i] += face_coefficient_[f] * b * b;
   // an odd periodic axis couples a colour to itself: relax serially then
   for (int a = 0; a < Dim; ++a)
     if (grid.periodic(a) && grid.cells()[a] % 2 == 1 && grid.cells()[a] > 1)
       colouring_valid_ = false;
+  stress_scratch_.setZero(num_stress_dofs_);
+  cell_scratch_.setZero(num_cells_);
+  face_scratch_.setZero(num_faces_);
+}
+
+template <int Dim>
+int MatrixFreeStokesOperator<Dim>::index_or_outside(int field, VecI<Dim> c, int axis,
+                                                    int delta) const {
+  const Field& f = fields_[field];
+  c[axis] += delta;
+  int index = 0;
+  for (int a = Dim - 1; a >= 0; --a) {
+    int t = c[a];
+    if (t < 0 || t >= f.dims[a]) {
+      if (!periodic_[a]) return -1;
+      t = ((t % f.dims[a]) + f.dims[a]) % f.dims[a];
+    }
+    index = index * f.dims[a] + t;
+  }
+  return f.offset + index;
+}
+
+template <int Dim>
+int MatrixFreeStokesOperator<Dim>::column_faces(int field, const VecI<Dim>& c,
+                                                std::array<int, 2 * Dim>& face,
+                                                std::array<double, 2 * Dim>& coef) const {
+  int count = 0;
+  for (const Term& t : terms_[field]) {
+    const int f = index_or_outside(t.field, c, t.axis, t.delta);
+    if (f < 0) continue;  // a face outside the domain: zero velocity
+    face[count] = f;
+    coef[count++] = t.coef;
+  }
+  return count;
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double* q) const {
+  // s = M W_L^s tau on the DOFs of unknowns, zero elsewhere (eliminated DOFs below)
+#pragma omp parallel for schedule(static)
+  for (int d = 0; d < num_stress_dofs_; ++d) {
+    const int u = unknown_of_dof_[d];
+    s[d] = u >= 0 ? weight_[u] * x[u] : 0.0;
+  }
+  if (eliminated_ >= 0) {
+    // the eliminated diagonal DOF is minus the sum of the other diagonal unknowns of its cell
+    const int base = fields_[Dim + eliminated_].offset;
+#pragma omp parallel for schedule(static)
+    for (int c = 0; c < num_cells_; ++c) {
+      double sum = 0.0;
+      for (int k = 0; k < Dim - 1; ++k) {
+        const int u = unknown_of_dof_[fields_[Dim + k].offset + c];
+        if (u >= 0) sum += x[u];
+      }
+      s[base + c] = eliminated_weight_[c] * sum;
+    }
+  }
+  if (!has_pressure_) return;
+  // q = W_L^p p
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < num_cells_; ++c) {
+    const int u = unknown_of_cell_[c];
+    q[c] = u >= 0 ? weight_[u] * x[u] : 0.0;
+  }
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::faces_from_grid(const double* s, const double* q,
+                                                    double* force, bool scale_by_c) const {
+  std::array<const double*, kFields> data{};
+  for (int k = 0; k < kComponents; ++k) data[Dim + k] = s;
+  data[kCellField] = q;
+  for (int a = 0; a < Dim; ++a)
+    stencil_rows<Dim>(fields_[a], force, terms_[a], fields_, data, periodic_,
+                      scale_by_c ? face_coefficient_.data() : nullptr);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::grid_from_faces(const double* v, double* s, double* q) const {
+  std::array<const double*, kFields> data{};
+  for (int a = 0; a < Dim; ++a) data[a] = v;
+  // D v on the components the unknowns use (and the eliminated one), G^T v on the cells
+  for (int field : layout_field_)
+    stencil_rows<Dim>(fields_[field], s, terms_[field], fields_, data, periodic_, nullptr);
+  if (eliminated_ >= 0)
+    stencil_rows<Dim>(fields_[Dim + eliminated_], s, terms_[Dim + eliminated_], fields_, data,
+                      periodic_, nullptr);
+  if (has_pressure_)
+    stencil_rows<Dim>(fields_[kCellField], q, terms_[kCellField], fields_, data, periodic_,
+                      nullptr);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, const VectorX* x,
+                                           VectorX& y) const {
+  y.resize(size_);
+  for (int field : layout_field_) {
+    const Field& f = fields_[field];
+    const int count = f.dims.prod();
+    const bool reduced_diagonal = eliminated_ >= 0 && field - Dim < Dim;
+    const int eliminated_base = eliminated_ >= 0 ? fields_[Dim + eliminated_].offset : 0;
+    // one writer per unknown: its weight times (D v) at its DOF, plus 1/2 N^-1 W^s x
+#pragma omp parallel for schedule(static)
+    for (int e = 0; e < count; ++e) {
+      const int u = unknown_of_dof_[f.offset + e];
+      if (u < 0) continue;
+      double value = weight_[u] * s[f.offset + e];
+      if (x) value += self_[u] * (*x)[u];
+      if (reduced_diagonal) {
+        // the eliminated DOF of the cell (e is the cell index on diagonal components)
+        value += eliminated_weight_[e] * s[eliminated_base + e];
+        if constexpr (Dim == 3) {
+          if (x) {
+            const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + e];
+            if (partner >= 0) value += eliminated_coupling_[e] * (*x)[partner];
+          }
+        }
+      }
+      y[u] = value;
+    }
+  }
+  if (!has_pressure_) return;
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < num_cells_; ++c) {
+    const int u = unknown_of_cell_[c];
+    if (u >= 0) y[u] = weight_[u] * q[c];
+  }
 }
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
-  // face values v_f = C_f sum_j B_fj x_j (one writer per face)
-  VectorX v(num_faces_);
+  double* s = stress_scratch_.data();
+  double* q = cell_scratch_.data();
+  double* v = face_scratch_.data();
+  // x to the grid, v = C B x per face, B^T v per grid DOF, gathered per unknown
+  scatter(x, s, q);
+  faces_from_grid(s, q, v, true);
+  grid_from_faces(v, s, q);
+  gather(s, q, &x, y);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::sweep_group(int field, int parity, bool reverse,
+                                                const VectorX& rhs, VectorX& x, double omega,
+                                                const std::vector<char>* active) const {
+  const Field& f = fields_[field];
+  const bool is_cell = field == kCellField;
+  const int* map = is_cell ? unknown_of_cell_.data() : unknown_of_dof_.data();
+  const bool reduced_diagonal = eliminated_ >= 0 && !is_cell && field - Dim < Dim;
+  const int n0 = f.dims[0];
+  int rows = 1;
+  for (int a = 1; a < Dim; ++a) rows *= f.dims[a];
+  double* force = face_scratch_.data();
+  // relaxes the unknown at c (grid index d) and adds its change to the force on its faces
+  auto relax = [&](const VecI<Dim>& c, int d) {
+    const int u = map[d];
+    if (u < 0 || diagonal_[u] == 0.0 || (active && !(*active)[u])) return;
+    std::array<int, 2 * Dim + 2> face;
+    std::array<double, 2 * Dim + 2> b;
+    int count = 0;
+    for (const Term& t : terms_[field]) {
+      const int fi = index_or_outside(t.field, c, t.axis, t.delta);
+      if (fi < 0) continue;
+      face[count] = fi;
+      b[count++] = weight_[u] * t.coef;
+    }
+    double ax = self_[u] * x[u];
+    if (reduced_diagonal) {
+      const int cell = d - f.offset;
+      for (const Term& t : terms_[Dim + eliminated_]) {
+        const int fi = index_or_outside(t.field, c, t.axis, t.delta);
+        if (fi < 0) continue;
+        face[count] = fi;
+        b[count++] = eliminated_weight_[cell] * t.coef;
+      }
+      if constexpr (Dim == 3) {
+        const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + cell];
+        if (partner >= 0) ax += eliminated_coupling_[cell] * x[partner];
+      }
+    }
+    // (A x)_u = sum_f B_fu C_f (B x)_f + the N part
+    for (int m = 0; m < count; ++m) ax += b[m] * face_coefficient_[face[m]] * force[face[m]];
+    const double off = ax - diagonal_[u] * x[u];
+    const double updated = (1.0 - omega) * x[u] + omega * (rhs[u] - off) / diagonal_[u];
+    const double change = updated - x[u];
+    x[u] = updated;
+    for (int m = 0; m < count; ++m) force[face[m]] += b[m] * change;
+  };
+  auto relax_row = [&](int r) {
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r, sum = 0;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % f.dims[a];
+      rest /= f.dims[a];
+      sum += c[a];
+    }
+    // the entries of this colour: coordinate sum of the given parity
+    const int first = (parity + sum) % 2;
+    const int base = f.offset + r * n0;
+    if (!reverse) {
+      for (int x0 = first; x0 < n0; x0 += 2) {
+        c[0] = x0;
+        relax(c, base + x0);
+      }
+    } else if (first < n0) {
+      for (int x0 = first + 2 * ((n0 - 1 - first) / 2); x0 >= 0; x0 -= 2) {
+        c[0] = x0;
+        relax(c, base + x0);
+      }
+    }
+  };
+  if (colouring_valid_) {
+    // no two unknowns of the group share a face: rows in parallel
 #pragma omp parallel for schedule(static)
-  for (int f = 0; f < num_faces_; ++f) {
-    v[f] = face_coefficient_[f] != 0.0 ? face_coefficient_[f] * face_product(f, x) : 0.0;
-  }
-  // y_i = sum_f B_fi v_f + (1/2 N^-1 W^s x)_i (one writer per unknown)
-  y.resize(size_);
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < size_; ++i) {
-    double s = self_[i] * x[i];
-    if (partner_[i] >= 0) s += partner_coef_[i] * x[partner_[i]];
-    for (int e = unknown_start_[i]; e < unknown_start_[i + 1]; ++e)
-      s += unknown_coef_[e] * v[unknown_face_[e]];
-    y[i] = s;
+    for (int r = 0; r < rows; ++r) relax_row(r);
+  } else if (!reverse) {
+    for (int r = 0; r < rows; ++r) relax_row(r);
+  } else {
+    for (int r = rows - 1; r >= 0; --r) relax_row(r);
   }
 }
 
 template <int Dim>
-double MatrixFreeStokesOperator<Dim>::face_product(int f, const VectorX& x) const {
-  // (B x)_f from the unknowns acting on face f
-  double s = 0.0;
-  for (int e = face_start_[f]; e < face_start_[f + 1]; ++e) s += face_coef_[e] * x[face_unknown_[e]];
-  return s;
-}
-
-template <int Dim>
-double MatrixFreeStokesOperator<Dim>::row_product(int i, const VectorX& x) const {
-  // (A x)_i from the faces of unknown i only
-  double s = self_[i] * x[i];
-  if (partner_[i] >= 0) s += partner_coef_[i] * x[partner_[i]];
-  for (int e = unknown_start_[i]; e < unknown_start_[i + 1]; ++e) {
-    const int f = unknown_face_[e];
-    if (face_coefficient_[f] == 0.0) continue;
-    s += unknown_coef_[e] * face_coefficient_[f] * face_product(f, x);
+void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, VectorX& x,
+                                          double omega, const std::vector<char>* active) const {
+  // the face force B x of the starting x (zero at the start of an SSOR application)
+  double* force = face_scratch_.data();
+  bool zero = true;
+  for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
+  if (zero) {
+    std::fill(force, force + num_faces_, 0.0);
+  } else {
+    scatter(x, stress_scratch_.data(), cell_scratch_.data());
+    faces_from_grid(stress_scratch_.data(), cell_scratch_.data(), force, false);
   }
-  return s;
+  // colour groups: stress components in layout order, then pressure; red then black
+  const int blocks = static_cast<int>(layout_field_.size()) + (has_pressure_ ? 1 : 0);
+  for (int step = 0; step < 2 * blocks; ++step) {
+    const int g = reverse ? 2 * blocks - 1 - step : step;
+    const int block = g / 2;
+    const int field =
+        block < static_cast<int>(layout_field_.size()) ? layout_field_[block] : kCellField;
+    sweep_group(field, g % 2, reverse, rhs, x, omega, active);
+  }
 }
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                   const std::vector<char>* active) const {
-  // unknowns of one group share no face
-  colour_sweep(groups_, colouring_valid_, false, diagonal_, rhs, x, omega, active,
-               [&](int i) { return row_product(i, x) - diagonal_[i] * x[i]; });
+  sweep(false, rhs, x, omega, active);
 }
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                    const std::vector<char>* active) const {
-  colour_sweep(groups_, colouring_valid_, true, diagonal_, rhs, x, omega, active,
-               [&](int i) { return row_product(i, x) - diagonal_[i] * x[i]; });
+  sweep(true, rhs, x, omega, active);
 }
 
 template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
-  VectorX force(num_faces_);
-  // one writer per face: gather the unknowns acting on it
-#pragma omp parallel for schedule(static)
-  for (int f = 0; f < num_faces_; ++f) force[f] = face_product(f, x);
+  VectorX s(num_stress_dofs_), q(num_cells_), force(num_faces_);
+  scatter(x, s.data(), q.data());
+  faces_from_grid(s.data(), q.data(), force.data(), false);
   return force;
 }
 
 template <int Dim>
 std::vector<std::pair<int, double>> MatrixFreeStokesOperator<Dim>::stencil(int i) const {
   std::vector<std::pair<int, double>> column;
-  for (int e = unknown_start_[i]; e < unknown_start_[i + 1]; ++e)
-    column.emplace_back(unknown_face_[e], unknown_coef_[e]);
-  return column;
+  std::array<int, 2 * Dim> face;
+  std::array<double, 2 * Dim> coef;
+  const int loc = location_[i];
+  if (i >= num_stress_) {
+    const int count = column_faces(kCellField, lattice_coord<Dim>(loc, fields_[kCellField].dims),
+                                   face, coef);
+    for (int m = 0; m < count; ++m) column.emplace_back(face[m], weight_[i] * coef[m]);
+  } else {
+    int k = 0;
+    while (k + 1 < kComponents && loc >= fields_[Dim + k + 1].offset) ++k;
+    const int e = loc - fields_[Dim + k].offset;
+    const VecI<Dim> c = lattice_coord<Dim>(e, fields_[Dim + k].dims);
+    int count = column_faces(Dim + k, c, face, coef);
+    for (int m = 0; m < count; ++m) column.emplace_back(face[m], weight_[i] * coef[m]);
+    if (eliminated_ >= 0 && StressGrid<Dim>::is_diagonal(k)) {
+      // reduced form: the eliminated DOF of the cell, with E's -1 in its weight
+      count = column_faces(Dim + eliminated_, c, face, coef);
+      for (int m = 0; m < count; ++m) column.emplace_back(face[m], eliminated_weight_[e] * coef[m]);
+    }
+  }
+  // merge repeated faces (a periodic axis of one or two cells)
+  std::sort(column.begin(), column.end());
+  std::vector<std::pair<int, double>> merged;
+  for (const auto& entry : column) {
+    if (!merged.empty() && merged.back().first == entry.first)
+      merged.back().second += entry.second;
+    else
+      merged.push_back(entry);
+  }
+  return merged;
 }
 
 template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
-  VectorX b(size_);
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < size_; ++i) {
-    double s = 0.0;
-    for (int e = unknown_start_[i]; e < unknown_start_[i + 1]; ++e) {
-      const int f = unknown_face_[e];
-      s += unknown_coef_[e] * fluid_face_[f] * u_star[f];
-    }
-    b[i] = s;
-  }
+  // b = B^T W_F^u u*: the gather of apply without C and the N part
+  const VectorX v = fluid_face_.cwiseProduct(u_star);
+  VectorX s(num_stress_dofs_), q(num_cells_), b;
+  grid_from_faces(v.data(), s.data(), q.data());
+  gather(s.data(), q.data(), nullptr, b);
   return b;
+}
+
+template <int Dim>
+std::size_t MatrixFreeStokesOperator<Dim>::memory_bytes() const {
+  const std::size_t d = sizeof(double), i = sizeof(int);
+  std::size_t bytes = d * (face_coefficient_.size() + fluid_face_.size() + weight_.size() +
+                           self_.size() + diagonal_.size() + eliminated_weight_.size() +
+                           eliminated_coupling_.size() + stress_scratch_.size() +
+                           cell_scratch_.size() + face_scratch_.size()) +
+                      i * (unknown_of_dof_.size() + unknown_of_cell_.size() + location_.size());
+  for (const VectorX& n : null_space_) bytes += d * n.size();
+  return bytes;
+}
+
+template <int Dim>
+double MatrixFreeStokesOperator<Dim>::bytes_per_apply() const {
+  // stress grid: map read twice, s written, read, written, read; cells the same with pressure;
+  // faces: C read, v written and read; unknowns: x twice, weight twice, self, y;
+  // eliminated (reduced): its weight twice and (3D) its coupling per cell
+  const double d = sizeof(double), i = sizeof(int);
+  double bytes = num_stress_dofs_ * (2 * i + 4 * d) + num_faces_ * 3 * d + size_ * 6 * d;
+  if (has_pressure_) bytes += num_cells_ * (2 * i + 4 * d);
+  if (eliminated_ >= 0) bytes += num_cells_ * ((Dim == 3 ? 3 : 2) * d);
+  return bytes;
 }
 
 // --- update, scatter, energy, solve ---------------------------------------------------------

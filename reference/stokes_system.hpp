@@ -20,6 +20,7 @@
 /// StressLayout (identity in the full form).
 
 #include <array>
+#include <cstddef>
 #include <string>
 #include <utility>
 #include <vector>
@@ -107,11 +108,20 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 /// Matrix-free back end of the same A (eq. (24) without bodies), in the factored form
 ///   A = B^T C B + blockdiag(1/2 N^-1 W^s, 0),   B = [D^T M W_L^s E S_tau^T, G W_L^p S_p^T],
 ///   C = dt W_F^u P^-1 (W_L^u)^-1  (num_faces square, diagonal),
-/// B stored as per-unknown face stencils (and their transpose per face), never A itself. apply is
-/// two gather loops (faces, then unknowns; OpenMP, deterministic). SSOR sweeps (section 4.3) run
-/// over colour groups: per stress component (in StressLayout order) and then pressure, red-black
-/// by the parity of the coordinate sum; unknowns of one group share no face, so each group is
-/// relaxed in parallel (serially, in a fixed order, when an odd periodic axis breaks the colouring).
+/// applied by stencils over the grid: neither A nor B is stored. The operator holds one C_f per
+/// face, a grid -> unknown map (one int per StressGrid DOF and per cell), per unknown its weight
+/// factor (M W_L^s or W_L^p), its 1/2 N^-1 W^s entry and A_ii, and (reduced form) per cell the
+/// eliminated component's weight and N^-1 coupling. The +-1/dx of D (eq. (8), coupling.hpp's
+/// deformation_rate_row) and G and the neighbour positions come from the grid layout on the fly.
+/// apply = scatter x to the grid (s = M W_L^s E tau, q = W_L^p p), per face v = C (G q + D^T s),
+/// then D v and G^T v per grid DOF, gathered into y; each loop runs OpenMP over grid rows or DOFs
+/// with one writer per output entry, so results do not depend on the thread count. SSOR sweeps
+/// (section 4.3) run over colour groups: per stress component (in StressLayout order) and then
+/// pressure, red-black by the parity of the coordinate sum; they keep the face force B x up to
+/// date as unknowns change, and unknowns of one group share no face, so each group is relaxed in
+/// parallel (serially, in grid order, when an odd periodic axis breaks the colouring). Scratch
+/// vectors are sized at construction: apply and the sweeps allocate nothing, and one operator
+/// must not run two of them at once from different threads.
 template <int Dim>
 class MatrixFreeStokesOperator : public LinearOperator {
  public:
@@ -136,28 +146,74 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// Column i of B: the faces unknown i acts on and the coefficients B_fi, as (face, B_fi) pairs.
   std::vector<std::pair<int, double>> stencil(int i) const;
 
+  /// Bytes the operator holds (stored coefficients, maps and scratch), for the benchmark harness.
+  std::size_t memory_bytes() const override;
+  /// Bytes one apply reads and writes at least (every array it streams through once per pass).
+  double bytes_per_apply() const override;
+
  private:
-  /// (B x)_f: row f of B times x.
-  double face_product(int f, const VectorX& x) const;
-  double row_product(int i, const VectorX& x) const;
+
+  /// A lattice-numbered block of one of the operator's vectors: the faces of one axis, one
+  /// StressGrid component or the cells (offset into its vector and size along each axis).
+  struct Field {
+    int offset = 0;
+    VecI<Dim> dims = VecI<Dim>::Zero();
+  };
+  /// One stencil term: coef times the input field at c + delta e_axis.
+  struct Term {
+    int field = 0, axis = 0, delta = 0;
+    double coef = 0.0;
+  };
+  static constexpr int kComponents = StressGrid<Dim>::kComponents;
+  /// fields: 0..Dim-1 faces of axis a, Dim + k stress component k, Dim + kComponents cells.
+  static constexpr int kCellField = Dim + kComponents;
+  static constexpr int kFields = kCellField + 1;
+
+  /// s = M W_L^s E tau on the StressGrid, q = W_L^p p on the cells (zero where inactive).
+  void scatter(const VectorX& x, double* s, double* q) const;
+  /// force = B x from the scattered s, q (times C_f when `scale_by_c`).
+  void faces_from_grid(const double* s, const double* q, double* force, bool scale_by_c) const;
+  /// s = D v on every StressGrid DOF and q = G^T v on every cell.
+  void grid_from_faces(const double* v, double* s, double* q) const;
+  /// y = B^T-gathered values of s, q per unknown (plus 1/2 N^-1 W^s x when x is given).
+  void gather(const double* s, const double* q, const VectorX* x, VectorX& y) const;
+  /// Index of the entry of field `field` at c + delta e_axis after periodic wrapping, -1 outside.
+  int index_or_outside(int field, VecI<Dim> c, int axis, int delta) const;
+  /// The faces of the column of B of the grid DOF at c of field `field` (a stress component or
+  /// the cells), with the D / G coefficient (weights not applied). Returns the count.
+  int column_faces(int field, const VecI<Dim>& c, std::array<int, 2 * Dim>& face,
+                   std::array<double, 2 * Dim>& coef) const;
+  /// One colour group of an SSOR sweep, keeping force_ = B x current.
+  void sweep_group(int field, int parity, bool reverse, const VectorX& rhs, VectorX& x,
+                   double omega, const std::vector<char>* active) const;
+  void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
+             const std::vector<char>* active) const;
+
+  std::array<bool, Dim> periodic_{};
+  std::array<Field, kFields> fields_{};
+  std::array<std::vector<Term>, kFields> terms_;  ///< per output field: the stencil of B or B^T
+  std::vector<int> layout_field_;                 ///< per layout component: its field
+  int eliminated_ = -1;                           ///< eliminated StressGrid component, -1 full
   int size_ = 0;
+  int num_stress_ = 0;
   int num_faces_ = 0;
+  int num_stress_dofs_ = 0;
+  int num_cells_ = 0;
+  bool has_pressure_ = false;
   VectorX face_coefficient_;
   VectorX fluid_face_;
-  // B by unknown (CSR): the faces each unknown acts on and the coefficient
-  std::vector<int> unknown_start_, unknown_face_;
-  std::vector<double> unknown_coef_;
-  // B by face (CSR): the unknowns acting on each face
-  std::vector<int> face_start_, face_unknown_;
-  std::vector<double> face_coef_;
-  // 1/2 N^-1 W^s: own entry and (3D reduced diagonal block) the partner unknown's entry
-  VectorX self_;
-  std::vector<int> partner_;
-  std::vector<double> partner_coef_;
+  std::vector<int> unknown_of_dof_;   ///< per StressGrid DOF: unknown or -1
+  std::vector<int> unknown_of_cell_;  ///< per cell: pressure unknown or -1
+  std::vector<int> location_;         ///< per unknown: StressGrid DOF or cell
+  VectorX weight_;                    ///< per unknown: M W_L^s (stress) or W_L^p (pressure)
+  VectorX self_;                      ///< per unknown: its 1/2 N^-1 W^s entry
+  VectorX eliminated_weight_;         ///< reduced form, per cell: -W_L^s of the eliminated DOF
+  VectorX eliminated_coupling_;       ///< 3D reduced, per cell: 1/2 N^-1 W^s of the eliminated DOF
   VectorX diagonal_;
-  std::vector<std::vector<int>> groups_;
   bool colouring_valid_ = true;
   std::vector<VectorX> null_space_;
+  // scratch, sized at construction
+  mutable VectorX stress_scratch_, cell_scratch_, face_scratch_;
 };
 
 /// u <- u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau_full) on faces with
