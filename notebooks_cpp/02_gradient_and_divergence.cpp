@@ -119,6 +119,20 @@ int main(int argc, char** argv) {
     if (depth > 1.5 * grid.dx()) worst = std::max(worst, std::abs(pressure[c] - 1000.0 * g * depth) / (1000.0 * g * depth));
   }
   nb.check("hydrostatic pressure p = rho g depth below the surface row, relative", worst, 2.0 * kMinLiquidFaceFraction);
+  {
+    // figure: the solved pressure per cell (viridis, 0 to its maximum), the surface at y = 0.4
+    const int px = 24;
+    const double p_max = pressure.maxCoeff();
+    Image img(grid.cells()[0] * px, grid.cells()[1] * px, {255, 255, 255});
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        const int c = grid.cell_index(VecI<2>(x / px, (img.height - 1 - y) / px));
+        if (pw.liquid_cell[c] > 0.0) img.set(x, y, colormap_viridis(pressure[c] / p_max));
+        if (x % px == 0 || y % px == 0) img.set(x, y, {200, 200, 200});
+      }
+    nb.figure("02_pressure.ppm", img, "the solved pressure per liquid cell (viridis, 0 to " +
+                                          std::to_string(static_cast<int>(p_max)) + " Pa), white: air");
+  }
   // finite-difference check that the solution minimises the energy of eq. (8)
   auto energy = [&](const VectorX& q_dofs) {
     VectorX uu = u_star;

@@ -62,6 +62,19 @@ int main(int argc, char** argv) {
   nb.matrix("D (dx = 1)", Eigen::MatrixXd(D2), 1);
   nb.check_true("D is 17 x 12", D2.rows() == 17 && D2.cols() == 12);
   {
+    // figure: D as a picture, one square per entry (coolwarm: -1 blue, 0 white-grey, +1 red)
+    const Eigen::MatrixXd Dd(D2);
+    const int px = 20;
+    Image img(static_cast<int>(Dd.cols()) * px, static_cast<int>(Dd.rows()) * px, {255, 255, 255});
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        const double v = Dd(y / px, x / px);
+        if (v != 0.0) img.set(x, y, colormap_coolwarm(0.5 + 0.5 * v));
+        if (x % px == 0 || y % px == 0) img.set(x, y, {220, 220, 220});
+      }
+    nb.figure("03_D.ppm", img, "D (17 x 12): rows xx, yy at the cells, then xy at the nodes; blue -1, red +1");
+  }
+  {
     // a diagonal row: -1/dx and +1/dx on the two faces of its cell along its axis; D of a constant
     // velocity is zero on every DOF whose faces all lie inside the domain
     const Eigen::MatrixXd Dd(D2);

@@ -8,6 +8,7 @@
 
 #include "notebooks_cpp/notebook.hpp"
 #include "reference/cholmod_solver.hpp"
+#include "reference/plot.hpp"
 #include "reference/stokes_system.hpp"
 #include "reference/stress_weights.hpp"
 #include "reference/volume_fractions.hpp"
@@ -181,6 +182,24 @@ int main(int argc, char** argv) {
     for (size_t k = 1; k < history.size(); ++k) rise = std::max(rise, history[k] - history[k - 1]);
     nb.check("largest increase of E_f between iterates (relative to E_f(0))", rise / e0, 1e-14);
     nb.check_true("E_f(iterate 12) approaches E_f(x*)", history.back() - e_star < 1e-3 * (e0 - e_star));
+    PlotSpec spec;
+    spec.title = "E_f along the PCG iterates";
+    spec.x_label = "PCG iteration";
+    spec.y_label = "E_f";
+    PlotSeries along;
+    along.label = "E_f(x_k)";
+    along.marker = Marker::circle;
+    PlotSeries optimum;
+    optimum.label = "E_f(x*) (CHOLMOD)";
+    optimum.dash = 6.0;
+    for (std::size_t k = 0; k < history.size(); ++k) {
+      along.x.push_back(static_cast<double>(k));
+      along.y.push_back(history[k]);
+      optimum.x.push_back(static_cast<double>(k));
+      optimum.y.push_back(e_star);
+    }
+    spec.series = {along, optimum};
+    nb.figure("04_energy.ppm", plot_lines(spec), "E_f along the PCG iterates, and its minimum");
   }
   return nb.finish();
 }

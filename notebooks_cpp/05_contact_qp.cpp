@@ -10,6 +10,7 @@
 #include "notebooks_cpp/notebook.hpp"
 #include "reference/collision.hpp"
 #include "reference/contact_system.hpp"
+#include "reference/plot.hpp"
 #include "reference/rigid_body.hpp"
 #include "reference/scene.hpp"
 
@@ -67,6 +68,49 @@ int main(int argc, char** argv) {
   }
   ContactSystem<2> sys(bodies, contacts, params);
   nb.check_true("four contacts", sys.num_contacts() == 4);
+  {
+    // figure: the two boxes, the floor, the contact points and their normals (from b to a)
+    PlotSpec spec;
+    spec.title = "two boxes: contact points and normals";
+    spec.x_label = "x (m)";
+    spec.y_label = "y (m)";
+    spec.width = 640;
+    spec.height = 420;
+    spec.x_min = 0.35;
+    spec.x_max = 0.65;
+    spec.y_min = -0.03;
+    spec.y_max = 0.2;
+    auto outline = [](const std::string& label, const Vec<2>& c, const Vec<2>& h, Rgb colour) {
+      PlotSeries b;
+      b.label = label;
+      b.color = colour;
+      b.x = {c[0] - h[0], c[0] + h[0], c[0] + h[0], c[0] - h[0], c[0] - h[0]};
+      b.y = {c[1] - h[1], c[1] - h[1], c[1] + h[1], c[1] + h[1], c[1] - h[1]};
+      return b;
+    };
+    PlotSeries floor;
+    floor.label = "floor";
+    floor.color = Rgb{90, 90, 90};
+    floor.x = {0.35, 0.65};
+    floor.y = {0.0, 0.0};
+    PlotSeries points, normals;
+    points.label = "contact points";
+    points.line = false;
+    points.marker = Marker::circle;
+    points.color = Rgb{200, 40, 40};
+    normals.label = "normals (0.03 m)";
+    normals.color = Rgb{200, 40, 40};
+    normals.line_width = 1.5;
+    for (const auto& k : contacts) {
+      points.x.push_back(k.point[0]);
+      points.y.push_back(k.point[1]);
+      normals.x.insert(normals.x.end(), {k.point[0], k.point[0] + 0.03 * k.normal[0], NAN});
+      normals.y.insert(normals.y.end(), {k.point[1], k.point[1] + 0.03 * k.normal[1], NAN});
+    }
+    spec.series = {floor, outline("A", Vec<2>(0.5, 0.05), Vec<2>(0.1, 0.05), Rgb{40, 80, 180}),
+                   outline("B", Vec<2>(0.52, 0.14), Vec<2>(0.06, 0.04), Rgb{40, 150, 80}), points, normals};
+    nb.figure("05_contacts.ppm", plot_lines(spec), "the two boxes, the floor and the four contacts with their normals");
+  }
 
   nb.md("## Jacobians and mass matrix\n"
         "Row c of J_lambda is [n^T, r_a x n] at body a's DOFs minus the same for body b: "
