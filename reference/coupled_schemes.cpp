@@ -264,10 +264,11 @@ template <int Dim>
 std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>& in,
                                                     const StokesWeights& w, StressForm form,
                                                     StokesUnknowns unknowns, const VectorX& u_star,
-                                                    const std::vector<RigidBody<Dim>>& bodies) {
+                                                    const std::vector<RigidBody<Dim>>& bodies,
+                                                    const std::string& backend) {
   const ContactSystem<Dim> contacts(bodies, in.contacts, in.contact_params);
   return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, w, in.dt, u_star, bodies,
-                                                 in.solids, contacts, unknowns);
+                                                 in.solids, contacts, unknowns, backend);
 }
 
 /// u, p, tau, v, lambda, z of the final system and unknowns.
@@ -367,6 +368,9 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   const auto t_start = Clock::now();
   if (in.u_star.size() != in.grid.num_faces())
     throw std::invalid_argument("solve_coupled_step: u_star must have one entry per face");
+  if (options.backend != "explicit" && options.backend != "matrixfree")
+    throw std::invalid_argument("solve_coupled_step: unknown back end \"" + options.backend +
+                                "\" (one of explicit, matrixfree)");
   CoupledSolveResult r;
   // P.. C schemes: inviscid (viscosity zeroed, so no stress unknowns)
   StokesWeights inviscid = in.weights;
@@ -378,7 +382,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   if (scheme == CouplingScheme::pc_vc_pc_unified) {
     // section 6.2: PC-unified -> (u1, v1), VC-unified -> (u2, v2), PC-unified -> final
     const auto s1 = build_system(in, inviscid, StressForm::reduced,
-                                 StokesUnknowns::pressure_and_stress, in.u_star, in.bodies);
+                                 StokesUnknowns::pressure_and_stress, in.u_star, in.bodies, options.backend);
     const auto t1 = Clock::now();
     const Unknowns x1 = unified_solve(*s1, settings, r, r.coupled_iterations);
     const double pc1_seconds = seconds_since(t1);
@@ -391,7 +395,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     Unknowns x2;
     if (!non_newtonian) {
       s2 = build_system(in, in.weights, StressForm::full, StokesUnknowns::stress_only, u1,
-                        with_velocities(in.bodies, dof, v1));
+                        with_velocities(in.bodies, dof, v1), options.backend);
       const auto t2 = Clock::now();
       x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
       r.viscosity_coupled_seconds = seconds_since(t2);
@@ -402,7 +406,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
       for (int k = 0; k < viscosity_rounds; ++k) {
         w.viscosity = eta;
         s2 = build_system(in, w, StressForm::full, StokesUnknowns::stress_only, u1,
-                          with_velocities(in.bodies, dof, v1));
+                          with_velocities(in.bodies, dof, v1), options.backend);
         const auto t2 = Clock::now();
         x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
         r.viscosity_coupled_seconds += seconds_since(t2);
@@ -415,7 +419,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
 
     const auto s3 = build_system(in, inviscid, StressForm::reduced,
                                  StokesUnknowns::pressure_and_stress, u2,
-                                 with_velocities(in.bodies, dof, v2));
+                                 with_velocities(in.bodies, dof, v2), options.backend);
     const auto t3 = Clock::now();
     const Unknowns x3 = unified_solve(*s3, settings, r, r.coupled_iterations);
     r.coupled_seconds = pc1_seconds + r.viscosity_coupled_seconds + seconds_since(t3);
@@ -439,7 +443,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     for (int k = 0; k < viscosity_rounds; ++k) {
       w.viscosity = eta;
       s = build_system(in, w, StressForm::reduced, StokesUnknowns::pressure_and_stress, in.u_star,
-                       in.bodies);
+                       in.bodies, options.backend);
       if (scheme == CouplingScheme::pvc_unified) {
         const auto t0 = Clock::now();
         x = unified_solve(*s, settings, r, r.coupled_iterations);
@@ -455,7 +459,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     return r;
   }
   const auto s = build_system(in, viscous ? in.weights : inviscid, StressForm::reduced,
-                              StokesUnknowns::pressure_and_stress, in.u_star, in.bodies);
+                              StokesUnknowns::pressure_and_stress, in.u_star, in.bodies, options.backend);
   count_dofs(*s, r);
   Unknowns x;
   if (scheme == CouplingScheme::pc_unified || scheme == CouplingScheme::pvc_unified) {

@@ -19,8 +19,10 @@
 ///     solve_staggered_projections (friction first, normal last), by MPRGP on the coloured
 ///     sparse A33 / A44 with the diagonal boost gamma of section 4.4.5, for given x_f.
 ///
-/// Explicit back end only: MonolithicSystem assembles A_stokes as a sparse matrix. The
-/// matrix-free production path is issue 7.
+/// Both back ends of MonolithicSystem run every scheme (CoupledSchemeOptions::backend): the
+/// operators (FluidBodyOperator, MonolithicOperator) and the solver code are the same, only the
+/// fluid part and the rigid products are explicit matrices or stencils (docs/coupling.md, "Back
+/// ends of the coupled step").
 
 #include <functional>
 #include <string>
@@ -141,9 +143,10 @@ struct CoupledSchemeOptions {
   /// (herschel_bulkley.hpp) provides both. The viscosity of in.weights is then ignored.
   std::function<VectorX(const VectorX& u_star)> initial_viscosity;
   std::function<VectorX(const VectorX& stress, const VectorX& viscosity)> update_viscosity;
-  /// The back end of the fluid blocks of eq. (24): "explicit" (assembled sparse matrices, the
-  /// reference oracle) or "matrixfree" (stencils applied on the fly, the production path;
-  /// solver.backend of the scene file).
+  /// The back end of every MonolithicSystem (eq. (24)) the step builds: "explicit" (assembled
+  /// sparse matrices, the reference oracle) or "matrixfree" (stencils applied on the fly, the
+  /// production path; solver.backend of the scene file). solve_coupled_step throws
+  /// std::invalid_argument on any other name.
   std::string backend = "explicit";
 };
 

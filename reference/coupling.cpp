@@ -346,6 +346,38 @@ bool BodyCouplingOperator<Dim>::stress_column(int body, int dof, Block& column) 
 }
 
 template <int Dim>
+std::vector<typename BodyCouplingOperator<Dim>::SurfaceColumn>
+BodyCouplingOperator<Dim>::pressure_columns() const {
+  std::vector<SurfaceColumn> out;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int c : surface_cells_[i]) {
+      SurfaceColumn s;
+      s.body = static_cast<int>(i);
+      s.row = rows_[i];
+      s.index = c;
+      pressure_column(s.body, c, s.column);
+      out.push_back(s);
+    }
+  return out;
+}
+
+template <int Dim>
+std::vector<typename BodyCouplingOperator<Dim>::SurfaceColumn>
+BodyCouplingOperator<Dim>::stress_columns() const {
+  std::vector<SurfaceColumn> out;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int k : surface_stress_[i]) {
+      SurfaceColumn s;
+      s.body = static_cast<int>(i);
+      s.row = rows_[i];
+      s.index = k;
+      stress_column(s.body, k, s.column);
+      out.push_back(s);
+    }
+  return out;
+}
+
+template <int Dim>
 SparseMatrix BodyCouplingOperator<Dim>::pressure_jacobian() const {
   std::vector<Triplet> triplets;
   Block column;

@@ -135,6 +135,21 @@ class BodyCouplingOperator {
   /// Stress DOFs with a non-zero column of J_s (per body).
   const std::vector<std::vector<int>>& surface_stress() const { return surface_stress_; }
 
+  /// One non-zero column block of J_p or J_s: the body (index in the body list), its first row,
+  /// the cell (J_p) or StressGrid DOF (J_s), and the kBodyDofs entries of the column.
+  struct SurfaceColumn {
+    int body = 0;
+    int row = 0;
+    int index = 0;
+    BodyVec<Dim> column;
+  };
+  /// The non-zero column blocks of J_p, per body in body order then by cell: the entries of
+  /// pressure_jacobian() bit for bit (the same evaluation), without a num_rows x num_cells
+  /// matrix. For the matrix-free back end of eq. (24), which keeps them per surface unknown.
+  std::vector<SurfaceColumn> pressure_columns() const;
+  /// The same for J_s (stress_jacobian()), per body then by StressGrid DOF.
+  std::vector<SurfaceColumn> stress_columns() const;
+
   /// J_p explicitly, num_rows x num_cells.
   SparseMatrix pressure_jacobian() const;
   /// J_s explicitly, num_rows x num_stress_dofs (all StressGrid components).

@@ -19,6 +19,7 @@
 /// The products B_i^T M_r^-1 B_j x are evaluated right to left (sequential multiplication,
 /// section 4.4.3); the dense n x n blocks exist only in dense_matrix(), for small tests.
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -37,6 +38,20 @@ namespace monolith {
 /// The sixteen blocks of eq. (24) for one step. Unknown blocks: 1 tau (active stress unknowns of
 /// StokesDofs, StressLayout numbering), 2 p (active pressure DOFs), 3 lambda (one per contact of
 /// the ContactSystem), 4 z ((Dim - 1) per contact). Holds copies of its inputs.
+///
+/// Two back ends (docs/coupling.md, "Back ends of the coupled step"), chosen by the last
+/// constructor argument:
+///   - "explicit" (the reference oracle): the fluid part F is ExplicitStokesSystem (every matrix of
+///     eq. (8) by its paper name, stokes()) and B_f = [B_1 B_2] is one sparse nd x (n_tau + n_p)
+///     matrix (fluid_body_jacobian());
+///   - "matrixfree" (the production path): F is a MatrixFreeStokesOperator (face stencils, no
+///     global matrix) and B_f is kept as its non-zero column blocks only: for every fluid unknown
+///     on a body surface and every body it touches, the kBodyDofs entries of W_L J E S^T, read
+///     once from BodyCouplingOperator (coupling.hpp) and applied by loops over the surface
+///     (O(surface) memory and work, no global matrix). stokes() and fluid_body_jacobian() are
+///     empty under this back end.
+/// Both back ends agree to round-off (tests/test_backends.cpp); every function below works under
+/// both. Copies share the (immutable) fluid part.
 template <int Dim>
 class MonolithicSystem {
  public:
@@ -45,11 +60,13 @@ class MonolithicSystem {
   /// ContactSystem of the same bodies (its v* is the two-way bodies' v*, its alpha must equal
   /// 1 / dx^Dim: std::invalid_argument otherwise). One-way (fixed, kinematic) bodies enter b1,
   /// b2 only (section 4.4.4). `unknowns` = stress_only drops the pressure block (p fixed at
-  /// zero: the "VC" solve of PC-VC-PC-unified, section 6.2); n_p = 0 then.
+  /// zero: the "VC" solve of PC-VC-PC-unified, section 6.2); n_p = 0 then. `backend` is
+  /// "explicit" or "matrixfree" (std::invalid_argument naming both otherwise).
   MonolithicSystem(const MacGrid<Dim>& grid, StressForm form, const StokesWeights& w, double dt,
                    const VectorX& u_star, const std::vector<RigidBody<Dim>>& bodies,
                    const SolidWeights<Dim>& solids, const ContactSystem<Dim>& contacts,
-                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
+                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress,
+                   const std::string& backend = "explicit");
 
   int num_stress() const { return dofs_.num_stress(); }
   int num_pressure() const { return dofs_.num_pressure(); }
@@ -66,7 +83,7 @@ class MonolithicSystem {
   ///   F_12 = dt W_L^s M D W_F^u P^-1 (W_L^u)^-1 G W_L^p,
   ///   F_22 = dt W_L^p G^T W_F^u P^-1 (W_L^u)^-1 G W_L^p (stokes_system.hpp, restricted to the
   ///   active DOFs), zero in the other blocks. A_ji = A_ij^T. The rigid part is evaluated as
-  ///   B_i^T (M_r^-1 (B_j x)), never formed.
+  ///   B_i^T (M_r^-1 (B_j x)), never formed; F through stokes_operator() under matrixfree.
   VectorX apply_block(int i, int j, const VectorX& x) const;
   /// eq. (24): A11 tau = (1/2 N^-1 W^s + dt W_L^s M D K D^T M W_L^s + (dt/alpha) W_L^s J_s^T
   /// M_r^-1 J_s W_L^s) tau, K = W_F^u P^-1 (W_L^u)^-1; n_tau x n_tau.
@@ -101,7 +118,7 @@ class MonolithicSystem {
   VectorX b4() const { return contacts_.b4(); }
 
   /// The whole of eq. (24) densely, (n_tau + n_p + nc + nf) square, column by column through
-  /// apply_block: for small tests only.
+  /// apply_block (both back ends): for small tests only.
   Eigen::MatrixXd dense_matrix() const;
   /// (b1, b2, b3, b4).
   VectorX rhs() const;
@@ -123,30 +140,64 @@ class MonolithicSystem {
   /// The generalised force on the two-way bodies (N and N m; 2D per metre) of the fluid part
   /// x_f = (tau, p): B_1 tau + B_2 p = Jh_s W_L^s tau_full + Jh_p W_L^p p (eq. (21)), nd.
   VectorX fluid_body_force(const VectorX& x_fluid) const;
+  /// eq. (21), the transpose of fluid_body_force: B_f^T f = (B_1^T f, B_2^T f) for a body-space
+  /// vector f (nd), n_tau + n_p.
+  VectorX fluid_body_force_transpose(const VectorX& f) const;
+  /// force = B_f x_f (eq. (21), nd; `force` must already have nd entries), without allocating:
+  /// the hot-loop form of fluid_body_force that the coupled operators use.
+  void fluid_body_force_into(const Eigen::Ref<const VectorX>& x_fluid, VectorX& force) const;
+  /// y += scale B_f^T f (eq. (24), the left factor of the rigid blocks dt alpha B_f^T M_r^-1 B_f;
+  /// y has n_tau + n_p entries). Allocation-free under matrixfree.
+  void add_fluid_body_force_transpose(const VectorX& f, double scale, Eigen::Ref<VectorX> y) const;
+  /// diagonal += scale diag(B_f^T M_r^-1 B_f) (eq. (24): with scale = dt alpha, the rigid part
+  /// of the diagonal of A_ff), n_tau + n_p, column by column of B_f (never the n x n product).
+  void add_rigid_diagonal(double scale, Eigen::Ref<VectorX> diagonal) const;
+  /// sum |B_f| over its entries (the scale of the null-space test of the coupled operators).
+  double fluid_body_jacobian_abs_sum() const;
   /// eq. (21): v = v* + dt M_r^-1 (J_lambda^T lambda + J_z^T z + Jh_p W_L^p p + Jh_s W_L^s tau);
   /// the alpha of (alpha M_r)^-1 and of the scaled forces cancels. nd, ContactSystem order.
   VectorX body_velocities(const VectorX& x_fluid, const VectorX& lambda, const VectorX& z) const;
   /// eq. (8) update of the face velocities: u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau)
-  /// on faces with W_F^u W_L^u > 0 (apply_stokes_update), num_faces.
+  /// on faces with W_F^u W_L^u > 0 (explicit: apply_stokes_update; matrixfree: the same face
+  /// force from MatrixFreeStokesOperator::face_force), num_faces.
   VectorX fluid_velocities(const VectorX& x_fluid) const;
   /// Cell pressures and all stress components of x_fluid = (tau, p).
   VectorX pressure_cells(const VectorX& x_fluid) const;
   VectorX stress_full(const VectorX& x_fluid) const;
 
-  const ExplicitStokesSystem& stokes() const { return stokes_; }
+  /// "explicit" or "matrixfree".
+  const std::string& backend() const { return backend_; }
+  bool matrix_free() const { return matrix_free_; }
+  /// The fluid part F = A_stokes of eq. (24) (the (tau, p) blocks without bodies) as a
+  /// LinearOperator: explicit, stokes().A with row-order SSOR sweeps; matrixfree, the
+  /// MatrixFreeStokesOperator with red-black colour-group sweeps (section 4.3).
+  const LinearOperator& stokes_operator() const { return *stokes_operator_; }
+  /// The explicit matrices of eq. (8) (explicit back end; all empty under matrixfree).
+  const ExplicitStokesSystem& stokes() const;
   const StokesDofs& dofs() const { return dofs_; }
   const ContactSystem<Dim>& contacts() const { return contacts_; }
   /// B_1 = Jh_s W_L^s E S_tau^T and B_2 = Jh_p W_L^p S_p^T side by side: nd x (n_tau + n_p),
-  /// non-zero only in the body-surface columns.
+  /// non-zero only in the body-surface columns (explicit back end; 0 x 0 under matrixfree, where
+  /// fluid_body_force and its transpose apply the same products).
   const SparseMatrix& fluid_body_jacobian() const { return b_fluid_; }
+  const SparseMatrix& j_lambda_transpose() const { return j_lambda_t_; }
   double dt() const { return dt_; }
   double alpha() const { return alpha_; }
 
  private:
+  /// One non-zero column block of B_f (matrixfree): fluid unknown, first row of the body, the
+  /// kBodyDofs entries (W_L, E and the DOF selection folded in).
+  struct RigidColumn {
+    int unknown = 0;
+    int row = 0;
+    BodyVec<Dim> column;
+  };
   /// B_i x (body space, nd) for block j.
   VectorX body_force(int j, const VectorX& x) const;
   /// B_i^T f for block i.
   VectorX body_force_transpose(int i, const VectorX& f) const;
+  /// The matrixfree column blocks of B_f from the two-way BodyCouplingOperator.
+  void build_rigid_columns(const BodyCouplingOperator<Dim>& two);
 
   MacGrid<Dim> grid_;
   StressGrid<Dim> stress_;
@@ -154,51 +205,91 @@ class MonolithicSystem {
   StokesWeights w_;
   double dt_ = 0.0, alpha_ = 1.0;
   VectorX u_star_;
+  std::string backend_;
+  bool matrix_free_ = false;
   StokesDofs dofs_;
-  ExplicitStokesSystem stokes_;
+  std::shared_ptr<const ExplicitStokesSystem> stokes_;                 ///< explicit only
+  std::shared_ptr<const MatrixFreeStokesOperator<Dim>> matrix_free_stokes_;  ///< matrixfree only
+  std::shared_ptr<const LinearOperator> stokes_operator_;
   ContactSystem<Dim> contacts_;
-  SparseMatrix b_fluid_;      ///< nd x n_fluid
-  SparseMatrix b_fluid_t_;    ///< its transpose
+  SparseMatrix b_fluid_;      ///< nd x n_fluid (explicit)
+  SparseMatrix b_fluid_t_;    ///< its transpose (explicit)
+  std::vector<RigidColumn> rigid_columns_;  ///< matrixfree, by unknown then row
   SparseMatrix j_lambda_t_, j_z_t_;
   VectorX b1_, b2_;
 };
 
-/// The MLCP (26) over x = (tau, p, lambda) as a LinearOperator, size n_tau + n_p + nc:
-///   A = S + R,  S = blockdiag(A_stokes, A33 (1 + gamma on its diagonal)) the sparse part,
+/// The common base of the coupled operators of eq. (24) (MonolithicOperator over (tau, p, lambda),
+/// FluidBodyOperator over (tau, p)): A = S + R with
+///   S = blockdiag(F, A33 + gamma diag(A33)) the sparse part (no contact block in FluidBodyOperator),
 ///   R = dt alpha [B_f^T M_r^-1 B_f, B_f^T M_r^-1 J_lambda^T; J_lambda M_r^-1 B_f, 0],
-/// B_f = [B_1 B_2] (MonolithicSystem). apply = S x + R x with R by sequential multiplication;
+/// F = MonolithicSystem::stokes_operator() whatever the back end, B_f = [B_1 B_2]. apply = S x +
+/// R x with R by sequential multiplication (section 4.4.3: body-space vectors only, never n x n);
 /// diagonal = diag(S) + dt alpha diag(B_f^T M_r^-1 B_f) (column by column, never the n x n
-/// product); SSOR sweeps run on S only, in row order, honouring `active` (section 4.3: SOR on the
-/// remaining sparse part). gamma is the boost of section 4.4.5 on the contact rows only, so the
-/// fluid rows keep their exact equations. null_space: the Stokes null vectors (enclosed liquid)
-/// that the bodies do not see (B_f n = 0), extended by zeros.
+/// product). SSOR sweeps (section 4.3: SOR on the remaining sparse part) run on S only, honouring
+/// `active`: the fluid rows through F's own sweeps (explicit: row order; matrixfree: red-black
+/// colour groups per stress component and pressure), then the contact rows (explicit: row order;
+/// matrixfree: Welsh-Powell colour groups of the contact graph, ColouredSparseOperator); the
+/// backward sweep runs the contact rows first, so forward then backward is symmetric. gamma is
+/// the boost of section 4.4.5 on the contact rows only, so the fluid rows keep their exact
+/// equations. null_space: the Stokes null vectors (enclosed liquid) that the bodies do not see
+/// (B_f n = 0), extended by zeros.
+///
+/// apply and the sweeps work in mutable scratch vectors sized at construction (no allocation per
+/// call under matrixfree): calling them concurrently on one operator object is not thread-safe
+/// (each call is parallel inside). Holds a reference to the system, which must outlive it.
 template <int Dim>
-class MonolithicOperator : public LinearOperator {
+class CoupledOperator : public LinearOperator {
  public:
-  MonolithicOperator(const MonolithicSystem<Dim>& system, double contact_boost = 0.0);
   int size() const override { return size_; }
   void apply(const VectorX& x, VectorX& y) const override;
   VectorX diagonal() const override { return diagonal_; }
   void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
-                     const std::vector<char>* active = nullptr) const override {
-    sparse_.forward_sweep(rhs, x, omega, active);
-  }
+                     const std::vector<char>* active = nullptr) const override;
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
-                      const std::vector<char>* active = nullptr) const override {
-    sparse_.backward_sweep(rhs, x, omega, active);
-  }
+                      const std::vector<char>* active = nullptr) const override;
   const std::vector<VectorX>& null_space() const override { return null_space_; }
-  /// The sparse part S.
-  const SparseMatrix& sparse_part() const { return sparse_.matrix(); }
   /// The operator densely (column by column through apply), for small tests.
   Eigen::MatrixXd dense_matrix() const;
+  const MonolithicSystem<Dim>& system() const { return system_; }
+
+ protected:
+  /// with_contacts: the lambda rows and columns of (26) with gamma = contact_boost on A33.
+  CoupledOperator(const MonolithicSystem<Dim>& system, bool with_contacts, double contact_boost);
+  /// The contact block of S (A33 boosted), nullptr without contact rows.
+  const LinearOperator* contact_block() const { return contact_.get(); }
 
  private:
+  /// One SOR sweep of S: fluid rows then contact rows (forward), or the reverse.
+  void sweep(const VectorX& rhs, VectorX& x, double omega, const std::vector<char>* active,
+             bool backward) const;
+
   const MonolithicSystem<Dim>& system_;
-  int size_ = 0, num_fluid_ = 0;
-  SparseMatrixOperator sparse_;
+  int size_ = 0, num_fluid_ = 0, num_contacts_ = 0;
+  std::shared_ptr<const LinearOperator> contact_;
   VectorX diagonal_;
   std::vector<VectorX> null_space_;
+  // scratch (apply, sweeps)
+  mutable VectorX x_fluid_, y_fluid_, rhs_fluid_, x_contact_, y_contact_, rhs_contact_;
+  mutable VectorX force_, g_, h_;
+  mutable std::vector<char> active_fluid_, active_contact_;
+};
+
+/// The MLCP (26) over x = (tau, p, lambda) as a LinearOperator, size n_tau + n_p + nc: the
+/// CoupledOperator with contact rows, A = S + R,
+///   S = blockdiag(A_stokes, A33 (1 + gamma on its diagonal)) the sparse part,
+///   R = dt alpha [B_f^T M_r^-1 B_f, B_f^T M_r^-1 J_lambda^T; J_lambda M_r^-1 B_f, 0]
+/// (eqs. (24), (26)); apply, diagonal, sweeps and null space as CoupledOperator says.
+template <int Dim>
+class MonolithicOperator : public CoupledOperator<Dim> {
+ public:
+  MonolithicOperator(const MonolithicSystem<Dim>& system, double contact_boost = 0.0);
+  /// The sparse part S assembled (explicit back end only: std::logic_error under matrixfree,
+  /// where S exists only as operators). For small tests.
+  SparseMatrix sparse_part() const;
+
+ private:
+  double contact_boost_ = 0.0;
 };
 
 /// The fluid-body block A_ff of eq. (24) over x_f = (tau, p), size n_tau + n_p:
@@ -206,34 +297,12 @@ class MonolithicOperator : public LinearOperator {
 /// (symmetric positive semi-definite; definite unless the liquid is enclosed and the bodies do not
 /// feel the enclosed group's constant pressure), i.e. the liquid two-way coupled with the
 /// bodies but without contact: the "P" / "PV" / "VC" solve of the partitioned schemes of
-/// section 6 (and the unified schemes when there are no contacts). apply = A_stokes x + the rigid
-/// part by sequential multiplication (section 4.4.3); diagonal = diag(A_stokes) + dt alpha
-/// diag(B_f^T M_r^-1 B_f); SSOR sweeps run on A_stokes only (section 4.3, as MonolithicOperator);
-/// null_space: the Stokes null vectors the bodies do not see. MonolithicOperator restricted to
-/// its fluid rows and columns.
+/// section 6 (and the unified schemes when there are no contacts). The CoupledOperator without
+/// contact rows: MonolithicOperator restricted to its fluid rows and columns.
 template <int Dim>
-class FluidBodyOperator : public LinearOperator {
+class FluidBodyOperator : public CoupledOperator<Dim> {
  public:
   explicit FluidBodyOperator(const MonolithicSystem<Dim>& system);
-  int size() const override { return size_; }
-  void apply(const VectorX& x, VectorX& y) const override;
-  VectorX diagonal() const override { return diagonal_; }
-  void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
-                     const std::vector<char>* active = nullptr) const override {
-    sparse_.forward_sweep(rhs, x, omega, active);
-  }
-  void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
-                      const std::vector<char>* active = nullptr) const override {
-    sparse_.backward_sweep(rhs, x, omega, active);
-  }
-  const std::vector<VectorX>& null_space() const override { return null_space_; }
-
- private:
-  const MonolithicSystem<Dim>& system_;
-  int size_ = 0;
-  SparseMatrixOperator sparse_;
-  VectorX diagonal_;
-  std::vector<VectorX> null_space_;
 };
 
 /// The friction LCP (25) as a LinearOperator over z: A44 with (1 + gamma) on its diagonal
@@ -248,7 +317,9 @@ SparseMatrixOperator friction_operator(const MonolithicSystem<Dim>& system, doub
 /// (S^-1 rhs, S y) and so are exactly the sweeps of S A S: the SSOR preconditioner is invariant
 /// under the scaling, and preconditioned CG steps are the same; what changes is MPRGP's
 /// expansion step length 1.9 / ||S A S|| and its proportioning test, which compare gradient
-/// entries across rows. null_space: S^-1 n, normalised. Holds a reference to A.
+/// entries across rows. null_space: S^-1 n, normalised. Holds a reference to A. apply and the
+/// sweeps use mutable scratch vectors sized at construction (not thread-safe to call
+/// concurrently on one object).
 class JacobiScaledOperator : public LinearOperator {
  public:
   explicit JacobiScaledOperator(const LinearOperator& a);
@@ -267,6 +338,7 @@ class JacobiScaledOperator : public LinearOperator {
   const LinearOperator& a_;
   VectorX scale_, diagonal_;
   std::vector<VectorX> null_space_;
+  mutable VectorX scaled_x_, scaled_rhs_;
 };
 
 /// Options of solve_pvc_unified.
