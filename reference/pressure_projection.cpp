@@ -1,6 +1,7 @@
 #include "reference/pressure_projection.hpp"
 
 #include <cmath>
+#include <cstddef>
 #include <stdexcept>
 
 #include "reference/gradient.hpp"
@@ -168,103 +169,210 @@ template <int Dim>
 MatrixFreePressureOperator<Dim>::MatrixFreePressureOperator(const MacGrid<Dim>& grid,
                                                             const PressureWeights& w,
                                                             const PressureDofs& dofs, double dt)
-    : grid_(&grid),
+    : cells_(grid.cells()),
+      periodic_(grid.periodic()),
+      inv_dx_(1.0 / grid.dx()),
       num_dofs_(dofs.size()),
-      cell_of_dof_(dofs.cell_of_dof),
+      dof_of_cell_(dofs.dof_of_cell),
+      coefficient_(face_coefficients(w, dt, grid.dx())),
       fluid_face_(w.fluid_face),
       null_space_(dofs.null_space) {
-  const VectorX k = face_coefficients(w, dt, grid.dx());
+  for (int a = 0; a < Dim; ++a) {
+    face_offset_[a] = grid.face_offset(a);
+    face_dims_[a] = grid.face_dims(a);
+  }
   liquid_.resize(num_dofs_);
-  neighbour_.assign(num_dofs_ * kNeighbours, -1);
-  coefficient_.assign(num_dofs_ * kNeighbours, 0.0);
-  face_.assign(num_dofs_ * kNeighbours, 0);
-  face_sign_.assign(num_dofs_ * kNeighbours, 0.0);
   diagonal_.setZero(num_dofs_);
-  for (int i = 0; i < num_dofs_; ++i) liquid_[i] = w.liquid_cell[cell_of_dof_[i]];
-  // stencil of every DOF: face coefficient and neighbour DOF (a face onto the cell itself, on a
-  // periodic axis of one cell, has a zero row in G and is dropped)
+  // W_L^p and A_ii = W_i^2 sum_f k_f per DOF (a face onto the cell itself, on a periodic axis
+  // of one cell, has a zero row in G and is left out)
   for (int i = 0; i < num_dofs_; ++i) {
-    const int cell = cell_of_dof_[i];
-    const auto cf = cell_faces<Dim>(grid, cell);
+    const int cell = dofs.cell_of_dof[i];
+    liquid_[i] = w.liquid_cell[cell];
+    std::array<int, 2 * Dim> face, other;
+    cell_stencil(grid.cell_coord(cell), face, other);
     double diag = 0.0;
-    for (int j = 0; j < kNeighbours; ++j) {
-      const int s = i * kNeighbours + j;
-      face_[s] = cf.face[j];
-      face_sign_[s] = cf.other[j] == cell ? 0.0 : cf.sign[j];
-      if (cf.other[j] == cell) continue;
-      coefficient_[s] = k[cf.face[j]];
-      neighbour_[s] = cf.other[j] >= 0 ? dofs.dof_of_cell[cf.other[j]] : -1;
-      diag += coefficient_[s];
-    }
+    for (int j = 0; j < 2 * Dim; ++j)
+      if (other[j] != cell) diag += coefficient_[face[j]];
     diagonal_[i] = liquid_[i] * liquid_[i] * diag;
   }
   // red-black colours by the parity of the cell coordinates
   for (int a = 0; a < Dim; ++a)
     if (grid.periodic(a) && grid.cells()[a] % 2 == 1 && grid.cells()[a] > 1)
       colouring_valid_ = false;
-  for (int i = 0; i < num_dofs_; ++i)
-    colour_dofs_[grid.cell_coord(cell_of_dof_[i]).sum() % 2].push_back(i);
+  q_.setZero(grid.num_cells());
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::cell_stencil(const VecI<Dim>& c,
+                                                   std::array<int, 2 * Dim>& face,
+                                                   std::array<int, 2 * Dim>& other) const {
+  // linear indices of c along the face lattices and the cells, then +-1 along each axis
+  for (int a = 0; a < Dim; ++a) {
+    const VecI<Dim>& fd = face_dims_[a];
+    int lower_face = 0, cell = 0;
+    for (int b = Dim - 1; b >= 0; --b) {
+      lower_face = lower_face * fd[b] + c[b];
+      cell = cell * cells_[b] + c[b];
+    }
+    int stride = 1, face_stride = 1;
+    for (int b = 0; b < a; ++b) {
+      stride *= cells_[b];
+      face_stride *= fd[b];
+    }
+    const int n = cells_[a];
+    // lower face: the cell is its plus cell; the minus cell is c - e_a
+    face[2 * a] = face_offset_[a] + lower_face;
+    other[2 * a] = c[a] > 0 ? cell - stride : (periodic_[a] ? cell + (n - 1) * stride : -1);
+    // upper face: the cell is its minus cell; the plus cell is c + e_a
+    const bool last = c[a] == n - 1;
+    face[2 * a + 1] = face_offset_[a] + lower_face +
+                      (last && periodic_[a] ? -(n - 1) * face_stride : face_stride);
+    other[2 * a + 1] = !last ? cell + stride : (periodic_[a] ? cell - (n - 1) * stride : -1);
+  }
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::scatter(const VectorX& x) const {
+  const int num_cells = static_cast<int>(q_.size());
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < num_cells; ++c) {
+    const int i = dof_of_cell_[c];
+    q_[c] = i >= 0 ? liquid_[i] * x[i] : 0.0;
+  }
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
   y.resize(num_dofs_);
-  // (A x)_i = W_i sum_f k_f (W_i x_i - W_j x_j), the stencil of W G^T K G W
+  scatter(x);
+  // (A x)_i = W_i sum_f k_f (q_i - q_j), q = W x: the stencil of W G^T K G W, per grid row
+  const int n0 = cells_[0];
+  const int rows = static_cast<int>(q_.size()) / n0;
 #pragma omp parallel for schedule(static)
-  for (int i = 0; i < num_dofs_; ++i) {
-    const double qi = liquid_[i] * x[i];
-    double sum = 0.0;
-    for (int j = 0; j < kNeighbours; ++j) {
-      const int s = i * kNeighbours + j;
-      const int n = neighbour_[s];
-      sum += coefficient_[s] * (qi - (n >= 0 ? liquid_[n] * x[n] : 0.0));
+  for (int r = 0; r < rows; ++r) {
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % cells_[a];
+      rest /= cells_[a];
     }
-    y[i] = liquid_[i] * sum;
+    for (int x0 = 0; x0 < n0; ++x0) {
+      const int cell = r * n0 + x0;
+      const int i = dof_of_cell_[cell];
+      if (i < 0) continue;
+      c[0] = x0;
+      std::array<int, 2 * Dim> face, other;
+      cell_stencil(c, face, other);
+      const double qi = q_[cell];
+      double sum = 0.0;
+      for (int j = 0; j < 2 * Dim; ++j)
+        sum += coefficient_[face[j]] * (qi - (other[j] >= 0 ? q_[other[j]] : 0.0));
+      y[i] = liquid_[i] * sum;
+    }
   }
 }
 
 template <int Dim>
-double MatrixFreePressureOperator<Dim>::off_diagonal_product(int i, const VectorX& x) const {
-  // sum_{j != i} A_ij x_j with A_ij = -k_f W_i W_j over the neighbours of i
-  double off = 0.0;
-  for (int j = 0; j < kNeighbours; ++j) {
-    const int s = i * kNeighbours + j;
-    const int n = neighbour_[s];
-    if (n >= 0) off -= coefficient_[s] * liquid_[i] * liquid_[n] * x[n];
+void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, VectorX& x,
+                                            double omega, const std::vector<char>* active) const {
+  // q = W x of the starting x, kept current as DOFs change
+  scatter(x);
+  const int n0 = cells_[0];
+  const int rows = static_cast<int>(q_.size()) / n0;
+  auto relax_row = [&](int r, int parity) {
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r, sum = 0;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % cells_[a];
+      rest /= cells_[a];
+      sum += c[a];
+    }
+    const int first = (parity + sum) % 2;
+    if (first >= n0) return;
+    const int last = first + 2 * ((n0 - 1 - first) / 2);
+    // within an independent colour the order does not matter: ascending (memory order) then
+    const bool descending = reverse && !colouring_valid_;
+    for (int step = 0; step <= (last - first) / 2; ++step) {
+      const int x0 = descending ? last - 2 * step : first + 2 * step;
+      const int cell = r * n0 + x0;
+      const int i = dof_of_cell_[cell];
+      if (i < 0 || diagonal_[i] == 0.0 || (active && !(*active)[i])) continue;
+      c[0] = x0;
+      std::array<int, 2 * Dim> face, other;
+      cell_stencil(c, face, other);
+      // sum_{j != i} A_ij x_j = -W_i sum_f k_f W_j x_j over the neighbours of i
+      double off = 0.0;
+      for (int j = 0; j < 2 * Dim; ++j)
+        if (other[j] >= 0 && other[j] != cell) off -= coefficient_[face[j]] * q_[other[j]];
+      off *= liquid_[i];
+      x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
+      q_[cell] = liquid_[i] * x[i];
+    }
+  };
+  for (int step = 0; step < 2; ++step) {
+    const int parity = reverse ? 1 - step : step;
+    if (colouring_valid_) {
+      // cells of one colour only couple to the other colour: rows in parallel
+#pragma omp parallel for schedule(static)
+      for (int r = 0; r < rows; ++r) relax_row(r, parity);
+    } else if (!reverse) {
+      for (int r = 0; r < rows; ++r) relax_row(r, parity);
+    } else {
+      for (int r = rows - 1; r >= 0; --r) relax_row(r, parity);
+    }
   }
-  return off;
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                     const std::vector<char>* active) const {
-  // dofs of one colour only couple to the other colour (unless an odd periodic axis breaks it)
-  colour_sweep(colour_dofs_, colouring_valid_, false, diagonal_, rhs, x, omega, active,
-               [&](int i) { return off_diagonal_product(i, x); });
+  sweep(false, rhs, x, omega, active);
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                      const std::vector<char>* active) const {
-  colour_sweep(colour_dofs_, colouring_valid_, true, diagonal_, rhs, x, omega, active,
-               [&](int i) { return off_diagonal_product(i, x); });
+  sweep(true, rhs, x, omega, active);
 }
 
 template <int Dim>
 VectorX MatrixFreePressureOperator<Dim>::rhs(const VectorX& u_star) const {
   VectorX b(num_dofs_);
-  const double inv_dx = 1.0 / grid_->dx();
-  // b_i = W_i sum_f s_if W_F^u_f u*_f / dx  (s = +1 on the cell's lower faces, -1 on upper)
+  // b_i = W_i sum_f s_if W_F^u_f u*_f / dx  (s = +1 on the cell's lower faces, -1 on upper, 0
+  // on a face onto the cell itself)
+  const int num_cells = static_cast<int>(q_.size());
 #pragma omp parallel for schedule(static)
-  for (int i = 0; i < num_dofs_; ++i) {
+  for (int cell = 0; cell < num_cells; ++cell) {
+    const int i = dof_of_cell_[cell];
+    if (i < 0) continue;
+    VecI<Dim> c = lattice_coord<Dim>(cell, cells_);
+    std::array<int, 2 * Dim> face, other;
+    cell_stencil(c, face, other);
     double sum = 0.0;
-    for (int j = 0; j < kNeighbours; ++j) {
-      const int s = i * kNeighbours + j;
-      sum += face_sign_[s] * fluid_face_[face_[s]] * u_star[face_[s]];
+    for (int j = 0; j < 2 * Dim; ++j) {
+      const double sign = other[j] == cell ? 0.0 : (j % 2 == 0 ? 1.0 : -1.0);
+      sum += sign * fluid_face_[face[j]] * u_star[face[j]];
     }
-    b[i] = liquid_[i] * sum * inv_dx;
+    b[i] = liquid_[i] * sum * inv_dx_;
   }
   return b;
+}
+
+template <int Dim>
+std::size_t MatrixFreePressureOperator<Dim>::memory_bytes() const {
+  std::size_t bytes = sizeof(int) * dof_of_cell_.size() +
+                      sizeof(double) * (liquid_.size() + coefficient_.size() +
+                                        fluid_face_.size() + diagonal_.size() + q_.size());
+  for (const VectorX& n : null_space_) bytes += sizeof(double) * n.size();
+  return bytes;
+}
+
+template <int Dim>
+double MatrixFreePressureOperator<Dim>::bytes_per_apply() const {
+  // cells: map twice, q written and read; faces: k once; DOFs: x, W twice, y
+  return static_cast<double>(q_.size()) * (2 * sizeof(int) + 2 * sizeof(double)) +
+         static_cast<double>(coefficient_.size()) * sizeof(double) +
+         static_cast<double>(num_dofs_) * 4 * sizeof(double);
 }
 
 template <int Dim>

@@ -12,6 +12,7 @@
 /// W_F^u > 0; every other cell has p = 0. A is restricted to those DOFs (rows and columns).
 
 #include <array>
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -70,9 +71,15 @@ ExplicitPressureSystem assemble_explicit_pressure(const MacGrid<Dim>& grid,
                                                   const PressureDofs& dofs, double dt,
                                                   const VectorX& u_star);
 
-/// Matrix-free back end: the same A (eq. (8), A22 of eq. (24)) applied by a stencil loop over the
-/// DOFs (OpenMP, one writer per output entry, deterministic). SSOR sweeps use red-black ordering
-/// of the cells (by the parity of the sum of cell coordinates), each colour in parallel.
+/// Matrix-free back end: the same A (eq. (8), A22 of eq. (24)) applied by a stencil loop over
+/// the cells (OpenMP over grid rows, one writer per output entry, deterministic):
+///   (A x)_i = W_i sum_{faces f of cell i} k_f (W_i x_i - W_j x_j),  k_f = dt W_F^u / (rho W_L^u dx^2),
+/// j the cell across f (W_j x_j = 0 outside the domain or on inactive cells). It stores k_f and
+/// W_F^u per face, a cell -> DOF map, W_L^p and A_ii per DOF; the neighbours come from the grid
+/// layout on the fly. SSOR sweeps use red-black ordering of the cells (by the parity of the sum of
+/// cell coordinates), each colour in parallel (serially in grid order on an odd periodic axis).
+/// Scratch is sized at construction: apply and the sweeps allocate nothing, and one operator must
+/// not run two of them at once from different threads.
 template <int Dim>
 class MatrixFreePressureOperator : public LinearOperator {
  public:
@@ -89,23 +96,34 @@ class MatrixFreePressureOperator : public LinearOperator {
   /// b = W_L^p G^T W_F^u u* restricted to the DOFs, by a stencil loop.
   VectorX rhs(const VectorX& u_star) const;
 
+  /// Bytes the operator holds (coefficients, map, scratch), for the benchmark harness.
+  std::size_t memory_bytes() const override;
+  /// Bytes one apply reads and writes at least (every array it streams through once per pass).
+  double bytes_per_apply() const override;
+
  private:
-  static constexpr int kNeighbours = 2 * Dim;
-  /// sum_{j != i} A_ij x_j (the row of i without its diagonal), for the SOR sweeps.
-  double off_diagonal_product(int i, const VectorX& x) const;
-  const MacGrid<Dim>* grid_;
+  /// The 2 Dim faces of the cell at c (lower then upper per axis) and the cell across each (-1
+  /// outside; the cell itself across a periodic axis of one cell).
+  void cell_stencil(const VecI<Dim>& c, std::array<int, 2 * Dim>& face,
+                    std::array<int, 2 * Dim>& other) const;
+  /// q = W_L^p x on the cells (zero on inactive cells).
+  void scatter(const VectorX& x) const;
+  void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
+             const std::vector<char>* active) const;
+  VecI<Dim> cells_ = VecI<Dim>::Zero();
+  std::array<bool, Dim> periodic_{};
+  std::array<int, Dim> face_offset_{};
+  std::array<VecI<Dim>, Dim> face_dims_{};
+  double inv_dx_ = 1.0;
   int num_dofs_ = 0;
-  std::vector<int> cell_of_dof_;
-  VectorX liquid_;                   ///< W_L^p per DOF
-  VectorX fluid_face_;               ///< W_F^u per face (for rhs)
-  std::vector<int> neighbour_;       ///< per DOF and face: neighbour DOF, -1 none
-  std::vector<double> coefficient_;  ///< per DOF and face: dt W_F^u P^-1 (W_L^u)^-1 / dx^2
-  std::vector<int> face_;            ///< per DOF and face: face index (for rhs)
-  std::vector<double> face_sign_;    ///< +1 if the DOF is the face's plus cell, -1 if minus
+  std::vector<int> dof_of_cell_;  ///< per cell: DOF or -1
+  VectorX liquid_;                ///< W_L^p per DOF
+  VectorX coefficient_;           ///< k_f = dt W_F^u P^-1 (W_L^u)^-1 / dx^2 per face
+  VectorX fluid_face_;            ///< W_F^u per face (for rhs)
   VectorX diagonal_;
-  std::array<std::vector<int>, 2> colour_dofs_;
   bool colouring_valid_ = true;  ///< false on odd periodic axes: colours then run serially
   std::vector<VectorX> null_space_;
+  mutable VectorX q_;  ///< scratch: W_L^p x on the cells
 };
 
 /// u <- u - dt P^-1 (W_L^u)^-1 G W_L^p p on faces with W_F^u W_L^u > 0 (the update of eq. (4)

@@ -218,6 +218,24 @@ void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms
   }
 }
 
+/// Index of the first entry (coordinate 0 along axis 0) of the row of field f at the row
+/// coordinates of c (axes 1..Dim-1) shifted by delta along `axis` (no shift for axis 0), wrapped
+/// on periodic axes; -1 if the row lies outside the domain.
+template <int Dim, class FieldT>
+int row_start(const FieldT& f, const VecI<Dim>& c, int axis, int delta,
+              const std::array<bool, Dim>& periodic) {
+  int row = 0;
+  for (int a = Dim - 1; a >= 1; --a) {
+    int v = c[a] + (axis == a ? delta : 0);
+    if (v < 0 || v >= f.dims[a]) {
+      if (!periodic[a]) return -1;
+      v = ((v % f.dims[a]) + f.dims[a]) % f.dims[a];
+    }
+    row = row * f.dims[a] + v;
+  }
+  return f.offset + row * f.dims[0];
+}
+
 }  // namespace
 
 template <int Dim>
@@ -469,40 +487,12 @@ void MatrixFreeStokesOperator<Dim>::sweep_group(int field, int parity, bool reve
   int rows = 1;
   for (int a = 1; a < Dim; ++a) rows *= f.dims[a];
   double* force = face_scratch_.data();
-  // relaxes the unknown at c (grid index d) and adds its change to the force on its faces
-  auto relax = [&](const VecI<Dim>& c, int d) {
-    const int u = map[d];
-    if (u < 0 || diagonal_[u] == 0.0 || (active && !(*active)[u])) return;
-    std::array<int, 2 * Dim + 2> face;
-    std::array<double, 2 * Dim + 2> b;
-    int count = 0;
-    for (const Term& t : terms_[field]) {
-      const int fi = index_or_outside(t.field, c, t.axis, t.delta);
-      if (fi < 0) continue;
-      face[count] = fi;
-      b[count++] = weight_[u] * t.coef;
-    }
-    double ax = self_[u] * x[u];
-    if (reduced_diagonal) {
-      const int cell = d - f.offset;
-      for (const Term& t : terms_[Dim + eliminated_]) {
-        const int fi = index_or_outside(t.field, c, t.axis, t.delta);
-        if (fi < 0) continue;
-        face[count] = fi;
-        b[count++] = eliminated_weight_[cell] * t.coef;
-      }
-      if constexpr (Dim == 3) {
-        const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + cell];
-        if (partner >= 0) ax += eliminated_coupling_[cell] * x[partner];
-      }
-    }
-    // (A x)_u = sum_f B_fu C_f (B x)_f + the N part
-    for (int m = 0; m < count; ++m) ax += b[m] * face_coefficient_[face[m]] * force[face[m]];
-    const double off = ax - diagonal_[u] * x[u];
-    const double updated = (1.0 - omega) * x[u] + omega * (rhs[u] - off) / diagonal_[u];
-    const double change = updated - x[u];
-    x[u] = updated;
-    for (int m = 0; m < count; ++m) force[face[m]] += b[m] * change;
+  // the faces of the column of B of every entry of a row: per stencil term the start of the
+  // face row and the shift along axis 0 (eq. (8)'s D or G^T rows, as in stencil_rows)
+  struct RowTerm {
+    int start = 0, shift = 0, length = 0;
+    double coef = 0.0;
+    bool eliminated = false;
   };
   auto relax_row = [&](int r) {
     VecI<Dim> c = VecI<Dim>::Zero();
@@ -512,19 +502,60 @@ void MatrixFreeStokesOperator<Dim>::sweep_group(int field, int parity, bool reve
       rest /= f.dims[a];
       sum += c[a];
     }
+    std::array<RowTerm, 2 * Dim + 2> row_terms;
+    int num_terms = 0;
+    auto add_terms = [&](int of_field, bool eliminated) {
+      for (const Term& t : terms_[of_field]) {
+        const int start = row_start<Dim>(fields_[t.field], c, t.axis, t.delta, periodic_);
+        if (start < 0) continue;  // faces outside the domain: zero velocity
+        row_terms[num_terms++] = {start, t.axis == 0 ? t.delta : 0, fields_[t.field].dims[0],
+                                  t.coef, eliminated};
+      }
+    };
+    add_terms(field, false);
+    if (reduced_diagonal) add_terms(Dim + eliminated_, true);
     // the entries of this colour: coordinate sum of the given parity
     const int first = (parity + sum) % 2;
+    if (first >= n0) return;
+    const int last = first + 2 * ((n0 - 1 - first) / 2);
     const int base = f.offset + r * n0;
-    if (!reverse) {
-      for (int x0 = first; x0 < n0; x0 += 2) {
-        c[0] = x0;
-        relax(c, base + x0);
+    // within an independent group the order does not matter: ascending (memory order) then
+    const bool descending = reverse && !colouring_valid_;
+    for (int step = 0; step <= (last - first) / 2; ++step) {
+      const int x0 = descending ? last - 2 * step : first + 2 * step;
+      const int d = base + x0;
+      const int u = map[d];
+      if (u < 0 || diagonal_[u] == 0.0 || (active && !(*active)[u])) continue;
+      // the faces of u and their B_fu
+      std::array<int, 2 * Dim + 2> face;
+      std::array<double, 2 * Dim + 2> b;
+      int count = 0;
+      for (int m = 0; m < num_terms; ++m) {
+        const RowTerm& t = row_terms[m];
+        int xi = x0 + t.shift;
+        if (xi < 0 || xi >= t.length) {
+          if (!periodic_[0]) continue;
+          xi = ((xi % t.length) + t.length) % t.length;
+        }
+        face[count] = t.start + xi;
+        b[count++] = (t.eliminated ? eliminated_weight_[x0 + r * n0] : weight_[u]) * t.coef;
       }
-    } else if (first < n0) {
-      for (int x0 = first + 2 * ((n0 - 1 - first) / 2); x0 >= 0; x0 -= 2) {
-        c[0] = x0;
-        relax(c, base + x0);
+      double ax = self_[u] * x[u];
+      if constexpr (Dim == 3) {
+        if (reduced_diagonal) {
+          // the other diagonal unknown of the cell, through the eliminated DOF's N^-1
+          const int cell = d - f.offset;
+          const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + cell];
+          if (partner >= 0) ax += eliminated_coupling_[cell] * x[partner];
+        }
       }
+      // (A x)_u = sum_f B_fu C_f (B x)_f + the N part; relax, then move the force with x_u
+      for (int m = 0; m < count; ++m) ax += b[m] * face_coefficient_[face[m]] * force[face[m]];
+      const double off = ax - diagonal_[u] * x[u];
+      const double updated = (1.0 - omega) * x[u] + omega * (rhs[u] - off) / diagonal_[u];
+      const double change = updated - x[u];
+      x[u] = updated;
+      for (int m = 0; m < count; ++m) force[face[m]] += b[m] * change;
     }
   };
   if (colouring_valid_) {
