@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 #include "reference/deformation_rate.hpp"
@@ -136,7 +137,9 @@ template <int Dim>
 VectorX NonNewtonianViscosity<Dim>::initial_viscosity(const VectorX& fluid_face,
                                                       const VectorX& u_star, const VectorX& warm) {
   residuals_.clear();
-  if (warm.size() == stress_.num_dofs()) {
+  const bool has_warm = warm.size() == stress_.num_dofs();
+  const bool complete = has_warm && warm.allFinite();
+  if (complete) {
     s_ = warm;
     return mixture_.viscosity(s_);
   }
@@ -145,7 +148,19 @@ VectorX NonNewtonianViscosity<Dim>::initial_viscosity(const VectorX& fluid_face,
   for (int i = 0; i < rate.size(); ++i) rate[i] = active_[i] ? rate[i] / fluid_stress_[i] : 0.0;
   // line 3: eq. (27) at the interpolated norm
   s_ = shear_rate_norm(stress_, rate, active_);
+  // a partial warm start: the previous rate where it has one (finite), line 1 elsewhere
+  if (has_warm)
+    for (int i = 0; i < s_.size(); ++i)
+      if (std::isfinite(warm[i])) s_[i] = warm[i];
   return mixture_.viscosity(s_);
+}
+
+template <int Dim>
+VectorX NonNewtonianViscosity<Dim>::previous_shear_rate() const {
+  VectorX warm = s_;
+  for (int i = 0; i < warm.size(); ++i)
+    if (!active_[i]) warm[i] = std::numeric_limits<double>::quiet_NaN();
+  return warm;
 }
 
 template <int Dim>

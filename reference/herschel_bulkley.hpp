@@ -118,7 +118,9 @@ class NonNewtonianViscosity {
   /// eta^1. With `warm` (one shear rate s per stress DOF, e.g. the previous step's
   /// shear_rate()) line 1 is replaced by s^1 = warm: the iteration's fixed point is the same,
   /// only its start differs (docs/non-newtonian.md: with 2 rounds from u* a steady flow is not
-  /// a fixed point of the time stepping, the wall rate of u* carries dt g / dx).
+  /// a fixed point of the time stepping, the wall rate of u* carries dt g / dx). A non-finite
+  /// entry of `warm` (NaN: no previous rate there, e.g. a DOF that just became active) takes
+  /// line 1's value at that DOF (the simulator's start, previous_shear_rate()).
   VectorX initial_viscosity(const VectorX& fluid_face, const VectorX& u_star,
                             const VectorX& warm = VectorX());
   /// Line 6 and line 3 for k + 1: gamma_dot^(k+1) = tau / (2 eta) on the active DOFs with
@@ -133,6 +135,9 @@ class NonNewtonianViscosity {
   /// The last shear rate s per stress DOF (equivalent simple-shear rate).
   const VectorX& shear_rate() const { return s_; }
   const std::vector<char>& active() const { return active_; }
+  /// The warm start for the next step on the same layout: shear_rate() on the DOFs that were
+  /// active, NaN elsewhere (initial_viscosity then falls back to line 1 there).
+  VectorX previous_shear_rate() const;
 
  private:
   StressGrid<Dim> stress_;

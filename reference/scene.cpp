@@ -132,6 +132,46 @@ const Range kNonNegative{0.0, kInf, false, false, "a finite number >= 0"};
 const Range kUnitClosed{0.0, 1.0, false, false, "a number in [0, 1]"};
 const Range kUnitOpen{0.0, 1.0, true, true, "a number in (0, 1)"};
 
+}  // namespace
+
+const std::vector<std::string>& viscosity_preset_names() {
+  static const std::vector<std::string> names = {"newtonian", "shear-thinning", "shear-thickening",
+                                                 "bingham"};
+  return names;
+}
+
+ViscositySpec viscosity_preset(const std::string& name) {
+  // section 6.4.1 (Fig. 10): (r, gamma0, tau0, k) = (1, 1, 0, 11), (0.5, 1, 1, 10),
+  // (2, 1, 1, 10), (1, 1, 1e3, 10)
+  ViscositySpec v;
+  v.model = "herschel-bulkley";
+  v.preset = name;
+  v.gamma0 = 1.0;
+  if (name == "newtonian") {
+    v.k = 11.0;
+    v.n = 1.0;
+    v.tau0 = 0.0;
+  } else if (name == "shear-thinning") {
+    v.k = 10.0;
+    v.n = 0.5;
+    v.tau0 = 1.0;
+  } else if (name == "shear-thickening") {
+    v.k = 10.0;
+    v.n = 2.0;
+    v.tau0 = 1.0;
+  } else if (name == "bingham") {
+    v.k = 10.0;
+    v.n = 1.0;
+    v.tau0 = 1e3;
+  } else {
+    throw InputError("viscosity preset: unknown name \"" + name + "\" (one of " +
+                     quoted_list(viscosity_preset_names()) + ")");
+  }
+  return v;
+}
+
+namespace {
+
 /// The validating reader: every helper records problems instead of throwing.
 class SceneParser {
  public:
@@ -782,7 +822,18 @@ SceneDesc parse_scene(const json& j, const std::string& label, const std::filesy
               p.check_keys(*vj, vp, {"model", "eta"});
               p.opt_number(*vj, vp, "eta", kNonNegative, l.viscosity.eta);
             } else {
-              p.check_keys(*vj, vp, {"model", "k", "n", "tau0", "gamma0"});
+              p.check_keys(*vj, vp, {"model", "preset", "k", "n", "tau0", "gamma0"});
+              // a named section 6.4.1 set first; explicit keys next to it override it
+              std::string preset;
+              if (const json* pj = p.member(*vj, "preset", vp, false, "one of " + quoted_list(viscosity_preset_names())))
+                if (p.read_enum(*pj, vp + ".preset", viscosity_preset_names(), preset)) {
+                  const ViscositySpec set = viscosity_preset(preset);
+                  l.viscosity.k = set.k;
+                  l.viscosity.n = set.n;
+                  l.viscosity.tau0 = set.tau0;
+                  l.viscosity.gamma0 = set.gamma0;
+                  l.viscosity.preset = preset;
+                }
               p.opt_number(*vj, vp, "k", kNonNegative, l.viscosity.k);
               p.opt_number(*vj, vp, "n", kPositive, l.viscosity.n);
               p.opt_number(*vj, vp, "tau0", kNonNegative, l.viscosity.tau0);

@@ -42,6 +42,9 @@ struct ViscositySpec {
   double n = 1.0;
   double tau0 = 0.0;
   double gamma0 = 1e-3;
+  /// herschel-bulkley only: the named set it started from (`"preset"`, viscosity_preset), or
+  /// empty; explicit keys next to it have overridden its values above.
+  std::string preset = "";
   /// True when this liquid needs stress unknowns (any non-zero viscosity).
   bool is_viscous() const { return model != "newtonian" || eta > 0.0; }
 };
@@ -108,6 +111,10 @@ struct SolverSpec {
   double contact_margin = 0.1;  ///< epsilon of section 3.2.4, in units of dx
   double shrink = 0.01;         ///< zeta of section 4.4.6, in units of dx
   double diagonal_boost = 1e-4; ///< gamma of section 4.4.5
+  /// Algorithm 2's line 1 in the simulator (section 5): true (default) starts each step's
+  /// viscosity rounds from the previous step's shear rate where it has one, false from the rate
+  /// of u* as printed (docs/non-newtonian.md). Not a scene key: set from C++ (tests, benches).
+  bool viscosity_warm_start = true;
 };
 
 /// Particle seeding and maintenance (an addition to the contract's keys).
@@ -145,6 +152,14 @@ struct SceneDesc {
   /// Cell width (cells are cubic: validated).
   double dx() const { return (domain.upper[0] - domain.lower[0]) / domain.cells[0]; }
 };
+
+/// The named herschel-bulkley sets of a scene's `"viscosity": {"model": "herschel-bulkley",
+/// "preset": NAME}`: "newtonian", "shear-thinning", "shear-thickening", "bingham".
+const std::vector<std::string>& viscosity_preset_names();
+/// The section 6.4.1 (Fig. 10) set NAME as eq. (27)'s (k, n = r, tau0, gamma0): newtonian
+/// (11, 1, 0, 1), shear-thinning (10, 0.5, 1, 1), shear-thickening (10, 2, 1, 1), bingham
+/// (10, 1, 1e3, 1). Throws InputError for any other name.
+ViscositySpec viscosity_preset(const std::string& name);
 
 /// Parses and validates a scene. Collects every problem it finds and throws one InputError that
 /// lists them all (one line each: `LABEL: key.path: what is wrong (what is allowed)`).

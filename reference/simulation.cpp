@@ -209,6 +209,10 @@ class Simulation : public AnySimulation {
   bool non_newtonian_ = false;
   ViscosityMixture mixture_;
   std::shared_ptr<const SparseMatrix> deformation_rate_;  ///< D of eq. (8), built once
+  /// Algorithm 2's start (departure, docs/non-newtonian.md): the shear rate s per stress DOF at
+  /// the end of the previous step, NaN where that step had no unknown (line 1 there); empty
+  /// before the first step or with solver.viscosity_warm_start off
+  VectorX previous_shear_rate_;
   // liquid state
   Particles<Dim> particles_;
   VectorX liquid_phi_;
@@ -549,7 +553,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
     model = std::make_unique<NonNewtonianViscosity<Dim>>(
         stress_grid_, deformation_rate_, solid_weights_.fluid_stress, stress_liquid_, mixture_);
     options.initial_viscosity = [&](const VectorX& u_star) {
-      eta = model->initial_viscosity(solid_weights_.fluid_face, u_star);
+      eta = model->initial_viscosity(solid_weights_.fluid_face, u_star, previous_shear_rate_);
       return eta;
     };
     options.update_viscosity = [&](const VectorX& tau, const VectorX& used) {
@@ -561,7 +565,10 @@ void Simulation<Dim>::solve_coupled(double dt) {
       solve_coupled_step<Dim>(in, parse_coupling_scheme(scene_.solver.scheme), ss, options);
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
-  if (model) record_viscosity_rounds(model->residuals());
+  if (model) {
+    record_viscosity_rounds(model->residuals());
+    if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
+  }
   u_ = r.u;
   pressure_ = r.pressure;
   stress_ = r.stress;
@@ -663,7 +670,7 @@ void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
       pressure_ = solve.pressure;
       stress_ = solve.stress;
       return solve.stress;
-    });
+    }, previous_shear_rate_);
   } else {
     // PC-VC-PC: Algorithm 2 around the viscosity solve, from the first pressure solve's u
     const PressureSolveResult first =
@@ -679,7 +686,7 @@ void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
       record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
       stress_ = viscous.stress;
       return viscous.stress;
-    });
+    }, previous_shear_rate_);
     const PressureSolveResult second =
         solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
     record_solve(second.pcg, second.dofs, 0, "second pressure");
@@ -688,6 +695,8 @@ void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
   // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
   cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
   record_viscosity_rounds(model.residuals());
+  // the next step starts from this step's rate (departure from line 1, docs/non-newtonian.md)
+  if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model.previous_shear_rate();
 }
 
 template <int Dim>

@@ -527,3 +527,63 @@ TEST_CASE("the memory estimate grows with cells and particles", "[unit][property
   CHECK(c > b);
   CHECK(estimate_memory_bytes(3, {64, 64, 64}, 0) > estimate_memory_bytes(2, {64, 64}, 0) * 60);
 }
+
+TEST_CASE("herschel-bulkley presets give the section 6.4.1 sets; explicit keys override them",
+          "[unit]") {
+  struct Expected {
+    const char* name;
+    double k, n, tau0, gamma0;
+  };
+  // section 6.4.1 (Fig. 10): (r, gamma0, tau0, k)
+  for (const Expected e : {Expected{"newtonian", 11.0, 1.0, 0.0, 1.0}, Expected{"shear-thinning", 10.0, 0.5, 1.0, 1.0},
+                           Expected{"shear-thickening", 10.0, 2.0, 1.0, 1.0}, Expected{"bingham", 10.0, 1.0, 1e3, 1.0}}) {
+    CAPTURE(e.name);
+    for (int dim : {2, 3}) {
+      json j = base_scene(dim);
+      j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"preset", e.name}};
+      const ViscositySpec v = parse_scene(j, "test.json", ".").liquids[0].viscosity;
+      CHECK(v.model == "herschel-bulkley");
+      CHECK(v.preset == e.name);
+      CHECK(v.k == e.k);
+      CHECK(v.n == e.n);
+      CHECK(v.tau0 == e.tau0);
+      CHECK(v.gamma0 == e.gamma0);
+      CHECK(v.is_viscous());
+    }
+  }
+  // Fig. 11's Bingham liquid: the preset with k = 100
+  json j = base_scene(2);
+  j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"preset", "bingham"}, {"k", 100}};
+  const ViscositySpec b = parse_scene(j, "test.json", ".").liquids[0].viscosity;
+  CHECK(b.k == 100.0);
+  CHECK(b.tau0 == 1e3);
+  CHECK(b.n == 1.0);
+  // the key order does not matter: an explicit key wins wherever it stands
+  j["liquids"][0]["viscosity"] = json::parse(R"({"tau0": 5, "model": "herschel-bulkley", "preset": "shear-thinning"})");
+  CHECK(parse_scene(j, "test.json", ".").liquids[0].viscosity.tau0 == 5.0);
+  // without a preset the defaults are unchanged (k = 0, n = 1, tau0 = 0, gamma0 = 1e-3)
+  j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"k", 2}};
+  const ViscositySpec plain = parse_scene(j, "test.json", ".").liquids[0].viscosity;
+  CHECK(plain.preset.empty());
+  CHECK(plain.gamma0 == 1e-3);
+  CHECK(plain.tau0 == 0.0);
+}
+
+TEST_CASE("an unknown viscosity preset names the file, the key path and the allowed names",
+          "[unit][validation]") {
+  json j = base_scene(3);
+  j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"preset", "shear-thining"}};
+  const auto lines = problems_of(j);
+  REQUIRE(lines.size() == 1);
+  CHECK(lines[0].rfind("test.json: liquids[0].viscosity.preset:", 0) == 0);
+  CHECK(mentions(lines, "did you mean \"shear-thinning\""));
+  for (const char* name : {"\"newtonian\"", "\"shear-thinning\"", "\"shear-thickening\"", "\"bingham\""})
+    CHECK(mentions(lines, name));
+  // a preset is a herschel-bulkley key: next to a newtonian model it is an unknown key
+  j["liquids"][0]["viscosity"] = {{"model", "newtonian"}, {"preset", "bingham"}};
+  CHECK(mentions(problems_of(j), "liquids[0].viscosity.preset"));
+  // not a string
+  j["liquids"][0]["viscosity"] = {{"model", "herschel-bulkley"}, {"preset", 3}};
+  CHECK(mentions(problems_of(j), "liquids[0].viscosity.preset"));
+  CHECK_THROWS_AS(viscosity_preset("honey"), InputError);
+}
