@@ -7,9 +7,13 @@
 
 #include <omp.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -19,11 +23,28 @@
 #include "reference/coupled_schemes.hpp"
 #include "reference/coupling.hpp"
 #include "reference/monolithic_system.hpp"
+#include "reference/mprgp.hpp"
+#include "reference/pcg.hpp"
 #include "reference/scene.hpp"
 #include "reference/simulation.hpp"
 #include "reference/volume_fractions.hpp"
 #include "tests/support/body_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
+
+#if defined(__GLIBC__)
+// Every malloc of this executable is counted (glibc's allocator underneath), so a test can
+// assert that an operator's apply allocates nothing beyond what its fluid part does (Eigen
+// allocates through malloc, not operator new).
+extern "C" void* __libc_malloc(std::size_t size);
+namespace {
+std::atomic<long> g_mallocs{0};
+}  // namespace
+extern "C" void* malloc(std::size_t size) {
+  g_mallocs.fetch_add(1, std::memory_order_relaxed);
+  return __libc_malloc(size);
+}
+#define MONOLITH_COUNTS_MALLOC 1
+#endif
 
 using namespace monolith;
 using monolith::testing::make_body;
@@ -466,4 +487,199 @@ TEST_CASE("Back ends: the matrix-free coupled step is deterministic, for 1 and 2
   check_deterministic<2>(random_scene<2>(16, 31, 0.8, 0.4, true), CouplingScheme::pvc_unified);
   check_deterministic<2>(random_scene<2>(16, 32, 0.8, 0.4, true), CouplingScheme::pv_c);
   check_deterministic<3>(random_scene<3>(8, 33, 0.8, 0.4, true), CouplingScheme::pvc_unified);
+}
+
+#ifdef MONOLITH_COUNTS_MALLOC
+namespace {
+
+/// mallocs made by f().
+template <class F>
+long mallocs_of(const F& f) {
+  const long before = g_mallocs.load();
+  f();
+  return g_mallocs.load() - before;
+}
+
+template <int Dim>
+void check_no_allocation(int n) {
+  const CoupledStepInput<Dim> in = random_scene<Dim>(n, 41, 0.8, 0.4, true);
+  const MonolithicSystem<Dim> m = make_system<Dim>(in, "matrixfree");
+  const MonolithicOperator<Dim> op(m, 1e-4);
+  const FluidBodyOperator<Dim> fluid_body(m);
+  const JacobiScaledOperator scaled(op);
+  const LinearOperator& stokes = m.stokes_operator();
+  const VectorX x = testing::random_vector(op.size(), 5), xf = x.head(m.num_fluid());
+  const VectorX b = testing::random_vector(op.size(), 6), bf = b.head(m.num_fluid());
+  std::vector<char> active(op.size(), 1);
+  active[1] = 0;
+  std::vector<char> active_f(active.begin(), active.begin() + m.num_fluid());
+  VectorX y(op.size()), yf(m.num_fluid()), z = x, zf = xf;
+  // warm up (first calls may size buffers), then count: the coupled operators may allocate only
+  // what their fluid part F allocates itself (none of the rigid part, the contact block or the
+  // splitting into blocks)
+  op.apply(x, y);
+  fluid_body.apply(xf, yf);
+  scaled.apply(x, y);
+  stokes.apply(xf, yf);
+  const long fluid_apply = mallocs_of([&] { stokes.apply(xf, yf); });
+  const long fluid_sweeps = mallocs_of([&] {
+    stokes.forward_sweep(bf, zf, 1.0, &active_f);
+    stokes.backward_sweep(bf, zf, 1.0, &active_f);
+  });
+  CHECK(mallocs_of([&] { op.apply(x, y); }) == fluid_apply);
+  CHECK(mallocs_of([&] { fluid_body.apply(xf, yf); }) == fluid_apply);
+  CHECK(mallocs_of([&] { scaled.apply(x, y); }) == fluid_apply);
+  CHECK(mallocs_of([&] {
+          op.forward_sweep(b, z, 1.0, &active);
+          op.backward_sweep(b, z, 1.0, &active);
+        }) == fluid_sweeps);
+  CHECK(mallocs_of([&] {
+          scaled.forward_sweep(b, z, 1.0, &active);
+          scaled.backward_sweep(b, z, 1.0, &active);
+        }) == fluid_sweeps);
+  std::printf("%dD: mallocs per apply: fluid part %ld, coupled operators the same\n", Dim, fluid_apply);
+}
+
+}  // namespace
+
+TEST_CASE("Back ends: the matrix-free coupled operators allocate nothing per apply or sweep",
+          "[unit][backends]") {
+  // the counter sees Eigen's allocations
+  REQUIRE(mallocs_of([] {
+            VectorX v = VectorX::Ones(1000);
+            REQUIRE(v.sum() == 1000.0);
+          }) >= 1);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  check_no_allocation<2>(16);
+  check_no_allocation<3>(8);
+  omp_set_num_threads(threads);
+}
+#endif
+
+namespace {
+
+template <int Dim>
+void time_backends(int n) {
+  using Clock = std::chrono::steady_clock;
+  const CoupledStepInput<Dim> in = random_scene<Dim>(n, 51, 0.8, 0.0, false);
+  for (const std::string backend : {"explicit", "matrixfree"}) {
+    const auto t0 = Clock::now();
+    const MonolithicSystem<Dim> s = make_system<Dim>(in, backend);
+    const MonolithicOperator<Dim> op(s, 1e-4);
+    const double setup = std::chrono::duration<double>(Clock::now() - t0).count();
+    const VectorX x = testing::random_vector(op.size(), 1);
+    VectorX y;
+    op.apply(x, y);
+    const int reps = 20;
+    auto t1 = Clock::now();
+    for (int k = 0; k < reps; ++k) op.apply(x, y);
+    const double apply = std::chrono::duration<double>(Clock::now() - t1).count() / reps;
+    VectorX z = x;
+    t1 = Clock::now();
+    for (int k = 0; k < reps; ++k) {
+      op.forward_sweep(x, z, 1.0);
+      op.backward_sweep(x, z, 1.0);
+    }
+    const double sweeps = std::chrono::duration<double>(Clock::now() - t1).count() / reps;
+    CoupledSchemeOptions options;
+    options.backend = backend;
+    t1 = Clock::now();
+    const CoupledSolveResult r = solve_coupled_step<Dim>(in, CouplingScheme::pvc_unified, solve_settings(1e-6), options);
+    const double solve = std::chrono::duration<double>(Clock::now() - t1).count();
+    std::printf("%dD %d^%d %-10s unknowns %d + %d + %d: set-up %.3f s, apply %.3f ms, SSOR %.3f ms, "
+                "PVC-unified %ld iterations in %.3f s (%.3f ms each)\n",
+                Dim, n, Dim, backend.c_str(), s.num_stress(), s.num_pressure(), s.num_contacts(), setup,
+                1e3 * apply, 1e3 * sweeps, r.coupled_iterations, solve, 1e3 * solve / std::max(1L, r.coupled_iterations));
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Back ends: timings of the coupled operator and a PVC-unified step (not a check)", "[.][timing]") {
+  time_backends<2>(64);
+  time_backends<3>(16);
+  time_backends<3>(24);
+}
+
+TEST_CASE("Back ends: PCG and MPRGP step counts per back end (diagnostic, not a check)", "[.][timing]") {
+  const CoupledStepInput<3> in = random_scene<3>(24, 51, 0.8, 0.0, false);
+  for (const std::string backend : {"explicit", "matrixfree"}) {
+    const MonolithicSystem<3> s = make_system<3>(in, backend);
+    const FluidBodyOperator<3> fb(s);
+    VectorX x = VectorX::Zero(fb.size());
+    PcgSettings pcg;
+    pcg.max_iterations = 20000;
+    const PcgResult p = pcg_solve(fb, s.fluid_rhs(VectorX(), VectorX()), x, pcg);
+    // Stokes part alone
+    VectorX xs = VectorX::Zero(fb.size());
+    const PcgResult ps = pcg_solve(s.stokes_operator(), s.fluid_rhs(VectorX(), VectorX()), xs, pcg);
+    const MonolithicOperator<3> op(s, 1e-4);
+    const JacobiScaledOperator scaled(op);
+    const int n = op.size(), nc = s.num_contacts();
+    VectorX lower = VectorX::Constant(n, -std::numeric_limits<double>::infinity());
+    VectorX upper = VectorX::Constant(n, std::numeric_limits<double>::infinity());
+    lower.tail(nc).setZero();
+    MprgpSettings ms;
+    ms.max_iterations = 20000;
+    VectorX y = VectorX::Zero(n);
+    const MprgpResult m = mprgp_solve(scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))),
+                                      lower, upper, y, ms);
+    VectorX w = VectorX::Zero(n);
+    const PcgResult pm = pcg_solve(scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), w, pcg);
+    MprgpSettings plain = ms;
+    plain.precondition = false;
+    VectorX y2 = VectorX::Zero(n);
+    const MprgpResult m2 = mprgp_solve(scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))),
+                                       lower, upper, y2, plain);
+    VectorX y3 = VectorX::Zero(n);
+    const MprgpResult m3 = mprgp_solve(op, s.mlcp_rhs(VectorX::Zero(s.num_friction())), lower, upper, y3, ms);
+    std::printf("%-10s A_ff PCG %d, A_stokes PCG %d, MPRGP %d (cg %d, expansion %d, proportioning %d), "
+                "PCG on scaled (26) unbounded %d (lambda min %.2e), MPRGP unpreconditioned %d, MPRGP unscaled %d\n",
+                backend.c_str(), p.iterations, ps.iterations, m.iterations, m.cg_steps, m.expansion_steps,
+                m.proportioning_steps, pm.iterations, w.tail(nc).minCoeff(), m2.iterations, m3.iterations);
+  }
+}
+
+namespace {
+
+/// z = SSOR^-1 r of an operator (forward then backward sweep from zero), as PCG and MPRGP apply it.
+VectorX ssor(const LinearOperator& a, const VectorX& r, const std::vector<char>* active) {
+  VectorX z = VectorX::Zero(r.size());
+  a.forward_sweep(r, z, 1.0, active);
+  a.backward_sweep(r, z, 1.0, active);
+  return z;
+}
+
+/// |r2^T M^-1 r1 - r1^T M^-1 r2| relative: the SSOR preconditioner M^-1 must be symmetric for CG.
+template <int Dim>
+void check_ssor_symmetric(const std::string& backend, int n) {
+  const CoupledStepInput<Dim> in = random_scene<Dim>(n, 61, 0.8, 0.4, true);
+  const MonolithicSystem<Dim> s = make_system<Dim>(in, backend);
+  const MonolithicOperator<Dim> op(s, 1e-4);
+  const JacobiScaledOperator scaled(op);
+  std::vector<char> active(op.size(), 1);
+  for (int i = 0; i < op.size(); i += 7) active[i] = 0;
+  active[op.size() - 1] = 0;  // a contact at its bound
+  const VectorX r1 = testing::random_vector(op.size(), 1), r2 = testing::random_vector(op.size(), 2);
+  for (const LinearOperator* a : {static_cast<const LinearOperator*>(&op), static_cast<const LinearOperator*>(&scaled)})
+    for (const std::vector<char>* mask : {static_cast<const std::vector<char>*>(nullptr),
+                                          static_cast<const std::vector<char>*>(&active)}) {
+      const VectorX z1 = ssor(*a, r1, mask), z2 = ssor(*a, r2, mask);
+      const double d = std::abs(r2.dot(z1) - r1.dot(z2)) / (r1.norm() * z2.norm());
+      INFO(backend << (a == &op ? " unscaled" : " scaled") << (mask ? " masked" : ""));
+      CHECK(d <= 1e-12);
+      if (mask)
+        for (int i = 0; i < op.size(); ++i)
+          if (!active[i]) REQUIRE(z1[i] == 0.0);
+    }
+}
+
+}  // namespace
+
+TEST_CASE("Back ends: the SSOR preconditioner of the coupled operators is symmetric", "[unit][backends]") {
+  for (const std::string backend : {"explicit", "matrixfree"}) {
+    check_ssor_symmetric<2>(backend, 16);
+    check_ssor_symmetric<3>(backend, 8);
+  }
 }
