@@ -563,17 +563,18 @@ int main(int argc, char** argv) {
   std::vector<Row> rows;
 
   std::printf(
+      "Per configuration; \"a / b\" = 2 threads / 1 thread:\n\n"
       "| dim | grid | back end | DOFs (p + tau) | set-up s | apply ms | iteration ms | "
-      "iteration ms (1 thr) | iterations | solve s (2 thr) | solve s (1 thr) | 1/2 thr | "
-      "peak MiB | bytes/DOF | apply GB/s | / triad "
-      "|\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "iterations | solve s (2 thr) | solve s (1 thr) | 1 thr / 2 thr | peak MiB | bytes/DOF | "
+      "apply GB/s | apply / triad "
+      "|\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   std::fflush(stdout);
   for (int dim : {2, 3}) {
     for (int n : dim == 2 ? sizes2 : sizes3) {
       for (const std::string& backend : backends) {
         Row row{dim, n, backend, run_configuration(exe, backend, dim, n, eta)};
         if (row.r.empty()) {
-          std::printf("| %dD | %d^%d | %s | child failed | | | | | | | | | | | | |\n", dim, n, dim,
+          std::printf("| %dD | %d^%d | %s | child failed | | | | | | | | | | |\n", dim, n, dim,
                       backend.c_str());
           continue;
         }
@@ -586,13 +587,14 @@ int main(int argc, char** argv) {
         r["triad_fraction"] = 1e9 * r["apply_gbs"] / triad[2];
         r["triad_fraction_1t"] = 1e9 * r["apply_gbs_1t"] / triad[1];
         std::printf(
-            "| %dD | %d^%d | %s | %.0f (%.0f + %.0f) | %.3f | %.3f | %.3f | %.3f | %.0f%s | "
-            "%.3f | %.3f | %.2f | %.1f | %.0f | %.2f | %.2f |\n",
+            "| %dD | %d^%d | %s | %.0f (%.0f + %.0f) | %.3f | %.3f / %.3f | %.2f / %.2f | "
+            "%.0f%s | %.3f | %.3f | %.2f | %.1f | %.0f | %.2f / %.2f | %.2f / %.2f |\n",
             dim, n, dim, backend.c_str(), r["dofs"], r["pressure_dofs"], r["stress_dofs"],
-            r["setup_s"], 1e3 * r["apply_s"], 1e3 * r["iteration_s"], 1e3 * r["iteration_s_1t"],
-            r["iterations"], r["converged"] > 0 ? "" : " (not converged)", r["solve_s"],
-            r["solve_s_1t"], r["thread_ratio"], r["peak_bytes"] / (1 << 20), r["bytes_per_dof"],
-            r["apply_gbs"], r["triad_fraction"]);
+            r["setup_s"], 1e3 * r["apply_s"], 1e3 * r["apply_s_1t"], 1e3 * r["iteration_s"],
+            1e3 * r["iteration_s_1t"], r["iterations"],
+            r["converged"] > 0 ? "" : " (not converged)", r["solve_s"], r["solve_s_1t"],
+            r["thread_ratio"], r["peak_bytes"] / (1 << 20), r["bytes_per_dof"], r["apply_gbs"],
+            r["apply_gbs_1t"], r["triad_fraction"], r["triad_fraction_1t"]);
         std::fflush(stdout);
         rows.push_back(row);
       }
@@ -601,47 +603,56 @@ int main(int argc, char** argv) {
 
   // explicit / matrix-free ratios per size
   std::printf(
-      "\nExplicit / matrix-free (2 threads):\n\n| dim | grid | per apply | per iteration | "
-      "iterations | whole solve | set-up | peak memory |\n|---|---|---|---|---|---|---|---|\n");
+      "\nExplicit / matrix-free (\"a / b\" = 2 threads / 1 thread):\n\n| dim | grid | per apply | "
+      "per iteration | iterations | whole solve | set-up | peak memory |\n"
+      "|---|---|---|---|---|---|---|---|\n");
   for (int dim : {2, 3}) {
     for (int n : dim == 2 ? sizes2 : sizes3) {
       const Row* e = find_row(rows, dim, n, "explicit");
       const Row* m = find_row(rows, dim, n, "matrixfree");
       if (!e || !m) continue;
       auto ratio = [&](const char* key) { return e->r.at(key) / m->r.at(key); };
-      std::printf("| %dD | %d^%d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f |\n", dim, n, dim,
-                  ratio("apply_s"), ratio("iteration_s"), ratio("iterations"), ratio("solve_s"),
-                  ratio("setup_s"), ratio("peak_bytes"));
+      std::printf(
+          "| %dD | %d^%d | %.2f / %.2f | %.2f / %.2f | %.2f | %.2f / %.2f | %.2f | %.2f |\n", dim,
+          n, dim, ratio("apply_s"), ratio("apply_s_1t"), ratio("iteration_s"),
+          ratio("iteration_s_1t"), ratio("iterations"), ratio("solve_s"), ratio("solve_s_1t"),
+          ratio("setup_s"), ratio("peak_bytes"));
     }
   }
 
   // the goals of issue 7, on the 3D scene at 48^3 and above (the largest 3D grids of --quick)
   std::printf("\nGoals (issue 7), 3D at %s:\n\n",
               quick ? "the quick sizes (not the goal's 48^3)" : ">= 48^3");
-  auto goal = [&](const std::string& what, double target, const char* key_e, const char* key_m,
-                  bool ratio_em, bool single_mf) {
+  // value: explicit[key] / matrix-free[key], or matrix-free[key] alone when `ratio` is false
+  auto goal = [&](const std::string& what, double target, const char* key, bool ratio) {
     for (int n : sizes3) {
       if (!quick && n < 48) continue;
       const Row* e = find_row(rows, 3, n, "explicit");
       const Row* m = find_row(rows, 3, n, "matrixfree");
-      if (!m || (!single_mf && !e)) continue;
-      const double value = single_mf  ? m->r.at(key_m)
-                           : ratio_em ? e->r.at(key_e) / m->r.at(key_m)
-                                      : 0.0;
+      if (!m || (ratio && !e)) continue;
+      const double value = ratio ? e->r.at(key) / m->r.at(key) : m->r.at(key);
       std::printf("- %s at %d^3: %.2f (goal >= %.2f): %s\n", what.c_str(), n, value, target,
                   value >= target ? "met" : "not met");
     }
   };
-  goal("matrix-free per iteration faster than explicit, x", 2.0, "iteration_s", "iteration_s", true,
-       false);
-  goal("matrix-free whole solve faster than explicit, x", 1.5, "solve_s", "solve_s", true, false);
-  goal("matrix-free 2 threads faster than 1 thread on the solve, x", 1.6, "", "thread_ratio", false,
+  goal("matrix-free faster per iteration than explicit (2 threads each), x", 2.0, "iteration_s",
        true);
-  goal("matrix-free apply bandwidth / 2-thread triad", 0.5, "", "triad_fraction", false, true);
-  goal("matrix-free apply bandwidth / 1-thread triad, both 1 thread", 0.5, "", "triad_fraction_1t",
-       false, true);
+  goal("matrix-free faster per whole solve than explicit (2 threads each), x", 1.5, "solve_s",
+       true);
+  goal("matrix-free 2 threads faster than 1 thread on the whole solve, x", 1.6, "thread_ratio",
+       false);
+  goal("matrix-free apply bandwidth / triad bandwidth (2 threads each)", 0.5, "triad_fraction",
+       false);
   goal("explicit / matrix-free peak memory per DOF (goal: matrix-free at most a third)", 3.0,
-       "bytes_per_dof", "bytes_per_dof", true, false);
+       "bytes_per_dof", true);
+  std::printf(
+      "\nThe same with 1 thread each (less sensitive to other processes on the cores):\n\n");
+  goal("matrix-free faster per iteration than explicit (1 thread each), x", 2.0, "iteration_s_1t",
+       true);
+  goal("matrix-free faster per whole solve than explicit (1 thread each), x", 1.5, "solve_s_1t",
+       true);
+  goal("matrix-free apply bandwidth / triad bandwidth (1 thread each)", 0.5, "triad_fraction_1t",
+       false);
 
   // the coupled scene (bodies and contacts), both back ends
   std::printf(
@@ -651,7 +662,7 @@ int main(int argc, char** argv) {
       "ms per MPRGP iteration | MPRGP iterations | solve s | difference |\n"
       "|---|---|---|---|---|---|---|---|---|---|\n");
   bench_coupled<2>(quick ? 64 : 128, eta);
-  bench_coupled<3>(quick ? 16 : 32, eta);
+  bench_coupled<3>(quick ? 16 : 24, eta);
 
   // CSV
   {
