@@ -476,8 +476,8 @@ void MatrixFreeStokesOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
 }
 
 template <int Dim>
-void MatrixFreeStokesOperator<Dim>::sweep_group(int field, int parity, bool reverse,
-                                                const VectorX& rhs, VectorX& x, double omega,
+void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const VectorX& rhs,
+                                                VectorX& x, double omega,
                                                 const std::vector<char>* active) const {
   const Field& f = fields_[field];
   const bool is_cell = field == kCellField;
@@ -494,7 +494,7 @@ void MatrixFreeStokesOperator<Dim>::sweep_group(int field, int parity, bool reve
     double coef = 0.0;
     bool eliminated = false;
   };
-  auto relax_row = [&](int r) {
+  auto relax_row = [&](int r, int parity) {
     VecI<Dim> c = VecI<Dim>::Zero();
     int rest = r, sum = 0;
     for (int a = 1; a < Dim; ++a) {
@@ -558,14 +558,19 @@ void MatrixFreeStokesOperator<Dim>::sweep_group(int field, int parity, bool reve
       for (int m = 0; m < count; ++m) force[face[m]] += b[m] * change;
     }
   };
+  const int first_colour = reverse ? 1 : 0, second_colour = 1 - first_colour;
   if (colouring_valid_) {
-    // no two unknowns of the group share a face: rows in parallel
+    // no two unknowns of one colour share a face: rows in parallel
+    for (int parity : {first_colour, second_colour}) {
 #pragma omp parallel for schedule(static)
-    for (int r = 0; r < rows; ++r) relax_row(r);
+      for (int r = 0; r < rows; ++r) relax_row(r, parity);
+    }
   } else if (!reverse) {
-    for (int r = 0; r < rows; ++r) relax_row(r);
+    for (int r = 0; r < rows; ++r) relax_row(r, first_colour);
+    for (int r = 0; r < rows; ++r) relax_row(r, second_colour);
   } else {
-    for (int r = rows - 1; r >= 0; --r) relax_row(r);
+    for (int r = rows - 1; r >= 0; --r) relax_row(r, first_colour);
+    for (int r = rows - 1; r >= 0; --r) relax_row(r, second_colour);
   }
 }
 
@@ -582,14 +587,14 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
     scatter(x, stress_scratch_.data(), cell_scratch_.data());
     faces_from_grid(stress_scratch_.data(), cell_scratch_.data(), force, false);
   }
-  // colour groups: stress components in layout order, then pressure; red then black
+  // colour groups: stress components in layout order, then pressure; red then black (the
+  // reverse order backward)
   const int blocks = static_cast<int>(layout_field_.size()) + (has_pressure_ ? 1 : 0);
-  for (int step = 0; step < 2 * blocks; ++step) {
-    const int g = reverse ? 2 * blocks - 1 - step : step;
-    const int block = g / 2;
+  for (int step = 0; step < blocks; ++step) {
+    const int block = reverse ? blocks - 1 - step : step;
     const int field =
         block < static_cast<int>(layout_field_.size()) ? layout_field_[block] : kCellField;
-    sweep_group(field, g % 2, reverse, rhs, x, omega, active);
+    sweep_block(field, reverse, rhs, x, omega, active);
   }
 }
 

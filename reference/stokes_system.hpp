@@ -183,9 +183,10 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// the cells), with the D / G coefficient (weights not applied). Returns the count.
   int column_faces(int field, const VecI<Dim>& c, std::array<int, 2 * Dim>& face,
                    std::array<double, 2 * Dim>& coef) const;
-  /// One colour group of an SSOR sweep, keeping force_ = B x current.
-  void sweep_group(int field, int parity, bool reverse, const VectorX& rhs, VectorX& x,
-                   double omega, const std::vector<char>* active) const;
+  /// The two colour groups (red then black; black then red when `reverse`) of one field in an
+  /// SSOR sweep, keeping the face force B x in the face scratch current.
+  void sweep_block(int field, bool reverse, const VectorX& rhs, VectorX& x, double omega,
+                   const std::vector<char>* active) const;
   void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
              const std::vector<char>* active) const;
 
