@@ -51,7 +51,7 @@ namespace monolith {
 ///     (O(surface) memory and work, no global matrix). stokes() and fluid_body_jacobian() are
 ///     empty under this back end.
 /// Both back ends agree to round-off (tests/test_backends.cpp); every function below works under
-/// both. Copies share the (immutable) fluid part.
+/// both. Copies share the fluid part (built once, never modified).
 template <int Dim>
 class MonolithicSystem {
  public:
