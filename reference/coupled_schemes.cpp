@@ -382,7 +382,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   if (scheme == CouplingScheme::pc_vc_pc_unified) {
     // section 6.2: PC-unified -> (u1, v1), VC-unified -> (u2, v2), PC-unified -> final
     const auto s1 = build_system(in, inviscid, StressForm::reduced,
-                                 StokesUnknowns::pressure_and_stress, in.u_star, in.bodies, options.backend);
+                                 StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
+                                 options.backend);
     const auto t1 = Clock::now();
     const Unknowns x1 = unified_solve(*s1, settings, r, r.coupled_iterations);
     const double pc1_seconds = seconds_since(t1);
@@ -459,7 +460,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     return r;
   }
   const auto s = build_system(in, viscous ? in.weights : inviscid, StressForm::reduced,
-                              StokesUnknowns::pressure_and_stress, in.u_star, in.bodies, options.backend);
+                              StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
+                              options.backend);
   count_dofs(*s, r);
   Unknowns x;
   if (scheme == CouplingScheme::pc_unified || scheme == CouplingScheme::pvc_unified) {

@@ -167,7 +167,8 @@ void MonolithicSystem<Dim>::build_rigid_columns(const BodyCouplingOperator<Dim>&
       }
       const int local = c.index - stress_.offset(Dim - 1);
       for (int j = 0; j < layout_.num_components(); ++j)
-        if (StressGrid<Dim>::is_diagonal(layout_.component(j))) add_unknown(layout_.offset(j) + local, -1.0);
+        if (StressGrid<Dim>::is_diagonal(layout_.component(j)))
+          add_unknown(layout_.offset(j) + local, -1.0);
     }
   rigid_columns_.clear();
   rigid_columns_.reserve(blocks.size());
@@ -234,7 +235,8 @@ void MonolithicSystem<Dim>::add_rigid_diagonal(double scale, Eigen::Ref<VectorX>
     const SparseMatrix mb = contacts_.m_r_inverse * b_fluid_;
     const SparseMatrix prod = b_fluid_.cwiseProduct(mb);
     for (int k = 0; k < prod.outerSize(); ++k)
-      for (SparseMatrix::InnerIterator it(prod, k); it; ++it) diagonal[it.col()] += scale * it.value();
+      for (SparseMatrix::InnerIterator it(prod, k); it; ++it)
+        diagonal[it.col()] += scale * it.value();
     return;
   }
   // M_r^-1 is block diagonal per body: c^T M_b^-1 c per column block
@@ -365,7 +367,8 @@ VectorX MonolithicSystem<Dim>::friction_rhs(const VectorX& x) const {
   VectorX b = b4();
   if (num_friction() == 0 || num_body_dofs() == 0) return b;
   // b4 - dt alpha J_z M_r^-1 (B_f x_f + J_lambda^T lambda)
-  const VectorX force = fluid_body_force(x.head(num_fluid())) + j_lambda_t_ * x.segment(num_fluid(), num_contacts());
+  const VectorX force =
+      fluid_body_force(x.head(num_fluid())) + j_lambda_t_ * x.segment(num_fluid(), num_contacts());
   b -= (dt_ * alpha_) * (contacts_.j_z * (contacts_.m_r_inverse * force));
   return b;
 }
@@ -633,14 +636,16 @@ Eigen::MatrixXd CoupledOperator<Dim>::dense_matrix() const {
 }
 
 template <int Dim>
-MonolithicOperator<Dim>::MonolithicOperator(const MonolithicSystem<Dim>& system, double contact_boost)
+MonolithicOperator<Dim>::MonolithicOperator(const MonolithicSystem<Dim>& system,
+                                            double contact_boost)
     : CoupledOperator<Dim>(system, true, contact_boost), contact_boost_(contact_boost) {}
 
 template <int Dim>
 SparseMatrix MonolithicOperator<Dim>::sparse_part() const {
   const MonolithicSystem<Dim>& s = this->system();
   if (s.matrix_free())
-    throw std::logic_error("MonolithicOperator::sparse_part: the matrixfree back end forms no matrix");
+    throw std::logic_error(
+        "MonolithicOperator::sparse_part: the matrixfree back end forms no matrix");
   // S = blockdiag(A_stokes, A33 + gamma diag(A33)), row by row (both blocks row-major)
   const int nf = s.num_fluid(), nc = s.num_contacts();
   const SparseMatrix& a = s.stokes().A;
@@ -653,7 +658,8 @@ SparseMatrix MonolithicOperator<Dim>::sparse_part() const {
   for (int i = 0; i < nf; ++i)
     for (SparseMatrix::InnerIterator it(a, i); it; ++it) m.insert(i, it.col()) = it.value();
   for (int i = 0; i < nc; ++i)
-    for (SparseMatrix::InnerIterator it(a33, i); it; ++it) m.insert(nf + i, nf + it.col()) = it.value();
+    for (SparseMatrix::InnerIterator it(a33, i); it; ++it)
+      m.insert(nf + i, nf + it.col()) = it.value();
   m.makeCompressed();
   return m;
 }

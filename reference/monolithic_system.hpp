@@ -221,7 +221,7 @@ class MonolithicSystem {
 
 /// The common base of the coupled operators of eq. (24) (MonolithicOperator over (tau, p, lambda),
 /// FluidBodyOperator over (tau, p)): A = S + R with
-///   S = blockdiag(F, A33 + gamma diag(A33)) the sparse part (no contact block in FluidBodyOperator),
+///   S = blockdiag(F, A33 + gamma diag(A33)) the sparse part (FluidBodyOperator: S = F),
 ///   R = dt alpha [B_f^T M_r^-1 B_f, B_f^T M_r^-1 J_lambda^T; J_lambda M_r^-1 B_f, 0],
 /// F = MonolithicSystem::stokes_operator() whatever the back end, B_f = [B_1 B_2]. apply = S x +
 /// R x with R by sequential multiplication (section 4.4.3: body-space vectors only, never n x n);

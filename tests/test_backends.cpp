@@ -3,15 +3,14 @@
 // and the right-hand sides agree to round-off; solve_coupled_step agrees under all nine schemes
 // of section 6 to the solver tolerance; a whole simulator step agrees; the matrix-free step is
 // deterministic for a fixed thread count (and across thread counts). 2D and 3D, small grids.
-#include <catch2/catch.hpp>
-
 #include <omp.h>
 
 #include <atomic>
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <stdexcept>
@@ -95,10 +94,12 @@ CoupledStepInput<Dim> random_scene(int n, unsigned seed, double eta, double mu, 
   ShapeSpec ball;
   ball.type = "sphere";
   ball.radius = r;
-  ball.center = testing::as_std<Dim>(point<Dim>(0.35 + j0 + h0 + r - 0.05 * dx, 0.3 + j1, 0.5 + j1));
+  ball.center =
+      testing::as_std<Dim>(point<Dim>(0.35 + j0 + h0 + r - 0.05 * dx, 0.3 + j1, 0.5 + j1));
   const Vec<Dim> cs = point<Dim>(0.35 + j0 + h0 + 2.0 * r + hs - 0.1 * dx, 0.3 + j1, 0.5 + j1);
-  in.bodies = {make_body<Dim>(box_shape<Dim>(c0, h0), 2000.0, mu), make_body<Dim>(box_shape<Dim>(c1, h1), 600.0, mu),
-               make_body<Dim>(ball, 1200.0, mu), make_body<Dim>(box_shape<Dim>(cs, hs), 1000.0, mu, "static")};
+  in.bodies = {make_body<Dim>(box_shape<Dim>(c0, h0), 2000.0, mu),
+               make_body<Dim>(box_shape<Dim>(c1, h1), 600.0, mu), make_body<Dim>(ball, 1200.0, mu),
+               make_body<Dim>(box_shape<Dim>(cs, hs), 1000.0, mu, "static")};
   for (int b = 0; b < 3; ++b) {
     BodyVec<Dim> v = BodyVec<Dim>::Zero();
     for (int k = 0; k < kBodyDofs<Dim>; ++k) v[k] = 0.05 * jitter(seed + 7 * b, 3 + k);
@@ -115,8 +116,8 @@ CoupledStepInput<Dim> random_scene(int n, unsigned seed, double eta, double mu, 
   const auto boundary = testing::all_boundaries<Dim>(BoundaryType::wall);
   in.solids = solid_weights<Dim>(in.grid, coupling_bodies(in.bodies), {}, boundary, 0.01 * dx);
   const double level = 0.62 + 0.05 * jitter(seed, 20);
-  const VectorX phi =
-      testing::sample_lattice<Dim>(half_lattice(in.grid), [&](const Vec<Dim>& x) { return x[1] - level; });
+  const VectorX phi = testing::sample_lattice<Dim>(half_lattice(in.grid),
+                                                   [&](const Vec<Dim>& x) { return x[1] - level; });
   in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
   in.u_star = 0.3 * testing::random_vector(in.grid.num_faces(), seed + 100);
   in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).array() += kGravity * kDt;
@@ -163,7 +164,8 @@ struct Worst {
 };
 
 template <int Dim>
-void check_operators_agree(int n, unsigned seed, bool kinematic, StressForm form, StokesUnknowns unknowns) {
+void check_operators_agree(int n, unsigned seed, bool kinematic, StressForm form,
+                           StokesUnknowns unknowns) {
   const CoupledStepInput<Dim> in = random_scene<Dim>(n, seed, 0.8, 0.4, kinematic);
   const MonolithicSystem<Dim> e = make_system<Dim>(in, "explicit", form, unknowns);
   const MonolithicSystem<Dim> m = make_system<Dim>(in, "matrixfree", form, unknowns);
@@ -237,8 +239,8 @@ void check_operators_agree(int n, unsigned seed, bool kinematic, StressForm form
   CHECK_THROWS_AS(om.sparse_part(), std::logic_error);
   CHECK(oe.sparse_part().rows() == oe.size());
   std::printf("backends %dD n=%d seed %u%s%s: largest relative difference %.2e\n", Dim, n, seed,
-              kinematic ? " kinematic" : "", unknowns == StokesUnknowns::stress_only ? " stress-only" : "",
-              worst.value);
+              kinematic ? " kinematic" : "",
+              unknowns == StokesUnknowns::stress_only ? " stress-only" : "", worst.value);
 }
 
 }  // namespace
@@ -262,8 +264,9 @@ TEST_CASE("Back ends: MonolithicSystem names both back ends on a wrong one", "[u
 
 TEST_CASE("Back ends: eq. (24) blocks, (26), A_ff and right-hand sides agree to round-off, 2D",
           "[unit][backends]") {
-  for (unsigned seed : {3u, 11u}) check_operators_agree<2>(16, seed, seed == 11u, StressForm::reduced,
-                                                           StokesUnknowns::pressure_and_stress);
+  for (unsigned seed : {3u, 11u})
+    check_operators_agree<2>(16, seed, seed == 11u, StressForm::reduced,
+                             StokesUnknowns::pressure_and_stress);
   // the VC system of PC-VC-PC-unified: stress only, full form
   check_operators_agree<2>(16, 5, true, StressForm::full, StokesUnknowns::stress_only);
 }
@@ -274,7 +277,8 @@ TEST_CASE("Back ends: eq. (24) blocks, (26), A_ff and right-hand sides agree to 
   check_operators_agree<3>(10, 9, true, StressForm::full, StokesUnknowns::stress_only);
 }
 
-TEST_CASE("Back ends: dense_matrix of eq. (24) agrees under both back ends, 2D", "[unit][backends]") {
+TEST_CASE("Back ends: dense_matrix of eq. (24) agrees under both back ends, 2D",
+          "[unit][backends]") {
   const CoupledStepInput<2> in = random_scene<2>(10, 2, 0.8, 0.4, true);
   const MonolithicSystem<2> e = make_system<2>(in, "explicit");
   const MonolithicSystem<2> m = make_system<2>(in, "matrixfree");
@@ -306,10 +310,11 @@ struct Difference {
 };
 
 Difference result_difference(const CoupledSolveResult& m, const CoupledSolveResult& e) {
-  const std::vector<std::pair<const char*, double>> fields = {{"u", relative_inf(m.u, e.u)},
-                                                              {"p", relative_inf(m.pressure, e.pressure)},
-                                                              {"tau", relative_inf(m.stress, e.stress)},
-                                                              {"v", relative_inf(m.body_velocity, e.body_velocity)}};
+  const std::vector<std::pair<const char*, double>> fields = {
+      {"u", relative_inf(m.u, e.u)},
+      {"p", relative_inf(m.pressure, e.pressure)},
+      {"tau", relative_inf(m.stress, e.stress)},
+      {"v", relative_inf(m.body_velocity, e.body_velocity)}};
   Difference d;
   for (const auto& [name, value] : fields)
     if (value >= d.state) {
@@ -321,14 +326,16 @@ Difference result_difference(const CoupledSolveResult& m, const CoupledSolveResu
 }
 
 bool bitwise_equal(const VectorX& a, const VectorX& b) {
-  return a.size() == b.size() && (a.size() == 0 || std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0);
+  return a.size() == b.size() &&
+         (a.size() == 0 || std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0);
 }
 
 bool bitwise_equal(const CoupledSolveResult& a, const CoupledSolveResult& b) {
-  return bitwise_equal(a.u, b.u) && bitwise_equal(a.pressure, b.pressure) && bitwise_equal(a.stress, b.stress) &&
-         bitwise_equal(a.body_velocity, b.body_velocity) && bitwise_equal(a.lambda, b.lambda) &&
-         bitwise_equal(a.z, b.z) && a.coupled_iterations == b.coupled_iterations &&
-         a.fluid_iterations == b.fluid_iterations && a.contact_iterations == b.contact_iterations;
+  return bitwise_equal(a.u, b.u) && bitwise_equal(a.pressure, b.pressure) &&
+         bitwise_equal(a.stress, b.stress) && bitwise_equal(a.body_velocity, b.body_velocity) &&
+         bitwise_equal(a.lambda, b.lambda) && bitwise_equal(a.z, b.z) &&
+         a.coupled_iterations == b.coupled_iterations && a.fluid_iterations == b.fluid_iterations &&
+         a.contact_iterations == b.contact_iterations;
 }
 
 /// Both back ends under all nine schemes at solver tolerance `tol`: the largest differences.
@@ -339,16 +346,20 @@ Difference schemes_difference(const CoupledStepInput<Dim>& in, double tol) {
     INFO(coupling_scheme_name(scheme) << " at tolerance " << tol);
     CoupledSchemeOptions e_options, m_options;
     m_options.backend = "matrixfree";
-    const CoupledSolveResult e = solve_coupled_step<Dim>(in, scheme, solve_settings(tol), e_options);
-    const CoupledSolveResult m = solve_coupled_step<Dim>(in, scheme, solve_settings(tol), m_options);
+    const CoupledSolveResult e =
+        solve_coupled_step<Dim>(in, scheme, solve_settings(tol), e_options);
+    const CoupledSolveResult m =
+        solve_coupled_step<Dim>(in, scheme, solve_settings(tol), m_options);
     REQUIRE(e.converged);
     REQUIRE(m.converged);
     const Difference d = result_difference(m, e);
-    std::printf("  %dD tol %.0e %-17s explicit %4ld + %4ld + %4ld iterations, matrixfree %4ld + %4ld + %4ld: "
-                "difference %.1e (%s), lambda %.1e\n",
-                Dim, tol, coupling_scheme_name(scheme).c_str(), e.fluid_iterations, e.contact_iterations,
-                e.coupled_iterations, m.fluid_iterations, m.contact_iterations, m.coupled_iterations, d.state,
-                d.which.c_str(), d.lambda);
+    std::printf(
+        "  %dD tol %.0e %-17s explicit %4ld + %4ld + %4ld iterations, matrixfree %4ld + %4ld + "
+        "%4ld: "
+        "difference %.1e (%s), lambda %.1e\n",
+        Dim, tol, coupling_scheme_name(scheme).c_str(), e.fluid_iterations, e.contact_iterations,
+        e.coupled_iterations, m.fluid_iterations, m.contact_iterations, m.coupled_iterations,
+        d.state, d.which.c_str(), d.lambda);
     if (d.state > worst.state) {
       worst.state = d.state;
       worst.which = coupling_scheme_name(scheme) + " " + d.which;
@@ -386,8 +397,9 @@ TEST_CASE("Back ends: solve_coupled_step agrees under all nine schemes to the so
       loose = schemes_difference<3>(in, 1e-7);
       tight = schemes_difference<3>(in, 1e-10);
     }
-    INFO(dim << "D: largest difference " << loose.state << " (" << loose.which << ") at 1e-7, " << tight.state
-             << " (" << tight.which << ") at 1e-10; lambda " << loose.lambda << ", " << tight.lambda);
+    INFO(dim << "D: largest difference " << loose.state << " (" << loose.which << ") at 1e-7, "
+             << tight.state << " (" << tight.which << ") at 1e-10; lambda " << loose.lambda << ", "
+             << tight.lambda);
     CHECK(tight.state <= 1e3 * 1e-10);
     CHECK(loose.state <= 1e3 * 1e-7);
     CHECK(tight.lambda <= 10.0 * 1e-10 / gamma);
@@ -408,10 +420,11 @@ std::string number(double x) {
 /// One frame of bunny-onto-floating-bowl-2d (Fig. 3) made small: 32^2 cells, one frame of 0.02 s
 /// (two steps at max_dt 0.01), solver tolerance `tol`, PVC-unified with a viscous liquid.
 FrameStats simulate_small(const std::string& backend, double tol) {
-  const SceneDesc s = load_scene("bunny-onto-floating-bowl-2d",
-                                 {"render.enabled=false", "domain.cells=[32,32]", "time.fps=50",
-                                  "solver.scheme=PVC-unified", "liquids.0.viscosity={\"model\":\"newtonian\",\"eta\":0.5}",
-                                  "solver.tolerance=" + number(tol), "solver.backend=" + backend});
+  const SceneDesc s = load_scene(
+      "bunny-onto-floating-bowl-2d",
+      {"render.enabled=false", "domain.cells=[32,32]", "time.fps=50", "solver.scheme=PVC-unified",
+       "liquids.0.viscosity={\"model\":\"newtonian\",\"eta\":0.5}",
+       "solver.tolerance=" + number(tol), "solver.backend=" + backend});
   auto sim = make_simulation(s);
   return sim->advance_frame();
 }
@@ -419,7 +432,8 @@ FrameStats simulate_small(const std::string& backend, double tol) {
 /// Largest relative difference over the bodies' positions and velocities and the liquid's
 /// kinetic energy and volume.
 double frame_difference(const FrameStats& m, const FrameStats& e) {
-  double d = std::abs(m.kinetic_energy_liquid - e.kinetic_energy_liquid) / std::abs(e.kinetic_energy_liquid);
+  double d = std::abs(m.kinetic_energy_liquid - e.kinetic_energy_liquid) /
+             std::abs(e.kinetic_energy_liquid);
   d = std::max(d, std::abs(m.liquid_volume - e.liquid_volume) / e.liquid_volume);
   REQUIRE(m.bodies.size() == e.bodies.size());
   for (std::size_t b = 0; b < e.bodies.size(); ++b) {
@@ -427,7 +441,8 @@ double frame_difference(const FrameStats& m, const FrameStats& e) {
     for (double v : e.bodies[b].velocity) vscale = std::max(vscale, std::abs(v));
     for (std::size_t k = 0; k < e.bodies[b].velocity.size(); ++k) {
       d = std::max(d, std::abs(m.bodies[b].velocity[k] - e.bodies[b].velocity[k]) / vscale);
-      d = std::max(d, std::abs(m.bodies[b].position[k] - e.bodies[b].position[k]));  // m, domain of 1 m
+      d = std::max(
+          d, std::abs(m.bodies[b].position[k] - e.bodies[b].position[k]));  // m, domain of 1 m
     }
   }
   return d;
@@ -435,20 +450,23 @@ double frame_difference(const FrameStats& m, const FrameStats& e) {
 
 }  // namespace
 
-TEST_CASE("Back ends: a simulator frame with bodies agrees between the back ends", "[unit][backends]") {
+TEST_CASE("Back ends: a simulator frame with bodies agrees between the back ends",
+          "[unit][backends]") {
   // Fig. 3's scene at 32^2 under PVC-unified with viscosity: two coupled steps (contacts of the
   // bunny with the bowl and of the bowl with the liquid). As for the single solves above, the
   // difference is solver error: it falls with the tolerance.
   const FrameStats e7 = simulate_small("explicit", 1e-7), m7 = simulate_small("matrixfree", 1e-7);
-  const FrameStats e10 = simulate_small("explicit", 1e-10), m10 = simulate_small("matrixfree", 1e-10);
+  const FrameStats e10 = simulate_small("explicit", 1e-10),
+                   m10 = simulate_small("matrixfree", 1e-10);
   REQUIRE(e10.solver.converged);
   REQUIRE(m10.solver.converged);
   CHECK(e10.steps == m10.steps);
   CHECK(e10.particles == m10.particles);
   const double d7 = frame_difference(m7, e7), d10 = frame_difference(m10, e10);
-  std::printf("simulator frame: explicit %ld iterations, matrixfree %ld at 1e-10; difference %.2e at "
-              "1e-7, %.2e at 1e-10\n",
-              static_cast<long>(e10.solver.iterations), static_cast<long>(m10.solver.iterations), d7, d10);
+  std::printf(
+      "simulator frame: explicit %ld iterations, matrixfree %ld at 1e-10; difference %.2e at "
+      "1e-7, %.2e at 1e-10\n",
+      static_cast<long>(e10.solver.iterations), static_cast<long>(m10.solver.iterations), d7, d10);
   CHECK(d10 <= 1e-6);
   CHECK(d10 <= 1e-1 * d7);
 }
@@ -475,8 +493,8 @@ void check_deterministic(const CoupledStepInput<Dim>& in, CouplingScheme scheme)
   CHECK(bitwise_equal(a, b));
   CHECK(bitwise_equal(c, d));
   CHECK(bitwise_equal(a, c));
-  std::printf("determinism %dD %s: %ld iterations, 4 runs in %.2f s\n", Dim, coupling_scheme_name(scheme).c_str(),
-              a.coupled_iterations + a.fluid_iterations,
+  std::printf("determinism %dD %s: %ld iterations, 4 runs in %.2f s\n", Dim,
+              coupling_scheme_name(scheme).c_str(), a.coupled_iterations + a.fluid_iterations,
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
 
@@ -546,7 +564,8 @@ void check_no_allocation(int n) {
           scaled.forward_sweep(b, z, 1.0, &active);
           scaled.backward_sweep(b, z, 1.0, &active);
         }) == fluid_sweeps);
-  std::printf("%dD: mallocs per apply: fluid part %ld, coupled operators the same\n", Dim, fluid_apply);
+  std::printf("%dD: mallocs per apply: fluid part %ld, coupled operators the same\n", Dim,
+              fluid_apply);
 }
 
 }  // namespace
@@ -594,24 +613,29 @@ void time_backends(int n) {
     CoupledSchemeOptions options;
     options.backend = backend;
     t1 = Clock::now();
-    const CoupledSolveResult r = solve_coupled_step<Dim>(in, CouplingScheme::pvc_unified, solve_settings(1e-6), options);
+    const CoupledSolveResult r =
+        solve_coupled_step<Dim>(in, CouplingScheme::pvc_unified, solve_settings(1e-6), options);
     const double solve = std::chrono::duration<double>(Clock::now() - t1).count();
-    std::printf("%dD %d^%d %-10s unknowns %d + %d + %d: set-up %.3f s, apply %.3f ms, SSOR %.3f ms, "
-                "PVC-unified %ld iterations in %.3f s (%.3f ms each)\n",
-                Dim, n, Dim, backend.c_str(), s.num_stress(), s.num_pressure(), s.num_contacts(), setup,
-                1e3 * apply, 1e3 * sweeps, r.coupled_iterations, solve, 1e3 * solve / std::max(1L, r.coupled_iterations));
+    std::printf(
+        "%dD %d^%d %-10s unknowns %d + %d + %d: set-up %.3f s, apply %.3f ms, SSOR %.3f ms, "
+        "PVC-unified %ld iterations in %.3f s (%.3f ms each)\n",
+        Dim, n, Dim, backend.c_str(), s.num_stress(), s.num_pressure(), s.num_contacts(), setup,
+        1e3 * apply, 1e3 * sweeps, r.coupled_iterations, solve,
+        1e3 * solve / std::max(1L, r.coupled_iterations));
   }
 }
 
 }  // namespace
 
-TEST_CASE("Back ends: timings of the coupled operator and a PVC-unified step (not a check)", "[.][timing]") {
+TEST_CASE("Back ends: timings of the coupled operator and a PVC-unified step (not a check)",
+          "[.][timing]") {
   time_backends<2>(64);
   time_backends<3>(16);
   time_backends<3>(24);
 }
 
-TEST_CASE("Back ends: PCG and MPRGP step counts per back end (diagnostic, not a check)", "[.][timing]") {
+TEST_CASE("Back ends: PCG and MPRGP step counts per back end (diagnostic, not a check)",
+          "[.][timing]") {
   const CoupledStepInput<3> in = random_scene<3>(24, 51, 0.8, 0.0, false);
   for (const std::string backend : {"explicit", "matrixfree"}) {
     const MonolithicSystem<3> s = make_system<3>(in, backend);
@@ -632,21 +656,27 @@ TEST_CASE("Back ends: PCG and MPRGP step counts per back end (diagnostic, not a 
     MprgpSettings ms;
     ms.max_iterations = 20000;
     VectorX y = VectorX::Zero(n);
-    const MprgpResult m = mprgp_solve(scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))),
-                                      lower, upper, y, ms);
+    const MprgpResult m = mprgp_solve(
+        scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), lower,
+        upper, y, ms);
     VectorX w = VectorX::Zero(n);
-    const PcgResult pm = pcg_solve(scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), w, pcg);
+    const PcgResult pm = pcg_solve(
+        scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), w, pcg);
     MprgpSettings plain = ms;
     plain.precondition = false;
     VectorX y2 = VectorX::Zero(n);
-    const MprgpResult m2 = mprgp_solve(scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))),
-                                       lower, upper, y2, plain);
+    const MprgpResult m2 = mprgp_solve(
+        scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), lower,
+        upper, y2, plain);
     VectorX y3 = VectorX::Zero(n);
-    const MprgpResult m3 = mprgp_solve(op, s.mlcp_rhs(VectorX::Zero(s.num_friction())), lower, upper, y3, ms);
-    std::printf("%-10s A_ff PCG %d, A_stokes PCG %d, MPRGP %d (cg %d, expansion %d, proportioning %d), "
-                "PCG on scaled (26) unbounded %d (lambda min %.2e), MPRGP unpreconditioned %d, MPRGP unscaled %d\n",
-                backend.c_str(), p.iterations, ps.iterations, m.iterations, m.cg_steps, m.expansion_steps,
-                m.proportioning_steps, pm.iterations, w.tail(nc).minCoeff(), m2.iterations, m3.iterations);
+    const MprgpResult m3 =
+        mprgp_solve(op, s.mlcp_rhs(VectorX::Zero(s.num_friction())), lower, upper, y3, ms);
+    std::printf(
+        "%-10s A_ff PCG %d, A_stokes PCG %d, MPRGP %d (cg %d, expansion %d, proportioning %d), "
+        "PCG on scaled (26) unbounded %d (lambda min %.2e), MPRGP unpreconditioned %d, MPRGP "
+        "unscaled %d\n",
+        backend.c_str(), p.iterations, ps.iterations, m.iterations, m.cg_steps, m.expansion_steps,
+        m.proportioning_steps, pm.iterations, w.tail(nc).minCoeff(), m2.iterations, m3.iterations);
   }
 }
 
@@ -670,8 +700,10 @@ void check_ssor_symmetric(const std::string& backend, int n) {
   std::vector<char> active(op.size(), 1);
   for (int i = 0; i < op.size(); i += 7) active[i] = 0;
   active[op.size() - 1] = 0;  // a contact at its bound
-  const VectorX r1 = testing::random_vector(op.size(), 1), r2 = testing::random_vector(op.size(), 2);
-  for (const LinearOperator* a : {static_cast<const LinearOperator*>(&op), static_cast<const LinearOperator*>(&scaled)})
+  const VectorX r1 = testing::random_vector(op.size(), 1),
+                r2 = testing::random_vector(op.size(), 2);
+  for (const LinearOperator* a :
+       {static_cast<const LinearOperator*>(&op), static_cast<const LinearOperator*>(&scaled)})
     for (const std::vector<char>* mask : {static_cast<const std::vector<char>*>(nullptr),
                                           static_cast<const std::vector<char>*>(&active)}) {
       const VectorX z1 = ssor(*a, r1, mask), z2 = ssor(*a, r2, mask);
@@ -686,7 +718,8 @@ void check_ssor_symmetric(const std::string& backend, int n) {
 
 }  // namespace
 
-TEST_CASE("Back ends: the SSOR preconditioner of the coupled operators is symmetric", "[unit][backends]") {
+TEST_CASE("Back ends: the SSOR preconditioner of the coupled operators is symmetric",
+          "[unit][backends]") {
   for (const std::string backend : {"explicit", "matrixfree"}) {
     check_ssor_symmetric<2>(backend, 16);
     check_ssor_symmetric<3>(backend, 8);
@@ -701,8 +734,10 @@ TEST_CASE("Back ends: thread timing of one small step (diagnostic, not a check)"
       CoupledSchemeOptions options;
       options.backend = backend;
       const auto t0 = std::chrono::steady_clock::now();
-      const CoupledSolveResult r = solve_coupled_step<2>(in, CouplingScheme::pvc_unified, solve_settings(1e-6), options);
-      std::printf("%s %d threads: %ld iterations, %d rounds, %.3f s\n", backend.c_str(), threads, r.coupled_iterations,
-                  r.staggered_iterations, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      const CoupledSolveResult r =
+          solve_coupled_step<2>(in, CouplingScheme::pvc_unified, solve_settings(1e-6), options);
+      std::printf("%s %d threads: %ld iterations, %d rounds, %.3f s\n", backend.c_str(), threads,
+                  r.coupled_iterations, r.staggered_iterations,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     }
 }
