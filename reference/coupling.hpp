@@ -143,11 +143,12 @@ class BodyCouplingOperator {
     int index = 0;
     BodyVec<Dim> column;
   };
-  /// The non-zero column blocks of J_p, per body in body order then by cell: the entries of
-  /// pressure_jacobian() bit for bit (the same evaluation), without a num_rows x num_cells
-  /// matrix. For the matrix-free back end of eq. (24), which keeps them per surface unknown.
+  /// The non-zero column blocks of J_p (eqs. (18)/(24)), per body in body order then by cell:
+  /// the entries of pressure_jacobian() bit for bit (the same evaluation), without a num_rows x
+  /// num_cells matrix. For the matrix-free back end of eq. (24), which keeps them per surface
+  /// unknown.
   std::vector<SurfaceColumn> pressure_columns() const;
-  /// The same for J_s (stress_jacobian()), per body then by StressGrid DOF.
+  /// The same for J_s (eqs. (19)/(24); stress_jacobian()), per body then by StressGrid DOF.
   std::vector<SurfaceColumn> stress_columns() const;
 
   /// J_p explicitly, num_rows x num_cells.
