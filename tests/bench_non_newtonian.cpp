@@ -109,7 +109,7 @@ void fig9(int dim, const std::string& out, int frames) {
   if (frames <= 0) frames = dim == 2 ? 30 : 10;
   PlotSpec plot;
   plot.title = "Fig. 9 (" + std::to_string(dim) + "D): residual of each viscosity round, frame 10";
-  plot.x_label = "round of Algorithm 2 (staggered projection iteration)";
+  plot.x_label = "round of Algorithm 2";
   plot.y_label = "||tau - 2 N(g) g|| / ||tau||";
   plot.log_y = true;
   std::vector<std::vector<Image>> rows;
@@ -140,7 +140,9 @@ void fig9(int dim, const std::string& out, int frames) {
                 r.seconds / static_cast<double>(r.frames.size()));
     if (!r.pictures.empty()) {
       rows.push_back(r.pictures);
-      captions.push_back(std::to_string(rounds) + " iteration(s): frames 5, 10, 20, 30 (30 fps)");
+      std::string which;
+      for (std::size_t k = 0; k < r.pictures.size(); ++k) which += (k ? ", " : "") + std::to_string(shots[k]);
+      captions.push_back(std::to_string(rounds) + " iteration(s): frames " + which + " (30 fps)");
     }
   }
   write_plot(plot, out + "/non-newtonian-fig9-residuals-" + std::to_string(dim) + "d.ppm");
@@ -179,7 +181,10 @@ void models(int dim, const std::string& out, int frames) {
                   shape.c_str());
       std::fflush(stdout);
       rows.push_back(r.pictures);
-      captions.push_back(preset + ": t = 0.067, 0.133, 0.267, 0.5 s");
+      std::string times;
+      const char* labels[] = {"0.067", "0.133", "0.267", "0.5"};
+      for (std::size_t k = 0; k < r.pictures.size(); ++k) times += std::string(k ? ", " : "") + labels[k];
+      captions.push_back(preset + ": t = " + times + " s");
     }
     montage(rows, captions, tile)
         .write_ppm(out + "/non-newtonian-fig" + (body ? "11" : "10") + "-" + std::to_string(dim) + "d.ppm");
