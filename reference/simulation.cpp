@@ -177,7 +177,9 @@ class Simulation : public AnySimulation {
   /// statistics added to stats_.
   void solve_liquid(double dt);
   /// solve_liquid for scenes with a herschel-bulkley liquid (section 5): the unified or decoupled
-  /// sequence with Algorithm 2 around its viscous solve (staggered_iterations rounds).
+  /// sequence with Algorithm 2 around its viscous solve (staggered_iterations rounds), started
+  /// from the previous step's shear rate where there is one (departure: line 1 as printed only
+  /// in the first step and on newly active DOFs; docs/non-newtonian.md, departure 4).
   void solve_liquid_non_newtonian(double dt);
   /// Algorithm 2's model for the current weights (W_F^s, W_L^s, the liquids' mass fractions).
   NonNewtonianViscosity<Dim> non_newtonian_model() const;
