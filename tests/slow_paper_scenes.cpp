@@ -124,7 +124,8 @@ TEST_CASE("2D non-Newtonian scenes (Figs. 10, 11): the four models behave as sec
   // wider than the Newtonian one, the thickening one less (measured x extent: Newtonian 0.846,
   // thinning 0.979, thickening 0.668 m). Fig. 11 after 0.3 s (9 frames): the bunny sinks
   // deepest in the thinning liquid and least in the Bingham one, thickening between Newtonian
-  // and Bingham (heights in docs/non-newtonian.md). Volume drift at most 3 % over these frames.
+  // and Bingham (measured 0.116, 0.150, 0.258, 0.379 m for thinning, Newtonian, thickening,
+  // Bingham). Volume drift: measured at most 0.37 %, tolerance 3 %.
   std::map<std::string, double> extent, height;
   for (const char* preset : {"newtonian", "shear-thinning", "shear-thickening", "bingham"}) {
     const ModelRun drop = run_model(std::string("liquid-drop-") + preset + "-2d", 4);
