@@ -64,7 +64,7 @@ double seconds_since(Clock::time_point t0) {
 
 // --- memory: /proc/self/status ---------------------------------------------------------------
 
-/// A "VmXXX:" line of /proc/self/status in bytes (0 when absent).
+/// The value of a line of /proc/self/status such as "VmHWM:", in bytes (0 when absent).
 double status_bytes(const char* key) {
   std::ifstream in("/proc/self/status");
   std::string line;
@@ -686,27 +686,37 @@ int main(int argc, char** argv) {
     }
   }
 
-  // plot: time per SSOR-PCG iteration against DOFs, one curve per back end and dimension
+  // plot: time per SSOR-PCG iteration against DOFs, one curve per back end and dimension with
+  // 2 threads (thick) and the same with 1 thread (thin, crosses: the timings least disturbed by
+  // other processes)
   {
     PlotSpec spec;
-    spec.title = "time per SSOR-PCG iteration (2 threads)";
+    spec.title = "time per SSOR-PCG iteration";
     spec.x_label = "unknowns (tau + p)";
     spec.y_label = "seconds per iteration";
     spec.log_x = spec.log_y = true;
+    spec.width = 900;
+    spec.height = 600;
     int index = 0;
     for (int dim : {2, 3}) {
       for (const std::string& backend : backends) {
-        PlotSeries series;
-        series.label = std::to_string(dim) + "D " + backend;
-        for (const Row& row : rows) {
-          if (row.dim != dim || row.backend != backend) continue;
-          series.x.push_back(row.r.at("dofs"));
-          series.y.push_back(row.r.at("iteration_s"));
+        const Rgb color = plot_palette(index++);
+        for (const char* key : {"iteration_s", "iteration_s_1t"}) {
+          const bool one = std::strcmp(key, "iteration_s_1t") == 0;
+          PlotSeries series;
+          series.label =
+              std::to_string(dim) + "D " + backend + (one ? ", 1 thread" : ", 2 threads");
+          for (const Row& row : rows) {
+            if (row.dim != dim || row.backend != backend) continue;
+            series.x.push_back(row.r.at("dofs"));
+            series.y.push_back(row.r.at(key));
+          }
+          series.color = color;
+          series.marker = one ? Marker::cross : dim == 2 ? Marker::circle : Marker::square;
+          series.line_width = one ? 1.0 : 2.0;
+          series.dash = backend == "explicit" ? 8.0 : 0.0;
+          spec.series.push_back(series);
         }
-        series.color = plot_palette(index++);
-        series.marker = dim == 2 ? Marker::circle : Marker::square;
-        series.dash = backend == "explicit" ? 8.0 : 0.0;
-        spec.series.push_back(series);
       }
     }
     write_plot(spec, plot_path);
