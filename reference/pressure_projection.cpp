@@ -10,6 +10,10 @@ namespace monolith {
 
 namespace {
 
+/// Below this many cells the matrix-free loops run on one thread: a parallel region costs more
+/// than it saves on small grids (and much more on an oversubscribed machine).
+constexpr Eigen::Index kParallelMin = 16384;
+
 // (W_L^u)^-1 entries are reciprocal_or_zero: 0 where W_L^u = 0 (such faces have no liquid cell
 // beside them, so the matching row of G W_L^p is zero anyway).
 
@@ -234,7 +238,7 @@ void MatrixFreePressureOperator<Dim>::cell_stencil(const VecI<Dim>& c,
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::scatter(const VectorX& x) const {
   const int num_cells = static_cast<int>(q_.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
   for (int c = 0; c < num_cells; ++c) {
     const int i = dof_of_cell_[c];
     q_[c] = i >= 0 ? liquid_[i] * x[i] : 0.0;
@@ -248,7 +252,7 @@ void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const 
   // (A x)_i = W_i sum_f k_f (q_i - q_j), q = W x: the stencil of W G^T K G W, per grid row
   const int n0 = cells_[0];
   const int rows = static_cast<int>(q_.size()) / n0;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
   for (int r = 0; r < rows; ++r) {
     VecI<Dim> c = VecI<Dim>::Zero();
     int rest = r;
@@ -313,7 +317,7 @@ void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Ve
     const int parity = reverse ? 1 - step : step;
     if (colouring_valid_) {
       // cells of one colour only couple to the other colour: rows in parallel
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
       for (int r = 0; r < rows; ++r) relax_row(r, parity);
     } else if (!reverse) {
       for (int r = 0; r < rows; ++r) relax_row(r, parity);
@@ -341,7 +345,7 @@ VectorX MatrixFreePressureOperator<Dim>::rhs(const VectorX& u_star) const {
   // b_i = W_i sum_f s_if W_F^u_f u*_f / dx  (s = +1 on the cell's lower faces, -1 on upper, 0
   // on a face onto the cell itself)
   const int num_cells = static_cast<int>(q_.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
   for (int cell = 0; cell < num_cells; ++cell) {
     const int i = dof_of_cell_[cell];
     if (i < 0) continue;

@@ -163,19 +163,28 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 
 namespace {
 
+/// Below this many grid entries the matrix-free loops run on one thread: a parallel region
+/// costs more than it saves on small grids (and much more on an oversubscribed machine).
+constexpr int kParallelMin = 16384;
+
 /// out = sum over `terms` of coef * in_field(c + delta e_axis) for every entry c of the field
 /// `of` (zero where an input lies outside the domain, wrapped on periodic axes), then times
-/// scale entrywise if given. OpenMP over the rows along axis 0 of `of`: each row has one writer,
-/// and every entry sums its terms in the same order, whatever the thread count.
+/// scale entrywise if given. Shares the rows along axis 0 of `of` among the threads of the
+/// enclosing parallel region (omp for, no barrier at the end): each row has one writer, and
+/// every entry sums its terms in the same order, whatever the thread count.
 template <int Dim, class FieldT, class TermT, std::size_t N>
 void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms,
                   const std::array<FieldT, N>& fields, const std::array<const double*, N>& data,
-                  const std::array<bool, Dim>& periodic, const double* scale) {
+                  const std::array<bool, Dim>& periodic, const double* scale,
+                  const std::vector<int>* row_list) {
   const int n0 = of.dims[0];
   int rows = 1;
   for (int a = 1; a < Dim; ++a) rows *= of.dims[a];
-#pragma omp parallel for schedule(static)
-  for (int r = 0; r < rows; ++r) {
+  // every row, or only those of row_list
+  const int count = row_list ? static_cast<int>(row_list->size()) : rows;
+#pragma omp for schedule(static) nowait
+  for (int m = 0; m < count; ++m) {
+    const int r = row_list ? (*row_list)[m] : m;
     // the row's coordinates along axes 1..Dim-1
     VecI<Dim> c = VecI<Dim>::Zero();
     int rest = r;
@@ -334,6 +343,28 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   for (int a = 0; a < Dim; ++a)
     if (grid.periodic(a) && grid.cells()[a] % 2 == 1 && grid.cells()[a] > 1)
       colouring_valid_ = false;
+  // the rows the loops visit: face rows with fluid, stress and cell rows with unknowns
+  for (int field = 0; field < kFields; ++field) {
+    const Field& f = fields_[field];
+    const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
+    for (int r = 0; r < rows; ++r) {
+      bool used = false;
+      for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0 && !used; ++e) {
+        if (field < Dim) {
+          used = face_coefficient_[e] != 0.0;
+        } else if (field == kCellField) {
+          used = unknown_of_cell_[e] >= 0;
+        } else if (field - Dim == eliminated_) {
+          // the eliminated DOF of a cell with a diagonal unknown
+          for (int k = 0; k < Dim - 1; ++k)
+            used = used || unknown_of_dof_[fields_[Dim + k].offset + (e - f.offset)] >= 0;
+        } else {
+          used = unknown_of_dof_[e] >= 0;
+        }
+      }
+      if (used) active_rows_[field].push_back(r);
+    }
+  }
   stress_scratch_.setZero(num_stress_dofs_);
   cell_scratch_.setZero(num_cells_);
   face_scratch_.setZero(num_faces_);
@@ -372,43 +403,63 @@ int MatrixFreeStokesOperator<Dim>::column_faces(int field, const VecI<Dim>& c,
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double* q) const {
-  // s = M W_L^s tau on the DOFs of unknowns, zero elsewhere (eliminated DOFs below)
-#pragma omp parallel for schedule(static)
-  for (int d = 0; d < num_stress_dofs_; ++d) {
-    const int u = unknown_of_dof_[d];
-    s[d] = u >= 0 ? weight_[u] * x[u] : 0.0;
+  // (orphaned omp for without barriers: called inside a parallel region, every loop writes its
+  // own entries; only rows with unknowns, the others stay zero)
+  // s = M W_L^s tau on the DOFs of unknowns, zero elsewhere
+  for (int field : layout_field_) {
+    const Field& f = fields_[field];
+    const std::vector<int>& rows = active_rows_[field];
+    const int count = static_cast<int>(rows.size());
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < count; ++m) {
+      const int start = f.offset + rows[m] * f.dims[0];
+      for (int d = start; d < start + f.dims[0]; ++d) {
+        const int u = unknown_of_dof_[d];
+        s[d] = u >= 0 ? weight_[u] * x[u] : 0.0;
+      }
+    }
   }
   if (eliminated_ >= 0) {
     // the eliminated diagonal DOF is minus the sum of the other diagonal unknowns of its cell
     const int base = fields_[Dim + eliminated_].offset;
-#pragma omp parallel for schedule(static)
-    for (int c = 0; c < num_cells_; ++c) {
-      double sum = 0.0;
-      for (int k = 0; k < Dim - 1; ++k) {
-        const int u = unknown_of_dof_[fields_[Dim + k].offset + c];
-        if (u >= 0) sum += x[u];
+    const std::vector<int>& rows = active_rows_[Dim + eliminated_];
+    const int count = static_cast<int>(rows.size());
+    const int n0 = fields_[Dim + eliminated_].dims[0];
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < count; ++m)
+      for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+        double sum = 0.0;
+        for (int k = 0; k < Dim - 1; ++k) {
+          const int u = unknown_of_dof_[fields_[Dim + k].offset + c];
+          if (u >= 0) sum += x[u];
+        }
+        s[base + c] = eliminated_weight_[c] * sum;
       }
-      s[base + c] = eliminated_weight_[c] * sum;
-    }
   }
   if (!has_pressure_) return;
   // q = W_L^p p
-#pragma omp parallel for schedule(static)
-  for (int c = 0; c < num_cells_; ++c) {
-    const int u = unknown_of_cell_[c];
-    q[c] = u >= 0 ? weight_[u] * x[u] : 0.0;
-  }
+  const std::vector<int>& rows = active_rows_[kCellField];
+  const int count = static_cast<int>(rows.size());
+  const int n0 = fields_[kCellField].dims[0];
+#pragma omp for schedule(static) nowait
+  for (int m = 0; m < count; ++m)
+    for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+      const int u = unknown_of_cell_[c];
+      q[c] = u >= 0 ? weight_[u] * x[u] : 0.0;
+    }
 }
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::faces_from_grid(const double* s, const double* q,
-                                                    double* force, bool scale_by_c) const {
+                                                    double* force, bool scale_by_c,
+                                                    bool all_rows) const {
   std::array<const double*, kFields> data{};
   for (int k = 0; k < kComponents; ++k) data[Dim + k] = s;
   data[kCellField] = q;
   for (int a = 0; a < Dim; ++a)
     stencil_rows<Dim>(fields_[a], force, terms_[a], fields_, data, periodic_,
-                      scale_by_c ? face_coefficient_.data() : nullptr);
+                      scale_by_c ? face_coefficient_.data() : nullptr,
+                      all_rows ? nullptr : &active_rows_[a]);
 }
 
 template <int Dim>
@@ -417,50 +468,58 @@ void MatrixFreeStokesOperator<Dim>::grid_from_faces(const double* v, double* s, 
   for (int a = 0; a < Dim; ++a) data[a] = v;
   // D v on the components the unknowns use (and the eliminated one), G^T v on the cells
   for (int field : layout_field_)
-    stencil_rows<Dim>(fields_[field], s, terms_[field], fields_, data, periodic_, nullptr);
+    stencil_rows<Dim>(fields_[field], s, terms_[field], fields_, data, periodic_, nullptr,
+                      &active_rows_[field]);
   if (eliminated_ >= 0)
     stencil_rows<Dim>(fields_[Dim + eliminated_], s, terms_[Dim + eliminated_], fields_, data,
-                      periodic_, nullptr);
+                      periodic_, nullptr, &active_rows_[Dim + eliminated_]);
   if (has_pressure_)
     stencil_rows<Dim>(fields_[kCellField], q, terms_[kCellField], fields_, data, periodic_,
-                      nullptr);
+                      nullptr, &active_rows_[kCellField]);
 }
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, const VectorX* x,
                                            VectorX& y) const {
-  y.resize(size_);
+  // (orphaned omp for without barriers, like scatter; y is sized by the caller)
   for (int field : layout_field_) {
     const Field& f = fields_[field];
-    const int count = f.dims.prod();
+    const std::vector<int>& rows = active_rows_[field];
+    const int count = static_cast<int>(rows.size());
+    const int n0 = f.dims[0];
     const bool reduced_diagonal = eliminated_ >= 0 && field - Dim < Dim;
     const int eliminated_base = eliminated_ >= 0 ? fields_[Dim + eliminated_].offset : 0;
     // one writer per unknown: its weight times (D v) at its DOF, plus 1/2 N^-1 W^s x
-#pragma omp parallel for schedule(static)
-    for (int e = 0; e < count; ++e) {
-      const int u = unknown_of_dof_[f.offset + e];
-      if (u < 0) continue;
-      double value = weight_[u] * s[f.offset + e];
-      if (x) value += self_[u] * (*x)[u];
-      if (reduced_diagonal) {
-        // the eliminated DOF of the cell (e is the cell index on diagonal components)
-        value += eliminated_weight_[e] * s[eliminated_base + e];
-        if constexpr (Dim == 3) {
-          if (x) {
-            const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + e];
-            if (partner >= 0) value += eliminated_coupling_[e] * (*x)[partner];
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < count; ++m)
+      for (int e = rows[m] * n0; e < (rows[m] + 1) * n0; ++e) {
+        const int u = unknown_of_dof_[f.offset + e];
+        if (u < 0) continue;
+        double value = weight_[u] * s[f.offset + e];
+        if (x) value += self_[u] * (*x)[u];
+        if (reduced_diagonal) {
+          // the eliminated DOF of the cell (e is the cell index on diagonal components)
+          value += eliminated_weight_[e] * s[eliminated_base + e];
+          if constexpr (Dim == 3) {
+            if (x) {
+              const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + e];
+              if (partner >= 0) value += eliminated_coupling_[e] * (*x)[partner];
+            }
           }
         }
+        y[u] = value;
       }
-      y[u] = value;
-    }
   }
   if (!has_pressure_) return;
-#pragma omp parallel for schedule(static)
-  for (int c = 0; c < num_cells_; ++c) {
-    const int u = unknown_of_cell_[c];
-    if (u >= 0) y[u] = weight_[u] * q[c];
-  }
+  const std::vector<int>& rows = active_rows_[kCellField];
+  const int n0 = fields_[kCellField].dims[0];
+  const int count = static_cast<int>(rows.size());
+#pragma omp for schedule(static) nowait
+  for (int m = 0; m < count; ++m)
+    for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+      const int u = unknown_of_cell_[c];
+      if (u >= 0) y[u] = weight_[u] * q[c];
+    }
 }
 
 template <int Dim>
@@ -468,11 +527,19 @@ void MatrixFreeStokesOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
   double* s = stress_scratch_.data();
   double* q = cell_scratch_.data();
   double* v = face_scratch_.data();
-  // x to the grid, v = C B x per face, B^T v per grid DOF, gathered per unknown
-  scatter(x, s, q);
-  faces_from_grid(s, q, v, true);
-  grid_from_faces(v, s, q);
-  gather(s, q, &x, y);
+  y.resize(size_);
+  // x to the grid, v = C B x per face, B^T v per grid DOF, gathered per unknown: one parallel
+  // region, a barrier between the passes
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+  {
+    scatter(x, s, q);
+#pragma omp barrier
+    faces_from_grid(s, q, v, true, false);
+#pragma omp barrier
+    grid_from_faces(v, s, q);
+#pragma omp barrier
+    gather(s, q, &x, y);
+  }
 }
 
 template <int Dim>
@@ -484,8 +551,6 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
   const int* map = is_cell ? unknown_of_cell_.data() : unknown_of_dof_.data();
   const bool reduced_diagonal = eliminated_ >= 0 && !is_cell && field - Dim < Dim;
   const int n0 = f.dims[0];
-  int rows = 1;
-  for (int a = 1; a < Dim; ++a) rows *= f.dims[a];
   double* force = face_scratch_.data();
   // the faces of the column of B of every entry of a row: per stencil term the start of the
   // face row and the shift along axis 0 (eq. (8)'s D or G^T rows, as in stencil_rows)
@@ -537,6 +602,8 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
           if (!periodic_[0]) continue;
           xi = ((xi % t.length) + t.length) % t.length;
         }
+        // a face without fluid (C_f = 0) adds nothing to A: its force is neither read nor kept
+        if (face_coefficient_[t.start + xi] == 0.0) continue;
         face[count] = t.start + xi;
         b[count++] = (t.eliminated ? eliminated_weight_[x0 + r * n0] : weight_[u]) * t.coef;
       }
@@ -559,18 +626,21 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
     }
   };
   const int first_colour = reverse ? 1 : 0, second_colour = 1 - first_colour;
+  // the rows with unknowns of this field, in grid order
+  const std::vector<int>& row_list = active_rows_[field];
+  const int count = static_cast<int>(row_list.size());
   if (colouring_valid_) {
     // no two unknowns of one colour share a face: rows in parallel
     for (int parity : {first_colour, second_colour}) {
-#pragma omp parallel for schedule(static)
-      for (int r = 0; r < rows; ++r) relax_row(r, parity);
+#pragma omp parallel for schedule(static) if (count * n0 > kParallelMin)
+      for (int m = 0; m < count; ++m) relax_row(row_list[m], parity);
     }
   } else if (!reverse) {
-    for (int r = 0; r < rows; ++r) relax_row(r, first_colour);
-    for (int r = 0; r < rows; ++r) relax_row(r, second_colour);
+    for (int m = 0; m < count; ++m) relax_row(row_list[m], first_colour);
+    for (int m = 0; m < count; ++m) relax_row(row_list[m], second_colour);
   } else {
-    for (int r = rows - 1; r >= 0; --r) relax_row(r, first_colour);
-    for (int r = rows - 1; r >= 0; --r) relax_row(r, second_colour);
+    for (int m = count - 1; m >= 0; --m) relax_row(row_list[m], first_colour);
+    for (int m = count - 1; m >= 0; --m) relax_row(row_list[m], second_colour);
   }
 }
 
@@ -584,8 +654,12 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
   if (zero) {
     std::fill(force, force + num_faces_, 0.0);
   } else {
-    scatter(x, stress_scratch_.data(), cell_scratch_.data());
-    faces_from_grid(stress_scratch_.data(), cell_scratch_.data(), force, false);
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+    {
+      scatter(x, stress_scratch_.data(), cell_scratch_.data());
+#pragma omp barrier
+      faces_from_grid(stress_scratch_.data(), cell_scratch_.data(), force, false, false);
+    }
   }
   // colour groups: stress components in layout order, then pressure; red then black (the
   // reverse order backward)
@@ -612,9 +686,13 @@ void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& 
 
 template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
-  VectorX s(num_stress_dofs_), q(num_cells_), force(num_faces_);
-  scatter(x, s.data(), q.data());
-  faces_from_grid(s.data(), q.data(), force.data(), false);
+  VectorX s = VectorX::Zero(num_stress_dofs_), q = VectorX::Zero(num_cells_), force(num_faces_);
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+  {
+    scatter(x, s.data(), q.data());
+#pragma omp barrier
+    faces_from_grid(s.data(), q.data(), force.data(), false, true);
+  }
   return force;
 }
 
@@ -657,9 +735,13 @@ template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
   // b = B^T W_F^u u*: the gather of apply without C and the N part
   const VectorX v = fluid_face_.cwiseProduct(u_star);
-  VectorX s(num_stress_dofs_), q(num_cells_), b;
-  grid_from_faces(v.data(), s.data(), q.data());
-  gather(s.data(), q.data(), nullptr, b);
+  VectorX s(num_stress_dofs_), q(num_cells_), b(size_);
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+  {
+    grid_from_faces(v.data(), s.data(), q.data());
+#pragma omp barrier
+    gather(s.data(), q.data(), nullptr, b);
+  }
   return b;
 }
 

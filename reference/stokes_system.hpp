@@ -171,8 +171,10 @@ class MatrixFreeStokesOperator : public LinearOperator {
 
   /// s = M W_L^s E tau on the StressGrid, q = W_L^p p on the cells (zero where inactive).
   void scatter(const VectorX& x, double* s, double* q) const;
-  /// force = B x from the scattered s, q (times C_f when `scale_by_c`).
-  void faces_from_grid(const double* s, const double* q, double* force, bool scale_by_c) const;
+  /// force = B x from the scattered s, q (times C_f when `scale_by_c`), on the face rows with
+  /// fluid (all rows when `all_rows`).
+  void faces_from_grid(const double* s, const double* q, double* force, bool scale_by_c,
+                       bool all_rows) const;
   /// s = D v on every StressGrid DOF and q = G^T v on every cell.
   void grid_from_faces(const double* v, double* s, double* q) const;
   /// y = B^T-gathered values of s, q per unknown (plus 1/2 N^-1 W^s x when x is given).
@@ -193,6 +195,11 @@ class MatrixFreeStokesOperator : public LinearOperator {
   std::array<bool, Dim> periodic_{};
   std::array<Field, kFields> fields_{};
   std::array<std::vector<Term>, kFields> terms_;  ///< per output field: the stencil of B or B^T
+  /// per field, the rows (along axis 0) the loops visit: face rows with some C_f != 0, stress
+  /// and cell rows with some unknown (the eliminated component: rows of cells with a diagonal
+  /// unknown). The other rows of the scratch vectors stay zero, so a liquid filling a small part
+  /// of the grid costs in proportion to its rows, not to the grid.
+  std::array<std::vector<int>, kFields> active_rows_;
   std::vector<int> layout_field_;                 ///< per layout component: its field
   int eliminated_ = -1;                           ///< eliminated StressGrid component, -1 full
   int size_ = 0;
