@@ -57,6 +57,25 @@ CellFaces<Dim> cell_faces(const MacGrid<Dim>& grid, int cell) {
   return cf;
 }
 
+/// The cell stencil (faces and cells across them, as MatrixFreePressureOperator::cell_stencil)
+/// of the cell at x along axis 0 of a row, from the stencil of the row's first cell: along axes
+/// 1.. both move with x; along axis 0 they follow x, wrapped on a periodic axis 0.
+template <int Dim>
+inline void shift_stencil(int x, int n0, bool periodic0, int cell,
+                          const std::array<int, 2 * Dim>& face0,
+                          const std::array<int, 2 * Dim>& other0, std::array<int, 2 * Dim>& face,
+                          std::array<int, 2 * Dim>& other) {
+  const bool last = x == n0 - 1;
+  face[0] = face0[0] + x;
+  other[0] = x > 0 ? cell - 1 : (periodic0 ? cell + n0 - 1 : -1);
+  face[1] = last && periodic0 ? face0[0] : face0[0] + x + 1;
+  other[1] = !last ? cell + 1 : (periodic0 ? cell - (n0 - 1) : -1);
+  for (int j = 2; j < 2 * Dim; ++j) {
+    face[j] = face0[j] + x;
+    other[j] = other0[j] >= 0 ? other0[j] + x : -1;
+  }
+}
+
 }  // namespace
 
 template <int Dim>
@@ -260,13 +279,14 @@ void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const 
       c[a] = rest % cells_[a];
       rest /= cells_[a];
     }
+    // the stencil of the row's first cell, shifted along the row
+    std::array<int, 2 * Dim> face0, other0, face, other;
+    cell_stencil(c, face0, other0);
     for (int x0 = 0; x0 < n0; ++x0) {
       const int cell = r * n0 + x0;
       const int i = dof_of_cell_[cell];
       if (i < 0) continue;
-      c[0] = x0;
-      std::array<int, 2 * Dim> face, other;
-      cell_stencil(c, face, other);
+      shift_stencil<Dim>(x0, n0, periodic_[0], cell, face0, other0, face, other);
       const double qi = q_[cell];
       double sum = 0.0;
       for (int j = 0; j < 2 * Dim; ++j)
@@ -293,6 +313,8 @@ void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Ve
     }
     const int first = (parity + sum) % 2;
     if (first >= n0) return;
+    std::array<int, 2 * Dim> face0, other0, face, other;
+    cell_stencil(c, face0, other0);
     const int last = first + 2 * ((n0 - 1 - first) / 2);
     // within an independent colour the order does not matter: ascending (memory order) then
     const bool descending = reverse && !colouring_valid_;
@@ -301,9 +323,7 @@ void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Ve
       const int cell = r * n0 + x0;
       const int i = dof_of_cell_[cell];
       if (i < 0 || diagonal_[i] == 0.0 || (active && !(*active)[i])) continue;
-      c[0] = x0;
-      std::array<int, 2 * Dim> face, other;
-      cell_stencil(c, face, other);
+      shift_stencil<Dim>(x0, n0, periodic_[0], cell, face0, other0, face, other);
       // sum_{j != i} A_ij x_j = -W_i sum_f k_f W_j x_j over the neighbours of i
       double off = 0.0;
       for (int j = 0; j < 2 * Dim; ++j)
