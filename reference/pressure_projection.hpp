@@ -98,7 +98,8 @@ class MatrixFreePressureOperator : public LinearOperator {
 
   /// Bytes the operator holds (coefficients, map, scratch), for the benchmark harness.
   std::size_t memory_bytes() const override;
-  /// Bytes one apply reads and writes at least (every array it streams through once per pass).
+  /// Bytes one apply must move at least: every stored array it reads once, x once, y once
+  /// (scratch excluded), as SparseMatrixOperator counts; for the harness's bandwidth figure.
   double bytes_per_apply() const override;
 
  private:
