@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <stdexcept>
+#include <type_traits>
 
 #include "reference/deformation_rate.hpp"
 #include "reference/gradient.hpp"
@@ -555,10 +556,20 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
   // the faces of the column of B of every entry of a row: per stencil term the start of the
   // face row and the shift along axis 0 (eq. (8)'s D or G^T rows, as in stencil_rows)
   struct RowTerm {
-    int start = 0, shift = 0, length = 0;
+    const double* coefficient = nullptr;  // C_f of the face row
+    double* force = nullptr;              // B x of the face row
+    int shift = 0, length = 0;
     double coef = 0.0;
     bool eliminated = false;
   };
+  const double* face_coefficient = face_coefficient_.data();
+  const double* diagonal = diagonal_.data();
+  const double* self = self_.data();
+  const double* weight = weight_.data();
+  const double* eliminated_weight = eliminated_weight_.data();
+  const double* b_rhs = rhs.data();
+  double* xs = x.data();
+  const bool periodic0 = periodic_[0];
   auto relax_row = [&](int r, int parity) {
     VecI<Dim> c = VecI<Dim>::Zero();
     int rest = r, sum = 0;
@@ -573,8 +584,9 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
       for (const Term& t : terms_[of_field]) {
         const int start = row_start<Dim>(fields_[t.field], c, t.axis, t.delta, periodic_);
         if (start < 0) continue;  // faces outside the domain: zero velocity
-        row_terms[num_terms++] = {start, t.axis == 0 ? t.delta : 0, fields_[t.field].dims[0],
-                                  t.coef, eliminated};
+        row_terms[num_terms++] = {face_coefficient + start, force + start,
+                                  t.axis == 0 ? t.delta : 0, fields_[t.field].dims[0], t.coef,
+                                  eliminated};
       }
     };
     add_terms(field, false);
@@ -586,43 +598,69 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
     const int base = f.offset + r * n0;
     // within an independent group the order does not matter: ascending (memory order) then
     const bool descending = reverse && !colouring_valid_;
-    for (int step = 0; step <= (last - first) / 2; ++step) {
-      const int x0 = descending ? last - 2 * step : first + 2 * step;
-      const int d = base + x0;
-      const int u = map[d];
-      if (u < 0 || diagonal_[u] == 0.0 || (active && !(*active)[u])) continue;
-      // the faces of u and their B_fu
-      std::array<int, 2 * Dim + 2> face;
-      std::array<double, 2 * Dim + 2> b;
-      int count = 0;
-      for (int m = 0; m < num_terms; ++m) {
-        const RowTerm& t = row_terms[m];
-        int xi = x0 + t.shift;
-        if (xi < 0 || xi >= t.length) {
-          if (!periodic_[0]) continue;
-          xi = ((xi % t.length) + t.length) % t.length;
+    // the entries of the row, with the term count a compile-time constant (unrolled loops)
+    auto relax_entries = [&](auto terms) {
+      constexpr int kTerms = decltype(terms)::value;
+      if constexpr (kTerms <= 2 * Dim + 2) {  // (at most 2 Dim + 2 terms; 8 only in 3D)
+        for (int step = 0; step <= (last - first) / 2; ++step) {
+          const int x0 = descending ? last - 2 * step : first + 2 * step;
+          const int d = base + x0;
+          const int u = map[d];
+          if (u < 0) continue;
+          const double diag = diagonal[u];
+          if (diag == 0.0 || (active && !(*active)[u])) continue;
+          const double xu = xs[u];
+          double ax = self[u] * xu;
+          if constexpr (Dim == 3) {
+            if (reduced_diagonal) {
+              // the other diagonal unknown of the cell, through the eliminated DOF's N^-1
+              const int cell = d - f.offset;
+              const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + cell];
+              if (partner >= 0) ax += eliminated_coupling_[cell] * xs[partner];
+            }
+          }
+          // (A x)_u = sum_f B_fu C_f (B x)_f + the N part over the faces of u with fluid, in
+          // term order; a face without fluid (C_f = 0, it adds nothing to A) or outside the
+          // domain keeps its force (apply relies on zeros there): its update goes to `sink`
+          const double w_u = weight[u];
+          const double w_e = reduced_diagonal ? eliminated_weight[x0 + r * n0] : 0.0;
+          double sink = 0.0;
+          std::array<double*, 2 * Dim + 2> face;
+          std::array<double, 2 * Dim + 2> b;
+          for (int m = 0; m < kTerms; ++m) {
+            const RowTerm& t = row_terms[m];
+            int xi = x0 + t.shift;
+            b[m] = (t.eliminated ? w_e : w_u) * t.coef;
+            if (xi < 0 || xi >= t.length) {
+              if (!periodic0) {
+                face[m] = &sink;
+                continue;
+              }
+              xi = ((xi % t.length) + t.length) % t.length;
+            }
+            const double cf = t.coefficient[xi];
+            face[m] = cf != 0.0 ? t.force + xi : &sink;
+            if (cf != 0.0) ax += b[m] * cf * t.force[xi];
+          }
+          // relax, then move the force with x_u
+          const double off = ax - diag * xu;
+          const double updated = (1.0 - omega) * xu + omega * (b_rhs[u] - off) / diag;
+          const double change = updated - xu;
+          xs[u] = updated;
+          for (int m = 0; m < kTerms; ++m) *face[m] += b[m] * change;
         }
-        // a face without fluid (C_f = 0) adds nothing to A: its force is neither read nor kept
-        if (face_coefficient_[t.start + xi] == 0.0) continue;
-        face[count] = t.start + xi;
-        b[count++] = (t.eliminated ? eliminated_weight_[x0 + r * n0] : weight_[u]) * t.coef;
       }
-      double ax = self_[u] * x[u];
-      if constexpr (Dim == 3) {
-        if (reduced_diagonal) {
-          // the other diagonal unknown of the cell, through the eliminated DOF's N^-1
-          const int cell = d - f.offset;
-          const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + cell];
-          if (partner >= 0) ax += eliminated_coupling_[cell] * x[partner];
-        }
-      }
-      // (A x)_u = sum_f B_fu C_f (B x)_f + the N part; relax, then move the force with x_u
-      for (int m = 0; m < count; ++m) ax += b[m] * face_coefficient_[face[m]] * force[face[m]];
-      const double off = ax - diagonal_[u] * x[u];
-      const double updated = (1.0 - omega) * x[u] + omega * (rhs[u] - off) / diagonal_[u];
-      const double change = updated - x[u];
-      x[u] = updated;
-      for (int m = 0; m < count; ++m) force[face[m]] += b[m] * change;
+    };
+    switch (num_terms) {
+      case 0: relax_entries(std::integral_constant<int, 0>()); break;
+      case 1: relax_entries(std::integral_constant<int, 1>()); break;
+      case 2: relax_entries(std::integral_constant<int, 2>()); break;
+      case 3: relax_entries(std::integral_constant<int, 3>()); break;
+      case 4: relax_entries(std::integral_constant<int, 4>()); break;
+      case 5: relax_entries(std::integral_constant<int, 5>()); break;
+      case 6: relax_entries(std::integral_constant<int, 6>()); break;
+      case 7: relax_entries(std::integral_constant<int, 7>()); break;
+      default: relax_entries(std::integral_constant<int, 8>()); break;
     }
   };
   const int first_colour = reverse ? 1 : 0, second_colour = 1 - first_colour;
