@@ -79,6 +79,30 @@ struct BoxSet {
 
 }  // namespace
 
+int sweep_diagonal_mismatch(const LinearOperator& a, const VectorX& diagonal,
+                            std::vector<char>& mismatch) {
+  const int n = a.size();
+  mismatch.assign(n, 0);
+  if (n == 0) return 0;
+  // one forward sweep from x = 0 with a tiny omega: x_i = omega (1 - sum_j A_ij x_j) / d_i, and
+  // the sum is O(omega), so d_i = omega / x_i to relative O(omega ||A|| / d_min)
+  const double omega = 1e-30;
+  const VectorX ones = VectorX::Ones(n);
+  VectorX x = VectorX::Zero(n);
+  a.forward_sweep(ones, x, omega);
+  int count = 0;
+  for (int i = 0; i < n; ++i) {
+    if (!(diagonal[i] > 0.0)) continue;
+    // a row the sweep leaves alone (x_i = 0) or relaxes with d_i < A_ii / 2
+    const bool bad = !(x[i] > 0.0) || omega / x[i] < 0.5 * diagonal[i];
+    if (bad) {
+      mismatch[i] = 1;
+      ++count;
+    }
+  }
+  return count;
+}
+
 double estimate_operator_norm(const LinearOperator& a, int iterations) {
   const int n = a.size();
   if (n == 0) return 1.0;
@@ -155,12 +179,31 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
     box.chopped_gradient(x, g, beta);
     box.free_mask(x, mask);
   };
-  // z = M_F^-1 g_F: SSOR on the principal submatrix A_FF of the free set (zero off F)
+  // rows the sweeps relax with a diagonal far below A's (docs/mprgp.md, "Rows the sweeps do not
+  // see"): they leave the SSOR block and get the Jacobi step g_i / A_ii instead
+  std::vector<char> jacobi_row;
+  VectorX a_diagonal;
+  int num_jacobi_rows = 0;
+  if (settings.precondition) {
+    a_diagonal = a.diagonal();
+    num_jacobi_rows = sweep_diagonal_mismatch(a, a_diagonal, jacobi_row);
+  }
+  std::vector<char> sweep_mask;
+  // z = M_F^-1 g_F: SSOR on the principal submatrix A_FF of the free set (zero off F), block
+  // diagonal with the Jacobi rows
   auto precondition = [&]() {
-    if (settings.precondition)
-      ssor_precondition(a, g, z, settings.omega, &mask);
-    else
+    if (!settings.precondition) {
       z = phi;
+    } else if (num_jacobi_rows == 0) {
+      ssor_precondition(a, g, z, settings.omega, &mask);
+    } else {
+      sweep_mask = mask;
+      for (int i = 0; i < n; ++i)
+        if (jacobi_row[i]) sweep_mask[i] = 0;
+      ssor_precondition(a, g, z, settings.omega, &sweep_mask);
+      for (int i = 0; i < n; ++i)
+        if (jacobi_row[i] && mask[i]) z[i] = a_diagonal[i] > 0.0 ? g[i] / a_diagonal[i] : 0.0;
+    }
     project_out(z);
   };
   // new free set or exact gradient: reclassify, precondition, restart the CG directions at z

@@ -63,6 +63,16 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
                         const VectorX& upper, VectorX& x, const MprgpSettings& settings,
                         const MprgpObserver& observer = nullptr);
 
+/// The rows whose SOR sweeps relax with a diagonal d_i below A_ii / 2 (or not at all), where
+/// `diagonal` = a.diagonal(): mismatch[i] = 1 for them (n entries), returns their number. Rows
+/// with A_ii <= 0 are never flagged. d is measured through the sweep itself (one forward sweep
+/// from x = 0 on rhs = 1 with omega = 1e-30: x_i = omega / d_i up to O(omega)). Such rows occur
+/// when an operator sweeps only a sparse part S of A = S + R (CoupledOperator: R is the
+/// rigid-body coupling of eq. (24)): the SSOR of S then badly underestimates A on those rows, and
+/// mprgp_solve takes them out of the SSOR block and gives them a Jacobi step (docs/mprgp.md).
+int sweep_diagonal_mismatch(const LinearOperator& a, const VectorX& diagonal,
+                            std::vector<char>& mismatch);
+
 /// An estimate of ||A||_2 = lambda_max(A) for SPD A: power iteration from a fixed start vector,
 /// ||A v|| / ||v|| after `iterations` steps, times 1.05 (the iteration approaches from below; the
 /// margin keeps alpha_bar = step_scale / ||A|| under 2 / ||A||).
