@@ -21,7 +21,7 @@ namespace monolith {
 struct MprgpSettings {
   double tolerance = 1e-6;     ///< stop when ||g^P||_inf <= tolerance * ||b||_inf (projected gradient)
   int max_iterations = 2000;   ///< limit on CG + expansion + proportioning steps
-  bool precondition = true;    ///< SSOR on the free set (section 4.3)
+  bool precondition = true;    ///< SSOR on the free set (section 4.3); Jacobi on rows the sweeps under-weight
   double omega = 1.0;          ///< SSOR relaxation in (0, 2)
   double step_scale = 1.9;     ///< alpha_bar = step_scale / ||A||, ||A|| estimated by power iteration
   double gamma_proportioning = 1.0;  ///< Gamma of the proportioning test
