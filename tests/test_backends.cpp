@@ -587,101 +587,6 @@ TEST_CASE("Back ends: the matrix-free coupled operators allocate nothing per app
 
 namespace {
 
-template <int Dim>
-void time_backends(int n) {
-  using Clock = std::chrono::steady_clock;
-  const CoupledStepInput<Dim> in = random_scene<Dim>(n, 51, 0.8, 0.0, false);
-  for (const std::string backend : {"explicit", "matrixfree"}) {
-    const auto t0 = Clock::now();
-    const MonolithicSystem<Dim> s = make_system<Dim>(in, backend);
-    const MonolithicOperator<Dim> op(s, 1e-4);
-    const double setup = std::chrono::duration<double>(Clock::now() - t0).count();
-    const VectorX x = testing::random_vector(op.size(), 1);
-    VectorX y;
-    op.apply(x, y);
-    const int reps = 20;
-    auto t1 = Clock::now();
-    for (int k = 0; k < reps; ++k) op.apply(x, y);
-    const double apply = std::chrono::duration<double>(Clock::now() - t1).count() / reps;
-    VectorX z = x;
-    t1 = Clock::now();
-    for (int k = 0; k < reps; ++k) {
-      op.forward_sweep(x, z, 1.0);
-      op.backward_sweep(x, z, 1.0);
-    }
-    const double sweeps = std::chrono::duration<double>(Clock::now() - t1).count() / reps;
-    CoupledSchemeOptions options;
-    options.backend = backend;
-    t1 = Clock::now();
-    const CoupledSolveResult r =
-        solve_coupled_step<Dim>(in, CouplingScheme::pvc_unified, solve_settings(1e-6), options);
-    const double solve = std::chrono::duration<double>(Clock::now() - t1).count();
-    std::printf(
-        "%dD %d^%d %-10s unknowns %d + %d + %d: set-up %.3f s, apply %.3f ms, SSOR %.3f ms, "
-        "PVC-unified %ld iterations in %.3f s (%.3f ms each)\n",
-        Dim, n, Dim, backend.c_str(), s.num_stress(), s.num_pressure(), s.num_contacts(), setup,
-        1e3 * apply, 1e3 * sweeps, r.coupled_iterations, solve,
-        1e3 * solve / std::max(1L, r.coupled_iterations));
-  }
-}
-
-}  // namespace
-
-TEST_CASE("Back ends: timings of the coupled operator and a PVC-unified step (not a check)",
-          "[.][timing]") {
-  time_backends<2>(64);
-  time_backends<3>(16);
-  time_backends<3>(24);
-}
-
-TEST_CASE("Back ends: PCG and MPRGP step counts per back end (diagnostic, not a check)",
-          "[.][timing]") {
-  const CoupledStepInput<3> in = random_scene<3>(24, 51, 0.8, 0.0, false);
-  for (const std::string backend : {"explicit", "matrixfree"}) {
-    const MonolithicSystem<3> s = make_system<3>(in, backend);
-    const FluidBodyOperator<3> fb(s);
-    VectorX x = VectorX::Zero(fb.size());
-    PcgSettings pcg;
-    pcg.max_iterations = 20000;
-    const PcgResult p = pcg_solve(fb, s.fluid_rhs(VectorX(), VectorX()), x, pcg);
-    // Stokes part alone
-    VectorX xs = VectorX::Zero(fb.size());
-    const PcgResult ps = pcg_solve(s.stokes_operator(), s.fluid_rhs(VectorX(), VectorX()), xs, pcg);
-    const MonolithicOperator<3> op(s, 1e-4);
-    const JacobiScaledOperator scaled(op);
-    const int n = op.size(), nc = s.num_contacts();
-    VectorX lower = VectorX::Constant(n, -std::numeric_limits<double>::infinity());
-    VectorX upper = VectorX::Constant(n, std::numeric_limits<double>::infinity());
-    lower.tail(nc).setZero();
-    MprgpSettings ms;
-    ms.max_iterations = 20000;
-    VectorX y = VectorX::Zero(n);
-    const MprgpResult m = mprgp_solve(
-        scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), lower,
-        upper, y, ms);
-    VectorX w = VectorX::Zero(n);
-    const PcgResult pm = pcg_solve(
-        scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), w, pcg);
-    MprgpSettings plain = ms;
-    plain.precondition = false;
-    VectorX y2 = VectorX::Zero(n);
-    const MprgpResult m2 = mprgp_solve(
-        scaled, scaled.scale().cwiseProduct(s.mlcp_rhs(VectorX::Zero(s.num_friction()))), lower,
-        upper, y2, plain);
-    VectorX y3 = VectorX::Zero(n);
-    const MprgpResult m3 =
-        mprgp_solve(op, s.mlcp_rhs(VectorX::Zero(s.num_friction())), lower, upper, y3, ms);
-    std::printf(
-        "%-10s A_ff PCG %d, A_stokes PCG %d, MPRGP %d (cg %d, expansion %d, proportioning %d), "
-        "PCG on scaled (26) unbounded %d (lambda min %.2e), MPRGP unpreconditioned %d, MPRGP "
-        "unscaled %d\n",
-        backend.c_str(), p.iterations, ps.iterations, m.iterations, m.cg_steps, m.expansion_steps,
-        m.proportioning_steps, pm.iterations, w.tail(nc).minCoeff(), m2.iterations, m3.iterations);
-  }
-}
-
-namespace {
-
 /// z = SSOR^-1 r of an operator (forward then backward sweep from zero), as PCG and MPRGP apply it.
 VectorX ssor(const LinearOperator& a, const VectorX& r, const std::vector<char>* active) {
   VectorX z = VectorX::Zero(r.size());
@@ -724,22 +629,6 @@ TEST_CASE("Back ends: the SSOR preconditioner of the coupled operators is symmet
     check_ssor_symmetric<2>(backend, 16);
     check_ssor_symmetric<3>(backend, 8);
   }
-}
-
-TEST_CASE("Back ends: thread timing of one small step (diagnostic, not a check)", "[.][timing]") {
-  const CoupledStepInput<2> in = random_scene<2>(12, 31, 0.8, 0.4, true);
-  for (const std::string backend : {"explicit", "matrixfree"})
-    for (int threads : {1, 2}) {
-      omp_set_num_threads(threads);
-      CoupledSchemeOptions options;
-      options.backend = backend;
-      const auto t0 = std::chrono::steady_clock::now();
-      const CoupledSolveResult r =
-          solve_coupled_step<2>(in, CouplingScheme::pvc_unified, solve_settings(1e-6), options);
-      std::printf("%s %d threads: %ld iterations, %d rounds, %.3f s\n", backend.c_str(), threads,
-                  r.coupled_iterations, r.staggered_iterations,
-                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    }
 }
 
 TEST_CASE("Back ends: Jacobi rows keep SSOR-preconditioned MPRGP on (26) below plain MPRGP",
