@@ -20,6 +20,10 @@ class LinearOperator {
   virtual void apply(const VectorX& x, VectorX& y) const = 0;
   /// The diagonal of A.
   virtual VectorX diagonal() const = 0;
+  /// The diagonal the SOR sweeps below divide by: diagonal() unless the sweeps relax only a part
+  /// of A (CoupledOperator sweeps the sparse part S of A = S + R, section 4.3). mprgp_solve
+  /// compares the two (sweep_diagonal_mismatch in mprgp.hpp).
+  virtual VectorX sweep_diagonal() const { return diagonal(); }
   /// One forward SOR sweep on A x = rhs, in place on x, relaxation omega: for every row i in the
   /// operator's sweep order, x_i <- (1 - omega) x_i + omega (rhs_i - sum_{j != i} A_ij x_j) / A_ii.
   /// Rows with A_ii = 0 are left unchanged. With `active` (size n), only rows with active[i] != 0

@@ -487,6 +487,9 @@ CoupledOperator<Dim>::CoupledOperator(const MonolithicSystem<Dim>& system, bool 
     }
   }
   // diagonal: diag(S) + dt alpha diag(B_f^T M_r^-1 B_f), column by column of B_f
+  sweep_diagonal_.resize(size_);
+  sweep_diagonal_.head(num_fluid_) = system.stokes_operator().sweep_diagonal();
+  if (num_contacts_ > 0) sweep_diagonal_.tail(num_contacts_) = contact_->sweep_diagonal();
   diagonal_.resize(size_);
   diagonal_.head(num_fluid_) = system.stokes_operator().diagonal();
   if (num_contacts_ > 0) diagonal_.tail(num_contacts_) = contact_->diagonal();

@@ -244,6 +244,9 @@ class CoupledOperator : public LinearOperator {
   int size() const override { return size_; }
   void apply(const VectorX& x, VectorX& y) const override;
   VectorX diagonal() const override { return diagonal_; }
+  /// diag(S): the sweeps relax the sparse part only, so on rows where the rigid term R dominates
+  /// this is far below diagonal().
+  VectorX sweep_diagonal() const override { return sweep_diagonal_; }
   void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                      const std::vector<char>* active = nullptr) const override;
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
@@ -267,7 +270,7 @@ class CoupledOperator : public LinearOperator {
   const MonolithicSystem<Dim>& system_;
   int size_ = 0, num_fluid_ = 0, num_contacts_ = 0;
   std::shared_ptr<const LinearOperator> contact_;
-  VectorX diagonal_;
+  VectorX diagonal_, sweep_diagonal_;
   std::vector<VectorX> null_space_;
   // scratch (apply, sweeps)
   mutable VectorX x_fluid_, y_fluid_, rhs_fluid_, x_contact_, y_contact_, rhs_contact_;
@@ -326,6 +329,10 @@ class JacobiScaledOperator : public LinearOperator {
   int size() const override { return a_.size(); }
   void apply(const VectorX& x, VectorX& y) const override;
   VectorX diagonal() const override { return diagonal_; }
+  /// S^2 times A's sweep diagonal: the sweeps are A's on scaled values.
+  VectorX sweep_diagonal() const override {
+    return scale_.cwiseProduct(scale_).cwiseProduct(a_.sweep_diagonal());
+  }
   void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                      const std::vector<char>* active = nullptr) const override;
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega,

@@ -79,23 +79,16 @@ struct BoxSet {
 
 }  // namespace
 
-int sweep_diagonal_mismatch(const LinearOperator& a, const VectorX& diagonal,
-                            std::vector<char>& mismatch) {
+int sweep_diagonal_mismatch(const LinearOperator& a, std::vector<char>& mismatch) {
   const int n = a.size();
   mismatch.assign(n, 0);
   if (n == 0) return 0;
-  // one forward sweep from x = 0 with a tiny omega: x_i = omega (1 - sum_j A_ij x_j) / d_i, and
-  // the sum is O(omega), so d_i = omega / x_i to relative O(omega ||A|| / d_min)
-  const double omega = 1e-30;
-  const VectorX ones = VectorX::Ones(n);
-  VectorX x = VectorX::Zero(n);
-  a.forward_sweep(ones, x, omega);
+  const VectorX diagonal = a.diagonal(), swept = a.sweep_diagonal();
   int count = 0;
   for (int i = 0; i < n; ++i) {
     if (!(diagonal[i] > 0.0)) continue;
-    // a row the sweep leaves alone (x_i = 0) or relaxes with d_i < A_ii / 2
-    const bool bad = !(x[i] > 0.0) || omega / x[i] < 0.5 * diagonal[i];
-    if (bad) {
+    // a row the sweep leaves alone (d_i <= 0) or relaxes with d_i < A_ii / 2
+    if (!(swept[i] >= 0.5 * diagonal[i])) {
       mismatch[i] = 1;
       ++count;
     }
@@ -186,7 +179,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   int num_jacobi_rows = 0;
   if (settings.precondition) {
     a_diagonal = a.diagonal();
-    num_jacobi_rows = sweep_diagonal_mismatch(a, a_diagonal, jacobi_row);
+    num_jacobi_rows = sweep_diagonal_mismatch(a, jacobi_row);
   }
   std::vector<char> sweep_mask;
   // z = M_F^-1 g_F: SSOR on the principal submatrix A_FF of the free set (zero off F), block

@@ -63,15 +63,13 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
                         const VectorX& upper, VectorX& x, const MprgpSettings& settings,
                         const MprgpObserver& observer = nullptr);
 
-/// The rows whose SOR sweeps relax with a diagonal d_i below A_ii / 2 (or not at all), where
-/// `diagonal` = a.diagonal(): mismatch[i] = 1 for them (n entries), returns their number. Rows
-/// with A_ii <= 0 are never flagged. d is measured through the sweep itself (one forward sweep
-/// from x = 0 on rhs = 1 with omega = 1e-30: x_i = omega / d_i up to O(omega)). Such rows occur
-/// when an operator sweeps only a sparse part S of A = S + R (CoupledOperator: R is the
-/// rigid-body coupling of eq. (24)): the SSOR of S then badly underestimates A on those rows, and
-/// mprgp_solve takes them out of the SSOR block and gives them a Jacobi step (docs/mprgp.md).
-int sweep_diagonal_mismatch(const LinearOperator& a, const VectorX& diagonal,
-                            std::vector<char>& mismatch);
+/// The rows whose SOR sweeps relax with a diagonal d_i = a.sweep_diagonal()_i below A_ii / 2
+/// (or not at all, d_i <= 0), A_ii = a.diagonal()_i: mismatch[i] = 1 for them (n entries),
+/// returns their number. Rows with A_ii <= 0 are never flagged. Such rows occur when an operator
+/// sweeps only a sparse part S of A = S + R (CoupledOperator: R is the rigid-body coupling of
+/// eq. (24)): the SSOR of S then badly underestimates A on those rows, and mprgp_solve takes them
+/// out of the SSOR block and gives them a Jacobi step (docs/mprgp.md).
+int sweep_diagonal_mismatch(const LinearOperator& a, std::vector<char>& mismatch);
 
 /// An estimate of ||A||_2 = lambda_max(A) for SPD A: power iteration from a fixed start vector,
 /// ||A v|| / ||v|| after `iterations` steps, times 1.05 (the iteration approaches from below; the
@@ -97,6 +95,8 @@ class DiagonalBoost : public LinearOperator {
   int size() const override;
   void apply(const VectorX& x, VectorX& y) const override;
   VectorX diagonal() const override;
+  /// (1 + gamma) times A's sweep diagonal.
+  VectorX sweep_diagonal() const override { return (1.0 + gamma_) * a_.sweep_diagonal(); }
   void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                      const std::vector<char>* active = nullptr) const override;
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
