@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "reference/plot.hpp"
-#include "reference/render.hpp"
+#include "reference/viz/plot.hpp"
+#include "reference/viz/render.hpp"
 
 namespace monolith {
 

@@ -8,9 +8,9 @@
 #include <limits>
 #include <sstream>
 
-#include "reference/embedded_data.hpp"
-#include "reference/errors.hpp"
-#include "reference/shape_tools.hpp"
+#include "reference/app/embedded_data.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/geometry/shape_tools.hpp"
 
 namespace monolith {
 

@@ -7,8 +7,8 @@
 #include <string_view>
 #include <vector>
 
-#include "reference/common.hpp"
-#include "reference/shape.hpp"
+#include "reference/core/common.hpp"
+#include "reference/geometry/shape.hpp"
 
 namespace monolith {
 

@@ -10,7 +10,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "reference/errors.hpp"
+#include "reference/core/errors.hpp"
 
 namespace monolith {
 

@@ -8,7 +8,7 @@
 #include <string_view>
 #include <vector>
 
-#include "reference/common.hpp"
+#include "reference/core/common.hpp"
 
 namespace monolith {
 

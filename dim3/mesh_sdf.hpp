@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "dim3/mesh.hpp"
-#include "reference/common.hpp"
+#include "reference/core/common.hpp"
 
 namespace monolith {
 

@@ -6,7 +6,7 @@
 
 #include "dim3/mesh.hpp"
 #include "dim3/mesh_sdf.hpp"
-#include "reference/shape.hpp"
+#include "reference/geometry/shape.hpp"
 
 namespace monolith {
 

@@ -5,8 +5,8 @@
 #include <memory>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/mac_grid.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 
@@ -39,7 +39,7 @@ int main(int argc, char** argv) {
 
   nb.md("## The staggered grid\n"
         "Pressure lives at cell centres, velocity component a on the faces normal to axis a "
-        "(`reference/mac_grid.hpp`). Cells are numbered x fastest; the faces of all axes form one "
+        "(`reference/grid/mac_grid.hpp`). Cells are numbered x fastest; the faces of all axes form one "
         "vector, axis 0 first, which is the velocity vector u of the paper, so G is "
         "num_faces x num_cells.");
   const int nx = 6, ny = 4;

@@ -7,11 +7,11 @@
 #include <random>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/cholmod_solver.hpp"
-#include "reference/gradient.hpp"
-#include "reference/pcg.hpp"
-#include "reference/pressure_projection.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/fluid/gradient.hpp"
+#include "reference/solvers/pcg.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 
@@ -21,7 +21,7 @@ int main(int argc, char** argv) {
   nb.md("## G on a 3 x 2 grid\n"
         "Row f of G is (p_plus - p_minus) / dx for the two cells beside face f; on a boundary face "
         "the outside cell is omitted (air pressure 0 beyond an open face; a wall face has W_F^u = 0, "
-        "so its row never contributes). `gradient_matrix` in reference/gradient.hpp.");
+        "so its row never contributes). `gradient_matrix` in reference/fluid/gradient.hpp.");
   const MacGrid<2> small(Vec<2>::Zero(), 1.0, VecI<2>(3, 2), {false, false});
   const SparseMatrix G_small = gradient_matrix<2>(small);
   nb.matrix("G (dx = 1): rows are the 8 x-faces then the 9 y-faces, columns the 6 cells",

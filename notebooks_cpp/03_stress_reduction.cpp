@@ -6,11 +6,11 @@
 #include <cmath>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/cholmod_solver.hpp"
-#include "reference/deformation_rate.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 
@@ -51,7 +51,7 @@ int main(int argc, char** argv) {
   notebook::Notebook nb(argc, argv, "03 D, N and the stress reduction");
 
   nb.md("## D on a 2 x 2 grid\n"
-        "Stress DOFs (reference/stress_grid.hpp): tau_xx and tau_yy at the 4 cell centres, tau_xy at "
+        "Stress DOFs (reference/grid/stress_grid.hpp): tau_xx and tau_yy at the 4 cell centres, tau_xy at "
         "the 9 nodes; rows of D in that order (xx, yy, xy). Columns: the 6 x-faces then the 6 "
         "y-faces. Diagonal rows are (u_a(c + e_a) - u_a(c)) / dx, off-diagonal rows "
         "1/2 (du_a/db + du_b/da) from the four faces around the node; faces outside the domain are "

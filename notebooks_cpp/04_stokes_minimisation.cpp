@@ -7,11 +7,11 @@
 #include <memory>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/cholmod_solver.hpp"
-#include "reference/plot.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/viz/plot.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 

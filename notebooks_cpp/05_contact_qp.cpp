@@ -8,11 +8,11 @@
 #include <sstream>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/collision.hpp"
-#include "reference/contact_system.hpp"
-#include "reference/plot.hpp"
-#include "reference/rigid_body.hpp"
-#include "reference/scene.hpp"
+#include "reference/contact/collision.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/viz/plot.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/app/scene.hpp"
 
 using namespace monolith;
 using nlohmann::json;
@@ -39,7 +39,7 @@ int main(int argc, char** argv) {
         "Box A (0.2 x 0.1 m, 500 kg/m^3) rests on the floor; box B (0.12 x 0.08 m, 800 kg/m^3) lies "
         "on A and slides to the right at 1 m/s while falling at 1.5 m/s. Gravity has already been "
         "added (v* of eq. (10)); dt = 0.01 s, dx = 1/32 m. Contacts come from `detect_contacts` "
-        "(reference/collision.hpp): two points between B and A and two between A and the floor. "
+        "(reference/contact/collision.hpp): two points between B and A and two between A and the floor. "
         "The DOFs are [vx, vy, omega] of A then of B.");
   json j = {{"format", "monolith-scene/1"}, {"name", "two-boxes"}, {"dim", 2}};
   j["domain"] = {{"lower", {0, 0}}, {"upper", {1, 1}}, {"cells", {32, 32}}, {"wall_friction", 0.5}};

@@ -10,8 +10,8 @@
 #include <sstream>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/mprgp.hpp"
-#include "reference/plot.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/viz/plot.hpp"
 
 using namespace monolith;
 

@@ -7,12 +7,12 @@
 #include <cmath>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/coupling.hpp"
-#include "reference/deformation_rate.hpp"
-#include "reference/gradient.hpp"
-#include "reference/image.hpp"
-#include "reference/viscosity.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/fluid/gradient.hpp"
+#include "reference/viz/image.hpp"
+#include "reference/fluid/viscosity.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 

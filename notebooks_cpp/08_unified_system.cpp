@@ -12,7 +12,7 @@
 
 #include "notebooks_cpp/coupled_step.hpp"
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/monolithic_system.hpp"
+#include "reference/coupling/monolithic_system.hpp"
 
 using namespace monolith;
 using nlohmann::json;

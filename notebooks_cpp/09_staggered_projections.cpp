@@ -13,9 +13,9 @@
 
 #include "notebooks_cpp/coupled_step.hpp"
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/monolithic_system.hpp"
-#include "reference/mprgp.hpp"
-#include "reference/plot.hpp"
+#include "reference/coupling/monolithic_system.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/viz/plot.hpp"
 
 using namespace monolith;
 using nlohmann::json;

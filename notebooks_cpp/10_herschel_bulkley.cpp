@@ -9,12 +9,12 @@
 #include <sstream>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/deformation_rate.hpp"
-#include "reference/herschel_bulkley.hpp"
-#include "reference/mac_grid.hpp"
-#include "reference/plot.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/fluid/herschel_bulkley.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/viz/plot.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 

@@ -1,5 +1,5 @@
 // Notebook 11: the nine coupling schemes of section 6 side by side on one step of one tiny scene
-// (solve_coupled_step, reference/coupled_schemes.hpp): per scheme the divergence left in the
+// (solve_coupled_step, reference/coupling/coupled_schemes.hpp): per scheme the divergence left in the
 // liquid against the bodies (volume change per step), the worst violation of the contact
 // conditions (penetration per step) and the iterations; the paper's claims asserted: P-C and
 // PV-C break incompressibility, C-P and C-PV break contact, the unified schemes keep both, and the
@@ -13,10 +13,10 @@
 
 #include "notebooks_cpp/coupled_step.hpp"
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/coupled_schemes.hpp"
-#include "reference/gradient.hpp"
-#include "reference/plot.hpp"
-#include "reference/pressure_projection.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
+#include "reference/fluid/gradient.hpp"
+#include "reference/viz/plot.hpp"
+#include "reference/fluid/pressure_projection.hpp"
 
 using namespace monolith;
 using nlohmann::json;
@@ -112,7 +112,7 @@ int main(int argc, char** argv) {
         "contact margin). Liquid and box arrive at the floor together at 0.5 m/s (u* = v* = "
         "(0, -0.5) + dt g): in this one step the floor must stop both, the liquid through the "
         "pressure and the box through its two contacts. mu = 0.3, dt = 0.01 s. Every scheme gets "
-        "the same input (solve_coupled_step, reference/coupled_schemes.hpp); inner tolerance 1e-10, "
+        "the same input (solve_coupled_step, reference/coupling/coupled_schemes.hpp); inner tolerance 1e-10, "
         "up to 60 rounds for the iterative schemes (stopping at a change of 1e-9).\n\n"
         "Measured after the step: **volume change** = dt dx^2 sum_c W_L^p div_c over the liquid "
         "area, div_c = -(G^T W_F^u u - alpha Jh_p^T v)_c the divergence of the liquid against the "

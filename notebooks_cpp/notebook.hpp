@@ -12,7 +12,7 @@
 #include <sstream>
 #include <string>
 
-#include "reference/image.hpp"
+#include "reference/viz/image.hpp"
 
 namespace notebook {
 

@@ -37,18 +37,18 @@
 #include <type_traits>
 #include <vector>
 
-#include "reference/collision.hpp"
-#include "reference/contact_system.hpp"
-#include "reference/coupled_schemes.hpp"
-#include "reference/coupling.hpp"
-#include "reference/monolithic_system.hpp"
-#include "reference/pcg.hpp"
-#include "reference/plot.hpp"
-#include "reference/scene.hpp"
-#include "reference/shape.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_grid.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/contact/collision.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/coupling/monolithic_system.hpp"
+#include "reference/solvers/pcg.hpp"
+#include "reference/viz/plot.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/body_helpers.hpp"
 
 using namespace monolith;

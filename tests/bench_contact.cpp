@@ -13,8 +13,8 @@
 #include <cstdlib>
 #include <random>
 
-#include "reference/rigid_world.hpp"
-#include "reference/scene.hpp"
+#include "reference/rigid/rigid_world.hpp"
+#include "reference/app/scene.hpp"
 
 using namespace monolith;
 using nlohmann::json;

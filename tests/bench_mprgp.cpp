@@ -13,8 +13,8 @@
 #include <limits>
 #include <random>
 
-#include "reference/colouring.hpp"
-#include "reference/mprgp.hpp"
+#include "reference/solvers/colouring.hpp"
+#include "reference/solvers/mprgp.hpp"
 
 using namespace monolith;
 

@@ -29,10 +29,10 @@
 #include <string>
 #include <vector>
 
-#include "reference/plot.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/stats.hpp"
+#include "reference/viz/plot.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/sim/stats.hpp"
 
 using namespace monolith;
 

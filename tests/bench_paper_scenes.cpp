@@ -1,7 +1,7 @@
 // Benchmark (not a test): the paper's Tables 1-3 for our scaled built-in scenes. Each scene of a
 // table runs from its first frame under each of the table's schemes (rendering off, everything
 // else as in the scene file, loaded like `monolith run NAME --frames K --scheme S --no-render`),
-// and the per-frame statistics (reference/stats.hpp) are averaged:
+// and the per-frame statistics (reference/sim/stats.hpp) are averaged:
 //   Table 1: Fig. 2 liquid-bunny-into-bowl, Fig. 3 bunny-onto-floating-bowl;
 //            P-C, C-P, PC-iterative, PC-unified.
 //   Table 2: Fig. 4 viscous-sphere-bunny-wall, Fig. 5 bunny-on-viscous-hemisphere;
@@ -50,10 +50,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include "reference/errors.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/stats.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/sim/stats.hpp"
 
 using namespace monolith;
 

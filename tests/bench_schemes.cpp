@@ -16,12 +16,12 @@
 #include <string>
 #include <vector>
 
-#include "reference/collision.hpp"
-#include "reference/coupled_schemes.hpp"
-#include "reference/coupling.hpp"
-#include "reference/mass_properties.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/contact/collision.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/rigid/mass_properties.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/body_helpers.hpp"
 
 using namespace monolith;

@@ -11,14 +11,14 @@
 #include <cstring>
 #include <omp.h>
 
-#include "reference/pressure_projection.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_grid.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/viscosity.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/fluid/viscosity.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

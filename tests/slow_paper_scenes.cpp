@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
 
 using namespace monolith;
 

@@ -4,9 +4,9 @@
 #include <catch2/catch.hpp>
 #include <algorithm>
 
-#include "reference/errors.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
 
 using namespace monolith;
 

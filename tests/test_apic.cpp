@@ -8,7 +8,7 @@
 #include <deque>
 #include <random>
 
-#include "reference/particles.hpp"
+#include "reference/particles/particles.hpp"
 
 using namespace monolith;
 

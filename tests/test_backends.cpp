@@ -1,4 +1,4 @@
-// The two back ends of the coupled step (reference/monolithic_system.hpp, "explicit" and
+// The two back ends of the coupled step (reference/coupling/monolithic_system.hpp, "explicit" and
 // "matrixfree"; issue 7): the operator of eq. (24), its blocks, the MLCP (26) and A_ff operators
 // and the right-hand sides agree to round-off; solve_coupled_step agrees under all nine schemes
 // of section 6 to the solver tolerance; a whole simulator step agrees; the matrix-free step is
@@ -17,16 +17,16 @@
 #include <string>
 #include <vector>
 
-#include "reference/collision.hpp"
-#include "reference/contact_system.hpp"
-#include "reference/coupled_schemes.hpp"
-#include "reference/coupling.hpp"
-#include "reference/monolithic_system.hpp"
-#include "reference/mprgp.hpp"
-#include "reference/pcg.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/contact/collision.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/coupling/monolithic_system.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/solvers/pcg.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/body_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 

@@ -1,4 +1,4 @@
-// Tests of the command line (reference/cli.cpp, reference/runner.cpp, docs/cli.md): exit codes,
+// Tests of the command line (reference/app/cli.cpp, reference/app/runner.cpp, docs/cli.md): exit codes,
 // messages, outputs of `run` with a stand-in simulation, and robustness against garbage input.
 #include <catch2/catch.hpp>
 
@@ -11,11 +11,11 @@
 #include <random>
 #include <sstream>
 
-#include "reference/cli.hpp"
-#include "reference/embedded_data.hpp"
-#include "reference/errors.hpp"
-#include "reference/runner.hpp"
-#include "reference/stats.hpp"
+#include "reference/app/cli.hpp"
+#include "reference/app/embedded_data.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/app/runner.hpp"
+#include "reference/sim/stats.hpp"
 
 using namespace monolith;
 using nlohmann::json;

@@ -7,9 +7,9 @@
 #include <cmath>
 #include <omp.h>
 
-#include "reference/collision.hpp"
-#include "reference/rigid_body.hpp"
-#include "reference/shape.hpp"
+#include "reference/contact/collision.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/geometry/shape.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

@@ -8,9 +8,9 @@
 #include <random>
 #include <set>
 
-#include "reference/colouring.hpp"
-#include "reference/mprgp.hpp"
-#include "reference/pcg.hpp"
+#include "reference/solvers/colouring.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/solvers/pcg.hpp"
 
 using namespace monolith;
 

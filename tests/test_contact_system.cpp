@@ -1,4 +1,4 @@
-// Tests of the contact problem (reference/contact_system.hpp): the Jacobians against finite
+// Tests of the contact problem (reference/contact/contact_system.hpp): the Jacobians against finite
 // differences of body motion, the definiteness of A33/A44, the right-hand side b3 of eq. (16),
 // restitution per pair, and the staggered projections against a dense oracle of eq. (15).
 #include <catch2/catch.hpp>
@@ -7,10 +7,10 @@
 
 #include <Eigen/Dense>
 
-#include "reference/collision.hpp"
-#include "reference/contact_system.hpp"
-#include "reference/rigid_body.hpp"
-#include "reference/scene.hpp"
+#include "reference/contact/collision.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/app/scene.hpp"
 
 using namespace monolith;
 using nlohmann::json;

@@ -1,4 +1,4 @@
-// Tests of the nine coupling schemes of section 6 (reference/coupled_schemes.hpp), 2D and 3D on
+// Tests of the nine coupling schemes of section 6 (reference/coupling/coupled_schemes.hpp), 2D and 3D on
 // small grids: names, the iterative schemes' convergence to the unified ones, the paper's claims
 // at solver level (P-C loses volume, C-P penetrates), reductions without bodies and the
 // neutrally buoyant body.
@@ -9,15 +9,15 @@
 #include <string>
 #include <vector>
 
-#include "reference/contact_system.hpp"
-#include "reference/coupled_schemes.hpp"
-#include "reference/coupling.hpp"
-#include "reference/mass_properties.hpp"
-#include "reference/monolithic_system.hpp"
-#include "reference/pressure_projection.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/rigid/mass_properties.hpp"
+#include "reference/coupling/monolithic_system.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/body_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 

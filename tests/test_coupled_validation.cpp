@@ -9,10 +9,10 @@
 #include <cmath>
 #include <vector>
 
-#include "reference/coupling.hpp"
-#include "reference/scene.hpp"
-#include "reference/shape.hpp"
-#include "reference/simulation.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/sim/simulation.hpp"
 #include "support/coupled_validation.hpp"
 
 using namespace monolith;

@@ -1,18 +1,18 @@
 // Consistent force exchange (section 4.4.1), the one-way / two-way split (section 4.4.4) and the
-// moving-solid weights (section 4.4.6): reference/coupling.hpp.
+// moving-solid weights (section 4.4.6): reference/coupling/coupling.hpp.
 #include <catch2/catch.hpp>
 
 #include <cmath>
 #include <memory>
 #include <vector>
 
-#include "reference/contact_system.hpp"
-#include "reference/coupling.hpp"
-#include "reference/deformation_rate.hpp"
-#include "reference/gradient.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/viscosity.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/fluid/gradient.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/fluid/viscosity.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

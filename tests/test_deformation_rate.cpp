@@ -4,8 +4,8 @@
 #include <set>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/deformation_rate.hpp"
-#include "reference/stress_grid.hpp"
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/grid/stress_grid.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

@@ -3,7 +3,7 @@
 #include <random>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/gradient.hpp"
+#include "reference/fluid/gradient.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

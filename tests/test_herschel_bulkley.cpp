@@ -8,14 +8,14 @@
 #include <functional>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/deformation_rate.hpp"
-#include "reference/herschel_bulkley.hpp"
-#include "reference/particles.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_grid.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/fluid/herschel_bulkley.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

@@ -7,7 +7,7 @@
 #include <iterator>
 #include <vector>
 
-#include "reference/image.hpp"
+#include "reference/viz/image.hpp"
 
 using namespace monolith;
 

@@ -7,7 +7,7 @@
 #include <random>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/particles.hpp"
+#include "reference/particles/particles.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

@@ -12,9 +12,9 @@
 
 #include "dim2/shapes_2d.hpp"
 #include "dim3/shapes_3d.hpp"
-#include "reference/mass_properties.hpp"
-#include "reference/shape.hpp"
-#include "reference/shape_tools.hpp"
+#include "reference/rigid/mass_properties.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/geometry/shape_tools.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

@@ -13,9 +13,9 @@
 #include "dim3/mesh.hpp"
 #include "dim3/mesh_sdf.hpp"
 #include "dim3/shapes_3d.hpp"
-#include "reference/errors.hpp"
-#include "reference/shape.hpp"
-#include "reference/shape_tools.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/geometry/shape_tools.hpp"
 
 using namespace monolith;
 

@@ -1,5 +1,5 @@
 // Tests of the unified system (24), the MLCP operator (26) and the PVC-unified solve
-// (reference/monolithic_system.hpp), 2D and 3D on small grids.
+// (reference/coupling/monolithic_system.hpp), 2D and 3D on small grids.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -9,14 +9,14 @@
 
 #include <Eigen/Eigenvalues>
 
-#include "reference/cholmod_solver.hpp"
-#include "reference/contact_system.hpp"
-#include "reference/coupled_schemes.hpp"
-#include "reference/coupling.hpp"
-#include "reference/mass_properties.hpp"
-#include "reference/monolithic_system.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/rigid/mass_properties.hpp"
+#include "reference/coupling/monolithic_system.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/body_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 

@@ -9,11 +9,11 @@
 #include <limits>
 #include <random>
 
-#include "reference/cholmod_solver.hpp"
-#include "reference/colouring.hpp"
-#include "reference/mprgp.hpp"
-#include "reference/pcg.hpp"
-#include "reference/pressure_projection.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/solvers/colouring.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/solvers/pcg.hpp"
+#include "reference/fluid/pressure_projection.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

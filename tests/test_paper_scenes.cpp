@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "reference/embedded_data.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
+#include "reference/app/embedded_data.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
 
 using namespace monolith;
 

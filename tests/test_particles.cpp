@@ -7,8 +7,8 @@
 #include <random>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/particles.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

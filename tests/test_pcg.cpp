@@ -6,9 +6,9 @@
 #include <random>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/pcg.hpp"
-#include "reference/pressure_projection.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/solvers/pcg.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

@@ -1,4 +1,4 @@
-// Tests of the PPM line plots and the raster toolkit of reference/plot.hpp.
+// Tests of the PPM line plots and the raster toolkit of reference/viz/plot.hpp.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-#include "reference/plot.hpp"
+#include "reference/viz/plot.hpp"
 
 using namespace monolith;
 

@@ -5,9 +5,9 @@
 #include <random>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/cholmod_solver.hpp"
-#include "reference/pressure_projection.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

@@ -12,8 +12,8 @@
 #include <string>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/embedded_data.hpp"
-#include "reference/render.hpp"
+#include "reference/app/embedded_data.hpp"
+#include "reference/viz/render.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

@@ -9,10 +9,10 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "reference/rigid_body.hpp"
-#include "reference/scene.hpp"
-#include "reference/shape.hpp"
-#include "reference/shape_tools.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/geometry/shape_tools.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

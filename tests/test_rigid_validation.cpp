@@ -1,12 +1,12 @@
-// Validation of the rigid-body contact model (reference/rigid_world.hpp) against closed-form
+// Validation of the rigid-body contact model (reference/rigid/rigid_world.hpp) against closed-form
 // mechanics, 2D and 3D. Every case states its source, the measured error and the tolerance.
 #include <catch2/catch.hpp>
 
 #include <cmath>
 
-#include "reference/rigid_world.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
+#include "reference/rigid/rigid_world.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
 
 using namespace monolith;
 using nlohmann::json;
@@ -204,7 +204,7 @@ TEMPLATE_TEST_CASE_SIG("a stack of four boxes stays at rest for three seconds", 
 
 TEST_CASE("the simulation runs the rigid world for a built-in scene and reports it in the stats",
           "[validation]") {
-  // the hook of Algorithm 1's body lines into Simulation<Dim> (reference/simulation.cpp):
+  // the hook of Algorithm 1's body lines into Simulation<Dim> (reference/sim/simulation.cpp):
   // box-stack-2d/3d for 0.5 s, stats of every frame carry the bodies, the contacts, the body
   // kinetic energy and the contact DOFs; the stack (placed with 1-2 mm gaps) comes to rest with
   // every contact epsilon = 0.1 dx deep: box i (half height h) at h (2 i + 1) - (i + 1) epsilon.

@@ -5,12 +5,12 @@
 #include <algorithm>
 #include <cmath>
 
-#include "reference/particles.hpp"
-#include "reference/pressure_projection.hpp"
-#include "reference/scene.hpp"
-#include "reference/shape.hpp"
-#include "reference/simulation.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 

@@ -1,4 +1,4 @@
-// Tests of scene parsing and validation (reference/scene.cpp, docs/scene-format.md).
+// Tests of scene parsing and validation (reference/app/scene.cpp, docs/scene-format.md).
 #include <catch2/catch.hpp>
 
 #include <filesystem>
@@ -7,9 +7,9 @@
 #include <set>
 #include <unistd.h>
 
-#include "reference/embedded_data.hpp"
-#include "reference/errors.hpp"
-#include "reference/scene.hpp"
+#include "reference/app/embedded_data.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/app/scene.hpp"
 
 using namespace monolith;
 using nlohmann::json;

@@ -11,8 +11,8 @@
 #include <map>
 #include <string>
 
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
 
 using namespace monolith;
 using nlohmann::json;

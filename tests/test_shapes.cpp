@@ -1,5 +1,5 @@
 /// \file test_shapes.cpp
-/// Tests of the signed distance functions of reference/shape.cpp and dim2/shapes_2d.cpp:
+/// Tests of the signed distance functions of reference/geometry/shape.cpp and dim2/shapes_2d.cpp:
 /// exact values, unit gradients, rotations, combinators, the bowl, polygons, volume_inside.
 
 #include <catch2/catch.hpp>
@@ -8,9 +8,9 @@
 #include <random>
 
 #include "dim2/shapes_2d.hpp"
-#include "reference/errors.hpp"
-#include "reference/shape.hpp"
-#include "reference/shape_tools.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/geometry/shape_tools.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

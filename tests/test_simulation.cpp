@@ -3,11 +3,11 @@
 #include <cmath>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/errors.hpp"
-#include "reference/pressure_projection.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

@@ -4,12 +4,12 @@
 #include <cmath>
 #include <omp.h>
 
-#include "reference/cholmod_solver.hpp"
-#include "reference/deformation_rate.hpp"
-#include "reference/gradient.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/fluid/gradient.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

@@ -18,8 +18,8 @@
 #include <utility>
 #include <vector>
 
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
 
 using namespace monolith;
 

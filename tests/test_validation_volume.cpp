@@ -2,7 +2,7 @@
 // of the particle level set, must stay within 1% of its frame-0 value at every frame (the issue's
 // requirement). The liquid is carried by particles of fixed volume; what keeps the level set's
 // volume on theirs is the position correction of Algorithm 1 line 15 (the density constraint and
-// the grid density projection of reference/particles.cpp, docs/particles.md).
+// the grid density projection of reference/particles/particles.cpp, docs/particles.md).
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/stats.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/sim/stats.hpp"
 
 using namespace monolith;
 

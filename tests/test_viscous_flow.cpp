@@ -5,11 +5,11 @@
 #include <cmath>
 
 #include "tests/support/test_helpers.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_grid.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/viscosity.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/fluid/viscosity.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 using namespace monolith;
 using namespace monolith::testing;

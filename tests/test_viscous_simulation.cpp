@@ -5,11 +5,11 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "reference/particles.hpp"
-#include "reference/scene.hpp"
-#include "reference/simulation.hpp"
-#include "reference/stress_grid.hpp"
-#include "reference/viscosity_field.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/fluid/viscosity_field.hpp"
 
 using namespace monolith;
 

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <random>
 
-#include "reference/volume_fractions.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;

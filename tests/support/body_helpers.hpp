@@ -6,12 +6,12 @@
 #include <string>
 #include <vector>
 
-#include "reference/collision.hpp"
-#include "reference/common.hpp"
-#include "reference/mass_properties.hpp"
-#include "reference/rigid_body.hpp"
-#include "reference/scene.hpp"
-#include "reference/shape.hpp"
+#include "reference/contact/collision.hpp"
+#include "reference/core/common.hpp"
+#include "reference/rigid/mass_properties.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
 #include "tests/support/test_helpers.hpp"
 
 namespace monolith::testing {

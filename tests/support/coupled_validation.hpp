@@ -12,10 +12,10 @@
 #include <string>
 #include <vector>
 
-#include "reference/coupling.hpp"
-#include "reference/scene.hpp"
-#include "reference/shape.hpp"
-#include "reference/simulation.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/sim/simulation.hpp"
 
 namespace monolith::validation {
 

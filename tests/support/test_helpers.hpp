@@ -8,13 +8,13 @@
 #include <string>
 #include <vector>
 
-#include "reference/common.hpp"
-#include "reference/pressure_projection.hpp"
-#include "reference/scene.hpp"
-#include "reference/shape.hpp"
-#include "reference/stokes_system.hpp"
-#include "reference/stress_weights.hpp"
-#include "reference/volume_fractions.hpp"
+#include "reference/core/common.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 namespace monolith::testing {
 
@@ -142,7 +142,7 @@ PressureWeights flat_surface_weights(const MacGrid<Dim>& grid,
 }
 
 /// The weights of eq. (8) with one density and one viscosity: uniform_stokes_weights
-/// (reference/stokes_system.hpp).
+/// (reference/fluid/stokes_system.hpp).
 template <int Dim>
 StokesWeights stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
                              const VectorX& liquid_phi,

@@ -1,0 +1,195 @@
+#pragma once
+/// \file coupled_schemes.hpp
+/// The nine pressure / viscosity / contact coupling schemes of section 6 (P-C, C-P, PC-iterative,
+/// PC-unified, PC-VC-PC-unified, PV-C, C-PV, PVC-iterative, PVC-unified) as options of one
+/// library function, solve_coupled_step. docs/coupling.md, "The nine schemes", explains them.
+///
+/// All nine build one MonolithicSystem (eq. (24)) and differ only in which blocks are solved
+/// together. With x_f = (tau, p) the fluid unknowns, the partition of eq. (24) is
+///
+///   [A_ff  A_fc] [x_f      ]   [b_f ]      A_ff = A_stokes + dt alpha B_f^T M_r^-1 B_f,
+///   [A_cf  A_cc] [lambda, z] = [b_c ],     A_cc = [A33 A34; A34^T A44],
+///
+/// and the two building blocks of the partitioned schemes are
+///   - the fluid solve ("P", "PV", "VC"): A_ff x_f = b_f - A_f3 lambda - A_f4 z for given
+///     contact forces, by SSOR-PCG (pcg.hpp) on FluidBodyOperator: the liquid is two-way coupled
+///     with the bodies (the rigid terms of A_ff are kept), but blind to contacts;
+///   - the contact solve ("C"): the normal QP A33 lambda = b3 - A31 tau - A32 p - A34 z,
+///     lambda >= 0, and with some mu > 0 the friction QP (25), staggered as in
+///     solve_staggered_projections (friction first, normal last), by MPRGP on the coloured
+///     sparse A33 / A44 with the diagonal boost gamma of section 4.4.5, for given x_f.
+///
+/// Both back ends of MonolithicSystem run every scheme (CoupledSchemeOptions::backend): the
+/// operators (FluidBodyOperator, MonolithicOperator) and the solver code are the same, only the
+/// fluid part and the rigid products are explicit matrices or stencils (docs/coupling.md, "Back
+/// ends of the coupled step").
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "reference/contact/collision.hpp"
+#include "reference/core/common.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/fluid/stokes_system.hpp"
+
+namespace monolith {
+
+/// Section 6: the nine ways of solving one step's pressure, viscosity and contact.
+enum class CouplingScheme {
+  p_c,               ///< P-C: fluid solve (no viscosity), then contact solve (section 6.1)
+  c_p,               ///< C-P: contact solve, then fluid solve (no viscosity)
+  pc_iterative,      ///< PC-iterative: block Gauss-Seidel P, C, P, C, ... (staggered projections)
+  pc_unified,        ///< PC-unified: the MLCP (26) without stress unknowns
+  pc_vc_pc_unified,  ///< PC-VC-PC-unified: PC-unified, VC-unified, PC-unified (section 6.2)
+  pv_c,              ///< PV-C: Stokes solve, then contact solve (section 6.3)
+  c_pv,              ///< C-PV: contact solve, then Stokes solve
+  pvc_iterative,     ///< PVC-iterative: block Gauss-Seidel PV, C, PV, C, ...
+  pvc_unified        ///< PVC-unified: the MLCP (26) over (tau, p, lambda) (section 4.2)
+};
+
+/// The paper's names "P-C", "C-P", "PC-iterative", "PC-unified", "PC-VC-PC-unified", "PV-C",
+/// "C-PV", "PVC-iterative", "PVC-unified"; std::invalid_argument (listing all nine) otherwise.
+CouplingScheme parse_coupling_scheme(const std::string& name);
+/// The paper's name of `s`.
+std::string coupling_scheme_name(CouplingScheme s);
+/// The nine names, in the order of the enum.
+const std::vector<std::string>& coupling_scheme_names();
+/// The nine schemes, in the order of the enum.
+const std::vector<CouplingScheme>& coupling_schemes();
+/// true for PC-VC-PC-unified, PV-C, C-PV, PVC-iterative, PVC-unified. The P.. C schemes drop
+/// viscosity: the liquid is treated as inviscid, as the simulator does without bodies.
+bool scheme_uses_viscosity(CouplingScheme s);
+/// true for PC-iterative and PVC-iterative.
+bool scheme_is_iterative(CouplingScheme s);
+
+/// One step's inputs to the pressure / viscosity / contact solves.
+template <int Dim>
+struct CoupledStepInput {
+  MacGrid<Dim> grid;
+  /// W_F^u (solid_weights(...).fluid_face), W_L^p, W_L^u, P, W_F^s (solid_weights(...).
+  /// fluid_stress), W_L^s, eta per stress DOF.
+  StokesWeights weights;
+  double dt = 0.0;
+  /// Face velocities after P2G, gravity, air extrapolation.
+  VectorX u_star;
+  /// Step-start pose; dynamic bodies carry v* (gravity in).
+  std::vector<RigidBody<Dim>> bodies;
+  /// solid_weights over coupling_bodies(bodies) + static solids.
+  SolidWeights<Dim> solids;
+  /// Friction / restitution already combined per pair.
+  std::vector<Contact<Dim>> contacts;
+  /// dt, dx, baumgarte, margin, restitution threshold (dx must be the grid's: alpha = 1/dx^Dim).
+  ContactParameters contact_params;
+};
+
+/// The weights of eq. (24) (section 3.1.2, 4.4.6) for a liquid beside bodies: W_L^p, W_L^u
+/// (clamped as liquid_face_weights does) and W_L^s from `liquid_phi` on half_lattice(grid)
+/// (liquid where < 0), W_F^u and W_F^s from `solids` (solid_weights of the posed bodies and
+/// static solids), one density rho (the diagonal of P, kg/m^3) and one viscosity eta (Pa s)
+/// everywhere. For tests, benchmarks and notebooks that pose one step in closed form; the
+/// simulator builds its weights from particles.
+template <int Dim>
+StokesWeights coupled_stokes_weights(const MacGrid<Dim>& grid, const SolidWeights<Dim>& solids,
+                                     const VectorX& liquid_phi, double rho, double eta);
+
+struct CoupledSolveResult {
+  VectorX u;              ///< face velocities after the step's solves (eq. (8) update)
+  VectorX pressure;       ///< cell pressures (Pa); for PC-VC-PC the sum of both pressure solves
+  VectorX stress;         ///< all StressGrid components (zero when no stress unknowns)
+  VectorX body_velocity;  ///< two-way (dynamic) bodies' generalised velocities, ContactSystem order
+  std::vector<int> body_dof;  ///< per body (input order): first row in body_velocity, -1 if none
+  VectorX lambda, z;      ///< contact forces of the last contact solve (N; 2D N/m)
+  /// Outer iterations: PC/PVC-iterative the fluid-contact rounds; P-C, C-P, PV-C, C-PV the
+  /// friction rounds of the contact solve; the unified schemes the staggered friction rounds
+  /// of solve_pvc_unified (summed over the three solves of PC-VC-PC); 1 without friction.
+  int staggered_iterations = 0;
+  long fluid_iterations = 0;      ///< CG iterations of separate P / PV solves
+  long contact_iterations = 0;    ///< MPRGP iterations of separate contact solves
+  long coupled_iterations = 0;    ///< MPRGP/CG iterations of unified solves (PC, PVC, VC)
+  /// fluid / contact / coupled: wall time of those solves (right-hand sides included);
+  /// total: the whole call, assembly of eq. (24) included.
+  double fluid_seconds = 0, contact_seconds = 0, coupled_seconds = 0, total_seconds = 0;
+  /// PC-VC-PC-unified: the VC-unified share of coupled_iterations / coupled_seconds (Table 2's
+  /// VC column); 0 for the other schemes.
+  long viscosity_coupled_iterations = 0;
+  double viscosity_coupled_seconds = 0;
+  /// Unknowns of the system(s) solved: active pressure cells, active stress unknowns (for
+  /// PC-VC-PC those of the VC solve), contacts, friction rows.
+  long pressure_dofs = 0, stress_dofs = 0, contact_dofs = 0, friction_dofs = 0;
+  /// Every inner solve converged (and the iterative schemes met the tolerance within
+  /// settings.max_iterations rounds).
+  bool converged = true;
+  /// Largest relative residual of the inner solves (PCG: ||r||_inf / ||b||_inf; MPRGP: projected
+  /// gradient).
+  double max_relative_residual = 0.0;
+  /// Iterative schemes: relative change (inf-norm) of (lambda, x_f) in the last round.
+  double last_change = 0.0;
+};
+
+/// Options of solve_coupled_step beyond StaggeredSettings.
+struct CoupledSchemeOptions {
+  /// PC-iterative / PVC-iterative: start every fluid and contact solve from the previous
+  /// round's unknowns (true), or from zero (false: each round's solves cost about as much as
+  /// a one-pass scheme's, as the per-solve iteration counts of the paper's Tables 1 and 3
+  /// suggest). The fixed point is the same.
+  bool warm_start = true;
+  /// Algorithm 2 (section 5, non-Newtonian liquids), used when both are set and the scheme has
+  /// stress unknowns: initial_viscosity(u*) gives eta^1 (lines 1, 3), update_viscosity(tau, eta^k)
+  /// gives eta^(k+1) from the solved stress (lines 6, 3); NonNewtonianViscosity
+  /// (herschel_bulkley.hpp) provides both. The viscosity of in.weights is then ignored.
+  std::function<VectorX(const VectorX& u_star)> initial_viscosity;
+  std::function<VectorX(const VectorX& stress, const VectorX& viscosity)> update_viscosity;
+  /// The back end of every MonolithicSystem (eq. (24)) the step builds: "explicit" (assembled
+  /// sparse matrices, the reference oracle) or "matrixfree" (stencils applied on the fly, the
+  /// production path; solver.backend of the scene file). solve_coupled_step throws
+  /// std::invalid_argument on any other name.
+  std::string backend = "explicit";
+};
+
+/// One step's pressure / viscosity / contact solves under `scheme` (section 6). Builds
+/// MonolithicSystem (eq. (24)) once: PV schemes with StressForm::reduced and the input viscosity,
+/// PC schemes with the viscosity zeroed (no stress unknowns). Then, with "fluid" and "contact"
+/// solves as in the file comment:
+///   - P-C / PV-C: fluid solve with lambda = z = 0, then the contact solve given x_f; u from x_f,
+///     v = body_velocities(x_f, lambda, z). The contact solve changes the bodies after the liquid
+///     was made divergence-free against their old velocity: volume loss (section 6.1.1).
+///   - C-P / C-PV: contact solve with x_f = 0, then the fluid solve given lambda, z: the liquid's
+///     push on the bodies overrides non-penetration.
+///   - PC-iterative / PVC-iterative: block Gauss-Seidel on eq. (24), i.e. staggered projections
+///     on the unified formulation: rounds of (fluid solve given lambda, z; friction QP (25) given
+///     x_f, lambda when some mu > 0; normal QP given x_f, z), each warm-started from the previous
+///     round (cold with options.warm_start = false), up to settings.max_iterations rounds, stopping when both lambda and x_f change by
+///     <= settings.tolerance (relative, inf-norm) in a round. Every round ends on the contact
+///     solve, so the returned bodies satisfy the contact conditions and the liquid's
+///     incompressibility is off by the last round's change. The fixed point is the one of
+///     PC-unified / PVC-unified: each block's equations hold given the others.
+///   - PC-unified / PVC-unified: solve_pvc_unified (MPRGP on (26), friction staggered; on the
+///     Jacobi-scaled MLCP, PvcUnifiedOptions::jacobi_scaling, a departure explained there); with no
+///     contacts SSOR-PCG on FluidBodyOperator instead (section 6: SOR-CG when there are no box
+///     constraints).
+///   - PC-VC-PC-unified (section 6.2): PC-unified -> u1, v1; VC-unified: MonolithicSystem with
+///     stress unknowns only (StressForm::full, p fixed at 0), u* = u1, body v* = v1 (the
+///     ContactSystem rebuilt with v1), solved as the unified MLCP -> u2, v2; PC-unified from
+///     u2, v2 -> final u, v, lambda, z. pressure = p1 + p3, stress = tau2.
+/// Non-Newtonian liquids (options.initial_viscosity / update_viscosity set, section 5): the
+/// viscous solve of the scheme (the whole solve of PV-C, C-PV, PVC-iterative, PVC-unified; the
+/// VC-unified solve of PC-VC-PC-unified) runs settings.max_iterations times, round k with the
+/// viscosity eta^k and each followed by the viscosity update, so the step ends with tau, p,
+/// lambda optimal for the last viscosity. Departure: the paper interleaves one viscosity update
+/// with each friction round of one staggered solve; solve_pvc_unified has no entry for a
+/// warm-started friction force, so here every viscosity round runs the scheme's own friction
+/// rounds (up to max_iterations^2 friction solves per step). Without friction the two agree.
+/// settings: max_iterations = staggered rounds (>= 1), tolerance = their stopping tolerance and
+/// the inner PCG tolerance is settings.mprgp.tolerance, with settings.mprgp.max_iterations;
+/// diagonal_boost = gamma on the contact rows. Throws SimulationError (errors.hpp) on a solver
+/// breakdown, std::invalid_argument on inconsistent input.
+template <int Dim>
+CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme,
+                                      const StaggeredSettings& settings,
+                                      const CoupledSchemeOptions& options = {});
+
+}  // namespace monolith

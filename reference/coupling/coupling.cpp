@@ -1,0 +1,511 @@
+#include "reference/coupling/coupling.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
+
+namespace monolith {
+
+namespace {
+
+/// Global index of the face normal to `axis` at coordinate f, wrapped along periodic axes, or -1
+/// where it lies outside the domain.
+template <int Dim>
+int face_index_or_outside(const MacGrid<Dim>& grid, int axis, VecI<Dim> f) {
+  const VecI<Dim> dims = grid.face_dims(axis);
+  for (int b = 0; b < Dim; ++b) {
+    if (grid.periodic(b)) f[b] = ((f[b] % dims[b]) + dims[b]) % dims[b];
+    if (f[b] < 0 || f[b] >= dims[b]) return -1;
+  }
+  return grid.face_index(axis, f);
+}
+
+template <int Dim>
+bool in_group(const CouplingBody<Dim>& body, BodyGroup group) {
+  return body.two_way == (group == BodyGroup::two_way);
+}
+
+/// Lattice coordinates [lo, hi] (inclusive) of the points origin + (c + shift) dx, c in
+/// [0, dims), that lie within `margin` of the box; the whole range on periodic axes (the box may
+/// wrap) and for unbounded or empty boxes.
+template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> lattice_range(const MacGrid<Dim>& grid, const Box<Dim>& box,
+                                              const Vec<Dim>& shift, const VecI<Dim>& dims,
+                                              double margin) {
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = dims - VecI<Dim>::Ones();
+  if (box.isEmpty()) return {lo, hi};
+  for (int a = 0; a < Dim; ++a) {
+    if (grid.periodic(a) || !std::isfinite(box.min()[a]) || !std::isfinite(box.max()[a])) continue;
+    const double from = (box.min()[a] - margin - grid.origin()[a]) / grid.dx() - shift[a];
+    const double to = (box.max()[a] + margin - grid.origin()[a]) / grid.dx() - shift[a];
+    lo[a] = std::max(lo[a], static_cast<int>(std::floor(std::max(from, -1.0))));
+    hi[a] = std::min(hi[a], static_cast<int>(std::ceil(std::min(to, static_cast<double>(dims[a])))));
+  }
+  return {lo, hi};
+}
+
+/// Calls fn(c) for every c in [lo, hi] (inclusive), x fastest.
+template <int Dim, class Fn>
+void for_range(const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
+  for (int a = 0; a < Dim; ++a)
+    if (hi[a] < lo[a]) return;
+  VecI<Dim> c = lo;
+  while (true) {
+    fn(c);
+    int a = 0;
+    while (a < Dim && c[a] == hi[a]) c[a] = lo[a], ++a;
+    if (a == Dim) return;
+    ++c[a];
+  }
+}
+
+/// A body's SDF on the lattice shifted by zeta (solid_phi_on_lattice of one shape), evaluated
+/// only within 2 dx of its bounds: farther out the distance to the bounds box (plus zeta), a
+/// positive lower bound of the true distance, stands in. The fractions, which read only signs
+/// and the values next to sign changes, are the same; a 3D mesh body costs its own box of
+/// samples instead of the whole lattice in every step.
+template <int Dim>
+VectorX body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
+                            double shrink_in_metres, double far) {
+  const Box<Dim> box = shape.bounds();
+  const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
+  VectorX phi(lattice.size());
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < lattice.size(); ++k) {
+    const Vec<Dim> x = lattice.position(lattice.coord(k));
+    if (bounded) {
+      const double outside = (x - x.cwiseMax(box.min()).cwiseMin(box.max())).norm();
+      if (outside > far) {
+        phi[k] = outside + shrink_in_metres;
+        continue;
+      }
+    }
+    phi[k] = shape.distance(x) + shrink_in_metres;
+  }
+  return phi;
+}
+
+/// face_negative_fractions of a body's lattice phi, evaluated only on faces whose control
+/// volume (the face centre +- dx along every axis) can reach the body's bounds; the others are
+/// zero (their whole control volume lies where phi > 0). Same values, O(faces near the body).
+template <int Dim>
+VectorX body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                            const VectorX& phi, const Box<Dim>& box) {
+  const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
+  if (!bounded) return face_negative_fractions(grid, lattice, phi);
+  VectorX w = VectorX::Zero(grid.num_faces());
+  const double reach = 1.5 * grid.dx();
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    const auto [axis, coord] = grid.face_coord(f);
+    const Vec<Dim> x = grid.face_center(axis, coord);
+    if ((x.array() < box.min().array() - reach).any() || (x.array() > box.max().array() + reach).any())
+      continue;
+    // the face control volume starts half a cell before the face along its normal
+    VecI<Dim> lower = 2 * coord;
+    lower[axis] -= 1;
+    w[f] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
+  }
+  return w;
+}
+
+}  // namespace
+
+template <int Dim>
+std::vector<CouplingBody<Dim>> coupling_bodies(const std::vector<RigidBody<Dim>>& bodies) {
+  std::vector<CouplingBody<Dim>> out;
+  out.reserve(bodies.size());
+  for (const RigidBody<Dim>& body : bodies)
+    out.push_back(CouplingBody<Dim>{body.posed_shape(), body.position, body.is_dynamic()});
+  return out;
+}
+
+template <int Dim>
+SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
+                                const std::vector<CouplingBody<Dim>>& bodies,
+                                const std::vector<ShapePtr<Dim>>& static_solids,
+                                const std::array<BoundaryType, 2 * Dim>& boundary,
+                                double shrink_in_metres) {
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const int nf = grid.num_faces();
+  SolidWeights<Dim> w;
+
+  // raw fractions: every body on its own, the static solids as one union (section 4.4.6 shrink)
+  VectorX union_phi = solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres);
+  w.static_face = face_negative_fractions(grid, lattice, union_phi);
+  VectorX sum = w.static_face;
+  for (const CouplingBody<Dim>& body : bodies) {
+    const VectorX phi =
+        body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, 2.0 * grid.dx());
+    w.body_face.push_back(body_face_fractions<Dim>(grid, lattice, phi, body.shape->bounds()));
+    sum += w.body_face.back();
+    union_phi = union_phi.cwiseMin(phi);
+  }
+
+  // overlap rule: scale every contribution by 1/sum where the sum exceeds 1
+  for (int f = 0; f < nf; ++f) {
+    if (sum[f] <= 1.0) continue;
+    const double scale = 1.0 / sum[f];
+    w.static_face[f] *= scale;
+    for (VectorX& body : w.body_face) body[f] *= scale;
+  }
+
+  // wall faces belong to the wall
+  for (int f = 0; f < nf; ++f) {
+    const auto [axis, coord] = grid.face_coord(f);
+    if (!grid.is_boundary_face(axis, coord)) continue;
+    const int side = coord[axis] == 0 ? 0 : 1;
+    if (boundary[2 * axis + side] != BoundaryType::wall) continue;
+    w.static_face[f] = 1.0;
+    for (VectorX& body : w.body_face) body[f] = 0.0;
+  }
+
+  // W_S^u as the sum of its parts, W_F^u = 1 - W_S^u
+  w.solid_face = w.static_face;
+  for (const VectorX& body : w.body_face) w.solid_face += body;
+  w.solid_face = w.solid_face.cwiseMin(1.0);
+  w.fluid_face = VectorX::Ones(nf) - w.solid_face;
+
+  // W_F^s from the union of all solids
+  w.fluid_stress = stress_fluid_weights(StressGrid<Dim>(grid), lattice, union_phi, boundary);
+  w.lattice_phi = std::move(union_phi);
+  return w;
+}
+
+template <int Dim>
+std::vector<int> body_rows(const std::vector<CouplingBody<Dim>>& bodies, BodyGroup group,
+                           int* count) {
+  std::vector<int> rows(bodies.size(), -1);
+  int next = 0;
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    if (!in_group(bodies[i], group)) continue;
+    rows[i] = next;
+    next += kBodyDofs<Dim>;
+  }
+  if (count) *count = next;
+  return rows;
+}
+
+template <int Dim>
+SparseMatrix aggregation_matrix(const MacGrid<Dim>& grid,
+                                const std::vector<CouplingBody<Dim>>& bodies,
+                                const SolidWeights<Dim>& weights, BodyGroup group) {
+  int num_rows = 0;
+  const std::vector<int> rows = body_rows(bodies, group, &num_rows);
+  const double volume = grid.cell_volume();
+  std::vector<Triplet> triplets;
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    if (rows[i] < 0) continue;
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      const double w = weights.body_face[i][f];
+      if (w <= 0.0 || weights.solid_face[f] <= 0.0) continue;
+      // the body's share of the face's solid volume
+      const double share = w / weights.solid_face[f];
+      const auto [axis, coord] = grid.face_coord(f);
+      const Vec<Dim> e = Vec<Dim>::Unit(axis);
+      const Vec<Dim> r = grid.face_center(axis, coord) - bodies[i].center;
+      const AngularVec<Dim> torque = moment<Dim>(r, e);
+      triplets.emplace_back(rows[i] + axis, f, volume * share);
+      for (int k = 0; k < kAngularDofs<Dim>; ++k)
+        if (torque[k] != 0.0) triplets.emplace_back(rows[i] + Dim + k, f, volume * share * torque[k]);
+    }
+  }
+  SparseMatrix q(num_rows, grid.num_faces());
+  q.setFromTriplets(triplets.begin(), triplets.end());
+  return q;
+}
+
+template <int Dim>
+std::vector<std::pair<int, double>> deformation_rate_row(const StressGrid<Dim>& stress, int dof,
+                                                         bool* complete) {
+  const MacGrid<Dim>& grid = stress.grid();
+  const auto [k, c] = stress.coord(dof);
+  const auto [a, b] = StressGrid<Dim>::component_axes(k);
+  std::vector<std::pair<int, double>> row;
+  bool all = true;
+  auto add = [&](int axis, const VecI<Dim>& f, double coef) {
+    const int index = face_index_or_outside(grid, axis, f);
+    if (index < 0) {
+      all = false;
+      return;
+    }
+    row.emplace_back(index, coef);
+  };
+  const double inv_dx = 1.0 / grid.dx();
+  if (a == b) {
+    // (D u)_aa = (u_a(c + e_a) - u_a(c)) / dx
+    add(a, c, -inv_dx);
+    add(a, c + unit_offset<Dim>(a), inv_dx);
+  } else {
+    // (D u)_ab = 1/2 [(u_a(n) - u_a(n - e_b)) + (u_b(n) - u_b(n - e_a))] / dx
+    const double h = 0.5 * inv_dx;
+    add(a, c, h);
+    add(a, c - unit_offset<Dim>(b), -h);
+    add(b, c, h);
+    add(b, c - unit_offset<Dim>(a), -h);
+  }
+  if (complete) *complete = all;
+  return row;
+}
+
+template <int Dim>
+BodyCouplingOperator<Dim>::BodyCouplingOperator(const MacGrid<Dim>& grid,
+                                                const std::vector<CouplingBody<Dim>>& bodies,
+                                                const SolidWeights<Dim>& weights,
+                                                BodyGroup group)
+    : grid_(grid), stress_(grid), bodies_(bodies), body_face_(weights.body_face) {
+  rows_ = body_rows(bodies_, group, &num_rows_);
+  surface_cells_.assign(bodies_.size(), {});
+  surface_stress_.assign(bodies_.size(), {});
+  // the surface: cells and stress DOFs whose column does not cancel, searched within two cells
+  // of the body's bounds (face control volumes reach one cell beyond a cell; the shrinkage only
+  // moves the surface inward)
+  const double margin = 2.0 * grid_.dx();
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    if (rows_[i] < 0) continue;
+    const int body = static_cast<int>(i);
+    const Box<Dim> bounds = bodies_[i].shape->bounds();
+    Block column;
+    const auto [lo, hi] = lattice_range<Dim>(grid_, bounds, Vec<Dim>::Constant(0.5), grid_.cells(), margin);
+    for_range<Dim>(lo, hi, [&](const VecI<Dim>& c) {
+      const int cell = grid_.cell_index(c);
+      if (pressure_column(body, cell, column)) surface_cells_[i].push_back(cell);
+    });
+    std::sort(surface_cells_[i].begin(), surface_cells_[i].end());
+    for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
+      const auto [slo, shi] = lattice_range<Dim>(grid_, bounds, StressGrid<Dim>::shift(k), stress_.dims(k), margin);
+      for_range<Dim>(slo, shi, [&](const VecI<Dim>& c) {
+        const int dof = stress_.index(k, c);
+        if (stress_column(body, dof, column)) surface_stress_[i].push_back(dof);
+      });
+    }
+    std::sort(surface_stress_[i].begin(), surface_stress_[i].end());
+  }
+}
+
+template <int Dim>
+typename BodyCouplingOperator<Dim>::Block BodyCouplingOperator<Dim>::face_block(int body,
+                                                                               int face) const {
+  Block block = Block::Zero();
+  const double w = body_face_[body][face];
+  if (w == 0.0) return block;
+  const auto [axis, coord] = grid_.face_coord(face);
+  const Vec<Dim> e = Vec<Dim>::Unit(axis);
+  const Vec<Dim> r = grid_.face_center(axis, coord) - bodies_[body].center;
+  const double scale = w * grid_.cell_volume();
+  block.template head<Dim>() = scale * e;
+  block.template tail<kAngularDofs<Dim>>() = scale * moment<Dim>(r, e);
+  return block;
+}
+
+template <int Dim>
+bool BodyCouplingOperator<Dim>::pressure_column(int body, int cell, Block& column) const {
+  const VectorX& w = body_face_[body];
+  const VecI<Dim> c = grid_.cell_coord(cell);
+  // the 2 Dim faces of the cell: face c (the cell is its plus side, G = +1/dx) and face c + e_a
+  // (the cell is its minus side, G = -1/dx)
+  std::array<int, 2 * Dim> faces;
+  for (int a = 0; a < Dim; ++a) {
+    faces[2 * a] = face_index_or_outside(grid_, a, c);
+    faces[2 * a + 1] = face_index_or_outside(grid_, a, VecI<Dim>(c + unit_offset<Dim>(a)));
+  }
+  // cancellation: equal body weight on every face (inside the body or outside it)
+  bool uniform = true;
+  for (int f : faces) uniform = uniform && w[f] == w[faces[0]];
+  if (uniform) return false;
+  // column of -Q W_S^u G: -sum_f W_{S,i}(f) dx^Dim [e_a; r_f x e_a] G_fc
+  const double inv_dx = 1.0 / grid_.dx();
+  column.setZero();
+  for (int a = 0; a < Dim; ++a) {
+    column -= inv_dx * face_block(body, faces[2 * a]);
+    column += inv_dx * face_block(body, faces[2 * a + 1]);
+  }
+  return true;
+}
+
+template <int Dim>
+bool BodyCouplingOperator<Dim>::stress_column(int body, int dof, Block& column) const {
+  const VectorX& w = body_face_[body];
+  bool complete = true;
+  const std::vector<std::pair<int, double>> row = deformation_rate_row(stress_, dof, &complete);
+  if (row.empty()) return false;
+  // cancellation: a complete stencil with equal body weight everywhere
+  bool uniform = complete;
+  for (const auto& entry : row) uniform = uniform && w[entry.first] == w[row.front().first];
+  if (uniform) return false;
+  bool any = false;
+  for (const auto& entry : row) any = any || w[entry.first] != 0.0;
+  if (!any) return false;
+  // column of -Q W_S^u D^T M: -M_k sum_f W_{S,i}(f) dx^Dim [e_a; r_f x e_a] D_kf
+  const double multiplicity = StressGrid<Dim>::multiplicity(stress_.coord(dof).first);
+  column.setZero();
+  for (const auto& [face, coef] : row) column -= (multiplicity * coef) * face_block(body, face);
+  return true;
+}
+
+template <int Dim>
+std::vector<typename BodyCouplingOperator<Dim>::SurfaceColumn>
+BodyCouplingOperator<Dim>::pressure_columns() const {
+  std::vector<SurfaceColumn> out;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int c : surface_cells_[i]) {
+      SurfaceColumn s;
+      s.body = static_cast<int>(i);
+      s.row = rows_[i];
+      s.index = c;
+      pressure_column(s.body, c, s.column);
+      out.push_back(s);
+    }
+  return out;
+}
+
+template <int Dim>
+std::vector<typename BodyCouplingOperator<Dim>::SurfaceColumn>
+BodyCouplingOperator<Dim>::stress_columns() const {
+  std::vector<SurfaceColumn> out;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int k : surface_stress_[i]) {
+      SurfaceColumn s;
+      s.body = static_cast<int>(i);
+      s.row = rows_[i];
+      s.index = k;
+      stress_column(s.body, k, s.column);
+      out.push_back(s);
+    }
+  return out;
+}
+
+template <int Dim>
+SparseMatrix BodyCouplingOperator<Dim>::pressure_jacobian() const {
+  std::vector<Triplet> triplets;
+  Block column;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int c : surface_cells_[i]) {
+      pressure_column(static_cast<int>(i), c, column);
+      for (int r = 0; r < kBodyDofs<Dim>; ++r)
+        if (column[r] != 0.0) triplets.emplace_back(rows_[i] + r, c, column[r]);
+    }
+  SparseMatrix j(num_rows_, grid_.num_cells());
+  j.setFromTriplets(triplets.begin(), triplets.end());
+  return j;
+}
+
+template <int Dim>
+SparseMatrix BodyCouplingOperator<Dim>::stress_jacobian() const {
+  std::vector<Triplet> triplets;
+  Block column;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int k : surface_stress_[i]) {
+      stress_column(static_cast<int>(i), k, column);
+      for (int r = 0; r < kBodyDofs<Dim>; ++r)
+        if (column[r] != 0.0) triplets.emplace_back(rows_[i] + r, k, column[r]);
+    }
+  SparseMatrix j(num_rows_, stress_.num_dofs());
+  j.setFromTriplets(triplets.begin(), triplets.end());
+  return j;
+}
+
+template <int Dim>
+VectorX BodyCouplingOperator<Dim>::apply_pressure(const VectorX& p) const {
+  VectorX y = VectorX::Zero(num_rows_);
+  Block column;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int c : surface_cells_[i]) {
+      pressure_column(static_cast<int>(i), c, column);
+      y.template segment<kBodyDofs<Dim>>(rows_[i]) += column * p[c];
+    }
+  return y;
+}
+
+template <int Dim>
+VectorX BodyCouplingOperator<Dim>::apply_pressure_transpose(const VectorX& v) const {
+  VectorX y = VectorX::Zero(grid_.num_cells());
+  Block column;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int c : surface_cells_[i]) {
+      pressure_column(static_cast<int>(i), c, column);
+      y[c] += column.dot(v.template segment<kBodyDofs<Dim>>(rows_[i]));
+    }
+  return y;
+}
+
+template <int Dim>
+VectorX BodyCouplingOperator<Dim>::apply_stress(const VectorX& tau) const {
+  VectorX y = VectorX::Zero(num_rows_);
+  Block column;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int k : surface_stress_[i]) {
+      stress_column(static_cast<int>(i), k, column);
+      y.template segment<kBodyDofs<Dim>>(rows_[i]) += column * tau[k];
+    }
+  return y;
+}
+
+template <int Dim>
+VectorX BodyCouplingOperator<Dim>::apply_stress_transpose(const VectorX& v) const {
+  VectorX y = VectorX::Zero(stress_.num_dofs());
+  Block column;
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int k : surface_stress_[i]) {
+      stress_column(static_cast<int>(i), k, column);
+      y[k] += column.dot(v.template segment<kBodyDofs<Dim>>(rows_[i]));
+    }
+  return y;
+}
+
+template <int Dim>
+void subtract_body_pressure_rhs(const BodyCouplingOperator<Dim>& op, const MacGrid<Dim>& grid,
+                                const VectorX& liquid_cell, const VectorX& v_star,
+                                VectorX& b2_cells) {
+  // alpha J_p is the J_p of eq. (24)
+  const double alpha = 1.0 / grid.cell_volume();
+  b2_cells -= alpha * liquid_cell.cwiseProduct(op.apply_pressure_transpose(v_star));
+}
+
+template <int Dim>
+void subtract_body_stress_rhs(const BodyCouplingOperator<Dim>& op, const MacGrid<Dim>& grid,
+                              const VectorX& liquid_stress, const VectorX& v_star,
+                              VectorX& b1_full) {
+  const double alpha = 1.0 / grid.cell_volume();
+  b1_full -= alpha * liquid_stress.cwiseProduct(op.apply_stress_transpose(v_star));
+}
+
+template <int Dim>
+VectorX group_velocities(const std::vector<RigidBody<Dim>>& bodies, BodyGroup group) {
+  std::vector<BodyVec<Dim>> blocks;
+  for (const RigidBody<Dim>& body : bodies)
+    if (body.is_dynamic() == (group == BodyGroup::two_way))
+      blocks.push_back(body.generalized_velocity());
+  VectorX v(kBodyDofs<Dim> * static_cast<int>(blocks.size()));
+  for (std::size_t i = 0; i < blocks.size(); ++i)
+    v.template segment<kBodyDofs<Dim>>(kBodyDofs<Dim> * static_cast<int>(i)) = blocks[i];
+  return v;
+}
+
+#define MONOLITH_INSTANTIATE(D)                                                                   \
+  template std::vector<CouplingBody<D>> coupling_bodies<D>(const std::vector<RigidBody<D>>&);     \
+  template SolidWeights<D> solid_weights<D>(const MacGrid<D>&,                                    \
+                                            const std::vector<CouplingBody<D>>&,                  \
+                                            const std::vector<ShapePtr<D>>&,                      \
+                                            const std::array<BoundaryType, 2 * D>&, double);      \
+  template std::vector<int> body_rows<D>(const std::vector<CouplingBody<D>>&, BodyGroup, int*);   \
+  template SparseMatrix aggregation_matrix<D>(const MacGrid<D>&,                                  \
+                                              const std::vector<CouplingBody<D>>&,                \
+                                              const SolidWeights<D>&, BodyGroup);                 \
+  template std::vector<std::pair<int, double>> deformation_rate_row<D>(const StressGrid<D>&, int, \
+                                                                       bool*);                    \
+  template class BodyCouplingOperator<D>;                                                         \
+  template void subtract_body_pressure_rhs<D>(const BodyCouplingOperator<D>&, const MacGrid<D>&,  \
+                                              const VectorX&, const VectorX&, VectorX&);          \
+  template void subtract_body_stress_rhs<D>(const BodyCouplingOperator<D>&, const MacGrid<D>&,    \
+                                            const VectorX&, const VectorX&, VectorX&);            \
+  template VectorX group_velocities<D>(const std::vector<RigidBody<D>>&, BodyGroup);
+
+MONOLITH_INSTANTIATE(2)
+MONOLITH_INSTANTIATE(3)
+
+#undef MONOLITH_INSTANTIATE
+
+}  // namespace monolith

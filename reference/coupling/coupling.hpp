@@ -1,0 +1,212 @@
+#pragma once
+/// \file coupling.hpp
+/// Consistent force exchange between the liquid and rigid bodies (section 4.4.1), the one-way /
+/// two-way split of the body terms (section 4.4.4) and the solid weights of moving bodies with
+/// the level-set shrinkage of section 4.4.6. docs/coupling.md explains the conventions.
+///
+/// Units. The paper's J_p, J_s are the ones of eq. (24), where the common factor dx^Dim of the
+/// fluid control volumes is dropped and the body mass is scaled by alpha = 1/dx^Dim (section
+/// 4.1). Here Q carries the control volume dx^Dim, so J_p p and J_s tau are forces in newtons
+/// (2D: N per metre) and torques in N m (2D: N m per metre):
+///     J_p(eq. 24) = alpha J_p(here),   J_s(eq. 24) = alpha J_s(here).
+/// The right-hand-side functions below apply alpha themselves.
+///
+/// Body rows. Every group (two-way: dynamic bodies; one-way: fixed and kinematic bodies, section
+/// 4.4.4) numbers its bodies in body order, kBodyDofs<Dim> rows each (linear, then angular: 2D
+/// [fx, fy, torque_z], 3D [fx, fy, fz, tx, ty, tz]); the two-way numbering is the one of
+/// contact_system.hpp (ContactSystem::body_dof).
+
+#include <array>
+#include <vector>
+
+#include "reference/core/common.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/rigid/mass_properties.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/grid/stress_grid.hpp"
+
+namespace monolith {
+
+/// A body as the coupling sees it: its posed signed distance, its centre of mass and whether it
+/// is two-way coupled (dynamic) or one-way (fixed, kinematic).
+template <int Dim>
+struct CouplingBody {
+  ShapePtr<Dim> shape;               ///< posed SDF, world frame, negative inside
+  Vec<Dim> center = Vec<Dim>::Zero(); ///< centre of mass (torque reference point), world frame
+  bool two_way = true;               ///< dynamic body
+};
+
+/// The coupling view of rigid bodies at their current pose (RigidBody::posed_shape()).
+template <int Dim>
+std::vector<CouplingBody<Dim>> coupling_bodies(const std::vector<RigidBody<Dim>>& bodies);
+
+/// Which bodies a J block covers (section 4.4.4): two-way (J_{p,2}, J_{s,2}: dynamic bodies)
+/// or one-way (J_{p,1}, J_{s,1}: fixed and kinematic bodies, right-hand side only).
+enum class BodyGroup { two_way, one_way };
+
+/// Solid weights with moving bodies (sections 3.1.2, 4.4.6), diagonal matrices stored as their
+/// diagonals.
+///
+/// body_face[i] = W_{S,i}^u: the fraction of every face control volume inside body i's posed SDF
+/// shrunk by zeta (phi_i + zeta < 0), computed on the half lattice like every other fraction
+/// (volume_fractions.hpp). Overlap rule: W_S^u = min(1, sum_i W_{S,i}^u + W_static^u), W_static^u
+/// the fraction of the union of the static (non-body) solids; where the sum exceeds 1 (bodies
+/// interpenetrating by more than the shrinkage, or a body inside a static solid) every
+/// contribution is scaled by the same factor 1/sum, so that the per-body weights stored here
+/// always add up to W_S^u minus the static part. On `wall` boundary faces W_F^u = 0 and
+/// W_S^u = 1 and the whole face belongs to the wall: body_face is 0 there (the pressure on a
+/// wall face is not a force on any body; the wall pushes bodies through contact).
+template <int Dim>
+struct SolidWeights {
+  std::vector<VectorX> body_face;  ///< W_{S,i}^u per body (after the overlap rule), num_faces
+  VectorX static_face;             ///< static solids and walls' share of W_S^u, num_faces
+  VectorX solid_face;              ///< W_S^u = static_face + sum_i body_face[i], num_faces
+  VectorX fluid_face;              ///< W_F^u = 1 - W_S^u (0 on wall faces), num_faces
+  /// W_F^s per StressGrid DOF: stress_fluid_weights of the union of all solids (bodies and
+  /// static), shrunk by zeta; equals 1 - (sum of the stress-control-volume fractions) wherever
+  /// bodies do not overlap.
+  VectorX fluid_stress;
+  /// The signed distance of the union of all solids (bodies and static) on half_lattice(grid),
+  /// shifted by zeta: solid_phi_on_lattice of them all, except that far (> 2 dx) from a body's
+  /// bounds its distance is replaced by the distance to those bounds (same signs).
+  VectorX lattice_phi;
+};
+
+/// Section 4.4.6 / 3.1.2: the weights above for bodies (shrunk by `shrink_in_metres` = zeta,
+/// the paper uses 0.01 dx) and static solids (shrunk alike), with the wall rule of
+/// fluid_face_weights and stress_fluid_weights.
+template <int Dim>
+SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
+                                const std::vector<CouplingBody<Dim>>& bodies,
+                                const std::vector<ShapePtr<Dim>>& static_solids,
+                                const std::array<BoundaryType, 2 * Dim>& boundary,
+                                double shrink_in_metres);
+
+/// Index of the first row of every body in its group's J blocks, -1 for bodies of the other
+/// group; `count` receives the number of rows (kBodyDofs<Dim> x bodies of the group).
+template <int Dim>
+std::vector<int> body_rows(const std::vector<CouplingBody<Dim>>& bodies, BodyGroup group,
+                           int* count);
+
+/// Section 4.4.1: the aggregation matrix Q, num_group_rows x num_faces (explicit, for tests and
+/// teaching). Column f (a face normal to axis a, centre x_f) holds, in the row block of body i,
+///     dx^Dim s_i(f) [e_a ; (x_f - c_i) x e_a],   s_i(f) = W_{S,i}^u(f) / W_S^u(f)
+/// (0 where W_S^u = 0): the force and torque about the centre of mass of a force density
+/// (N/m^3) acting on the face control volume dx^Dim, shared among the bodies covering the face
+/// in proportion to their volumes. With this share, Q W_S^u has the blocks
+/// W_{S,i}^u(f) dx^Dim [e_a ; (x_f - c_i) x e_a], so J_p = -Q W_S^u G counts every solid volume
+/// once, and sum_i (Q^T v)_f reproduces a common rigid velocity (Fig. 8). 2D torques are the
+/// scalar r_x f_y - r_y f_x.
+template <int Dim>
+SparseMatrix aggregation_matrix(const MacGrid<Dim>& grid,
+                                const std::vector<CouplingBody<Dim>>& bodies,
+                                const SolidWeights<Dim>& weights, BodyGroup group);
+
+/// The body-surface operators of section 4.4.1 for one group of bodies, assembled directly over
+/// the body surfaces without forming Q:
+///   J_p = -Q W_S^u G,        num_group_rows x num_cells,        (eq. (18)/(21)/(24))
+///   J_s = -Q W_S^u D^T M,    num_group_rows x num_stress_dofs,  (eq. (19)/(21)/(24))
+/// (units of this file: J_p p in N, see the file comment). Sign: the fluid's update is
+/// -dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau); J_p W_L^p p + J_s W_L^s tau is minus the
+/// same face force density aggregated over the bodies' volume, i.e. the force the liquid exerts
+/// on the bodies (Archimedes: J_p p_hydrostatic = +rho g V upward). M = diag(multiplicity) as in
+/// stokes_system.hpp: the fluid feels D^T M W_L^s tau, so the body does too.
+///
+/// Column c of J_p involves only the faces of cell c, column k of J_s only the faces of the
+/// stencil of D row k. Where those faces all exist and carry the same body weight (inside a body
+/// or outside all bodies), the force terms cancel exactly, so only the surface cells and
+/// surface stress DOFs are visited and stored. The matrix-free products evaluate the same
+/// columns on the fly, so they equal the assembled matrices bit for bit.
+template <int Dim>
+class BodyCouplingOperator {
+ public:
+  BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
+                       const SolidWeights<Dim>& weights, BodyGroup group);
+
+  int num_rows() const { return num_rows_; }
+  int num_cells() const { return grid_.num_cells(); }
+  int num_stress_dofs() const { return stress_.num_dofs(); }
+  /// First row of every body, -1 for bodies of the other group.
+  const std::vector<int>& rows() const { return rows_; }
+  /// Cells with a non-zero column of J_p (per body: the body's surface cells).
+  const std::vector<std::vector<int>>& surface_cells() const { return surface_cells_; }
+  /// Stress DOFs with a non-zero column of J_s (per body).
+  const std::vector<std::vector<int>>& surface_stress() const { return surface_stress_; }
+
+  /// One non-zero column block of J_p or J_s: the body (index in the body list), its first row,
+  /// the cell (J_p) or StressGrid DOF (J_s), and the kBodyDofs entries of the column.
+  struct SurfaceColumn {
+    int body = 0;
+    int row = 0;
+    int index = 0;
+    BodyVec<Dim> column;
+  };
+  /// The non-zero column blocks of J_p (eqs. (18)/(24)), per body in body order then by cell:
+  /// the entries of pressure_jacobian() bit for bit (the same evaluation), without a num_rows x
+  /// num_cells matrix. For the matrix-free back end of eq. (24), which keeps them per surface
+  /// unknown.
+  std::vector<SurfaceColumn> pressure_columns() const;
+  /// The same for J_s (eqs. (19)/(24); stress_jacobian()), per body then by StressGrid DOF.
+  std::vector<SurfaceColumn> stress_columns() const;
+
+  /// J_p explicitly, num_rows x num_cells.
+  SparseMatrix pressure_jacobian() const;
+  /// J_s explicitly, num_rows x num_stress_dofs (all StressGrid components).
+  SparseMatrix stress_jacobian() const;
+  /// y = J_p p (force and torque on every body of the group from the cell pressures p).
+  VectorX apply_pressure(const VectorX& p) const;
+  /// y = J_p^T v, num_cells.
+  VectorX apply_pressure_transpose(const VectorX& v) const;
+  /// y = J_s tau (tau: all StressGrid components).
+  VectorX apply_stress(const VectorX& tau) const;
+  /// y = J_s^T v, num_stress_dofs.
+  VectorX apply_stress_transpose(const VectorX& v) const;
+
+ private:
+  using Block = BodyVec<Dim>;
+  /// Column of body b's block of J_p at cell c; false if it vanishes by the cancellation rule.
+  bool pressure_column(int body, int cell, Block& column) const;
+  /// Column of body b's block of J_s at stress DOF k; false if it vanishes.
+  bool stress_column(int body, int dof, Block& column) const;
+  /// dx^Dim w_i(f) [e_a; (x_f - c_i) x e_a] for face f.
+  Block face_block(int body, int face) const;
+
+  MacGrid<Dim> grid_;
+  StressGrid<Dim> stress_;
+  std::vector<CouplingBody<Dim>> bodies_;
+  std::vector<VectorX> body_face_;
+  std::vector<int> rows_;
+  int num_rows_ = 0;
+  std::vector<std::vector<int>> surface_cells_, surface_stress_;
+};
+
+/// The D row of stress DOF `dof` as (face, coefficient) pairs: the stencil of
+/// deformation_rate_matrix (eq. (8)) without forming D. `complete` receives whether every face
+/// of the interior stencil exists (false at a non-periodic boundary, where D omits faces).
+template <int Dim>
+std::vector<std::pair<int, double>> deformation_rate_row(const StressGrid<Dim>& stress, int dof,
+                                                         bool* complete = nullptr);
+
+/// eq. (24), the body part of b2: b2_cells -= alpha W_L^p J_p^T v* (alpha = 1/dx^Dim converts to
+/// the paper's J_p, file comment), v* the group's body velocities (kBodyDofs per body, linear
+/// then angular, world frame). Full cell vector; the Stokes assembly selects (S_p) afterwards.
+template <int Dim>
+void subtract_body_pressure_rhs(const BodyCouplingOperator<Dim>& op, const MacGrid<Dim>& grid,
+                                const VectorX& liquid_cell, const VectorX& v_star,
+                                VectorX& b2_cells);
+
+/// eq. (24), the body part of b1: b1_full -= alpha W_L^s J_s^T v*, b1_full over all StressGrid
+/// DOFs (the full form of stokes_system.hpp's b1 before E^T and S_tau: b1 = S_tau E^T b1_full).
+template <int Dim>
+void subtract_body_stress_rhs(const BodyCouplingOperator<Dim>& op, const MacGrid<Dim>& grid,
+                              const VectorX& liquid_stress, const VectorX& v_star,
+                              VectorX& b1_full);
+
+/// The generalised velocities (v, omega) of the bodies of `group`, stacked in the group's row
+/// order (kBodyDofs per body).
+template <int Dim>
+VectorX group_velocities(const std::vector<RigidBody<Dim>>& bodies, BodyGroup group);
+
+}  // namespace monolith

@@ -1,0 +1,467 @@
+#include "reference/fluid/pressure_projection.hpp"
+
+#include <cmath>
+#include <cstddef>
+#include <stdexcept>
+
+#include "reference/fluid/gradient.hpp"
+
+namespace monolith {
+
+namespace {
+
+/// Below this many cells the matrix-free loops run on one thread: a parallel region costs more
+/// than it saves on small grids (and much more on an oversubscribed machine).
+constexpr Eigen::Index kParallelMin = 16384;
+
+// (W_L^u)^-1 entries are reciprocal_or_zero: 0 where W_L^u = 0 (such faces have no liquid cell
+// beside them, so the matching row of G W_L^p is zero anyway).
+
+/// Per-face coefficient dt W_F^u P^-1 (W_L^u)^-1 / dx^2 of the stencil form of A.
+VectorX face_coefficients(const PressureWeights& w, double dt, double dx) {
+  VectorX k(w.fluid_face.size());
+  for (int f = 0; f < k.size(); ++f) {
+    const double wf = w.fluid_face[f];
+    k[f] = wf > 0.0 && w.face_density[f] > 0.0
+               ? dt * wf * reciprocal_or_zero(w.liquid_face[f]) / (w.face_density[f] * dx * dx)
+               : 0.0;
+  }
+  return k;
+}
+
+/// The 2 Dim faces of a cell with the other cell across each (-1 outside), and the sign of the
+/// cell in that face's row of G.
+template <int Dim>
+struct CellFaces {
+  std::array<int, 2 * Dim> face, other;
+  std::array<double, 2 * Dim> sign;
+};
+
+template <int Dim>
+CellFaces<Dim> cell_faces(const MacGrid<Dim>& grid, int cell) {
+  CellFaces<Dim> cf;
+  const VecI<Dim> c = grid.cell_coord(cell);
+  for (int a = 0; a < Dim; ++a) {
+    // lower face: the cell is its plus cell
+    cf.face[2 * a] = grid.face_index(a, c);
+    cf.other[2 * a] = grid.face_cell_minus(a, c);
+    cf.sign[2 * a] = 1.0;
+    // upper face: the cell is its minus cell
+    VecI<Dim> upper = c;
+    upper[a] += 1;
+    const VecI<Dim> upper_face = grid.periodic(a) ? grid.wrap_cell(upper) : upper;
+    cf.face[2 * a + 1] = grid.face_index(a, upper_face);
+    cf.other[2 * a + 1] = grid.cell_index_or_outside(upper);
+    cf.sign[2 * a + 1] = -1.0;
+  }
+  return cf;
+}
+
+/// The cell stencil (faces and cells across them, as MatrixFreePressureOperator::cell_stencil)
+/// of the cell at x along axis 0 of a row, from the stencil of the row's first cell: along axes
+/// 1.. both move with x; along axis 0 they follow x, wrapped on a periodic axis 0.
+template <int Dim>
+inline void shift_stencil(int x, int n0, bool periodic0, int cell,
+                          const std::array<int, 2 * Dim>& face0,
+                          const std::array<int, 2 * Dim>& other0, std::array<int, 2 * Dim>& face,
+                          std::array<int, 2 * Dim>& other) {
+  const bool last = x == n0 - 1;
+  face[0] = face0[0] + x;
+  other[0] = x > 0 ? cell - 1 : (periodic0 ? cell + n0 - 1 : -1);
+  face[1] = last && periodic0 ? face0[0] : face0[0] + x + 1;
+  other[1] = !last ? cell + 1 : (periodic0 ? cell - (n0 - 1) : -1);
+  for (int j = 2; j < 2 * Dim; ++j) {
+    face[j] = face0[j] + x;
+    other[j] = other0[j] >= 0 ? other0[j] + x : -1;
+  }
+}
+
+}  // namespace
+
+template <int Dim>
+VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
+                         double fallback_density) {
+  VectorX rho = face_density;
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    if (face_density[f] > 0.0) continue;
+    // mean of the known densities on the faces of the two cells beside f
+    const auto [axis, coord] = grid.face_coord(f);
+    double sum = 0.0;
+    int count = 0;
+    for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
+      if (cell < 0) continue;
+      const auto cf = cell_faces<Dim>(grid, cell);
+      for (int g : cf.face)
+        if (face_density[g] > 0.0) {
+          sum += face_density[g];
+          ++count;
+        }
+    }
+    rho[f] = count > 0 ? sum / count : fallback_density;
+  }
+  return rho;
+}
+
+template <int Dim>
+PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeights& w, double dt) {
+  PressureDofs dofs;
+  dofs.dof_of_cell.assign(grid.num_cells(), -1);
+  // active: liquid in the cell and at least one face open to fluid
+  for (int c = 0; c < grid.num_cells(); ++c) {
+    if (!(w.liquid_cell[c] > 0.0)) continue;
+    const auto cf = cell_faces<Dim>(grid, c);
+    bool open = false;
+    for (int f : cf.face) open = open || w.fluid_face[f] > 0.0;
+    if (!open) continue;
+    dofs.dof_of_cell[c] = dofs.size();
+    dofs.cell_of_dof.push_back(c);
+  }
+  // connected groups over weighted faces; a group is closed if no weighted face leaves it
+  const VectorX k = face_coefficients(w, dt, grid.dx());
+  const int n = dofs.size();
+  std::vector<int> group(n, -1);
+  std::vector<int> stack;
+  int groups = 0;
+  for (int seed = 0; seed < n; ++seed) {
+    if (group[seed] >= 0) continue;
+    bool closed = true;
+    std::vector<int> members;
+    group[seed] = groups;
+    stack.push_back(seed);
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      members.push_back(i);
+      const int cell = dofs.cell_of_dof[i];
+      const auto cf = cell_faces<Dim>(grid, cell);
+      for (int j = 0; j < 2 * Dim; ++j) {
+        if (!(k[cf.face[j]] > 0.0) || cf.other[j] == cell) continue;
+        const int other = cf.other[j] >= 0 ? dofs.dof_of_cell[cf.other[j]] : -1;
+        if (other < 0) {
+          closed = false;  // pressure is pinned to zero across this face (air, open boundary)
+          continue;
+        }
+        if (group[other] < 0) {
+          group[other] = groups;
+          stack.push_back(other);
+        }
+      }
+    }
+    if (closed) {
+      // null vector: W_L^p p constant on the group
+      VectorX v = VectorX::Zero(n);
+      for (int i : members) v[i] = 1.0 / w.liquid_cell[dofs.cell_of_dof[i]];
+      dofs.null_space.push_back(v / v.norm());
+    }
+    ++groups;
+  }
+  return dofs;
+}
+
+template <int Dim>
+ExplicitPressureSystem assemble_explicit_pressure(const MacGrid<Dim>& grid,
+                                                  const PressureWeights& w,
+                                                  const PressureDofs& dofs, double dt,
+                                                  const VectorX& u_star) {
+  ExplicitPressureSystem sys;
+  // the named matrices of eq. (8)
+  sys.G = gradient_matrix(grid);
+  sys.W_F_u = sparse_diagonal(w.fluid_face);
+  sys.W_L_p = sparse_diagonal(w.liquid_cell);
+  sys.W_L_u_inv = sparse_diagonal(w.liquid_face.unaryExpr(&reciprocal_or_zero));
+  VectorX p_inv(grid.num_faces());
+  for (int f = 0; f < grid.num_faces(); ++f) p_inv[f] = reciprocal_or_zero(w.face_density[f]);
+  sys.P_inv = sparse_diagonal(p_inv);
+  // selection of the active DOFs
+  std::vector<Triplet> t;
+  for (int i = 0; i < dofs.size(); ++i) t.emplace_back(i, dofs.cell_of_dof[i], 1.0);
+  sys.S.resize(dofs.size(), grid.num_cells());
+  sys.S.setFromTriplets(t.begin(), t.end());
+  // A = dt W_L^p G^T W_F^u P^-1 (W_L^u)^-1 G W_L^p, restricted by S
+  const SparseMatrix Gt = sys.G.transpose();
+  const SparseMatrix A_full =
+      dt * (sys.W_L_p * Gt * sys.W_F_u * sys.P_inv * sys.W_L_u_inv * sys.G * sys.W_L_p);
+  const SparseMatrix St = sys.S.transpose();
+  sys.A = sys.S * A_full * St;
+  // b = W_L^p G^T W_F^u u*, restricted by S
+  sys.b = sys.S * (sys.W_L_p * (Gt * (sys.W_F_u * u_star)));
+  return sys;
+}
+
+template <int Dim>
+MatrixFreePressureOperator<Dim>::MatrixFreePressureOperator(const MacGrid<Dim>& grid,
+                                                            const PressureWeights& w,
+                                                            const PressureDofs& dofs, double dt)
+    : cells_(grid.cells()),
+      periodic_(grid.periodic()),
+      inv_dx_(1.0 / grid.dx()),
+      num_dofs_(dofs.size()),
+      dof_of_cell_(dofs.dof_of_cell),
+      coefficient_(face_coefficients(w, dt, grid.dx())),
+      fluid_face_(w.fluid_face),
+      null_space_(dofs.null_space) {
+  for (int a = 0; a < Dim; ++a) {
+    face_offset_[a] = grid.face_offset(a);
+    face_dims_[a] = grid.face_dims(a);
+  }
+  liquid_.resize(num_dofs_);
+  diagonal_.setZero(num_dofs_);
+  // W_L^p and A_ii = W_i^2 sum_f k_f per DOF (a face onto the cell itself, on a periodic axis
+  // of one cell, has a zero row in G and is left out)
+  for (int i = 0; i < num_dofs_; ++i) {
+    const int cell = dofs.cell_of_dof[i];
+    liquid_[i] = w.liquid_cell[cell];
+    std::array<int, 2 * Dim> face, other;
+    cell_stencil(grid.cell_coord(cell), face, other);
+    double diag = 0.0;
+    for (int j = 0; j < 2 * Dim; ++j)
+      if (other[j] != cell) diag += coefficient_[face[j]];
+    diagonal_[i] = liquid_[i] * liquid_[i] * diag;
+  }
+  // red-black colours by the parity of the cell coordinates
+  for (int a = 0; a < Dim; ++a)
+    if (grid.periodic(a) && grid.cells()[a] % 2 == 1 && grid.cells()[a] > 1)
+      colouring_valid_ = false;
+  q_.setZero(grid.num_cells());
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::cell_stencil(const VecI<Dim>& c,
+                                                   std::array<int, 2 * Dim>& face,
+                                                   std::array<int, 2 * Dim>& other) const {
+  // linear indices of c along the face lattices and the cells, then +-1 along each axis
+  for (int a = 0; a < Dim; ++a) {
+    const VecI<Dim>& fd = face_dims_[a];
+    int lower_face = 0, cell = 0;
+    for (int b = Dim - 1; b >= 0; --b) {
+      lower_face = lower_face * fd[b] + c[b];
+      cell = cell * cells_[b] + c[b];
+    }
+    int stride = 1, face_stride = 1;
+    for (int b = 0; b < a; ++b) {
+      stride *= cells_[b];
+      face_stride *= fd[b];
+    }
+    const int n = cells_[a];
+    // lower face: the cell is its plus cell; the minus cell is c - e_a
+    face[2 * a] = face_offset_[a] + lower_face;
+    other[2 * a] = c[a] > 0 ? cell - stride : (periodic_[a] ? cell + (n - 1) * stride : -1);
+    // upper face: the cell is its minus cell; the plus cell is c + e_a
+    const bool last = c[a] == n - 1;
+    face[2 * a + 1] = face_offset_[a] + lower_face +
+                      (last && periodic_[a] ? -(n - 1) * face_stride : face_stride);
+    other[2 * a + 1] = !last ? cell + stride : (periodic_[a] ? cell - (n - 1) * stride : -1);
+  }
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::scatter(const VectorX& x) const {
+  const int num_cells = static_cast<int>(q_.size());
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
+  for (int c = 0; c < num_cells; ++c) {
+    const int i = dof_of_cell_[c];
+    q_[c] = i >= 0 ? liquid_[i] * x[i] : 0.0;
+  }
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
+  y.resize(num_dofs_);
+  scatter(x);
+  // (A x)_i = W_i sum_f k_f (q_i - q_j), q = W x: the stencil of W G^T K G W, per grid row
+  const int n0 = cells_[0];
+  const int rows = static_cast<int>(q_.size()) / n0;
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
+  for (int r = 0; r < rows; ++r) {
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % cells_[a];
+      rest /= cells_[a];
+    }
+    // the stencil of the row's first cell, shifted along the row
+    std::array<int, 2 * Dim> face0, other0, face, other;
+    cell_stencil(c, face0, other0);
+    for (int x0 = 0; x0 < n0; ++x0) {
+      const int cell = r * n0 + x0;
+      const int i = dof_of_cell_[cell];
+      if (i < 0) continue;
+      shift_stencil<Dim>(x0, n0, periodic_[0], cell, face0, other0, face, other);
+      const double qi = q_[cell];
+      double sum = 0.0;
+      for (int j = 0; j < 2 * Dim; ++j)
+        sum += coefficient_[face[j]] * (qi - (other[j] >= 0 ? q_[other[j]] : 0.0));
+      y[i] = liquid_[i] * sum;
+    }
+  }
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, VectorX& x,
+                                            double omega, const std::vector<char>* active) const {
+  // q = W x of the starting x, kept current as DOFs change
+  scatter(x);
+  const int n0 = cells_[0];
+  const int rows = static_cast<int>(q_.size()) / n0;
+  auto relax_row = [&](int r, int parity) {
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r, sum = 0;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % cells_[a];
+      rest /= cells_[a];
+      sum += c[a];
+    }
+    const int first = (parity + sum) % 2;
+    if (first >= n0) return;
+    std::array<int, 2 * Dim> face0, other0, face, other;
+    cell_stencil(c, face0, other0);
+    const int last = first + 2 * ((n0 - 1 - first) / 2);
+    // within an independent colour the order does not matter: ascending (memory order) then
+    const bool descending = reverse && !colouring_valid_;
+    for (int step = 0; step <= (last - first) / 2; ++step) {
+      const int x0 = descending ? last - 2 * step : first + 2 * step;
+      const int cell = r * n0 + x0;
+      const int i = dof_of_cell_[cell];
+      if (i < 0 || diagonal_[i] == 0.0 || (active && !(*active)[i])) continue;
+      shift_stencil<Dim>(x0, n0, periodic_[0], cell, face0, other0, face, other);
+      // sum_{j != i} A_ij x_j = -W_i sum_f k_f W_j x_j over the neighbours of i
+      double off = 0.0;
+      for (int j = 0; j < 2 * Dim; ++j)
+        if (other[j] >= 0 && other[j] != cell) off -= coefficient_[face[j]] * q_[other[j]];
+      off *= liquid_[i];
+      x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal_[i];
+      q_[cell] = liquid_[i] * x[i];
+    }
+  };
+  for (int step = 0; step < 2; ++step) {
+    const int parity = reverse ? 1 - step : step;
+    if (colouring_valid_) {
+      // cells of one colour only couple to the other colour: rows in parallel
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
+      for (int r = 0; r < rows; ++r) relax_row(r, parity);
+    } else if (!reverse) {
+      for (int r = 0; r < rows; ++r) relax_row(r, parity);
+    } else {
+      for (int r = rows - 1; r >= 0; --r) relax_row(r, parity);
+    }
+  }
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                                    const std::vector<char>* active) const {
+  sweep(false, rhs, x, omega, active);
+}
+
+template <int Dim>
+void MatrixFreePressureOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                                     const std::vector<char>* active) const {
+  sweep(true, rhs, x, omega, active);
+}
+
+template <int Dim>
+VectorX MatrixFreePressureOperator<Dim>::rhs(const VectorX& u_star) const {
+  VectorX b(num_dofs_);
+  // b_i = W_i sum_f s_if W_F^u_f u*_f / dx  (s = +1 on the cell's lower faces, -1 on upper, 0
+  // on a face onto the cell itself)
+  const int num_cells = static_cast<int>(q_.size());
+#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
+  for (int cell = 0; cell < num_cells; ++cell) {
+    const int i = dof_of_cell_[cell];
+    if (i < 0) continue;
+    VecI<Dim> c = lattice_coord<Dim>(cell, cells_);
+    std::array<int, 2 * Dim> face, other;
+    cell_stencil(c, face, other);
+    double sum = 0.0;
+    for (int j = 0; j < 2 * Dim; ++j) {
+      const double sign = other[j] == cell ? 0.0 : (j % 2 == 0 ? 1.0 : -1.0);
+      sum += sign * fluid_face_[face[j]] * u_star[face[j]];
+    }
+    b[i] = liquid_[i] * sum * inv_dx_;
+  }
+  return b;
+}
+
+template <int Dim>
+std::size_t MatrixFreePressureOperator<Dim>::memory_bytes() const {
+  std::size_t bytes = sizeof(int) * dof_of_cell_.size() +
+                      sizeof(double) * (liquid_.size() + coefficient_.size() +
+                                        fluid_face_.size() + diagonal_.size() + q_.size());
+  for (const VectorX& n : null_space_) bytes += sizeof(double) * n.size();
+  return bytes;
+}
+
+template <int Dim>
+double MatrixFreePressureOperator<Dim>::bytes_per_apply() const {
+  // compulsory traffic, the same count as SparseMatrixOperator's: every stored array the apply
+  // reads once (cell -> DOF map, k per face, W_L^p per DOF), x read once, y written once; the
+  // scratch q and repeated reads that can hit the cache are not counted, so the bandwidth
+  // derived from it is a lower bound
+  return static_cast<double>(dof_of_cell_.size()) * sizeof(int) +
+         static_cast<double>(coefficient_.size()) * sizeof(double) +
+         static_cast<double>(num_dofs_) * 3 * sizeof(double);
+}
+
+template <int Dim>
+void apply_pressure_update(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                           const VectorX& pressure, VectorX& u) {
+  // q = W_L^p p, then the face update with G q
+  const VectorX q = w.liquid_cell.cwiseProduct(pressure);
+  const VectorX gq = apply_gradient(grid, q);
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    if (!(w.fluid_face[f] * w.liquid_face[f] > 0.0) || !(w.face_density[f] > 0.0)) continue;
+    u[f] -= dt * gq[f] / (w.face_density[f] * w.liquid_face[f]);
+  }
+}
+
+VectorX scatter_pressure(const PressureDofs& dofs, const VectorX& p_dofs, int num_cells) {
+  VectorX p = VectorX::Zero(num_cells);
+  for (int i = 0; i < dofs.size(); ++i) p[dofs.cell_of_dof[i]] = p_dofs[i];
+  return p;
+}
+
+template <int Dim>
+PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                                   const std::string& backend, const PcgSettings& settings,
+                                   VectorX& u) {
+  PressureSolveResult result;
+  // line 7: active DOFs
+  const PressureDofs dofs = select_pressure_dofs(grid, w, dt);
+  result.dofs = dofs.size();
+  VectorX p = VectorX::Zero(dofs.size());
+  // lines 8-10: assemble (or set up the stencil) and solve
+  if (backend == "explicit") {
+    const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
+    const SparseMatrixOperator op(sys.A, dofs.null_space);
+    result.pcg = pcg_solve(op, sys.b, p, settings);
+  } else if (backend == "matrixfree") {
+    const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
+    result.pcg = pcg_solve(op, op.rhs(u), p, settings);
+  } else {
+    throw std::invalid_argument("solve_pressure: unknown backend '" + backend +
+                                "' (explicit, matrixfree)");
+  }
+  // line 11: velocity update
+  result.pressure = scatter_pressure(dofs, p, grid.num_cells());
+  apply_pressure_update(grid, w, dt, result.pressure, u);
+  return result;
+}
+
+#define MONOLITH_INSTANTIATE(D)                                                                  \
+  template VectorX density_diagonal<D>(const MacGrid<D>&, const VectorX&, double);               \
+  template PressureDofs select_pressure_dofs<D>(const MacGrid<D>&, const PressureWeights&,       \
+                                                double);                                         \
+  template ExplicitPressureSystem assemble_explicit_pressure<D>(                                 \
+      const MacGrid<D>&, const PressureWeights&, const PressureDofs&, double, const VectorX&);   \
+  template class MatrixFreePressureOperator<D>;                                                  \
+  template void apply_pressure_update<D>(const MacGrid<D>&, const PressureWeights&, double,      \
+                                         const VectorX&, VectorX&);                              \
+  template PressureSolveResult solve_pressure<D>(const MacGrid<D>&, const PressureWeights&,      \
+                                                 double, const std::string&, const PcgSettings&, \
+                                                 VectorX&);
+MONOLITH_INSTANTIATE(2)
+MONOLITH_INSTANTIATE(3)
+#undef MONOLITH_INSTANTIATE
+
+}  // namespace monolith

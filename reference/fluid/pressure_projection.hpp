@@ -1,0 +1,153 @@
+#pragma once
+/// \file pressure_projection.hpp
+/// The variational pressure solve: eq. (8) without stress (equivalently eq. (18) without bodies),
+/// i.e. the A22 and b2 blocks of eq. (24), with both back ends of the operator:
+///
+///   A = dt W_L^p G^T W_F^u P^-1 (W_L^u)^-1 G W_L^p     (num_dofs x num_dofs, SPD or SPSD)
+///   b = W_L^p G^T W_F^u u*                              (num_dofs)
+///   u = u* - dt P^-1 (W_L^u)^-1 G W_L^p p               (on faces with W_F^u W_L^u > 0)
+///
+/// obtained by minimising E(p) = 1/2 ||u* - dt P^-1 (W_L^u)^-1 G W_L^p p||^2_{P W_F^u W_L^u}
+/// over p. The pressure DOFs are the cells with W_L^p > 0 that touch at least one face with
+/// W_F^u > 0; every other cell has p = 0. A is restricted to those DOFs (rows and columns).
+
+#include <array>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "reference/core/common.hpp"
+#include "reference/solvers/linear_operator.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/solvers/pcg.hpp"
+
+namespace monolith {
+
+/// The diagonal weight matrices and densities the pressure system is built from, each stored as
+/// its diagonal (see volume_fractions.hpp).
+struct PressureWeights {
+  VectorX fluid_face;    ///< W_F^u, num_faces
+  VectorX liquid_cell;   ///< W_L^p, num_cells
+  VectorX liquid_face;   ///< W_L^u, num_faces (clamped, see kMinLiquidFaceFraction)
+  VectorX face_density;  ///< diagonal of P, num_faces, positive wherever W_F^u W_L^u > 0
+};
+
+/// The diagonal of P: the faces' densities from particles_to_grid; where a face has none (zero),
+/// the mean of the non-zero densities of the faces of its two cells, else `fallback_density`.
+template <int Dim>
+VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
+                         double fallback_density);
+
+/// Active pressure DOFs (Algorithm 1, line 7) and the null space of A.
+struct PressureDofs {
+  std::vector<int> cell_of_dof;  ///< cell index of each DOF, increasing
+  std::vector<int> dof_of_cell;  ///< DOF of each cell, -1 for inactive cells
+  /// One unit vector per connected group of DOFs that no weighted face links to air, an open
+  /// boundary or an inactive cell (enclosed or periodic liquid): n_i proportional to 1 / W_L^p_i
+  /// on the group (a constant q = W_L^p p), zero elsewhere. Empty when A is definite.
+  std::vector<VectorX> null_space;
+  int size() const { return static_cast<int>(cell_of_dof.size()); }
+};
+
+template <int Dim>
+PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeights& w, double dt);
+
+/// Explicit back end: every matrix of eq. (8) with its paper name, A and b formed as written.
+struct ExplicitPressureSystem {
+  SparseMatrix G;          ///< eq. (8) gradient, num_faces x num_cells
+  SparseMatrix W_F_u;      ///< num_faces x num_faces, diagonal
+  SparseMatrix W_L_p;      ///< num_cells x num_cells, diagonal
+  SparseMatrix W_L_u_inv;  ///< (W_L^u)^-1, num_faces x num_faces, diagonal (0 where W_L^u = 0)
+  SparseMatrix P_inv;      ///< P^-1, num_faces x num_faces, diagonal
+  SparseMatrix S;          ///< selection, num_dofs x num_cells, S(k, cell_of_dof[k]) = 1
+  SparseMatrix A;          ///< S (dt W_L^p G^T W_F^u P^-1 (W_L^u)^-1 G W_L^p) S^T, SPSD
+  VectorX b;               ///< S W_L^p G^T W_F^u u*
+};
+
+/// eq. (8) / A22 and b2 of eq. (24), assembled explicitly.
+template <int Dim>
+ExplicitPressureSystem assemble_explicit_pressure(const MacGrid<Dim>& grid,
+                                                  const PressureWeights& w,
+                                                  const PressureDofs& dofs, double dt,
+                                                  const VectorX& u_star);
+
+/// Matrix-free back end: the same A (eq. (8), A22 of eq. (24)) applied by a stencil loop over
+/// the cells (OpenMP over grid rows, one writer per output entry, deterministic):
+///   (A x)_i = W_i sum_{faces f of cell i} k_f (W_i x_i - W_j x_j),  k_f = dt W_F^u / (rho W_L^u dx^2),
+/// j the cell across f (W_j x_j = 0 outside the domain or on inactive cells). It stores k_f and
+/// W_F^u per face, a cell -> DOF map, W_L^p and A_ii per DOF; the neighbours come from the grid
+/// layout on the fly. SSOR sweeps use red-black ordering of the cells (by the parity of the sum of
+/// cell coordinates), each colour in parallel (serially in grid order on an odd periodic axis).
+/// Scratch is sized at construction: apply and the sweeps allocate nothing, and one operator must
+/// not run two of them at once from different threads.
+template <int Dim>
+class MatrixFreePressureOperator : public LinearOperator {
+ public:
+  MatrixFreePressureOperator(const MacGrid<Dim>& grid, const PressureWeights& w,
+                             const PressureDofs& dofs, double dt);
+  int size() const override { return num_dofs_; }
+  void apply(const VectorX& x, VectorX& y) const override;
+  VectorX diagonal() const override { return diagonal_; }
+  void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                     const std::vector<char>* active = nullptr) const override;
+  void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                      const std::vector<char>* active = nullptr) const override;
+  const std::vector<VectorX>& null_space() const override { return null_space_; }
+  /// b = W_L^p G^T W_F^u u* restricted to the DOFs, by a stencil loop.
+  VectorX rhs(const VectorX& u_star) const;
+
+  /// Bytes the operator holds (coefficients, map, scratch), for the benchmark harness.
+  std::size_t memory_bytes() const override;
+  /// Bytes one apply must move at least: every stored array it reads once, x once, y once
+  /// (scratch excluded), as SparseMatrixOperator counts; for the harness's bandwidth figure.
+  double bytes_per_apply() const override;
+
+ private:
+  /// The 2 Dim faces of the cell at c (lower then upper per axis) and the cell across each (-1
+  /// outside; the cell itself across a periodic axis of one cell).
+  void cell_stencil(const VecI<Dim>& c, std::array<int, 2 * Dim>& face,
+                    std::array<int, 2 * Dim>& other) const;
+  /// q = W_L^p x on the cells (zero on inactive cells).
+  void scatter(const VectorX& x) const;
+  void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
+             const std::vector<char>* active) const;
+  VecI<Dim> cells_ = VecI<Dim>::Zero();
+  std::array<bool, Dim> periodic_{};
+  std::array<int, Dim> face_offset_{};
+  std::array<VecI<Dim>, Dim> face_dims_{};
+  double inv_dx_ = 1.0;
+  int num_dofs_ = 0;
+  std::vector<int> dof_of_cell_;  ///< per cell: DOF or -1
+  VectorX liquid_;                ///< W_L^p per DOF
+  VectorX coefficient_;           ///< k_f = dt W_F^u P^-1 (W_L^u)^-1 / dx^2 per face
+  VectorX fluid_face_;            ///< W_F^u per face (for rhs)
+  VectorX diagonal_;
+  bool colouring_valid_ = true;  ///< false on odd periodic axes: colours then run serially
+  std::vector<VectorX> null_space_;
+  mutable VectorX q_;  ///< scratch: W_L^p x on the cells
+};
+
+/// u <- u - dt P^-1 (W_L^u)^-1 G W_L^p p on faces with W_F^u W_L^u > 0 (the update of eq. (4)
+/// in the form of eq. (8)); `pressure` is a cell field (zero on inactive cells).
+template <int Dim>
+void apply_pressure_update(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                           const VectorX& pressure, VectorX& u);
+
+/// Cell field from DOF values (zero on inactive cells).
+VectorX scatter_pressure(const PressureDofs& dofs, const VectorX& p_dofs, int num_cells);
+
+struct PressureSolveResult {
+  VectorX pressure;  ///< cell field, Pa
+  PcgResult pcg;
+  int dofs = 0;
+};
+
+/// Lines 7-11 of Algorithm 1 for the pressure alone: selects DOFs, builds the system with the
+/// back end `backend` ("explicit" or "matrixfree"), solves it with SSOR-PCG and updates u
+/// (which enters as u*). Throws std::invalid_argument on an unknown backend name.
+template <int Dim>
+PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                                   const std::string& backend, const PcgSettings& settings,
+                                   VectorX& u);
+
+}  // namespace monolith

@@ -1,0 +1,950 @@
+#include "reference/fluid/stokes_system.hpp"
+
+#include <algorithm>
+#include <cstddef>
+#include <stdexcept>
+#include <type_traits>
+
+#include "reference/fluid/deformation_rate.hpp"
+#include "reference/fluid/gradient.hpp"
+#include "reference/grid/stress_weights.hpp"
+#include "reference/grid/volume_fractions.hpp"
+
+namespace monolith {
+
+namespace {
+
+/// C_f = dt W_F^u P^-1 (W_L^u)^-1 per face (0 where the face carries no fluid, liquid or density).
+VectorX stokes_face_coefficients(const PressureWeights& w, double dt) {
+  VectorX c(w.fluid_face.size());
+  for (int f = 0; f < c.size(); ++f)
+    c[f] = w.fluid_face[f] > 0.0 && w.face_density[f] > 0.0
+               ? dt * w.fluid_face[f] * reciprocal_or_zero(w.liquid_face[f]) / w.face_density[f]
+               : 0.0;
+  return c;
+}
+
+/// The StressGrid DOFs a layout unknown expands into, with the entries of E (+1, and -1 on the
+/// eliminated diagonal component in the reduced form). Returns the count (1 or 2).
+template <int Dim>
+int expansion_column(const StressLayout<Dim>& layout, int unknown, std::array<int, 2>& dof,
+                     std::array<double, 2>& sign) {
+  const StressGrid<Dim>& stress = layout.grid();
+  dof[0] = layout.dof_of_unknown(unknown);
+  sign[0] = 1.0;
+  const int k = layout.component(layout.component_of_unknown(unknown));
+  if (layout.form() != StressForm::reduced || !StressGrid<Dim>::is_diagonal(k)) return 1;
+  dof[1] = stress.offset(Dim - 1) + (dof[0] - stress.offset(k));
+  sign[1] = -1.0;
+  return 2;
+}
+
+}  // namespace
+
+// --- DOF selection --------------------------------------------------------------------------
+
+template <int Dim>
+StokesDofs select_stokes_dofs(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                              const StokesWeights& w, double dt, StokesUnknowns unknowns) {
+  StokesDofs dofs;
+  // stress: W^s > 0 and eta > 0 on every StressGrid DOF the unknown stands for
+  dofs.dof_of_unknown.assign(layout.num_unknowns(), -1);
+  for (int i = 0; i < layout.num_unknowns(); ++i) {
+    std::array<int, 2> dof;
+    std::array<double, 2> sign;
+    const int count = expansion_column(layout, i, dof, sign);
+    bool active = true;
+    for (int m = 0; m < count; ++m) {
+      const int d = dof[m];
+      active = active && w.fluid_stress[d] * w.liquid_stress[d] > 0.0 && w.viscosity[d] > 0.0;
+    }
+    if (!active) continue;
+    dofs.dof_of_unknown[i] = dofs.num_stress();
+    dofs.unknown_of_dof.push_back(i);
+  }
+  // pressure: the DOFs of the pressure solve
+  if (unknowns == StokesUnknowns::pressure_and_stress)
+    dofs.pressure = select_pressure_dofs(grid, w.pressure, dt);
+  // null space: an enclosed pressure group with tau = 0 (A11 is definite, so there is no other)
+  for (const VectorX& n : dofs.pressure.null_space) {
+    VectorX v = VectorX::Zero(dofs.size());
+    v.tail(dofs.num_pressure()) = n;
+    dofs.null_space.push_back(v);
+  }
+  return dofs;
+}
+
+// --- explicit back end ----------------------------------------------------------------------
+
+template <int Dim>
+ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
+                                              const StressLayout<Dim>& layout,
+                                              const StokesWeights& w, const StokesDofs& dofs,
+                                              double dt, const VectorX& u_star) {
+  const StressGrid<Dim>& stress = layout.grid();
+  ExplicitStokesSystem sys;
+  // the named matrices of eq. (8)
+  sys.G = gradient_matrix(grid);
+  sys.D = deformation_rate_matrix(stress);
+  sys.M = sparse_diagonal(stress_multiplicity(stress));
+  sys.N_inv = inverse_viscosity_matrix(layout, w.viscosity);
+  sys.W_F_u = sparse_diagonal(w.pressure.fluid_face);
+  sys.W_L_u_inv = sparse_diagonal(w.pressure.liquid_face.unaryExpr(&reciprocal_or_zero));
+  sys.P_inv = sparse_diagonal(w.pressure.face_density.unaryExpr(&reciprocal_or_zero));
+  sys.W_L_p = sparse_diagonal(w.pressure.liquid_cell);
+  sys.W_F_s = sparse_diagonal(w.fluid_stress);
+  sys.W_L_s = sparse_diagonal(w.liquid_stress);
+  sys.E = layout.expansion();
+  // selections of the active DOFs
+  std::vector<Triplet> t;
+  for (int k = 0; k < dofs.num_stress(); ++k) t.emplace_back(k, dofs.unknown_of_dof[k], 1.0);
+  sys.S_tau.resize(dofs.num_stress(), layout.num_unknowns());
+  sys.S_tau.setFromTriplets(t.begin(), t.end());
+  t.clear();
+  for (int k = 0; k < dofs.num_pressure(); ++k) t.emplace_back(k, dofs.pressure.cell_of_dof[k], 1.0);
+  sys.S_p.resize(dofs.num_pressure(), grid.num_cells());
+  sys.S_p.setFromTriplets(t.begin(), t.end());
+  // K = W_F^u P^-1 (W_L^u)^-1 and the full-layout N^-1 = M diag(1/eta)
+  const SparseMatrix K = sys.W_F_u * sys.P_inv * sys.W_L_u_inv;
+  const SparseMatrix N_full_inv =
+      sys.M * sparse_diagonal(w.viscosity.unaryExpr(&reciprocal_or_zero));
+  const SparseMatrix W_s = sys.W_F_s * sys.W_L_s;
+  const SparseMatrix Dt = sys.D.transpose();
+  const SparseMatrix St_tau = sys.S_tau.transpose();
+  const SparseMatrix St_p = sys.S_p.transpose();
+  // the stress force of the active unknowns on the faces, F_s = D^T M W_L^s E S_tau^T
+  // (num_faces x n_tau): restricting to the active unknowns first keeps every product below as
+  // small as the active stress set (empty for an inviscid liquid)
+  const SparseMatrix R = sys.E * St_tau;
+  const SparseMatrix F_s = Dt * SparseMatrix(sys.M * sys.W_L_s * R);
+  const SparseMatrix F_sT = F_s.transpose();
+  // A11 = S E^T (1/2 N^-1 W^s + dt W_L^s M D K D^T M W_L^s) E S^T
+  const SparseMatrix viscous = SparseMatrix(R.transpose() * N_full_inv * W_s) * R;
+  sys.A11 = 0.5 * viscous + dt * SparseMatrix(F_sT * K * F_s);
+  // b1 = S E^T W_L^s M D W_F^u u*
+  sys.b1 = F_sT * (sys.W_F_u * u_star);
+  if (dofs.num_pressure() > 0) {
+    // A12 = S E^T dt W_L^s M D K G W_L^p S_p^T
+    const SparseMatrix GW = sys.G * sys.W_L_p;
+    sys.A12 = dt * SparseMatrix(F_sT * K * GW) * St_p;
+    // A22 and b2 are the pressure system's (the same expression, so eta = 0 reproduces
+    // solve_pressure bit for bit)
+    const ExplicitPressureSystem pressure =
+        assemble_explicit_pressure(grid, w.pressure, dofs.pressure, dt, u_star);
+    sys.A22 = pressure.A;
+    sys.b2 = pressure.b;
+  } else {
+    sys.A12.resize(dofs.num_stress(), 0);
+    sys.A22.resize(0, 0);
+    sys.b2.resize(0);
+  }
+  // A = [A11 A12; A12^T A22]
+  const int ns = dofs.num_stress(), n = dofs.size();
+  t.clear();
+  t.reserve(sys.A11.nonZeros() + 2 * sys.A12.nonZeros() + sys.A22.nonZeros());
+  for (int i = 0; i < sys.A11.outerSize(); ++i)
+    for (SparseMatrix::InnerIterator it(sys.A11, i); it; ++it)
+      t.emplace_back(i, it.col(), it.value());
+  for (int i = 0; i < sys.A12.outerSize(); ++i)
+    for (SparseMatrix::InnerIterator it(sys.A12, i); it; ++it) {
+      t.emplace_back(i, ns + it.col(), it.value());
+      t.emplace_back(ns + it.col(), i, it.value());
+    }
+  for (int i = 0; i < sys.A22.outerSize(); ++i)
+    for (SparseMatrix::InnerIterator it(sys.A22, i); it; ++it)
+      t.emplace_back(ns + i, ns + it.col(), it.value());
+  sys.A.resize(n, n);
+  sys.A.setFromTriplets(t.begin(), t.end());
+  sys.b.resize(n);
+  sys.b << sys.b1, sys.b2;
+  return sys;
+}
+
+// --- matrix-free back end -------------------------------------------------------------------
+
+namespace {
+
+/// Below this many grid entries the matrix-free loops run on one thread: a parallel region
+/// costs more than it saves on small grids (and much more on an oversubscribed machine).
+constexpr int kParallelMin = 16384;
+
+/// out = sum over `terms` of coef * in_field(c + delta e_axis) for every entry c of the field
+/// `of` (zero where an input lies outside the domain, wrapped on periodic axes), then times
+/// scale entrywise if given. Shares the rows along axis 0 of `of` among the threads of the
+/// enclosing parallel region (omp for, no barrier at the end): each row has one writer, and
+/// every entry sums its terms in the same order, whatever the thread count.
+template <int Dim, class FieldT, class TermT, std::size_t N>
+void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms,
+                  const std::array<FieldT, N>& fields, const std::array<const double*, N>& data,
+                  const std::array<bool, Dim>& periodic, const double* scale,
+                  const std::vector<int>* row_list) {
+  const int n0 = of.dims[0];
+  int rows = 1;
+  for (int a = 1; a < Dim; ++a) rows *= of.dims[a];
+  // every row, or only those of row_list
+  const int count = row_list ? static_cast<int>(row_list->size()) : rows;
+#pragma omp for schedule(static) nowait
+  for (int m = 0; m < count; ++m) {
+    const int r = row_list ? (*row_list)[m] : m;
+    // the row's coordinates along axes 1..Dim-1
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % of.dims[a];
+      rest /= of.dims[a];
+    }
+    double* o = out + of.offset + static_cast<std::ptrdiff_t>(r) * n0;
+    for (int x = 0; x < n0; ++x) o[x] = 0.0;
+    for (const TermT& t : terms) {
+      // the input row: shifted along axes 1.., wrapped on periodic axes, or outside
+      const FieldT& f = fields[t.field];
+      int row = 0;
+      bool inside = true;
+      for (int a = Dim - 1; a >= 1 && inside; --a) {
+        int v = c[a] + (t.axis == a ? t.delta : 0);
+        if (v < 0 || v >= f.dims[a]) {
+          inside = periodic[a];
+          v = ((v % f.dims[a]) + f.dims[a]) % f.dims[a];
+        }
+        row = row * f.dims[a] + v;
+      }
+      if (!inside) continue;
+      // along axis 0: a contiguous interior, then the ends (wrapped or outside)
+      const int m0 = f.dims[0];
+      const double* in = data[t.field] + f.offset + static_cast<std::ptrdiff_t>(row) * m0;
+      const int shift = t.axis == 0 ? t.delta : 0;
+      const double coef = t.coef;
+      const int lo = std::max(0, -shift), hi = std::min(n0, m0 - shift);
+      for (int x = lo; x < hi; ++x) o[x] += coef * in[x + shift];
+      if (periodic[0]) {
+        for (int x = 0; x < lo; ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
+        for (int x = std::max(hi, lo); x < n0; ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
+      }
+    }
+    if (scale) {
+      const double* sc = scale + of.offset + static_cast<std::ptrdiff_t>(r) * n0;
+      for (int x = 0; x < n0; ++x) o[x] *= sc[x];
+    }
+  }
+}
+
+/// Index of the first entry (coordinate 0 along axis 0) of the row of field f at the row
+/// coordinates of c (axes 1..Dim-1) shifted by delta along `axis` (no shift for axis 0), wrapped
+/// on periodic axes; -1 if the row lies outside the domain.
+template <int Dim, class FieldT>
+int row_start(const FieldT& f, const VecI<Dim>& c, int axis, int delta,
+              const std::array<bool, Dim>& periodic) {
+  int row = 0;
+  for (int a = Dim - 1; a >= 1; --a) {
+    int v = c[a] + (axis == a ? delta : 0);
+    if (v < 0 || v >= f.dims[a]) {
+      if (!periodic[a]) return -1;
+      v = ((v % f.dims[a]) + f.dims[a]) % f.dims[a];
+    }
+    row = row * f.dims[a] + v;
+  }
+  return f.offset + row * f.dims[0];
+}
+
+}  // namespace
+
+template <int Dim>
+MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid,
+                                                        const StressLayout<Dim>& layout,
+                                                        const StokesWeights& w,
+                                                        const StokesDofs& dofs, double dt)
+    : periodic_(grid.periodic()),
+      eliminated_(layout.eliminated_component()),
+      size_(dofs.size()),
+      num_stress_(dofs.num_stress()),
+      num_faces_(grid.num_faces()),
+      num_stress_dofs_(layout.grid().num_dofs()),
+      num_cells_(grid.num_cells()),
+      has_pressure_(dofs.num_pressure() > 0),
+      face_coefficient_(stokes_face_coefficients(w.pressure, dt)),
+      fluid_face_(w.pressure.fluid_face),
+      null_space_(dofs.null_space) {
+  const StressGrid<Dim>& stress = layout.grid();
+  const double inv_dx = 1.0 / grid.dx();
+  // the lattice blocks: faces per axis, stress components, cells
+  for (int a = 0; a < Dim; ++a) fields_[a] = {grid.face_offset(a), grid.face_dims(a)};
+  for (int k = 0; k < kComponents; ++k) fields_[Dim + k] = {stress.offset(k), stress.dims(k)};
+  fields_[kCellField] = {0, grid.cells()};
+  for (int j = 0; j < layout.num_components(); ++j) layout_field_.push_back(Dim + layout.component(j));
+  // B^T per grid DOF: the rows of D (eq. (8)) and of G^T, +-1/dx on faces around the DOF
+  for (int k = 0; k < kComponents; ++k) {
+    const auto [a, b] = StressGrid<Dim>::component_axes(k);
+    std::vector<Term>& t = terms_[Dim + k];
+    if (a == b) {
+      // diagonal: du_a/da across the cell
+      t.push_back({a, a, 1, inv_dx});
+      t.push_back({a, a, 0, -inv_dx});
+    } else {
+      // off-diagonal: 1/2 (du_a/db + du_b/da) from the four faces around the node/edge
+      t.push_back({a, a, 0, 0.5 * inv_dx});
+      t.push_back({a, b, -1, -0.5 * inv_dx});
+      t.push_back({b, b, 0, 0.5 * inv_dx});
+      t.push_back({b, a, -1, -0.5 * inv_dx});
+    }
+  }
+  if (has_pressure_)
+    for (int a = 0; a < Dim; ++a) {
+      // G^T: the cell is the plus cell of its lower face and the minus cell of its upper face
+      terms_[kCellField].push_back({a, a, 0, inv_dx});
+      terms_[kCellField].push_back({a, a, 1, -inv_dx});
+    }
+  // B per face: the transpose of those stencils (a DOF at c reaching face c + delta e_axis is
+  // reached from the face at -delta), the same entries on every boundary and periodic axis
+  for (int field = Dim; field < kFields; ++field)
+    for (const Term& t : terms_[field]) terms_[t.field].push_back({field, t.axis, -t.delta, t.coef});
+
+  // grid -> unknown maps, per unknown weights and 1/2 N^-1 W^s
+  const VectorX m = stress_multiplicity(stress);
+  auto half_n_inv_ws = [&](int d) {
+    return 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d];
+  };
+  unknown_of_dof_.assign(num_stress_dofs_, -1);
+  unknown_of_cell_.assign(num_cells_, -1);
+  location_.resize(size_);
+  weight_.resize(size_);
+  self_.setZero(size_);
+  for (int i = 0; i < num_stress_; ++i) {
+    const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);
+    const int k = stress.coord(d).first;
+    unknown_of_dof_[d] = i;
+    location_[i] = d;
+    weight_[i] = m[d] * w.liquid_stress[d];
+    self_[i] = half_n_inv_ws(d);
+    // reduced form: E adds the eliminated DOF of the cell with sign -1 (sign^2 = 1 here)
+    if (eliminated_ >= 0 && StressGrid<Dim>::is_diagonal(k))
+      self_[i] += half_n_inv_ws(stress.offset(eliminated_) + d - stress.offset(k));
+  }
+  for (int k = 0; k < dofs.num_pressure(); ++k) {
+    const int i = num_stress_ + k, cell = dofs.pressure.cell_of_dof[k];
+    unknown_of_cell_[cell] = i;
+    location_[i] = cell;
+    weight_[i] = w.pressure.liquid_cell[cell];
+  }
+  if (eliminated_ >= 0) {
+    // the eliminated DOF of each cell: its -M W_L^s and (3D, where it couples the two diagonal
+    // unknowns of the cell through E^T N^-1 E) its 1/2 N^-1 W^s
+    eliminated_weight_.resize(num_cells_);
+    if constexpr (Dim == 3) eliminated_coupling_.resize(num_cells_);
+    for (int c = 0; c < num_cells_; ++c) {
+      const int d = stress.offset(eliminated_) + c;
+      eliminated_weight_[c] = -m[d] * w.liquid_stress[d];
+      if constexpr (Dim == 3) eliminated_coupling_[c] = half_n_inv_ws(d);
+    }
+  }
+  // diagonal: 1/2 N^-1 W^s plus sum_f C_f B_fi^2 over the merged column of B
+  diagonal_ = self_;
+  for (int i = 0; i < size_; ++i)
+    for (const auto& [f, b] : stencil(i)) diagonal_[i] += face_coefficient_[f] * b * b;
+  // an odd periodic axis couples a colour to itself: relax serially then
+  for (int a = 0; a < Dim; ++a)
+    if (grid.periodic(a) && grid.cells()[a] % 2 == 1 && grid.cells()[a] > 1)
+      colouring_valid_ = false;
+  // the rows the loops visit: face rows with fluid, stress and cell rows with unknowns
+  for (int field = 0; field < kFields; ++field) {
+    const Field& f = fields_[field];
+    const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
+    for (int r = 0; r < rows; ++r) {
+      bool used = false;
+      for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0 && !used; ++e) {
+        if (field < Dim) {
+          used = face_coefficient_[e] != 0.0;
+        } else if (field == kCellField) {
+          used = unknown_of_cell_[e] >= 0;
+        } else if (field - Dim == eliminated_) {
+          // the eliminated DOF of a cell with a diagonal unknown
+          for (int k = 0; k < Dim - 1; ++k)
+            used = used || unknown_of_dof_[fields_[Dim + k].offset + (e - f.offset)] >= 0;
+        } else {
+          used = unknown_of_dof_[e] >= 0;
+        }
+      }
+      if (used) active_rows_[field].push_back(r);
+    }
+  }
+  stress_scratch_.setZero(num_stress_dofs_);
+  cell_scratch_.setZero(num_cells_);
+  face_scratch_.setZero(num_faces_);
+}
+
+template <int Dim>
+int MatrixFreeStokesOperator<Dim>::index_or_outside(int field, VecI<Dim> c, int axis,
+                                                    int delta) const {
+  const Field& f = fields_[field];
+  c[axis] += delta;
+  int index = 0;
+  for (int a = Dim - 1; a >= 0; --a) {
+    int t = c[a];
+    if (t < 0 || t >= f.dims[a]) {
+      if (!periodic_[a]) return -1;
+      t = ((t % f.dims[a]) + f.dims[a]) % f.dims[a];
+    }
+    index = index * f.dims[a] + t;
+  }
+  return f.offset + index;
+}
+
+template <int Dim>
+int MatrixFreeStokesOperator<Dim>::column_faces(int field, const VecI<Dim>& c,
+                                                std::array<int, 2 * Dim>& face,
+                                                std::array<double, 2 * Dim>& coef) const {
+  int count = 0;
+  for (const Term& t : terms_[field]) {
+    const int f = index_or_outside(t.field, c, t.axis, t.delta);
+    if (f < 0) continue;  // a face outside the domain: zero velocity
+    face[count] = f;
+    coef[count++] = t.coef;
+  }
+  return count;
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double* q) const {
+  // (orphaned omp for without barriers: called inside a parallel region, every loop writes its
+  // own entries; only rows with unknowns, the others stay zero)
+  // s = M W_L^s tau on the DOFs of unknowns, zero elsewhere
+  for (int field : layout_field_) {
+    const Field& f = fields_[field];
+    const std::vector<int>& rows = active_rows_[field];
+    const int count = static_cast<int>(rows.size());
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < count; ++m) {
+      const int start = f.offset + rows[m] * f.dims[0];
+      for (int d = start; d < start + f.dims[0]; ++d) {
+        const int u = unknown_of_dof_[d];
+        s[d] = u >= 0 ? weight_[u] * x[u] : 0.0;
+      }
+    }
+  }
+  if (eliminated_ >= 0) {
+    // the eliminated diagonal DOF is minus the sum of the other diagonal unknowns of its cell
+    const int base = fields_[Dim + eliminated_].offset;
+    const std::vector<int>& rows = active_rows_[Dim + eliminated_];
+    const int count = static_cast<int>(rows.size());
+    const int n0 = fields_[Dim + eliminated_].dims[0];
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < count; ++m)
+      for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+        double sum = 0.0;
+        for (int k = 0; k < Dim - 1; ++k) {
+          const int u = unknown_of_dof_[fields_[Dim + k].offset + c];
+          if (u >= 0) sum += x[u];
+        }
+        s[base + c] = eliminated_weight_[c] * sum;
+      }
+  }
+  if (!has_pressure_) return;
+  // q = W_L^p p
+  const std::vector<int>& rows = active_rows_[kCellField];
+  const int count = static_cast<int>(rows.size());
+  const int n0 = fields_[kCellField].dims[0];
+#pragma omp for schedule(static) nowait
+  for (int m = 0; m < count; ++m)
+    for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+      const int u = unknown_of_cell_[c];
+      q[c] = u >= 0 ? weight_[u] * x[u] : 0.0;
+    }
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::faces_from_grid(const double* s, const double* q,
+                                                    double* force, bool scale_by_c,
+                                                    bool all_rows) const {
+  std::array<const double*, kFields> data{};
+  for (int k = 0; k < kComponents; ++k) data[Dim + k] = s;
+  data[kCellField] = q;
+  for (int a = 0; a < Dim; ++a)
+    stencil_rows<Dim>(fields_[a], force, terms_[a], fields_, data, periodic_,
+                      scale_by_c ? face_coefficient_.data() : nullptr,
+                      all_rows ? nullptr : &active_rows_[a]);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::grid_from_faces(const double* v, double* s, double* q) const {
+  std::array<const double*, kFields> data{};
+  for (int a = 0; a < Dim; ++a) data[a] = v;
+  // D v on the components the unknowns use (and the eliminated one), G^T v on the cells
+  for (int field : layout_field_)
+    stencil_rows<Dim>(fields_[field], s, terms_[field], fields_, data, periodic_, nullptr,
+                      &active_rows_[field]);
+  if (eliminated_ >= 0)
+    stencil_rows<Dim>(fields_[Dim + eliminated_], s, terms_[Dim + eliminated_], fields_, data,
+                      periodic_, nullptr, &active_rows_[Dim + eliminated_]);
+  if (has_pressure_)
+    stencil_rows<Dim>(fields_[kCellField], q, terms_[kCellField], fields_, data, periodic_,
+                      nullptr, &active_rows_[kCellField]);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, const VectorX* x,
+                                           VectorX& y) const {
+  // (orphaned omp for without barriers, like scatter; y is sized by the caller)
+  for (int field : layout_field_) {
+    const Field& f = fields_[field];
+    const std::vector<int>& rows = active_rows_[field];
+    const int count = static_cast<int>(rows.size());
+    const int n0 = f.dims[0];
+    const bool reduced_diagonal = eliminated_ >= 0 && field - Dim < Dim;
+    const int eliminated_base = eliminated_ >= 0 ? fields_[Dim + eliminated_].offset : 0;
+    // one writer per unknown: its weight times (D v) at its DOF, plus 1/2 N^-1 W^s x
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < count; ++m)
+      for (int e = rows[m] * n0; e < (rows[m] + 1) * n0; ++e) {
+        const int u = unknown_of_dof_[f.offset + e];
+        if (u < 0) continue;
+        double value = weight_[u] * s[f.offset + e];
+        if (x) value += self_[u] * (*x)[u];
+        if (reduced_diagonal) {
+          // the eliminated DOF of the cell (e is the cell index on diagonal components)
+          value += eliminated_weight_[e] * s[eliminated_base + e];
+          if constexpr (Dim == 3) {
+            if (x) {
+              const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + e];
+              if (partner >= 0) value += eliminated_coupling_[e] * (*x)[partner];
+            }
+          }
+        }
+        y[u] = value;
+      }
+  }
+  if (!has_pressure_) return;
+  const std::vector<int>& rows = active_rows_[kCellField];
+  const int n0 = fields_[kCellField].dims[0];
+  const int count = static_cast<int>(rows.size());
+#pragma omp for schedule(static) nowait
+  for (int m = 0; m < count; ++m)
+    for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+      const int u = unknown_of_cell_[c];
+      if (u >= 0) y[u] = weight_[u] * q[c];
+    }
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
+  double* s = stress_scratch_.data();
+  double* q = cell_scratch_.data();
+  double* v = face_scratch_.data();
+  y.resize(size_);
+  // x to the grid, v = C B x per face, B^T v per grid DOF, gathered per unknown: one parallel
+  // region, a barrier between the passes
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+  {
+    scatter(x, s, q);
+#pragma omp barrier
+    faces_from_grid(s, q, v, true, false);
+#pragma omp barrier
+    grid_from_faces(v, s, q);
+#pragma omp barrier
+    gather(s, q, &x, y);
+  }
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const VectorX& rhs,
+                                                VectorX& x, double omega,
+                                                const std::vector<char>* active) const {
+  const Field& f = fields_[field];
+  const bool is_cell = field == kCellField;
+  const int* map = is_cell ? unknown_of_cell_.data() : unknown_of_dof_.data();
+  const bool reduced_diagonal = eliminated_ >= 0 && !is_cell && field - Dim < Dim;
+  const int n0 = f.dims[0];
+  double* force = face_scratch_.data();
+  // the faces of the column of B of every entry of a row: per stencil term the start of the
+  // face row and the shift along axis 0 (eq. (8)'s D or G^T rows, as in stencil_rows)
+  struct RowTerm {
+    const double* coefficient = nullptr;  // C_f of the face row
+    double* force = nullptr;              // B x of the face row
+    int shift = 0, length = 0;
+    double coef = 0.0;
+    bool eliminated = false;
+  };
+  const double* face_coefficient = face_coefficient_.data();
+  const double* diagonal = diagonal_.data();
+  const double* self = self_.data();
+  const double* weight = weight_.data();
+  const double* eliminated_weight = eliminated_weight_.data();
+  const double* b_rhs = rhs.data();
+  double* xs = x.data();
+  const bool periodic0 = periodic_[0];
+  auto relax_row = [&](int r, int parity) {
+    VecI<Dim> c = VecI<Dim>::Zero();
+    int rest = r, sum = 0;
+    for (int a = 1; a < Dim; ++a) {
+      c[a] = rest % f.dims[a];
+      rest /= f.dims[a];
+      sum += c[a];
+    }
+    std::array<RowTerm, 2 * Dim + 2> row_terms;
+    int num_terms = 0;
+    auto add_terms = [&](int of_field, bool eliminated) {
+      for (const Term& t : terms_[of_field]) {
+        const int start = row_start<Dim>(fields_[t.field], c, t.axis, t.delta, periodic_);
+        if (start < 0) continue;  // faces outside the domain: zero velocity
+        row_terms[num_terms++] = {face_coefficient + start, force + start,
+                                  t.axis == 0 ? t.delta : 0, fields_[t.field].dims[0], t.coef,
+                                  eliminated};
+      }
+    };
+    add_terms(field, false);
+    if (reduced_diagonal) add_terms(Dim + eliminated_, true);
+    // the entries of this colour: coordinate sum of the given parity
+    const int first = (parity + sum) % 2;
+    if (first >= n0) return;
+    const int last = first + 2 * ((n0 - 1 - first) / 2);
+    const int base = f.offset + r * n0;
+    // within an independent group the order does not matter: ascending (memory order) then
+    const bool descending = reverse && !colouring_valid_;
+    // the entries of the row, with the term count a compile-time constant (unrolled loops)
+    auto relax_entries = [&](auto terms) {
+      constexpr int kTerms = decltype(terms)::value;
+      if constexpr (kTerms <= 2 * Dim + 2) {  // (at most 2 Dim + 2 terms; 8 only in 3D)
+        for (int step = 0; step <= (last - first) / 2; ++step) {
+          const int x0 = descending ? last - 2 * step : first + 2 * step;
+          const int d = base + x0;
+          const int u = map[d];
+          if (u < 0) continue;
+          const double diag = diagonal[u];
+          if (diag == 0.0 || (active && !(*active)[u])) continue;
+          const double xu = xs[u];
+          double ax = self[u] * xu;
+          if constexpr (Dim == 3) {
+            if (reduced_diagonal) {
+              // the other diagonal unknown of the cell, through the eliminated DOF's N^-1
+              const int cell = d - f.offset;
+              const int partner = unknown_of_dof_[fields_[Dim + 1 - (field - Dim)].offset + cell];
+              if (partner >= 0) ax += eliminated_coupling_[cell] * xs[partner];
+            }
+          }
+          // (A x)_u = sum_f B_fu C_f (B x)_f + the N part over the faces of u with fluid, in
+          // term order; a face without fluid (C_f = 0, it adds nothing to A) or outside the
+          // domain keeps its force (apply relies on zeros there): its update goes to `sink`
+          const double w_u = weight[u];
+          const double w_e = reduced_diagonal ? eliminated_weight[x0 + r * n0] : 0.0;
+          double sink = 0.0;
+          std::array<double*, 2 * Dim + 2> face;
+          std::array<double, 2 * Dim + 2> b;
+          for (int m = 0; m < kTerms; ++m) {
+            const RowTerm& t = row_terms[m];
+            int xi = x0 + t.shift;
+            b[m] = (t.eliminated ? w_e : w_u) * t.coef;
+            if (xi < 0 || xi >= t.length) {
+              if (!periodic0) {
+                face[m] = &sink;
+                continue;
+              }
+              xi = ((xi % t.length) + t.length) % t.length;
+            }
+            const double cf = t.coefficient[xi];
+            face[m] = cf != 0.0 ? t.force + xi : &sink;
+            if (cf != 0.0) ax += b[m] * cf * t.force[xi];
+          }
+          // relax, then move the force with x_u
+          const double off = ax - diag * xu;
+          const double updated = (1.0 - omega) * xu + omega * (b_rhs[u] - off) / diag;
+          const double change = updated - xu;
+          xs[u] = updated;
+          for (int m = 0; m < kTerms; ++m) *face[m] += b[m] * change;
+        }
+      }
+    };
+    switch (num_terms) {
+      case 0: relax_entries(std::integral_constant<int, 0>()); break;
+      case 1: relax_entries(std::integral_constant<int, 1>()); break;
+      case 2: relax_entries(std::integral_constant<int, 2>()); break;
+      case 3: relax_entries(std::integral_constant<int, 3>()); break;
+      case 4: relax_entries(std::integral_constant<int, 4>()); break;
+      case 5: relax_entries(std::integral_constant<int, 5>()); break;
+      case 6: relax_entries(std::integral_constant<int, 6>()); break;
+      case 7: relax_entries(std::integral_constant<int, 7>()); break;
+      default: relax_entries(std::integral_constant<int, 8>()); break;
+    }
+  };
+  const int first_colour = reverse ? 1 : 0, second_colour = 1 - first_colour;
+  // the rows with unknowns of this field, in grid order
+  const std::vector<int>& row_list = active_rows_[field];
+  const int count = static_cast<int>(row_list.size());
+  if (colouring_valid_) {
+    // no two unknowns of one colour share a face: rows in parallel
+    for (int parity : {first_colour, second_colour}) {
+#pragma omp parallel for schedule(static) if (count * n0 > kParallelMin)
+      for (int m = 0; m < count; ++m) relax_row(row_list[m], parity);
+    }
+  } else if (!reverse) {
+    for (int m = 0; m < count; ++m) relax_row(row_list[m], first_colour);
+    for (int m = 0; m < count; ++m) relax_row(row_list[m], second_colour);
+  } else {
+    for (int m = count - 1; m >= 0; --m) relax_row(row_list[m], first_colour);
+    for (int m = count - 1; m >= 0; --m) relax_row(row_list[m], second_colour);
+  }
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, VectorX& x,
+                                          double omega, const std::vector<char>* active) const {
+  // the face force B x of the starting x (zero at the start of an SSOR application)
+  double* force = face_scratch_.data();
+  bool zero = true;
+  for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
+  if (zero) {
+    std::fill(force, force + num_faces_, 0.0);
+  } else {
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+    {
+      scatter(x, stress_scratch_.data(), cell_scratch_.data());
+#pragma omp barrier
+      faces_from_grid(stress_scratch_.data(), cell_scratch_.data(), force, false, false);
+    }
+  }
+  // colour groups: stress components in layout order, then pressure; red then black (the
+  // reverse order backward)
+  const int blocks = static_cast<int>(layout_field_.size()) + (has_pressure_ ? 1 : 0);
+  for (int step = 0; step < blocks; ++step) {
+    const int block = reverse ? blocks - 1 - step : step;
+    const int field =
+        block < static_cast<int>(layout_field_.size()) ? layout_field_[block] : kCellField;
+    sweep_block(field, reverse, rhs, x, omega, active);
+  }
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                                  const std::vector<char>* active) const {
+  sweep(false, rhs, x, omega, active);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                                                   const std::vector<char>* active) const {
+  sweep(true, rhs, x, omega, active);
+}
+
+template <int Dim>
+VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
+  VectorX s = VectorX::Zero(num_stress_dofs_), q = VectorX::Zero(num_cells_), force(num_faces_);
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+  {
+    scatter(x, s.data(), q.data());
+#pragma omp barrier
+    faces_from_grid(s.data(), q.data(), force.data(), false, true);
+  }
+  return force;
+}
+
+template <int Dim>
+std::vector<std::pair<int, double>> MatrixFreeStokesOperator<Dim>::stencil(int i) const {
+  std::vector<std::pair<int, double>> column;
+  std::array<int, 2 * Dim> face;
+  std::array<double, 2 * Dim> coef;
+  const int loc = location_[i];
+  if (i >= num_stress_) {
+    const int count = column_faces(kCellField, lattice_coord<Dim>(loc, fields_[kCellField].dims),
+                                   face, coef);
+    for (int m = 0; m < count; ++m) column.emplace_back(face[m], weight_[i] * coef[m]);
+  } else {
+    int k = 0;
+    while (k + 1 < kComponents && loc >= fields_[Dim + k + 1].offset) ++k;
+    const int e = loc - fields_[Dim + k].offset;
+    const VecI<Dim> c = lattice_coord<Dim>(e, fields_[Dim + k].dims);
+    int count = column_faces(Dim + k, c, face, coef);
+    for (int m = 0; m < count; ++m) column.emplace_back(face[m], weight_[i] * coef[m]);
+    if (eliminated_ >= 0 && StressGrid<Dim>::is_diagonal(k)) {
+      // reduced form: the eliminated DOF of the cell, with E's -1 in its weight
+      count = column_faces(Dim + eliminated_, c, face, coef);
+      for (int m = 0; m < count; ++m) column.emplace_back(face[m], eliminated_weight_[e] * coef[m]);
+    }
+  }
+  // merge repeated faces (a periodic axis of one or two cells)
+  std::sort(column.begin(), column.end());
+  std::vector<std::pair<int, double>> merged;
+  for (const auto& entry : column) {
+    if (!merged.empty() && merged.back().first == entry.first)
+      merged.back().second += entry.second;
+    else
+      merged.push_back(entry);
+  }
+  return merged;
+}
+
+template <int Dim>
+VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
+  // b = B^T W_F^u u*: the gather of apply without C and the N part
+  const VectorX v = fluid_face_.cwiseProduct(u_star);
+  VectorX s(num_stress_dofs_), q(num_cells_), b(size_);
+#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+  {
+    grid_from_faces(v.data(), s.data(), q.data());
+#pragma omp barrier
+    gather(s.data(), q.data(), nullptr, b);
+  }
+  return b;
+}
+
+template <int Dim>
+std::size_t MatrixFreeStokesOperator<Dim>::memory_bytes() const {
+  const std::size_t d = sizeof(double), i = sizeof(int);
+  std::size_t bytes = d * (face_coefficient_.size() + fluid_face_.size() + weight_.size() +
+                           self_.size() + diagonal_.size() + eliminated_weight_.size() +
+                           eliminated_coupling_.size() + stress_scratch_.size() +
+                           cell_scratch_.size() + face_scratch_.size()) +
+                      i * (unknown_of_dof_.size() + unknown_of_cell_.size() + location_.size());
+  for (const VectorX& n : null_space_) bytes += d * n.size();
+  return bytes;
+}
+
+template <int Dim>
+double MatrixFreeStokesOperator<Dim>::bytes_per_apply() const {
+  // compulsory traffic, the same count as SparseMatrixOperator's: the grid -> unknown maps, C_f
+  // per face, per unknown its location, weight and 1/2 N^-1 W^s entry, the eliminated
+  // component's arrays, x read once and y written once. The scratch fields (written and read in
+  // each of the four passes) are not counted: at the benchmark sizes part of them stays in the
+  // cache, and counting them would overstate the bandwidth; this count makes it a lower bound.
+  const double d = sizeof(double), i = sizeof(int);
+  return i * static_cast<double>(unknown_of_dof_.size() + unknown_of_cell_.size() +
+                                 location_.size()) +
+         d * static_cast<double>(face_coefficient_.size() + weight_.size() + self_.size() +
+                                 eliminated_weight_.size() + eliminated_coupling_.size()) +
+         2.0 * d * size_;
+}
+
+// --- update, scatter, energy, solve ---------------------------------------------------------
+
+template <int Dim>
+void apply_stokes_update(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                         const StokesWeights& w, double dt, const VectorX& pressure_cells,
+                         const VectorX& tau_full, VectorX& u) {
+  const StressGrid<Dim>& stress = layout.grid();
+  // force per face: G W_L^p p + D^T M W_L^s tau
+  VectorX force = VectorX::Zero(grid.num_faces());
+  if (pressure_cells.size() > 0)
+    force += apply_gradient(grid, VectorX(w.pressure.liquid_cell.cwiseProduct(pressure_cells)));
+  if (tau_full.size() > 0) {
+    const SparseMatrix D = deformation_rate_matrix(stress);
+    const VectorX s = stress_multiplicity(stress).cwiseProduct(w.liquid_stress).cwiseProduct(tau_full);
+    force += D.transpose() * s;
+  }
+  const PressureWeights& pw = w.pressure;
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0)) continue;
+    u[f] -= dt * force[f] / (pw.face_density[f] * pw.liquid_face[f]);
+  }
+}
+
+template <int Dim>
+VectorX scatter_stress(const StressLayout<Dim>& layout, const StokesDofs& dofs, const VectorX& x) {
+  VectorX tau = VectorX::Zero(layout.num_unknowns());
+  for (int k = 0; k < dofs.num_stress(); ++k) tau[dofs.unknown_of_dof[k]] = x[k];
+  return layout.expand(tau);
+}
+
+VectorX scatter_stokes_pressure(const StokesDofs& dofs, const VectorX& x, int num_cells) {
+  VectorX p = VectorX::Zero(num_cells);
+  for (int k = 0; k < dofs.num_pressure(); ++k)
+    p[dofs.pressure.cell_of_dof[k]] = x[dofs.num_stress() + k];
+  return p;
+}
+
+template <int Dim>
+double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                     const StokesWeights& w, const StokesDofs& dofs, double dt,
+                     const VectorX& u_star, const VectorX& x) {
+  const StressGrid<Dim>& stress = layout.grid();
+  const VectorX tau = scatter_stress(layout, dofs, x);
+  const VectorX p = scatter_stokes_pressure(dofs, x, grid.num_cells());
+  VectorX u = u_star;
+  apply_stokes_update(grid, layout, w, dt, p, tau, u);
+  // kinetic part over P W_F^u W_L^u
+  const PressureWeights& pw = w.pressure;
+  double kinetic = 0.0;
+  for (int f = 0; f < grid.num_faces(); ++f)
+    kinetic += pw.face_density[f] * pw.fluid_face[f] * pw.liquid_face[f] * u[f] * u[f];
+  // stress part dt/4 tau^T N^-1 W^s tau, N^-1 = M / eta
+  const VectorX m = stress_multiplicity(stress);
+  double viscous = 0.0;
+  for (int d = 0; d < stress.num_dofs(); ++d)
+    viscous += m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d] *
+               tau[d] * tau[d];
+  return 0.5 * kinetic + 0.25 * dt * viscous;
+}
+
+template <int Dim>
+StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
+                               StokesUnknowns unknowns, StressForm form,
+                               const std::string& backend, const PcgSettings& settings,
+                               VectorX& u) {
+  StokesSolveResult result;
+  const StressLayout<Dim> layout(StressGrid<Dim>(grid), form);
+  // line 7: active DOFs
+  const StokesDofs dofs = select_stokes_dofs(grid, layout, w, dt, unknowns);
+  result.stress_dofs = dofs.num_stress();
+  result.pressure_dofs = dofs.num_pressure();
+  VectorX x = VectorX::Zero(dofs.size());
+  // lines 8-10: assemble (or set up the stencils) and solve
+  if (backend == "explicit") {
+    const ExplicitStokesSystem sys = assemble_explicit_stokes(grid, layout, w, dofs, dt, u);
+    const SparseMatrixOperator op(sys.A, dofs.null_space);
+    result.pcg = pcg_solve(op, sys.b, x, settings);
+  } else if (backend == "matrixfree") {
+    const MatrixFreeStokesOperator<Dim> op(grid, layout, w, dofs, dt);
+    result.pcg = pcg_solve(op, op.rhs(u), x, settings);
+  } else {
+    throw std::invalid_argument("solve_stokes: unknown backend '" + backend +
+                                "' (explicit, matrixfree)");
+  }
+  // line 11: velocity update
+  result.stress = scatter_stress(layout, dofs, x);
+  result.pressure = scatter_stokes_pressure(dofs, x, grid.num_cells());
+  apply_stokes_update(grid, layout, w, dt, result.pressure, result.stress, u);
+  return result;
+}
+
+template <int Dim>
+StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
+                                     const VectorX& liquid_phi,
+                                     const std::array<BoundaryType, 2 * Dim>& boundary,
+                                     double rho, double eta) {
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const StressGrid<Dim> stress(grid);
+  StokesWeights w;
+  w.pressure.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
+  w.pressure.liquid_cell = liquid_cell_weights(grid, lattice, liquid_phi);
+  w.pressure.liquid_face = liquid_face_weights(grid, lattice, liquid_phi, w.pressure.liquid_cell);
+  w.pressure.face_density = VectorX::Constant(grid.num_faces(), rho);
+  w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
+  w.liquid_stress = stress_liquid_weights(stress, lattice, liquid_phi);
+  w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  return w;
+}
+
+#define MONOLITH_INSTANTIATE(D)                                                                  \
+  template StokesWeights uniform_stokes_weights<D>(const MacGrid<D>&, const VectorX&,            \
+                                                   const VectorX&,                               \
+                                                   const std::array<BoundaryType, 2 * D>&,       \
+                                                   double, double);                              \
+  template StokesDofs select_stokes_dofs<D>(const MacGrid<D>&, const StressLayout<D>&,           \
+                                            const StokesWeights&, double, StokesUnknowns);       \
+  template ExplicitStokesSystem assemble_explicit_stokes<D>(const MacGrid<D>&,                   \
+                                                            const StressLayout<D>&,              \
+                                                            const StokesWeights&,                \
+                                                            const StokesDofs&, double,           \
+                                                            const VectorX&);                     \
+  template class MatrixFreeStokesOperator<D>;                                                    \
+  template void apply_stokes_update<D>(const MacGrid<D>&, const StressLayout<D>&,                \
+                                       const StokesWeights&, double, const VectorX&,             \
+                                       const VectorX&, VectorX&);                                \
+  template VectorX scatter_stress<D>(const StressLayout<D>&, const StokesDofs&, const VectorX&); \
+  template double stokes_energy<D>(const MacGrid<D>&, const StressLayout<D>&,                    \
+                                   const StokesWeights&, const StokesDofs&, double,              \
+                                   const VectorX&, const VectorX&);                              \
+  template StokesSolveResult solve_stokes<D>(const MacGrid<D>&, const StokesWeights&, double,    \
+                                             StokesUnknowns, StressForm, const std::string&,     \
+                                             const PcgSettings&, VectorX&);
+MONOLITH_INSTANTIATE(2)
+MONOLITH_INSTANTIATE(3)
+#undef MONOLITH_INSTANTIATE
+
+}  // namespace monolith

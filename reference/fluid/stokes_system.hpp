@@ -1,0 +1,269 @@
+#pragma once
+/// \file stokes_system.hpp
+/// The unified pressure-viscosity (Stokes) solve of sections 3.1.1-3.1.2: eq. (8) minimised over
+/// the stress tau and the pressure p together, giving the SPD system of eq. (24) without bodies
+///
+///   [A11   A12] [tau]   [b1]
+///   [A12^T A22] [ p ] = [b2],   with (docs/stokes.md derives every factor)
+///
+///   A11 = 1/2 N^-1 W^s + dt W_L^s M D W_F^u P^-1 (W_L^u)^-1 D^T M W_L^s     (reduced: E^T .. E)
+///   A12 = dt W_L^s M D W_F^u P^-1 (W_L^u)^-1 G W_L^p                         (reduced: E^T ..)
+///   A22 = dt W_L^p G^T W_F^u P^-1 (W_L^u)^-1 G W_L^p
+///   b1  = W_L^s M D W_F^u u*,   b2 = W_L^p G^T W_F^u u*
+///   u   = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau_full)   (faces with W_F^u W_L^u > 0)
+///
+/// M = diag(StressGrid::multiplicity) (1 diagonal, 2 off-diagonal components) is the one factor
+/// the paper leaves implicit: the off-diagonal DOF tau_xy stands for tau_xy and tau_yx, so it
+/// enters ||tau||_F^2 twice (N^-1 = M / eta, viscosity.hpp) and the divergence of the symmetric
+/// tensor twice (D^T M). With it the optimum is tau = 2 eta D u (eq. (5)) and the update adds
+/// dt/rho div tau (eq. (4)). W^s = W_F^s W_L^s (stress_weights.hpp), E the expansion of
+/// StressLayout (identity in the full form).
+
+#include <array>
+#include <cstddef>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "reference/core/common.hpp"
+#include "reference/solvers/linear_operator.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/solvers/pcg.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/fluid/viscosity.hpp"
+
+namespace monolith {
+
+/// Everything eq. (8) is built from, per DOF (diagonal matrices stored as their diagonals).
+struct StokesWeights {
+  PressureWeights pressure;  ///< W_F^u, W_L^p, W_L^u, P (pressure_projection.hpp)
+  VectorX fluid_stress;      ///< W_F^s per StressGrid DOF (all components)
+  VectorX liquid_stress;     ///< W_L^s per StressGrid DOF
+  VectorX viscosity;         ///< eta per StressGrid DOF, Pa s (0 = inviscid there)
+};
+
+/// The weights of eq. (8) (section 3.1.2) from level sets on half_lattice(grid): solid where
+/// solid_phi < 0, liquid where liquid_phi < 0, domain sides as `boundary` says, one density rho
+/// (the diagonal of P) and one viscosity eta everywhere. W_L^u is clamped as liquid_face_weights
+/// does. For teaching cases, tests and benchmarks; the simulator builds its own from particles.
+template <int Dim>
+StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
+                                     const VectorX& liquid_phi,
+                                     const std::array<BoundaryType, 2 * Dim>& boundary,
+                                     double rho, double eta);
+
+/// Which unknowns a solve has: both (PV: eq. (8)) or stress only (the "VC" step of PC-VC-PC:
+/// eq. (8) with p fixed at zero). Pressure only is solve_pressure (pressure_projection.hpp).
+enum class StokesUnknowns { pressure_and_stress, stress_only };
+
+/// Active unknowns (Algorithm 1, line 7): stress unknowns with W^s = W_F^s W_L^s > 0 and eta > 0
+/// (reduced diagonal unknowns: also on the eliminated component of the cell), and the pressure
+/// DOFs of select_pressure_dofs. The unknown vector is (tau, p), tau first (eq. (24)).
+struct StokesDofs {
+  PressureDofs pressure;                 ///< empty for stress_only
+  std::vector<int> unknown_of_dof;       ///< active stress DOF k -> StressLayout unknown
+  std::vector<int> dof_of_unknown;       ///< StressLayout unknown -> active stress DOF, -1 inactive
+  std::vector<VectorX> null_space;       ///< of the whole (tau, p) system, orthonormal
+  int num_stress() const { return static_cast<int>(unknown_of_dof.size()); }
+  int num_pressure() const { return pressure.size(); }
+  int size() const { return num_stress() + num_pressure(); }
+};
+
+template <int Dim>
+StokesDofs select_stokes_dofs(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                              const StokesWeights& w, double dt, StokesUnknowns unknowns);
+
+/// Explicit back end: every matrix of eq. (8)/(24) by its paper name; unknown vector (tau, p),
+/// tau first (the order of eq. (24)). A = [A11 A12; A12^T A22] restricted to the active DOFs.
+struct ExplicitStokesSystem {
+  SparseMatrix G;          ///< eq. (8) gradient, num_faces x num_cells
+  SparseMatrix D;          ///< eq. (8) deformation rate, num_stress_dofs x num_faces
+  SparseMatrix M;          ///< multiplicity, num_stress_dofs square, diagonal (1 or 2)
+  SparseMatrix N_inv;      ///< N^-1 in the layout, num_unknowns square (viscosity.hpp)
+  SparseMatrix W_F_u;      ///< num_faces square, diagonal
+  SparseMatrix W_L_u_inv;  ///< (W_L^u)^-1, num_faces square, diagonal (0 where W_L^u = 0)
+  SparseMatrix P_inv;      ///< P^-1, num_faces square, diagonal
+  SparseMatrix W_L_p;      ///< num_cells square, diagonal
+  SparseMatrix W_F_s;      ///< num_stress_dofs square, diagonal
+  SparseMatrix W_L_s;      ///< num_stress_dofs square, diagonal
+  SparseMatrix E;          ///< expansion, num_stress_dofs x num_unknowns
+  SparseMatrix S_tau;      ///< selection, num_stress_active x num_unknowns
+  SparseMatrix S_p;        ///< selection, num_pressure_active x num_cells
+  SparseMatrix A11;        ///< S_tau E^T (1/2 N_full^-1 W^s + dt W_L^s M D K D^T M W_L^s) E S_tau^T
+  SparseMatrix A12;        ///< S_tau E^T dt W_L^s M D K G W_L^p S_p^T (empty for stress_only)
+  SparseMatrix A22;        ///< S_p dt W_L^p G^T K G W_L^p S_p^T (empty for stress_only)
+  SparseMatrix A;          ///< [A11 A12; A12^T A22], SPD (SPSD with enclosed liquid)
+  VectorX b1, b2, b;       ///< b1 = S_tau E^T W_L^s M D W_F^u u*, b2 = S_p W_L^p G^T W_F^u u*
+};
+
+/// eq. (8) / the tau, p blocks of eq. (24), assembled explicitly (K = W_F^u P^-1 (W_L^u)^-1).
+template <int Dim>
+ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
+                                              const StressLayout<Dim>& layout,
+                                              const StokesWeights& w, const StokesDofs& dofs,
+                                              double dt, const VectorX& u_star);
+
+/// Matrix-free back end of the same A (eq. (24) without bodies), in the factored form
+///   A = B^T C B + blockdiag(1/2 N^-1 W^s, 0),   B = [D^T M W_L^s E S_tau^T, G W_L^p S_p^T],
+///   C = dt W_F^u P^-1 (W_L^u)^-1  (num_faces square, diagonal),
+/// applied by stencils over the grid: neither A nor B is stored. The operator holds one C_f per
+/// face, a grid -> unknown map (one int per StressGrid DOF and per cell), per unknown its weight
+/// factor (M W_L^s or W_L^p), its 1/2 N^-1 W^s entry and A_ii, and (reduced form) per cell the
+/// eliminated component's weight and N^-1 coupling. The +-1/dx of D (eq. (8), coupling.hpp's
+/// deformation_rate_row) and G and the neighbour positions come from the grid layout on the fly.
+/// apply = scatter x to the grid (s = M W_L^s E tau, q = W_L^p p), per face v = C (G q + D^T s),
+/// then D v and G^T v per grid DOF, gathered into y; each loop runs OpenMP over grid rows or DOFs
+/// with one writer per output entry, so results do not depend on the thread count. SSOR sweeps
+/// (section 4.3) run over colour groups: per stress component (in StressLayout order) and then
+/// pressure, red-black by the parity of the coordinate sum; they keep the face force B x up to
+/// date as unknowns change, and unknowns of one group share no face, so each group is relaxed in
+/// parallel (serially, in grid order, when an odd periodic axis breaks the colouring). Scratch
+/// vectors are sized at construction: apply and the sweeps allocate nothing, and one operator
+/// must not run two of them at once from different threads.
+template <int Dim>
+class MatrixFreeStokesOperator : public LinearOperator {
+ public:
+  MatrixFreeStokesOperator(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                           const StokesWeights& w, const StokesDofs& dofs, double dt);
+  int size() const override { return size_; }
+  void apply(const VectorX& x, VectorX& y) const override;
+  VectorX diagonal() const override { return diagonal_; }
+  void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                     const std::vector<char>* active = nullptr) const override;
+  void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
+                      const std::vector<char>* active = nullptr) const override;
+  const std::vector<VectorX>& null_space() const override { return null_space_; }
+  /// b = B^T W_F^u u* (= (b1, b2) of eq. (24)) by the same stencils.
+  VectorX rhs(const VectorX& u_star) const;
+  /// The face coefficient C_f = dt W_F^u / (rho W_L^u) (0 where the face carries no fluid).
+  const VectorX& face_coefficients() const { return face_coefficient_; }
+  /// B x: the generalised force G W_L^p p + D^T M W_L^s tau_full of x = (tau, p) on every face
+  /// (num_faces). The velocity update is u* - dt P^-1 (W_L^u)^-1 B x; the rigid-body terms of
+  /// eq. (24) aggregate the same force (J_s = -Q W_S^u D^T M, J_p = -Q W_S^u G, section 4.4.1; reference/coupling/coupling.hpp).
+  VectorX face_force(const VectorX& x) const;
+  /// Column i of B: the faces unknown i acts on and the coefficients B_fi, as (face, B_fi) pairs.
+  std::vector<std::pair<int, double>> stencil(int i) const;
+
+  /// Bytes the operator holds (stored coefficients, maps and scratch), for the benchmark harness.
+  std::size_t memory_bytes() const override;
+  /// Bytes one apply must move at least: every stored array it reads once, x once, y once
+  /// (scratch excluded), as SparseMatrixOperator counts; for the harness's bandwidth figure.
+  double bytes_per_apply() const override;
+
+ private:
+
+  /// A lattice-numbered block of one of the operator's vectors: the faces of one axis, one
+  /// StressGrid component or the cells (offset into its vector and size along each axis).
+  struct Field {
+    int offset = 0;
+    VecI<Dim> dims = VecI<Dim>::Zero();
+  };
+  /// One stencil term: coef times the input field at c + delta e_axis.
+  struct Term {
+    int field = 0, axis = 0, delta = 0;
+    double coef = 0.0;
+  };
+  static constexpr int kComponents = StressGrid<Dim>::kComponents;
+  /// fields: 0..Dim-1 faces of axis a, Dim + k stress component k, Dim + kComponents cells.
+  static constexpr int kCellField = Dim + kComponents;
+  static constexpr int kFields = kCellField + 1;
+
+  /// s = M W_L^s E tau on the StressGrid, q = W_L^p p on the cells (zero where inactive).
+  void scatter(const VectorX& x, double* s, double* q) const;
+  /// force = B x from the scattered s, q (times C_f when `scale_by_c`), on the face rows with
+  /// fluid (all rows when `all_rows`).
+  void faces_from_grid(const double* s, const double* q, double* force, bool scale_by_c,
+                       bool all_rows) const;
+  /// s = D v on every StressGrid DOF and q = G^T v on every cell.
+  void grid_from_faces(const double* v, double* s, double* q) const;
+  /// y = B^T-gathered values of s, q per unknown (plus 1/2 N^-1 W^s x when x is given).
+  void gather(const double* s, const double* q, const VectorX* x, VectorX& y) const;
+  /// Index of the entry of field `field` at c + delta e_axis after periodic wrapping, -1 outside.
+  int index_or_outside(int field, VecI<Dim> c, int axis, int delta) const;
+  /// The faces of the column of B of the grid DOF at c of field `field` (a stress component or
+  /// the cells), with the D / G coefficient (weights not applied). Returns the count.
+  int column_faces(int field, const VecI<Dim>& c, std::array<int, 2 * Dim>& face,
+                   std::array<double, 2 * Dim>& coef) const;
+  /// The two colour groups (red then black; black then red when `reverse`) of one field in an
+  /// SSOR sweep, keeping the face force B x in the face scratch current.
+  void sweep_block(int field, bool reverse, const VectorX& rhs, VectorX& x, double omega,
+                   const std::vector<char>* active) const;
+  void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
+             const std::vector<char>* active) const;
+
+  std::array<bool, Dim> periodic_{};
+  std::array<Field, kFields> fields_{};
+  std::array<std::vector<Term>, kFields> terms_;  ///< per output field: the stencil of B or B^T
+  /// per field, the rows (along axis 0) the loops visit: face rows with some C_f != 0, stress
+  /// and cell rows with some unknown (the eliminated component: rows of cells with a diagonal
+  /// unknown). The other rows of the scratch vectors stay zero, so a liquid filling a small part
+  /// of the grid costs in proportion to its rows, not to the grid.
+  std::array<std::vector<int>, kFields> active_rows_;
+  std::vector<int> layout_field_;                 ///< per layout component: its field
+  int eliminated_ = -1;                           ///< eliminated StressGrid component, -1 full
+  int size_ = 0;
+  int num_stress_ = 0;
+  int num_faces_ = 0;
+  int num_stress_dofs_ = 0;
+  int num_cells_ = 0;
+  bool has_pressure_ = false;
+  VectorX face_coefficient_;
+  VectorX fluid_face_;
+  std::vector<int> unknown_of_dof_;   ///< per StressGrid DOF: unknown or -1
+  std::vector<int> unknown_of_cell_;  ///< per cell: pressure unknown or -1
+  std::vector<int> location_;         ///< per unknown: StressGrid DOF or cell
+  VectorX weight_;                    ///< per unknown: M W_L^s (stress) or W_L^p (pressure)
+  VectorX self_;                      ///< per unknown: its 1/2 N^-1 W^s entry
+  VectorX eliminated_weight_;         ///< reduced form, per cell: -W_L^s of the eliminated DOF
+  VectorX eliminated_coupling_;       ///< 3D reduced, per cell: 1/2 N^-1 W^s of the eliminated DOF
+  VectorX diagonal_;
+  bool colouring_valid_ = true;
+  std::vector<VectorX> null_space_;
+  // scratch, sized at construction
+  mutable VectorX stress_scratch_, cell_scratch_, face_scratch_;
+};
+
+/// u <- u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau_full) on faces with
+/// W_F^u W_L^u > 0 (eq. (4) in the form of eq. (8)); M = diag(multiplicity) because one
+/// off-diagonal DOF is both tau_ab and tau_ba in div tau. `pressure_cells` is a cell field (zero
+/// where inactive, may be empty = no pressure), `tau_full` all StressGrid components.
+template <int Dim>
+void apply_stokes_update(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                         const StokesWeights& w, double dt, const VectorX& pressure_cells,
+                         const VectorX& tau_full, VectorX& u);
+
+/// The stress part of a solution vector x = (tau, p) as all StressGrid components (E S_tau^T).
+template <int Dim>
+VectorX scatter_stress(const StressLayout<Dim>& layout, const StokesDofs& dofs, const VectorX& x);
+
+/// The pressure part of x = (tau, p) as a cell field (zero on inactive cells).
+VectorX scatter_stokes_pressure(const StokesDofs& dofs, const VectorX& x, int num_cells);
+
+/// E_f of eq. (8) at (tau, p) = x with the common factor dx^Dim of the control volumes dropped:
+/// 1/2 ||u(x)||^2_{P W_F^u W_L^u} + dt/4 tau^T N^-1 W^s tau, u(x) the update of u*. A quadratic:
+/// E_f(x) = E_f(0) + dt (1/2 x^T A x - b~^T x), b~ the b of eq. (24) with u* read only on faces with
+/// W_L^u > 0; b~ = b unless a dry face lies in the stencil of a wet stress DOF (docs/stokes.md).
+template <int Dim>
+double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                     const StokesWeights& w, const StokesDofs& dofs, double dt,
+                     const VectorX& u_star, const VectorX& x);
+
+struct StokesSolveResult {
+  VectorX pressure;  ///< cell field, Pa
+  VectorX stress;    ///< tau, all components, StressGrid numbering, Pa
+  PcgResult pcg;
+  int pressure_dofs = 0, stress_dofs = 0;
+};
+
+/// Lines 7-11 of Algorithm 1 for the Stokes problem: select DOFs, build (backend "explicit" or
+/// "matrixfree"), SSOR-PCG, update u (which enters as u*). Throws std::invalid_argument on an
+/// unknown backend name.
+template <int Dim>
+StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
+                               StokesUnknowns unknowns, StressForm form,
+                               const std::string& backend, const PcgSettings& settings,
+                               VectorX& u);
+
+}  // namespace monolith

@@ -1,0 +1,149 @@
+#pragma once
+/// \file mac_grid.hpp
+/// The staggered (MAC) grid of section 3.1.2 and the DOF numbering of the unknowns.
+///
+/// Layout, for cells c in [0, cells) along every axis, with dx the (cubic) cell width:
+///  - pressure p and the liquid fraction W_L^p live at cell centres, origin + (c + 1/2) dx;
+///  - velocity component a lives on the faces normal to axis a, at origin + (f + 1/2 - e_a/2) dx,
+///    with f[a] in [0, cells[a]] (one more face than cells; on a periodic axis face cells[a] is
+///    face 0 and is not stored, so f[a] in [0, cells[a])).
+///
+/// Numbering: cell index = c[0] + cells[0] (c[1] + cells[1] c[2]) (x fastest). Faces of all axes are
+/// numbered in one vector, axis 0 first: face index = face_offset(a) + linear index within axis a.
+/// This is the order of the velocity vector u of the paper, so G is num_faces x num_cells.
+/// The stress DOFs of issue 3 (cell centres for diagonal components, nodes in 2D / edges in 3D
+/// for off-diagonal ones) extend this numbering in the same way.
+
+#include <array>
+#include <utility>
+
+#include "reference/core/common.hpp"
+
+namespace monolith {
+
+/// Linear index of coordinate c in a lattice of size dims, x fastest: the one numbering used for
+/// cells, faces of each axis, half-lattice samples and stress DOFs alike.
+template <int Dim>
+inline int lattice_index(const VecI<Dim>& c, const VecI<Dim>& dims) {
+  int index = 0;
+  for (int a = Dim - 1; a >= 0; --a) index = index * dims[a] + c[a];
+  return index;
+}
+
+/// Inverse of lattice_index.
+template <int Dim>
+inline VecI<Dim> lattice_coord(int index, const VecI<Dim>& dims) {
+  VecI<Dim> c;
+  for (int a = 0; a < Dim; ++a) {
+    c[a] = index % dims[a];
+    index /= dims[a];
+  }
+  return c;
+}
+
+template <int Dim>
+class MacGrid {
+ public:
+  MacGrid() = default;
+  MacGrid(const Vec<Dim>& origin, double dx, const VecI<Dim>& cells,
+          const std::array<bool, Dim>& periodic);
+
+  const Vec<Dim>& origin() const { return origin_; }
+  double dx() const { return dx_; }
+  const VecI<Dim>& cells() const { return cells_; }
+  bool periodic(int axis) const { return periodic_[axis]; }
+  const std::array<bool, Dim>& periodic() const { return periodic_; }
+  /// The domain [origin, origin + cells dx].
+  Box<Dim> domain_box() const;
+  /// Cell volume dx^Dim.
+  double cell_volume() const;
+
+  // --- cells (pressure DOFs) -------------------------------------------------------------------
+  int num_cells() const { return num_cells_; }
+  int cell_index(const VecI<Dim>& c) const;
+  VecI<Dim> cell_coord(int index) const;
+  bool cell_in_range(const VecI<Dim>& c) const;
+  Vec<Dim> cell_center(const VecI<Dim>& c) const;
+  /// Wraps periodic axes into range; non-periodic axes are left as they are.
+  VecI<Dim> wrap_cell(VecI<Dim> c) const;
+  /// Index of cell c after periodic wrapping, or -1 if it lies outside the domain.
+  int cell_index_or_outside(const VecI<Dim>& c) const;
+  /// The cell containing point x (clamped to the domain).
+  VecI<Dim> cell_containing(const Vec<Dim>& x) const;
+
+  // --- faces (velocity DOFs) -------------------------------------------------------------------
+  /// Number of faces normal to `axis` along each direction.
+  VecI<Dim> face_dims(int axis) const { return face_dims_[axis]; }
+  int num_faces(int axis) const { return face_count_[axis]; }
+  int num_faces() const { return face_offset_[Dim]; }
+  int face_offset(int axis) const { return face_offset_[axis]; }
+  int face_index(int axis, const VecI<Dim>& f) const;
+  /// (axis, coordinate) of a global face index.
+  std::pair<int, VecI<Dim>> face_coord(int index) const;
+  Vec<Dim> face_center(int axis, const VecI<Dim>& f) const;
+  /// True for faces on the domain boundary (never on a periodic axis).
+  bool is_boundary_face(int axis, const VecI<Dim>& f) const;
+  /// The cell on the minus side (f - e_axis) and plus side (f) of a face, wrapped on periodic
+  /// axes; -1 where that cell is outside the domain.
+  int face_cell_minus(int axis, const VecI<Dim>& f) const;
+  int face_cell_plus(int axis, const VecI<Dim>& f) const;
+
+  // --- positions -------------------------------------------------------------------------------
+  /// Wraps x into the domain along periodic axes.
+  Vec<Dim> wrap_position(Vec<Dim> x) const;
+
+  // --- interpolation (multilinear; constant beyond the outermost samples; periodic wrap) -------
+  /// Component `axis` of a face field u at x.
+  double interpolate_face(const VectorX& u, int axis, const Vec<Dim>& x) const;
+  /// The full velocity vector of face field u at x.
+  Vec<Dim> interpolate_velocity(const VectorX& u, const Vec<Dim>& x) const;
+  /// A cell-centred field q at x.
+  double interpolate_cell(const VectorX& q, const Vec<Dim>& x) const;
+
+  /// Multilinear stencil of a sample lattice at origin + (index + shift) dx with `dims` samples
+  /// per axis: writes the 2^Dim (linear sample index, weight) pairs into idx and w. Used by
+  /// interpolation and the particle transfers. `shift` is 0.5 on cell-centred axes, 0 on
+  /// node-aligned ones. The gradient of the weights (per unit length) goes into grad if not null.
+  void stencil(const Vec<Dim>& x, const Vec<Dim>& shift, const VecI<Dim>& dims,
+               std::array<int, (1 << Dim)>& idx, std::array<double, (1 << Dim)>& w,
+               std::array<Vec<Dim>, (1 << Dim)>* grad = nullptr) const;
+  /// shift vector of the faces normal to `axis` (0.5 everywhere but 0 along axis).
+  static Vec<Dim> face_shift(int axis);
+
+ private:
+  Vec<Dim> origin_ = Vec<Dim>::Zero();
+  double dx_ = 1.0;
+  VecI<Dim> cells_ = VecI<Dim>::Ones();
+  std::array<bool, Dim> periodic_{};
+  int num_cells_ = 1;
+  std::array<VecI<Dim>, Dim> face_dims_{};
+  std::array<int, Dim> face_count_{};
+  std::array<int, Dim + 1> face_offset_{};
+};
+
+/// A regular lattice of sample points origin + index * spacing, index in [0, dims) (x fastest).
+/// The canonical one is the half lattice of a MacGrid (spacing dx/2, dims 2 cells + 1): it holds
+/// every cell centre, face centre, node and (3D) edge centre, so the corners of every control
+/// volume (cell, face, and the stress control volumes of issue 3) are lattice points, and level
+/// sets sampled on it give all volume fractions (volume_fractions.hpp) without re-sampling.
+template <int Dim>
+struct SampleLattice {
+  Vec<Dim> origin = Vec<Dim>::Zero();
+  double spacing = 1.0;
+  VecI<Dim> dims = VecI<Dim>::Ones();
+
+  int size() const { return dims.prod(); }
+  int index(const VecI<Dim>& i) const { return lattice_index<Dim>(i, dims); }
+  VecI<Dim> coord(int k) const { return lattice_coord<Dim>(k, dims); }
+  Vec<Dim> position(const VecI<Dim>& i) const {
+    return origin + i.template cast<double>() * spacing;
+  }
+  /// Multilinear interpolation of samples q at x (clamped to the lattice).
+  double interpolate(const VectorX& q, const Vec<Dim>& x) const;
+};
+
+/// The half lattice of a grid: spacing dx/2, dims 2 cells + 1, origin at the grid origin.
+template <int Dim>
+SampleLattice<Dim> half_lattice(const MacGrid<Dim>& grid);
+
+}  // namespace monolith

@@ -1,0 +1,1170 @@
+#include "reference/particles/particles.hpp"
+
+#include <omp.h>
+
+#include <Eigen/IterativeLinearSolvers>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <random>
+
+#include "reference/grid/volume_fractions.hpp"
+
+namespace monolith {
+
+namespace {
+
+/// Particles never rest closer than this to a solid surface (in units of dx).
+constexpr double kSolidMargin = 0.05;
+/// Particles stay at least this far inside a wall (in units of dx).
+constexpr double kWallMargin = 0.01;
+/// Largest distance, in cells, a particle moves in one advection substep (advect_particles): the
+/// solid distance is checked after every substep, so solids thicker than this are not crossed.
+constexpr double kAdvectionSubstep = 0.5;
+/// Upper bound on the advection substeps of one particle in one step (a guard against a
+/// pathological velocity; at CFL 3 the bound from kAdvectionSubstep is about 6-12).
+constexpr int kMaxAdvectionSubsteps = 64;
+/// Seeding jitter: width of the jitter window as a fraction of the sub-cell width, so the
+/// stratified sub-lattice keeps a minimum spacing of half a sub-cell.
+constexpr double kSeedJitter = 0.5;
+/// Position correction (docs/particles.md): kernel support in rest spacings, relaxation time (s),
+/// under-relaxation of the Jacobi step, tolerated compression before a particle is corrected,
+/// and the largest step per call in rest spacings.
+constexpr double kCorrectionSupport = 2.0;
+constexpr double kCorrectionTime = 0.02;
+constexpr double kCorrectionRelaxation = 0.5;
+constexpr double kCorrectionSlack = 0.05;
+constexpr double kCorrectionMaxStep = 0.25;
+/// Pairs closer than this many rest spacings are pushed apart regardless of density.
+constexpr double kCorrectionMinDistance = 0.5;
+/// Density projection (docs/particles.md): fraction of the Poisson solution's gradient applied per
+/// call, largest move per call in cells, relative tolerance of the conjugate gradient solve.
+constexpr double kProjectionRelaxation = 1.0;
+constexpr double kProjectionMaxStep = 0.25;
+constexpr double kProjectionTolerance = 1e-4;
+/// Zhu & Bridson surface: kernel support in units of the particle spacing.
+constexpr double kSurfaceSupport = 2.0;
+
+/// What differs between 2D and 3D for the particles: the rigid rotation of a seeded liquid, and
+/// the calibrated particle radius of the surface reconstruction.
+template <int Dim>
+struct ParticleTraits;
+
+template <>
+struct ParticleTraits<2> {
+  /// omega x r in the plane: omega (-r_y, r_x).
+  static Vec<2> rotation_velocity(const std::vector<double>& w, const Vec<2>& r) {
+    const double om = w.empty() ? 0.0 : w[0];
+    return Vec<2>(-om * r[1], om * r[0]);
+  }
+  /// Gradient of that velocity: row a is grad v_a.
+  static Mat<2> rotation_gradient(const std::vector<double>& w) {
+    const double om = w.empty() ? 0.0 : w[0];
+    Mat<2> c;
+    c << 0.0, -om, om, 0.0;
+    return c;
+  }
+  /// Particle radius / particle spacing, calibrated so a uniformly seeded block's zero level set
+  /// lies on the block boundary and its enclosed area matches (docs/particles.md).
+  static constexpr double surface_radius = 0.59;
+};
+
+template <>
+struct ParticleTraits<3> {
+  static Vec<3> rotation_velocity(const std::vector<double>& w, const Vec<3>& r) {
+    const Vec<3> om = w.size() == 3 ? Vec<3>(w[0], w[1], w[2]) : Vec<3>::Zero();
+    return om.cross(r);
+  }
+  /// The cross-product matrix [omega]_x: row a is grad (omega x r)_a.
+  static Mat<3> rotation_gradient(const std::vector<double>& w) {
+    const Vec<3> om = w.size() == 3 ? Vec<3>(w[0], w[1], w[2]) : Vec<3>::Zero();
+    Mat<3> c;
+    c << 0.0, -om[2], om[1], om[2], 0.0, -om[0], -om[1], om[0], 0.0;
+    return c;
+  }
+  /// Particle radius / particle spacing (3D calibration, docs/particles.md).
+  static constexpr double surface_radius = 0.58;
+};
+
+/// Uniform double in (0, 1) from a 32-bit Mersenne twister draw (portable across standard
+/// libraries, unlike std::uniform_real_distribution).
+double unit_draw(std::mt19937& rng) {
+  return (static_cast<double>(rng()) + 0.5) / 4294967296.0;
+}
+
+int int_pow(int base, int exponent) {
+  int r = 1;
+  for (int i = 0; i < exponent; ++i) r *= base;
+  return r;
+}
+
+/// Rest spacing of a particle: the side of the cube (square) holding its volume m / rho.
+template <int Dim>
+double particle_spacing(const Particles<Dim>& particles, std::size_t p, double dx) {
+  const double rho = particles.density[p];
+  if (!(rho > 0.0) || !(particles.mass[p] > 0.0)) return 0.5 * dx;
+  return std::pow(particles.mass[p] / rho, 1.0 / Dim);
+}
+
+/// Moves a point inside a solid out along the solid's gradient to distance kSolidMargin dx.
+template <int Dim>
+void push_out_of_solids(const SolidField<Dim>& solids, double dx, Vec<Dim>& x) {
+  if (solids.empty()) return;
+  double d = solids.distance(x);
+  if (d >= 0.0) return;
+  const double target = kSolidMargin * dx;
+  // a couple of projection steps (the gradient of a min/max SDF is only piecewise exact)
+  for (int it = 0; it < 3 && d < 0.5 * target; ++it) {
+    Vec<Dim> n = solids.gradient(x);
+    const double len = n.norm();
+    if (!(len > 0.0)) break;
+    x += (target - d) * (n / len);
+    d = solids.distance(x);
+  }
+}
+
+/// Wraps periodic axes, pushes out of solids and keeps the point inside walls. Returns false
+/// when the point left through an open face and removal is allowed.
+template <int Dim>
+bool settle_position(const MacGrid<Dim>& grid, const SolidField<Dim>& solids,
+                     const std::array<BoundaryType, 2 * Dim>& boundary, bool allow_removal,
+                     Vec<Dim>& x) {
+  const double dx = grid.dx();
+  x = grid.wrap_position(x);
+  push_out_of_solids(solids, dx, x);
+  const Box<Dim> box = grid.domain_box();
+  const double m = kWallMargin * dx;
+  for (int a = 0; a < Dim; ++a) {
+    if (grid.periodic(a)) continue;
+    const double lo = box.min()[a], hi = box.max()[a];
+    // lower face
+    if (boundary[2 * a] == BoundaryType::open) {
+      if (x[a] < lo) {
+        if (allow_removal) return false;
+        x[a] = lo + m;
+      }
+    } else if (x[a] < lo + m) {
+      x[a] = lo + m;
+    }
+    // upper face
+    if (boundary[2 * a + 1] == BoundaryType::open) {
+      if (x[a] > hi) {
+        if (allow_removal) return false;
+        x[a] = hi - m;
+      }
+    } else if (x[a] > hi - m) {
+      x[a] = hi - m;
+    }
+  }
+  x = grid.wrap_position(x);
+  return true;
+}
+
+/// Minimum-image difference on periodic axes of the grid.
+template <int Dim>
+Vec<Dim> periodic_difference(const MacGrid<Dim>& grid, Vec<Dim> d) {
+  for (int a = 0; a < Dim; ++a) {
+    if (!grid.periodic(a)) continue;
+    const double length = grid.cells()[a] * grid.dx();
+    d[a] -= length * std::round(d[a] / length);
+  }
+  return d;
+}
+
+
+}  // namespace
+
+// --- particles container -------------------------------------------------------------------------
+
+template <int Dim>
+void Particles<Dim>::remove_flagged(const std::vector<char>& flag) {
+  std::size_t out = 0;
+  for (std::size_t p = 0; p < x.size(); ++p) {
+    if (p < flag.size() && flag[p]) continue;
+    if (out != p) {
+      x[out] = x[p];
+      v[out] = v[p];
+      c[out] = c[p];
+      mass[out] = mass[p];
+      density[out] = density[p];
+      liquid[out] = liquid[p];
+    }
+    ++out;
+  }
+  x.resize(out);
+  v.resize(out);
+  c.resize(out);
+  mass.resize(out);
+  density.resize(out);
+  liquid.resize(out);
+}
+
+// --- seeding -------------------------------------------------------------------------------------
+
+/// Stratified seeding: each cell covered by the liquid's bounds is split into n^Dim sub-cells
+/// (n = ceil(per_cell^(1/Dim)); per_cell of them drawn at random when per_cell is not a perfect
+/// power), one particle per sub-cell jittered by +-kSeedJitter/2 of the sub-cell width. Kept:
+/// inside the shape, not inside an earlier liquid, more than kSolidMargin dx from solids, inside
+/// the domain. One std::mt19937(seed) drawn in a fixed order, so the result depends only on the
+/// inputs.
+template <int Dim>
+Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<LiquidSpec>& liquids,
+                              const std::vector<ShapePtr<Dim>>& liquid_shapes,
+                              const SolidField<Dim>& solids, int per_cell, unsigned seed) {
+  Particles<Dim> particles;
+  if (per_cell <= 0) return particles;
+  const double dx = grid.dx();
+  const Box<Dim> domain = grid.domain_box();
+
+  // stratified sub-lattice: n^Dim sub-cells per cell, per_cell of them used
+  int n = 1;
+  while (int_pow(n, Dim) < per_cell) ++n;
+  const int sub_count = int_pow(n, Dim);
+  std::vector<int> sub_order(sub_count);
+
+  std::mt19937 rng(seed);
+  const std::size_t count = std::min(liquids.size(), liquid_shapes.size());
+  for (std::size_t l = 0; l < count; ++l) {
+    const LiquidSpec& spec = liquids[l];
+    const Shape<Dim>& shape = *liquid_shapes[l];
+    const double mass = spec.density * grid.cell_volume() / per_cell;
+
+    // cells covered by the shape's bounds clipped to the domain
+    Box<Dim> bounds = shape.bounds().intersection(domain);
+    if (bounds.isEmpty()) continue;
+    VecI<Dim> c0, c1;
+    for (int a = 0; a < Dim; ++a) {
+      c0[a] = std::max(0, static_cast<int>(std::floor((bounds.min()[a] - domain.min()[a]) / dx)));
+      c1[a] = std::min(grid.cells()[a] - 1,
+                       static_cast<int>(std::ceil((bounds.max()[a] - domain.min()[a]) / dx)));
+    }
+
+    // rotation centre: the shape's centre, else the centre of its clipped bounds
+    Vec<Dim> centre = bounds.center();
+    if (static_cast<int>(spec.shape.center.size()) == Dim)
+      for (int a = 0; a < Dim; ++a) centre[a] = spec.shape.center[a];
+    Vec<Dim> v0 = Vec<Dim>::Zero();
+    if (static_cast<int>(spec.velocity.size()) == Dim)
+      for (int a = 0; a < Dim; ++a) v0[a] = spec.velocity[a];
+    const Mat<Dim> grad_v = ParticleTraits<Dim>::rotation_gradient(spec.angular_velocity);
+
+    // visit the cells (x fastest), one jittered particle per chosen sub-cell
+    VecI<Dim> cell = c0;
+    bool done = false;
+    while (!done) {
+      // choose per_cell of the sub-cells (all of them when per_cell is a perfect power)
+      for (int s = 0; s < sub_count; ++s) sub_order[s] = s;
+      if (per_cell < sub_count)
+        for (int s = 0; s < per_cell; ++s) {
+          const int pick = s + static_cast<int>(rng() % static_cast<unsigned>(sub_count - s));
+          std::swap(sub_order[s], sub_order[pick]);
+        }
+      for (int k = 0; k < per_cell; ++k) {
+        const VecI<Dim> sub = lattice_coord<Dim>(sub_order[k], VecI<Dim>::Constant(n));
+        Vec<Dim> x;
+        for (int a = 0; a < Dim; ++a) {
+          const double jitter = kSeedJitter * (unit_draw(rng) - 0.5);
+          x[a] = domain.min()[a] + (cell[a] + (sub[a] + 0.5 + jitter) / n) * dx;
+        }
+        // keep: inside this liquid, not claimed by an earlier liquid, clear of solids
+        if (!(shape.distance(x) < 0.0)) continue;
+        bool claimed = false;
+        for (std::size_t e = 0; e < l && !claimed; ++e)
+          claimed = liquid_shapes[e]->distance(x) < 0.0;
+        if (claimed) continue;
+        if (!solids.empty() && !(solids.distance(x) > kSolidMargin * dx)) continue;
+        if (!domain.contains(x)) continue;
+        particles.x.push_back(x);
+        particles.v.push_back(
+            v0 + ParticleTraits<Dim>::rotation_velocity(spec.angular_velocity, x - centre));
+        particles.c.push_back(grad_v);
+        particles.mass.push_back(mass);
+        particles.density.push_back(spec.density);
+        particles.liquid.push_back(static_cast<int>(l));
+      }
+      // next cell
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++cell[a] <= c1[a]) break;
+        cell[a] = c0[a];
+      }
+      done = a == Dim;
+    }
+  }
+  return particles;
+}
+
+// --- APIC transfers ------------------------------------------------------------------------------
+
+/// APIC particle-to-grid (Algorithm 1 line 1; Jiang et al. 2015, per velocity component a on
+/// its face lattice):
+///   m_f = sum_p w_fp m_p,  (m u)_f = sum_p w_fp m_p (v_pa + c_pa . (x_f - x_p)),
+///   rho_f = sum_p w_fp m_p rho_p / m_f,
+/// with w_fp the multilinear weights of face lattice a. Deterministic for a fixed thread count:
+/// each thread accumulates a contiguous block of particles into its own buffers, which are then
+/// summed in thread order.
+template <int Dim>
+void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
+                       VectorX& face_mass, VectorX& face_density) {
+  constexpr int kCorners = 1 << Dim;
+  const int nf = grid.num_faces();
+  const long np = static_cast<long>(particles.size());
+  const int max_threads = std::max(1, omp_get_max_threads());
+  std::vector<VectorX> buf_m(max_threads), buf_mu(max_threads), buf_mr(max_threads);
+  int used_threads = 1;
+
+#pragma omp parallel num_threads(max_threads)
+  {
+    const int t = omp_get_thread_num();
+    const int nt = omp_get_num_threads();
+#pragma omp single
+    used_threads = nt;
+    VectorX& m = buf_m[t];
+    VectorX& mu = buf_mu[t];
+    VectorX& mr = buf_mr[t];
+    m = VectorX::Zero(nf);
+    mu = VectorX::Zero(nf);
+    mr = VectorX::Zero(nf);
+    const long begin = np * t / nt, end = np * (t + 1) / nt;
+    std::array<int, kCorners> idx;
+    std::array<double, kCorners> w;
+    for (long p = begin; p < end; ++p) {
+      const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+      const double mp = particles.mass[p];
+      for (int a = 0; a < Dim; ++a) {
+        const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
+        const VecI<Dim> dims = grid.face_dims(a);
+        const int offset = grid.face_offset(a);
+        grid.stencil(xp, shift, dims, idx, w);
+        for (int k = 0; k < kCorners; ++k) {
+          if (w[k] == 0.0) continue;
+          // affine velocity at the face sample (minimum image on periodic axes)
+          const Vec<Dim> xf = grid.face_center(a, lattice_coord<Dim>(idx[k], dims));
+          const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
+          const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
+          const int f = offset + idx[k];
+          m[f] += w[k] * mp;
+          mu[f] += w[k] * mp * vel;
+          mr[f] += w[k] * mp * particles.density[p];
+        }
+      }
+    }
+  }
+
+  // reduce the thread buffers in a fixed order
+  u.setZero(nf);
+  face_mass.setZero(nf);
+  face_density.setZero(nf);
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < nf; ++f) {
+    double m = 0.0, mu = 0.0, mr = 0.0;
+    for (int t = 0; t < used_threads; ++t) {
+      m += buf_m[t][f];
+      mu += buf_mu[t][f];
+      mr += buf_mr[t][f];
+    }
+    face_mass[f] = m;
+    if (m > 0.0) {
+      u[f] = mu / m;
+      face_density[f] = mr / m;
+    }
+  }
+}
+
+/// APIC grid-to-particle (first half of Algorithm 1 line 14; Jiang et al. 2015): v_pa = sum_f w_fp
+/// u_f, c_pa = sum_f grad w_fp u_f (row a of c is the gradient of component a; exact for affine
+/// fields away from walls).
+template <int Dim>
+void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u) {
+  constexpr int kCorners = 1 << Dim;
+  const long np = static_cast<long>(particles.size());
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < np; ++p) {
+    std::array<int, kCorners> idx;
+    std::array<double, kCorners> w;
+    std::array<Vec<Dim>, kCorners> g;
+    const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+    Vec<Dim> v = Vec<Dim>::Zero();
+    Mat<Dim> c = Mat<Dim>::Zero();
+    for (int a = 0; a < Dim; ++a) {
+      const int offset = grid.face_offset(a);
+      grid.stencil(xp, MacGrid<Dim>::face_shift(a), grid.face_dims(a), idx, w, &g);
+      for (int k = 0; k < kCorners; ++k) {
+        const double uf = u[offset + idx[k]];
+        v[a] += w[k] * uf;
+        c.row(a) += uf * g[k].transpose();
+      }
+    }
+    particles.v[p] = v;
+    particles.c[p] = c;
+  }
+}
+
+// --- extrapolation -------------------------------------------------------------------------------
+
+/// Breadth-first extrapolation: per layer, every invalid face with valid same-axis neighbours
+/// (+-1 along each axis, wrapped on periodic axes) of the previous layer takes their average.
+template <int Dim>
+void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
+                          int layers) {
+  const int nf = grid.num_faces();
+  valid.resize(nf, 0);
+  for (int layer = 0; layer < layers; ++layer) {
+    const std::vector<char> old = valid;
+    int filled = 0;
+    // each invalid face takes the average of its valid same-axis neighbours of the last layer
+#pragma omp parallel for schedule(static) reduction(+ : filled)
+    for (int f = 0; f < nf; ++f) {
+      if (old[f]) continue;
+      const auto [axis, coord] = grid.face_coord(f);
+      const VecI<Dim> dims = grid.face_dims(axis);
+      double sum = 0.0;
+      int count = 0;
+      for (int b = 0; b < Dim; ++b)
+        for (int s = -1; s <= 1; s += 2) {
+          VecI<Dim> nb = coord;
+          nb[b] += s;
+          if (grid.periodic(b))
+            nb[b] = (nb[b] + dims[b]) % dims[b];
+          else if (nb[b] < 0 || nb[b] >= dims[b])
+            continue;
+          const int g = grid.face_index(axis, nb);
+          if (g == f || !old[g]) continue;
+          sum += u[g];
+          ++count;
+        }
+      if (count > 0) {
+        u[f] = sum / count;
+        valid[f] = 1;
+        ++filled;
+      }
+    }
+    if (filled == 0) break;
+  }
+}
+
+// --- advection -----------------------------------------------------------------------------------
+
+/// Midpoint rule (RK2), Algorithm 1 line 14, in substeps with continuous collision against the
+/// solids: the step dt is split into n equal substeps so that no substep moves a particle more
+/// than kAdvectionSubstep dx (n from the larger of the speeds at the start and at the midpoint of
+/// the full step), and after every substep the particle is settled (periodic wrap, projection out
+/// of solids to kSolidMargin dx, clamping to kWallMargin dx inside walls, removal beyond open
+/// faces). A solid of thickness above about kAdvectionSubstep dx can therefore not be crossed in
+/// one step, whatever the CFL number (a single RK2 step at CFL 3 jumps up to 3 dx and more where
+/// the pressure has just accelerated the liquid, which carried particles through the bowl wall).
+template <int Dim>
+long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
+                      double dt, const SolidField<Dim>& solids,
+                      const std::array<BoundaryType, 2 * Dim>& boundary) {
+  const long np = static_cast<long>(particles.size());
+  const double max_move = kAdvectionSubstep * grid.dx();
+  std::vector<char> remove(np, 0);
+  long removed = 0;
+#pragma omp parallel for schedule(static) reduction(+ : removed)
+  for (long p = 0; p < np; ++p) {
+    Vec<Dim> x = particles.x[p];
+    // number of substeps from the speeds along the full-step midpoint path
+    const Vec<Dim> v1 = grid.interpolate_velocity(u, x);
+    const Vec<Dim> v2 = grid.interpolate_velocity(u, Vec<Dim>(x + 0.5 * dt * v1));
+    const double path = dt * std::max(v1.norm(), v2.norm());
+    const int n = std::clamp(static_cast<int>(std::ceil(path / max_move)), 1, kMaxAdvectionSubsteps);
+    const double h = dt / n;
+    bool inside = true;
+    for (int s = 0; s < n && inside; ++s) {
+      // midpoint rule (RK2) over the substep, then solids, walls, periodic wrap, open faces
+      const Vec<Dim> a = s == 0 ? v1 : grid.interpolate_velocity(u, x);
+      const Vec<Dim> xm = x + 0.5 * h * a;
+      x += h * grid.interpolate_velocity(u, xm);
+      inside = settle_position(grid, solids, boundary, true, x);
+    }
+    if (!inside) {
+      remove[p] = 1;
+      ++removed;
+    }
+    particles.x[p] = x;
+  }
+  if (removed > 0) particles.remove_flagged(remove);
+  return removed;
+}
+
+// --- position correction -------------------------------------------------------------------------
+
+namespace {
+
+/// Density kernel of the position correction, (1 - q^2)^3 for q = r / h < 1 (poly6 shape).
+double correction_kernel(double q2) {
+  if (q2 >= 1.0) return 0.0;
+  const double t = 1.0 - q2;
+  return t * t * t;
+}
+
+/// Kernel sum of a particle inside an infinite uniform lattice of spacing s (the rest number
+/// density n0; h / s = kCorrectionSupport). Scale invariant, so a constant per dimension.
+template <int Dim>
+double lattice_number_density() {
+  const int reach = static_cast<int>(std::ceil(kCorrectionSupport));
+  const int side = 2 * reach + 1;
+  double sum = 0.0;
+  for (int k = 0; k < int_pow(side, Dim); ++k) {
+    const VecI<Dim> off =
+        lattice_coord<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(reach);
+    const double r2 = off.template cast<double>().squaredNorm();
+    sum += correction_kernel(r2 / (kCorrectionSupport * kCorrectionSupport));
+  }
+  return sum;
+}
+
+}  // namespace
+
+/// Unilateral position-based density constraint (Macklin & Mueller 2013, applied as a position
+/// correction as in Takahashi & Lin 2019): with number density n_i = sum_j W(|x_i - x_j| / h),
+/// h = kCorrectionSupport s (s = (m / rho)^(1/Dim), the rest spacing), and the constraint
+/// C_i = n_i / n0 - 1 (n0 the number density of a uniform lattice of spacing s), only particles
+/// with C_i > kCorrectionSlack are corrected:
+///   lambda_i = -(C_i - slack) / (sum_k |grad_k C_i|^2 + eps),
+///   dx_i = alpha / n0 sum_j (lambda_i + lambda_j) grad W_spiky(x_i - x_j),
+/// one Jacobi iteration per call, alpha = kCorrectionRelaxation min(1, dt / kCorrectionTime).
+/// Compressed clusters spread towards emptier neighbours; a uniform lattice (C = 0) and free
+/// surfaces (C < 0) do not move, so apart from a one-off settling of the seeding noise the
+/// correction does not inflate the liquid. Pairs closer than kCorrectionMinDistance spacings are
+/// also pushed apart (half the overlap each). Algorithm 1, line 15.
+template <int Dim>
+void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
+                       const SolidField<Dim>& solids,
+                       const std::array<BoundaryType, 2 * Dim>& boundary) {
+  const long np = static_cast<long>(particles.size());
+  if (np < 2 || !(dt > 0.0)) return;
+  const double dx = grid.dx();
+  const double alpha = kCorrectionRelaxation * std::min(1.0, dt / kCorrectionTime);
+  const double n0 = lattice_number_density<Dim>();
+
+  // kernel supports h_i from the rest spacings
+  std::vector<double> support(np);
+  double max_support = 0.0;
+  for (long p = 0; p < np; ++p) {
+    support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
+    max_support = std::max(max_support, support[p]);
+  }
+
+  // spatial hash: particles bucketed by grid cell (counting sort, stable in particle order), with
+  // the wrapped positions stored in bucket order for locality
+  const int nc = grid.num_cells();
+  std::vector<int> bucket(np), start(nc + 1, 0), order(np);
+  std::vector<Vec<Dim>> xw(np), xs(np);
+  for (long p = 0; p < np; ++p) {
+    xw[p] = grid.wrap_position(particles.x[p]);
+    bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
+    ++start[bucket[p] + 1];
+  }
+  for (int c = 0; c < nc; ++c) start[c + 1] += start[c];
+  {
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (long p = 0; p < np; ++p) order[fill[bucket[p]]++] = static_cast<int>(p);
+  }
+  for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
+  const int ring = std::max(1, static_cast<int>(std::ceil(max_support / dx)));
+  const int side = 2 * ring + 1;
+  const int neighbour_cells = int_pow(side, Dim);
+  // a periodic axis shorter than the stencil maps two offsets to one cell: deduplicate then
+  bool dedup = false;
+  bool any_periodic = false;
+  for (int a = 0; a < Dim; ++a) {
+    dedup = dedup || (grid.periodic(a) && grid.cells()[a] < side);
+    any_periodic = any_periodic || grid.periodic(a);
+  }
+
+  // the bucket slots of the cells around `cell` (each cell once)
+  auto gather_candidates = [&](int cell, std::vector<int>& cand, std::vector<int>& cells) {
+    cand.clear();
+    cells.clear();
+    const VecI<Dim> ci = grid.cell_coord(cell);
+    for (int k = 0; k < neighbour_cells; ++k) {
+      const VecI<Dim> cj =
+          ci + lattice_coord<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring);
+      const int c = grid.cell_index_or_outside(cj);
+      if (c < 0) continue;
+      if (dedup) {
+        if (std::find(cells.begin(), cells.end(), c) != cells.end()) continue;
+      }
+      cells.push_back(c);
+      for (int q = start[c]; q < start[c + 1]; ++q) cand.push_back(q);
+    }
+  };
+  // visits every neighbour j != p within the support of p (minimum image on periodic axes)
+  auto for_neighbours = [&](int p, const std::vector<int>& cand, auto&& visit) {
+    const double h = support[p];
+    const Vec<Dim> xp = xw[p];
+    for (int q : cand) {
+      Vec<Dim> d = xp - xs[q];
+      if (any_periodic) d = periodic_difference(grid, d);
+      const double r2 = d.squaredNorm();
+      if (r2 >= h * h) continue;
+      const int j = order[q];
+      if (j == p) continue;
+      visit(j, d, std::sqrt(r2), h);
+    }
+  };
+
+  // spiky gradient grad_{x_i} W(x_i - x_j) = -3 (1 - r/h)^2 / h * (x_i - x_j) / r
+  auto spiky_gradient = [](long p, long j, const Vec<Dim>& d, double r, double h) {
+    Vec<Dim> dir;
+    if (r > 1e-9 * h) {
+      dir = d / r;
+    } else {
+      // coincident pair: a fixed direction, opposite for the two particles
+      dir = Vec<Dim>::Zero();
+      dir[0] = p < j ? 1.0 : -1.0;
+    }
+    const double t = 1.0 - r / h;
+    return Vec<Dim>(-3.0 * t * t / h * dir);
+  };
+
+  // pass 1: constraint values and multipliers (zero unless the particle is compressed)
+  std::vector<double> lambda(np, 0.0);
+  std::vector<char> close_pair(np, 0);
+  long compressed = 0;
+#pragma omp parallel reduction(+ : compressed)
+  {
+    std::vector<int> cand, cells;
+#pragma omp for schedule(dynamic, 16)
+    for (int cell = 0; cell < nc; ++cell) {
+      if (start[cell] == start[cell + 1]) continue;
+      gather_candidates(cell, cand, cells);
+      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+        const int p = order[slot];
+        const double h = support[p];
+        const double inv_h2 = 1.0 / (h * h);
+        const double min_distance = kCorrectionMinDistance * h / kCorrectionSupport;
+        const double min_distance2 = min_distance * min_distance;
+        const Vec<Dim> xp = xw[p];
+        // number density from squared distances only (no square roots)
+        double n = 1.0;  // the particle itself
+        for (int q : cand) {
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
+          const double r2 = d.squaredNorm();
+          if (r2 >= h * h || order[q] == p) continue;
+          if (r2 < min_distance2) close_pair[p] = 1;
+          n += correction_kernel(r2 * inv_h2);
+        }
+        const double c = n / n0 - 1.0 - kCorrectionSlack;
+        if (c <= 0.0) continue;
+        // constraint gradients, only for the compressed particles
+        Vec<Dim> grad_self = Vec<Dim>::Zero();
+        double grad_others = 0.0;
+        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double hp) {
+          const Vec<Dim> g = spiky_gradient(p, j, d, r, hp) / n0;
+          grad_self += g;
+          grad_others += g.squaredNorm();
+        });
+        // eps regularises the denominator (units 1/length^2, scaled by h)
+        const double eps = 1e-6 / (h * h);
+        lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
+        ++compressed;
+      }
+    }
+  }
+
+  if (compressed == 0 && std::find(close_pair.begin(), close_pair.end(), 1) == close_pair.end())
+    return;
+
+  // cells holding a compressed particle or a close pair: only their neighbourhoods move
+  std::vector<char> active_cell(nc, 0);
+  for (long p = 0; p < np; ++p)
+    if (lambda[p] != 0.0 || close_pair[p]) active_cell[bucket[p]] = 1;
+
+  // pass 2: displacements from the multipliers (Jacobi, so the result is order independent)
+  std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
+#pragma omp parallel
+  {
+    std::vector<int> cand, cells;
+#pragma omp for schedule(dynamic, 16)
+    for (int cell = 0; cell < nc; ++cell) {
+      if (start[cell] == start[cell + 1]) continue;
+      gather_candidates(cell, cand, cells);
+      bool near_active = false;
+      for (int c : cells) near_active = near_active || active_cell[c];
+      if (!near_active) continue;
+      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+        const int p = order[slot];
+        Vec<Dim> push = Vec<Dim>::Zero();
+        const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
+        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
+          // density constraints
+          const double l = lambda[p] + lambda[j];
+          if (l != 0.0) push += l * spiky_gradient(p, j, d, r, h) / n0;
+          // minimum distance: each particle of a close pair takes half of the overlap
+          if (r < min_distance) {
+            Vec<Dim> dir = Vec<Dim>::Zero();
+            if (r > 1e-9 * h)
+              dir = d / r;
+            else
+              dir[0] = p < j ? 1.0 : -1.0;  // as in spiky_gradient
+            push += 0.5 * (min_distance - r) * dir;
+          }
+        });
+        push *= alpha;
+        // never more than kCorrectionMaxStep spacings per step
+        const double cap = kCorrectionMaxStep * support[p] / kCorrectionSupport;
+        const double len = push.norm();
+        if (len > cap) push *= cap / len;
+        delta[p] = push;
+      }
+    }
+  }
+
+  // apply, then keep clear of solids and walls
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < np; ++p) {
+    if (delta[p].squaredNorm() == 0.0) continue;
+    Vec<Dim> x = particles.x[p] + delta[p];
+    settle_position(grid, solids, boundary, false, x);
+    particles.x[p] = x;
+  }
+}
+
+// --- density projection --------------------------------------------------------------------------
+
+namespace {
+
+/// Antiderivative of the hat max(0, 1 - |u|).
+double hat_integral(double u) {
+  if (u <= -1.0) return 0.0;
+  if (u <= 0.0) return 0.5 * (1.0 + u) * (1.0 + u);
+  if (u < 1.0) return 1.0 - 0.5 * (1.0 - u) * (1.0 - u);
+  return 1.0;
+}
+
+/// One axis of the splat kernel of the density projection: the hat of a cell centre averaged
+/// over a box of `width` (a particle's rest spacing, in cells) centred at offset t (in cells):
+/// (H(t + width/2) - H(t - width/2)) / width, H the hat's antiderivative. A regular lattice of
+/// particles of that spacing then splats exactly the hat-weighted volume of the region it fills.
+double box_hat_weight(double t, double width) {
+  return (hat_integral(t + 0.5 * width) - hat_integral(t - 0.5 * width)) / width;
+}
+
+/// The liquid indicator of the level set convolved with the multilinear hat of each cell centre,
+///   T_c = dx^-Dim int hat_c(x) H(-phi(x)) dx,
+/// i.e. what a perfectly even distribution of liquid particles filling {phi < 0} would splat
+/// onto cell c. Evaluated on the half cells of the lattice (2^Dim per cell; their liquid
+/// fractions from lattice_cell_negative_fraction): per axis, the half cells 2c-1 .. 2c+2 carry the
+/// hat integrals 1/8, 3/8, 3/8, 1/8. A half cell outside a non-periodic domain passes its weight
+/// to the adjacent inside one, as the clamped particle stencil does.
+template <int Dim>
+VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi) {
+  constexpr int kCorners = 1 << Dim;
+  // liquid fractions of the half cells
+  VecI<Dim> dims = 2 * grid.cells();
+  int count = 1;
+  for (int a = 0; a < Dim; ++a) count *= dims[a];
+  VectorX cur(count);
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < count; ++k) {
+    const VecI<Dim> lower = lattice_coord<Dim>(k, dims);
+    std::array<double, kCorners> corner;
+    for (int b = 0; b < kCorners; ++b) {
+      VecI<Dim> i = lower;
+      for (int a = 0; a < Dim; ++a) i[a] += (b >> a) & 1;
+      corner[b] = phi[lattice.index(i)];
+    }
+    cur[k] = lattice_cell_negative_fraction<Dim>(corner);
+  }
+  // per axis, the 4-tap hat integrals from half cells to cells
+  static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
+  for (int a = 0; a < Dim; ++a) {
+    VecI<Dim> out_dims = dims;
+    out_dims[a] = grid.cells()[a];
+    int out_count = 1;
+    for (int b = 0; b < Dim; ++b) out_count *= out_dims[b];
+    VectorX next(out_count);
+    const int n2 = dims[a];
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < out_count; ++k) {
+      const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
+      double sum = 0.0;
+      for (int t = 0; t < 4; ++t) {
+        int j = 2 * o[a] - 1 + t;
+        if (grid.periodic(a))
+          j = (j + n2) % n2;
+        else
+          j = std::clamp(j, 0, n2 - 1);
+        VecI<Dim> i = o;
+        i[a] = j;
+        int li = 0;
+        for (int b = Dim - 1; b >= 0; --b) li = li * dims[b] + i[b];
+        sum += kTaps[t] * cur[li];
+      }
+      next[k] = sum;
+    }
+    cur.swap(next);
+    dims = out_dims;
+  }
+  return cur;
+}
+
+/// One (reconstruction, solve, move) of project_particle_density.
+template <int Dim>
+DensityProjectionStats project_density_once(Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                                            const SampleLattice<Dim>& lattice,
+                                            const VectorX& fluid_face,
+                                            const SolidField<Dim>& solids,
+                                            const std::array<BoundaryType, 2 * Dim>& boundary) {
+  DensityProjectionStats stats;
+  const long np = static_cast<long>(particles.size());
+  if (np == 0) return stats;
+  const int nc = grid.num_cells();
+  const int nf = grid.num_faces();
+  const double dx = grid.dx();
+  const double cell_volume = grid.cell_volume();
+
+  // particle volume fractions: each particle's volume spread as a box of its rest spacing and
+  // then by the hat of the cell centres, splatted serially in particle order (deterministic)
+  VectorX rho = VectorX::Zero(nc);
+  for (long p = 0; p < np; ++p) {
+    const double volume =
+        particles.density[p] > 0.0 ? particles.mass[p] / particles.density[p] : 0.0;
+    const double width = particle_spacing(particles, p, dx) / dx;
+    const Vec<Dim> xr = (grid.wrap_position(particles.x[p]) - grid.origin()) / dx;
+    // per axis: five candidate cells around the particle and their weights
+    std::array<std::array<int, 5>, Dim> cell;
+    std::array<std::array<double, 5>, Dim> weight;
+    for (int a = 0; a < Dim; ++a) {
+      const int base = static_cast<int>(std::floor(xr[a])) - 2;
+      for (int k = 0; k < 5; ++k) {
+        int c = base + k;
+        weight[a][k] = box_hat_weight(c + 0.5 - xr[a], width);
+        if (grid.periodic(a))
+          c = ((c % grid.cells()[a]) + grid.cells()[a]) % grid.cells()[a];
+        else
+          c = std::clamp(c, 0, grid.cells()[a] - 1);
+        cell[a][k] = c;
+      }
+    }
+    std::array<int, Dim> k{};
+    while (true) {
+      double w = volume / cell_volume;
+      VecI<Dim> ci;
+      for (int a = 0; a < Dim; ++a) {
+        w *= weight[a][k[a]];
+        ci[a] = cell[a][k[a]];
+      }
+      if (w != 0.0) rho[grid.cell_index(ci)] += w;
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++k[a] < 5) break;
+        k[a] = 0;
+      }
+      if (a == Dim) break;
+    }
+  }
+  // liquid fractions of the particle level set, smoothed by the same hat
+  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice);
+  const VectorX target = hat_liquid_fractions(grid, lattice, phi);
+
+  // unknowns: cells holding particle volume or smoothed liquid
+  std::vector<int> unknown(nc, -1);
+  std::vector<int> cells;
+  for (int c = 0; c < nc; ++c)
+    if (rho[c] > 0.0 || target[c] > 0.0) {
+      unknown[c] = static_cast<int>(cells.size());
+      cells.push_back(c);
+    }
+  const int n = static_cast<int>(cells.size());
+  stats.cells = n;
+  if (n == 0) return stats;
+
+  // with q = -psi dx^2: (-L dx^2) psi = e (rows in cell order), and the move is grad q
+  std::vector<Triplet> triplets;
+  triplets.reserve(static_cast<std::size_t>(n) * (2 * Dim + 1));
+  VectorX rhs(n);
+  for (int r = 0; r < n; ++r) {
+    const int c = cells[r];
+    const VecI<Dim> ci = grid.cell_coord(c);
+    double diag = 0.0;
+    for (int a = 0; a < Dim; ++a)
+      for (int s = 0; s < 2; ++s) {
+        // the face between c and its neighbour along a (s = 0: minus side, 1: plus side)
+        VecI<Dim> fc = ci;
+        fc[a] += s;
+        if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
+        const int fi = grid.face_index(a, fc);
+        const double wf = fluid_face[fi];
+        if (!(wf > 0.0)) continue;
+        diag += wf;
+        VecI<Dim> cj = ci;
+        cj[a] += s == 0 ? -1 : 1;
+        const int j = grid.cell_index_or_outside(cj);
+        if (j >= 0 && unknown[j] >= 0 && j != c) triplets.emplace_back(r, unknown[j], -wf);
+      }
+    // a tiny shift keeps fully enclosed liquid (no air neighbour) non-singular
+    triplets.emplace_back(r, r, diag * (1.0 + 1e-6) + 1e-12);
+    const double e = rho[c] - target[c];
+    rhs[r] = e;
+    stats.error_before += std::abs(e) * cell_volume;
+  }
+  SparseMatrix A(n, n);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::ConjugateGradient<SparseMatrix, Eigen::Lower | Eigen::Upper,
+                           Eigen::DiagonalPreconditioner<double>>
+      cg;
+  cg.setTolerance(kProjectionTolerance);
+  cg.setMaxIterations(4 * n + 100);
+  cg.compute(A);
+  const VectorX psi = cg.solve(rhs);  // in units of dx^2
+  stats.iterations = static_cast<int>(cg.iterations());
+
+  // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids
+  VectorX move = VectorX::Zero(nf);
+#pragma omp parallel for schedule(static)
+  for (int f = 0; f < nf; ++f) {
+    if (!(fluid_face[f] > 0.0)) continue;
+    const auto [axis, coord] = grid.face_coord(f);
+    const int minus = grid.face_cell_minus(axis, coord);
+    const int plus = grid.face_cell_plus(axis, coord);
+    const double pm = minus >= 0 && unknown[minus] >= 0 ? psi[unknown[minus]] : 0.0;
+    const double pp = plus >= 0 && unknown[plus] >= 0 ? psi[unknown[plus]] : 0.0;
+    move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+  }
+
+  // move the particles (at most kProjectionMaxStep dx), then keep clear of solids and walls
+  const double cap = kProjectionMaxStep * dx;
+  double max_move = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_move)
+  for (long p = 0; p < np; ++p) {
+    Vec<Dim> d = grid.interpolate_velocity(move, particles.x[p]);
+    const double len = d.norm();
+    if (len > cap) d *= cap / len;
+    max_move = std::max(max_move, std::min(len, cap));
+    Vec<Dim> x = particles.x[p] + d;
+    settle_position(grid, solids, boundary, false, x);
+    particles.x[p] = x;
+  }
+  stats.max_move = max_move;
+  return stats;
+}
+
+}  // namespace
+
+/// Grid density projection (after Kugelstadt et al. 2019), with e the volume-fraction error:
+///   rho~_c = dx^-Dim sum_p V_p w_cp     (V_p = m_p / rho_p, w_cp the hat of cell c averaged over
+///                                        the box of side s_p = V_p^(1/Dim) around x_p)
+///   T_c    = dx^-Dim int hat_c(x) H(-phi(x)) dx           (the same kernel on the level set)
+///   e_c    = rho~_c - T_c
+///   L q = e on S = {c : rho~_c > 0 or T_c > 0},  (L q)_c = sum_f W_F^u_f (q_nb - q_c) / dx^2,
+///         q = 0 outside S (air), no flux through faces with W_F^u = 0 (walls, solids);
+///   x_p <- x_p + omega grad q (x_p),  grad q on the faces, interpolated like a velocity.
+/// L is num_S x num_S, negative semi-definite; the solve uses -L dx^2 (symmetric positive
+/// definite) with a diagonally preconditioned conjugate gradient. Since div(grad q) = e, the move
+/// empties over-full cells (e > 0) into under-full ones to first order.
+template <int Dim>
+DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                                                const SampleLattice<Dim>& lattice,
+                                                const VectorX& fluid_face,
+                                                const SolidField<Dim>& solids,
+                                                const std::array<BoundaryType, 2 * Dim>& boundary,
+                                                int iterations) {
+  DensityProjectionStats total;
+  for (int it = 0; it < iterations; ++it) {
+    const DensityProjectionStats one =
+        project_density_once(particles, grid, lattice, fluid_face, solids, boundary);
+    if (it == 0)
+      total = one;
+    else {
+      total.iterations += one.iterations;
+      total.max_move = std::max(total.max_move, one.max_move);
+    }
+  }
+  return total;
+}
+
+// --- liquid surface ------------------------------------------------------------------------------
+
+/// The liquid/air domain of Algorithm 1 line 4, after Zhu & Bridson (2005):
+/// phi(x) = |x - x_bar(x)| - r_bar(x), with x_bar and r_bar the kernel-
+/// weighted averages of the particle positions and radii, k(s) = max(0, 1 - s^2)^3, s = |x - x_p|
+/// / R. Particles splat onto the lattice points within R; slabs of the last axis wider than 2 R
+/// are processed even/odd in parallel, so no two threads touch the same point and every point
+/// sums its contributions in particle order (deterministic for any thread count).
+template <int Dim>
+VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                              const SampleLattice<Dim>& lattice) {
+  const int nl = lattice.size();
+  const long np = static_cast<long>(particles.size());
+  const double h = lattice.spacing;
+  const double dx = grid.dx();
+  if (np == 0) return VectorX::Constant(nl, 3.0 * dx);
+
+  // per-particle support and radius
+  std::vector<double> support(np), radius(np);
+  double max_support = 0.0;
+  for (long p = 0; p < np; ++p) {
+    const double s = particle_spacing(particles, p, dx);
+    support[p] = kSurfaceSupport * s;
+    radius[p] = ParticleTraits<Dim>::surface_radius * s;
+    max_support = std::max(max_support, support[p]);
+  }
+
+  // slabs along the last axis, width > 2 R in lattice points
+  constexpr int kLast = Dim - 1;
+  const int width = static_cast<int>(std::ceil(2.0 * max_support / h)) + 2;
+  const int slabs = std::max(1, (lattice.dims[kLast] + width - 1) / width);
+  std::vector<int> slab_of(np), slab_start(slabs + 1, 0), order(np);
+  for (long p = 0; p < np; ++p) {
+    const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
+    const int k = static_cast<int>(std::floor(s / width));
+    slab_of[p] = std::clamp(k, 0, slabs - 1);
+    ++slab_start[slab_of[p] + 1];
+  }
+  for (int k = 0; k < slabs; ++k) slab_start[k + 1] += slab_start[k];
+  {
+    std::vector<int> fill(slab_start.begin(), slab_start.end() - 1);
+    for (long p = 0; p < np; ++p) order[fill[slab_of[p]]++] = static_cast<int>(p);
+  }
+
+  // periodic images: shift by +-L on periodic axes
+  std::array<double, Dim> period{};
+  for (int a = 0; a < Dim; ++a) period[a] = grid.periodic(a) ? grid.cells()[a] * dx : 0.0;
+
+  VectorX wsum = VectorX::Zero(nl), rsum = VectorX::Zero(nl);
+  Eigen::Matrix<double, Dim, Eigen::Dynamic> xsum =
+      Eigen::Matrix<double, Dim, Eigen::Dynamic>::Zero(Dim, nl);
+
+  // splat one particle (all its periodic images) onto the lattice
+  auto splat = [&](int p) {
+    const Vec<Dim> xp = particles.x[p];
+    const double R = support[p];
+    const double inv_r2 = 1.0 / (R * R);
+    // per axis up to three image segments: (image coordinate, first index, last index)
+    std::array<std::array<double, 3>, Dim> img;
+    std::array<std::array<int, 3>, Dim> lo, hi;
+    std::array<int, Dim> nseg;
+    for (int a = 0; a < Dim; ++a) {
+      nseg[a] = 0;
+      for (int k = -1; k <= 1; ++k) {
+        if (k != 0 && period[a] == 0.0) continue;
+        const double xa = xp[a] + k * period[a];
+        const int i0 = std::max(0, static_cast<int>(std::ceil((xa - R - lattice.origin[a]) / h)));
+        const int i1 = std::min(lattice.dims[a] - 1,
+                                static_cast<int>(std::floor((xa + R - lattice.origin[a]) / h)));
+        if (i0 > i1) continue;
+        img[a][nseg[a]] = xa;
+        lo[a][nseg[a]] = i0;
+        hi[a][nseg[a]] = i1;
+        ++nseg[a];
+      }
+      if (nseg[a] == 0) return;
+    }
+    // every combination of image segments
+    std::array<int, Dim> seg{};
+    while (true) {
+      Vec<Dim> xi;
+      VecI<Dim> i0, i1;
+      for (int a = 0; a < Dim; ++a) {
+        xi[a] = img[a][seg[a]];
+        i0[a] = lo[a][seg[a]];
+        i1[a] = hi[a][seg[a]];
+      }
+      VecI<Dim> i = i0;
+      while (true) {
+        const Vec<Dim> d = lattice.position(i) - xi;
+        const double q2 = d.squaredNorm() * inv_r2;
+        if (q2 < 1.0) {
+          const double t = 1.0 - q2;
+          const double k = t * t * t;
+          const int li = lattice.index(i);
+          wsum[li] += k;
+          rsum[li] += k * radius[p];
+          xsum.col(li) += k * xi;
+        }
+        int a = 0;
+        for (; a < Dim; ++a) {
+          if (++i[a] <= i1[a]) break;
+          i[a] = i0[a];
+        }
+        if (a == Dim) break;
+      }
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++seg[a] < nseg[a]) break;
+        seg[a] = 0;
+      }
+      if (a == Dim) break;
+    }
+  };
+
+  // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
+  const bool wrap_last = grid.periodic(kLast);
+  const bool serial = wrap_last && slabs < 5;
+  std::vector<int> phase_slabs[3];
+  for (int k = 0; k < slabs; ++k) {
+    if (serial || (wrap_last && (k == 0 || k == slabs - 1)))
+      phase_slabs[2].push_back(k);
+    else
+      phase_slabs[k % 2].push_back(k);
+  }
+  for (int phase = 0; phase < 3; ++phase) {
+    const std::vector<int>& list = phase_slabs[phase];
+    const int count = static_cast<int>(list.size());
+    if (phase == 2) {
+      for (int s = 0; s < count; ++s)
+        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
+    } else {
+#pragma omp parallel for schedule(dynamic, 1)
+      for (int s = 0; s < count; ++s)
+        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
+    }
+  }
+
+  // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
+  VectorX phi(nl);
+#pragma omp parallel for schedule(static)
+  for (int li = 0; li < nl; ++li) {
+    if (wsum[li] > 0.0) {
+      const Vec<Dim> xbar = xsum.col(li) / wsum[li];
+      phi[li] = (lattice.position(lattice.coord(li)) - xbar).norm() - rsum[li] / wsum[li];
+    } else {
+      phi[li] = max_support;
+    }
+  }
+  return phi;
+}
+
+template <int Dim>
+double max_particle_speed(const Particles<Dim>& particles) {
+  const long np = static_cast<long>(particles.size());
+  double vmax = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : vmax)
+  for (long p = 0; p < np; ++p) vmax = std::max(vmax, particles.v[p].norm());
+  return vmax;
+}
+
+// --- explicit instantiations ---------------------------------------------------------------------
+
+#define MONOLITH_INSTANTIATE_PARTICLES(D)                                                          \
+  template struct Particles<D>;                                                                    \
+  template Particles<D> seed_particles(const MacGrid<D>&, const std::vector<LiquidSpec>&,          \
+                                       const std::vector<ShapePtr<D>>&, const SolidField<D>&, int, \
+                                       unsigned);                                                  \
+  template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,      \
+                                  VectorX&);                                                       \
+  template void grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&);               \
+  template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \
+  template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,         \
+                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);    \
+  template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
+                                  const std::array<BoundaryType, 2 * D>&);                         \
+  template DensityProjectionStats project_particle_density(                                        \
+      Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
+      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int);                          \
+  template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
+                                         const SampleLattice<D>&);                                 \
+  template double max_particle_speed(const Particles<D>&);
+
+MONOLITH_INSTANTIATE_PARTICLES(2)
+MONOLITH_INSTANTIATE_PARTICLES(3)
+
+#undef MONOLITH_INSTANTIATE_PARTICLES
+
+}  // namespace monolith

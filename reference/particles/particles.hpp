@@ -1,0 +1,130 @@
+#pragma once
+/// \file particles.hpp
+/// Liquid particles and everything that moves them: seeding, the APIC transfers (Jiang et al.
+/// 2015) between particles and the MAC grid, velocity extrapolation, advection, position
+/// correction, and the liquid level set reconstructed from the particles (Zhu & Bridson 2005).
+
+#include <functional>
+#include <vector>
+
+#include "reference/core/common.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/app/scene.hpp"
+#include "reference/geometry/shape.hpp"
+
+namespace monolith {
+
+/// Liquid particles (structure of arrays).
+template <int Dim>
+struct Particles {
+  std::vector<Vec<Dim>> x;     ///< positions
+  std::vector<Vec<Dim>> v;     ///< velocities
+  std::vector<Mat<Dim>> c;     ///< APIC affine matrices: row a is the gradient of velocity component a
+  std::vector<double> mass;    ///< kg (2D: kg per metre of depth)
+  std::vector<double> density; ///< kg/m^3 of the liquid the particle belongs to
+  std::vector<int> liquid;     ///< index into SceneDesc::liquids
+
+  std::size_t size() const { return x.size(); }
+  /// Removes particles whose flag is non-zero (order of the rest preserved).
+  void remove_flagged(const std::vector<char>& flag);
+};
+
+/// Where the solids are (static bodies now; walls are the domain boundary and handled by the
+/// grid). distance < 0 inside a solid; gradient is the outward unit normal.
+template <int Dim>
+struct SolidField {
+  std::function<double(const Vec<Dim>&)> distance;
+  std::function<Vec<Dim>(const Vec<Dim>&)> gradient;
+  bool empty() const { return !distance; }
+};
+
+/// Seeds `per_cell` jittered particles per cell inside each liquid's shape (never inside a solid,
+/// never outside the domain), with the liquid's velocity plus its rigid rotation about the
+/// shape's centre (APIC matrix c set to that rotation's velocity gradient). Deterministic for a
+/// given seed.
+template <int Dim>
+Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<LiquidSpec>& liquids,
+                              const std::vector<ShapePtr<Dim>>& liquid_shapes,
+                              const SolidField<Dim>& solids, int per_cell, unsigned seed);
+
+/// APIC particle-to-grid transfer onto the faces. Outputs, per face: u (momentum / mass, zero where
+/// no particle contributes), face_mass (sum of weighted particle masses), face_density
+/// (mass-weighted particle density, the diagonal of P; zero where face_mass is zero).
+template <int Dim>
+void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
+                       VectorX& face_mass, VectorX& face_density);
+
+/// APIC grid-to-particle transfer: v and c from the face velocities u.
+template <int Dim>
+void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u);
+
+/// Extends u from faces with valid[f] != 0 into the others, `layers` rings deep (averaging valid
+/// neighbours of the same component); marks the filled faces valid.
+template <int Dim>
+void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
+                          int layers);
+
+/// Moves particles through the (extrapolated) grid velocity u for dt with a second-order
+/// Runge-Kutta scheme, in substeps of at most half a cell so that thin solids are not tunnelled
+/// through at large CFL numbers; after every substep pushes particles inside a solid back out
+/// along its gradient,
+/// keeps them inside walls, wraps periodic axes. Particles that leave through an open face are
+/// removed; returns how many were removed.
+template <int Dim>
+long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
+                      double dt, const SolidField<Dim>& solids,
+                      const std::array<BoundaryType, 2 * Dim>& boundary);
+
+/// Position correction that keeps particles evenly spread so the liquid volume stays steady
+/// (Algorithm 1, line 15); respects solids, walls and periodicity.
+template <int Dim>
+void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
+                       const SolidField<Dim>& solids,
+                       const std::array<BoundaryType, 2 * Dim>& boundary);
+
+/// What project_particle_density did (for statistics and tests).
+struct DensityProjectionStats {
+  int cells = 0;              ///< unknowns of the Poisson problem
+  int iterations = 0;         ///< conjugate gradient iterations
+  double error_before = 0.0;  ///< sum_c |e_c| dx^Dim before the move (m^Dim), e_c as in particles.cpp
+  double max_move = 0.0;      ///< largest particle displacement (m)
+};
+
+/// Grid-based implicit density projection after Kugelstadt, Bender, Fernandez-Fernandez, Jeske,
+/// Loschner and Longva (2019), "Implicit density projection for volume conserving liquids",
+/// IEEE TVCG 27(4). Compares, per cell, the particle volume fraction (each particle's volume m/rho
+/// spread over a box of its rest spacing and weighted by the hat function of the cell centre)
+/// with the liquid fraction of the particle level set (liquid_phi_on_lattice on `lattice`)
+/// weighted by the same hat function, solves
+/// a Poisson problem with the face weights `fluid_face` (W_F^u: Neumann at walls and solids,
+/// Dirichlet 0 in air) for the error and moves every particle by the gradient of the solution,
+/// so over-full cells empty into under-full ones and the reconstructed volume follows the
+/// particle volume (a form of Algorithm 1, line 15). `iterations` repeats the whole (reconstruction, solve, move); the stats are
+/// those of the first iteration (error_before) and the sums over all (iterations, max_move the
+/// largest). Respects solids, walls and periodicity; deterministic for any thread count.
+template <int Dim>
+DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                                                const SampleLattice<Dim>& lattice,
+                                                const VectorX& fluid_face,
+                                                const SolidField<Dim>& solids,
+                                                const std::array<BoundaryType, 2 * Dim>& boundary,
+                                                int iterations = 1);
+
+/// Iterations of project_particle_density applied to freshly seeded particles (the simulation
+/// does this once before frame 0, so the particle volume and the level set's agree from the
+/// start; measured in docs/particles.md).
+inline constexpr int kSeedProjectionIterations = 2;
+
+/// The liquid's signed distance (negative inside) sampled on `lattice` (normally half_lattice of
+/// the grid), reconstructed from the particles after Zhu & Bridson (2005). Calibrated so that a
+/// uniformly seeded block of liquid gives a zero level set on the block's boundary (within a
+/// small fraction of dx) and so the volume of {phi < 0} matches the seeded volume.
+template <int Dim>
+VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                              const SampleLattice<Dim>& lattice);
+
+/// Largest particle speed (for the CFL condition).
+template <int Dim>
+double max_particle_speed(const Particles<Dim>& particles);
+
+}  // namespace monolith

@@ -1,0 +1,103 @@
+#include "reference/solvers/pcg.hpp"
+
+#include <cmath>
+
+namespace monolith {
+
+namespace {
+/// v <- v - sum_k n_k (n_k . v) for an orthonormal null-space basis.
+void project_out(const std::vector<VectorX>& basis, VectorX& v) {
+  for (const VectorX& n : basis) v -= n.dot(v) * n;
+}
+double inf_norm(const VectorX& v) {
+  return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0;
+}
+}  // namespace
+
+void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, double omega,
+                       const std::vector<char>* active) {
+  z.setZero(r.size());
+  a.forward_sweep(r, z, omega, active);
+  a.backward_sweep(r, z, omega, active);
+}
+
+PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
+                    const PcgSettings& settings) {
+  PcgResult result;
+  const int n = a.size();
+  const auto& null_space = a.null_space();
+  if (x.size() != n) x.setZero(n);
+
+  // right-hand side restricted to the range of A
+  VectorX b = b_in;
+  project_out(null_space, b);
+  project_out(null_space, x);
+  const double b_norm = inf_norm(b);
+  if (!std::isfinite(b_norm)) {
+    result.breakdown = true;
+    result.message = "non-finite right-hand side";
+    return result;
+  }
+  if (b_norm == 0.0) {
+    x.setZero(n);
+    result.converged = true;
+    return result;
+  }
+
+  // initial residual and search direction
+  VectorX r(n), z(n), p(n), ap(n);
+  a.apply(x, ap);
+  r = b - ap;
+  project_out(null_space, r);
+  auto precondition = [&](const VectorX& res, VectorX& out) {
+    if (settings.precondition)
+      ssor_precondition(a, res, out, settings.omega);
+    else
+      out = res;
+    project_out(null_space, out);
+  };
+  result.relative_residual = inf_norm(r) / b_norm;
+  if (result.relative_residual <= settings.tolerance) {
+    result.converged = true;
+    return result;
+  }
+  precondition(r, z);
+  p = z;
+  double rz = r.dot(z);
+
+  for (int k = 0; k < settings.max_iterations; ++k) {
+    // step along p
+    a.apply(p, ap);
+    const double pap = p.dot(ap);
+    if (!std::isfinite(pap) || pap <= 0.0) {
+      result.breakdown = true;
+      result.message = std::isfinite(pap) ? "p^T A p <= 0 (operator not positive definite)"
+                                          : "non-finite value in p^T A p";
+      return result;
+    }
+    const double alpha = rz / pap;
+    x += alpha * p;
+    r -= alpha * ap;
+    project_out(null_space, r);
+    result.iterations = k + 1;
+    result.relative_residual = inf_norm(r) / b_norm;
+    if (!std::isfinite(result.relative_residual)) {
+      result.breakdown = true;
+      result.message = "non-finite residual";
+      return result;
+    }
+    if (result.relative_residual <= settings.tolerance) {
+      result.converged = true;
+      break;
+    }
+    // new conjugate direction
+    precondition(r, z);
+    const double rz_new = r.dot(z);
+    p = z + (rz_new / rz) * p;
+    rz = rz_new;
+  }
+  project_out(null_space, x);
+  return result;
+}
+
+}  // namespace monolith
