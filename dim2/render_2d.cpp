@@ -81,10 +81,10 @@ View2 make_view(const Box<2>& domain, int width, int height, int margin) {
 
 
 /// The colour field at a point (the face velocity's magnitude, or a cell field interpolated).
-double field_at(const RenderView<2>& view, const std::string& color_by, const Vec<2>& x) {
+double field_at(const RenderView<2>& view, ColorBy color_by, const Vec<2>& x) {
   const MacGrid<2>& grid = *view.grid;
-  if (color_by == "speed") return grid.interpolate_velocity(*view.velocity, x).norm();
-  if (color_by == "pressure") return grid.interpolate_cell(*view.pressure, x);
+  if (color_by == ColorBy::speed) return grid.interpolate_velocity(*view.velocity, x).norm();
+  if (color_by == ColorBy::pressure) return grid.interpolate_cell(*view.pressure, x);
   return view.viscosity ? grid.interpolate_cell(*view.viscosity, x) : 0.0;
 }
 
@@ -112,8 +112,9 @@ Image render_frame<2>(const RenderView<2>& view, const RenderSpec& spec) {
 
   // the colour scale of the liquid (inactive without the field it needs)
   ColorScale scale;
-  const bool field_ok = (spec.color_by == "speed" && view.velocity) ||
-                        (spec.color_by == "pressure" && view.pressure) || spec.color_by == "viscosity";
+  const bool field_ok = (spec.color_by == ColorBy::speed && view.velocity) ||
+                        (spec.color_by == ColorBy::pressure && view.pressure) ||
+                        spec.color_by == ColorBy::viscosity;
   if (has_phi && field_ok) scale = make_color_scale(spec.color_by, liquid_field_values(view, lattice, spec.color_by));
 
   // the level set at every pixel centre inside the domain (+inf outside it or without liquid)

@@ -8,8 +8,8 @@
 #include <limits>
 #include <sstream>
 
-#include "reference/app/embedded_data.hpp"
 #include "reference/core/errors.hpp"
+#include "reference/geometry/embedded_assets.hpp"
 #include "reference/geometry/shape_tools.hpp"
 
 namespace monolith {
@@ -226,7 +226,7 @@ const std::vector<Vec<2>>& bunny_silhouette_points() {
 
 template <>
 ShapePtr<2> make_dimension_shape<2>(const ShapeSpec& spec, const std::string& key_path) {
-  if (spec.type == "polygon") {
+  if (spec.type == ShapeType::polygon) {
     // at least three points, non-zero area
     std::vector<Vec<2>> pts;
     for (std::size_t i = 0; i < spec.points.size(); ++i) {
@@ -251,7 +251,7 @@ ShapePtr<2> make_dimension_shape<2>(const ShapeSpec& spec, const std::string& ke
     centroid /= static_cast<double>(pts.size());
     return apply_rotation<2>(poly, spec, centroid);
   }
-  if (spec.type == "bunny") {
+  if (spec.type == ShapeType::bunny) {
     const auto& raw = bunny_silhouette_points();
     if (raw.size() < 3) {
       throw InputError(key_path + ": the embedded bunny silhouette is missing from this build "
@@ -274,7 +274,7 @@ ShapePtr<2> make_dimension_shape<2>(const ShapeSpec& spec, const std::string& ke
     for (const auto& p : raw) pts.push_back(c + s * (p - b.center()));
     return apply_rotation<2>(std::make_shared<PolygonShape>(std::move(pts)), spec, c);
   }
-  if (spec.type == "mesh") {
+  if (spec.type == ShapeType::mesh) {
     throw InputError(key_path + ".type: \"mesh\" is 3D only (in 2D: polygon or bunny)");
   }
   return nullptr;

@@ -273,7 +273,7 @@ struct Renderer {
   Scene scene;
   Camera camera;
   ColorScale scale;
-  std::string color_by;
+  ColorBy color_by = ColorBy::none;
   V3 light = V3(0.3, 1.0, 0.55).normalized();
   double pixel_angle = 0.0;
   std::array<bool, 6> wall{};
@@ -282,8 +282,8 @@ struct Renderer {
     const RenderView<3>& v = *scene.view;
     const MacGrid<3>& grid = *v.grid;
     double value = 0.0;
-    if (color_by == "speed") value = grid.interpolate_velocity(*v.velocity, x).norm();
-    else if (color_by == "pressure") value = grid.interpolate_cell(*v.pressure, x);
+    if (color_by == ColorBy::speed) value = grid.interpolate_velocity(*v.velocity, x).norm();
+    else if (color_by == ColorBy::pressure) value = grid.interpolate_cell(*v.pressure, x);
     else if (v.viscosity) value = grid.interpolate_cell(*v.viscosity, x);
     return to_v3(scale.color(value));
   }
@@ -414,8 +414,9 @@ Image render_frame<3>(const RenderView<3>& view, const RenderSpec& spec) {
   }
 
   // colour scale of the liquid
-  const bool field_ok = (spec.color_by == "speed" && view.velocity) ||
-                        (spec.color_by == "pressure" && view.pressure) || spec.color_by == "viscosity";
+  const bool field_ok = (spec.color_by == ColorBy::speed && view.velocity) ||
+                        (spec.color_by == ColorBy::pressure && view.pressure) ||
+                        spec.color_by == ColorBy::viscosity;
   if (sc.has_liquid && field_ok)
     r.scale = make_color_scale(spec.color_by, liquid_field_values(view, lattice, spec.color_by));
 

@@ -8,8 +8,8 @@
 #include <mutex>
 #include <sstream>
 
-#include "reference/app/embedded_data.hpp"
 #include "reference/core/errors.hpp"
+#include "reference/geometry/embedded_assets.hpp"
 #include "reference/geometry/shape_tools.hpp"
 
 namespace monolith {
@@ -83,7 +83,7 @@ Vec<3> vec3_param(const std::vector<double>& v, const std::string& key_path, con
 
 template <>
 ShapePtr<3> make_dimension_shape<3>(const ShapeSpec& spec, const std::string& key_path) {
-  if (spec.type == "mesh") {
+  if (spec.type == ShapeType::mesh) {
     // scale in the file's frame, then translate; rotation about `translate`
     Vec<3> scale = Vec<3>::Ones();
     if (spec.scale.size() == 1) {
@@ -95,13 +95,11 @@ ShapePtr<3> make_dimension_shape<3>(const ShapeSpec& spec, const std::string& ke
       throw InputError(key_path + ".scale: has a zero or non-finite factor (non-zero numbers)");
     }
     const Vec<3> translate = vec3_param(spec.translate, key_path, "translate", Vec<3>::Zero());
-    const std::filesystem::path file =
-        spec.resolved_file.empty() ? std::filesystem::path(spec.file) : spec.resolved_file;
     auto shape = std::make_shared<MeshShape>(
-        memoized_mesh_sdf(file, scale, translate, key_path + ".file"));
+        memoized_mesh_sdf(spec.file, scale, translate, key_path + ".file"));
     return apply_rotation<3>(shape, spec, translate);
   }
-  if (spec.type == "bunny") {
+  if (spec.type == ShapeType::bunny) {
     const Vec<3> center = vec3_param(spec.center, key_path, "center", Vec<3>::Zero());
     if (!(spec.size > 0.0) || !std::isfinite(spec.size)) {
       throw InputError(key_path + ".size: must be a finite number > 0");
@@ -110,7 +108,7 @@ ShapePtr<3> make_dimension_shape<3>(const ShapeSpec& spec, const std::string& ke
     auto shape = std::make_shared<ScaledMeshShape>(unit_bunny_sdf(), spec.size, center);
     return apply_rotation<3>(shape, spec, center);
   }
-  if (spec.type == "polygon") {
+  if (spec.type == ShapeType::polygon) {
     throw InputError(key_path + ".type: \"polygon\" is 2D only (in 3D: mesh or bunny)");
   }
   return nullptr;

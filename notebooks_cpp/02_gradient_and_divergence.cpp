@@ -7,11 +7,11 @@
 #include <random>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/oracle/cholmod_solver.hpp"
 #include "reference/fluid/gradient.hpp"
-#include "reference/solvers/pcg.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/solvers/pcg.hpp"
 
 using namespace monolith;
 

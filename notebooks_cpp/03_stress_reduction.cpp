@@ -6,11 +6,11 @@
 #include <cmath>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/oracle/cholmod_solver.hpp"
 #include "reference/fluid/deformation_rate.hpp"
 #include "reference/fluid/stokes_system.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
 
 using namespace monolith;
 
@@ -196,7 +196,7 @@ int main(int argc, char** argv) {
   VectorX u_div_free = u_star;
   PcgSettings tight;
   tight.tolerance = 1e-13;
-  solve_pressure<2>(g6, w6.pressure, dt, "explicit", tight, u_div_free);
+  solve_pressure<2>(g6, w6.pressure, dt, Backend::explicit_matrices, tight, u_div_free);
   StokesWeights w_var = w6;
   for (int d = 0; d < s6.num_dofs(); ++d) {
     const auto [k, c] = s6.coord(d);

@@ -7,11 +7,11 @@
 #include <memory>
 
 #include "notebooks_cpp/notebook.hpp"
-#include "reference/oracle/cholmod_solver.hpp"
-#include "reference/viz/plot.hpp"
 #include "reference/fluid/stokes_system.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/oracle/cholmod_solver.hpp"
+#include "reference/viz/plot.hpp"
 
 using namespace monolith;
 
@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
     nb.check("A11 = 1/eta + 4 dt = 3", std::abs(Eigen::MatrixXd(sys.A11)(0, 0) - 3.0), 1e-15);
     nb.check("b1 = 2a = 2", std::abs(sys.b1[0] - 2.0), 1e-15);
     VectorX u = u_star;
-    const auto r = solve_stokes(grid, w, dt, StokesUnknowns::stress_only, StressForm::full, "explicit", PcgSettings{}, u);
+    const auto r = solve_stokes(grid, w, dt, StokesUnknowns::stress_only, StressForm::full, Backend::explicit_matrices, PcgSettings{}, u);
     nb.check("tau = 2/3", std::abs(r.stress[node] - 2.0 / 3.0), 1e-14);
     nb.check("u(1,1) = 5/6", std::abs(u[grid.face_index(0, VecI<2>(1, 1))] - 5.0 / 6.0), 1e-14);
     nb.check("v(1,1) = -1/6", std::abs(u[grid.face_index(1, VecI<2>(1, 1))] + 1.0 / 6.0), 1e-14);

@@ -8,11 +8,11 @@
 #include <sstream>
 
 #include "notebooks_cpp/notebook.hpp"
+#include "reference/app/scene_file.hpp"
 #include "reference/contact/collision.hpp"
 #include "reference/contact/contact_system.hpp"
-#include "reference/viz/plot.hpp"
 #include "reference/rigid/rigid_body.hpp"
-#include "reference/app/scene.hpp"
+#include "reference/viz/plot.hpp"
 
 using namespace monolith;
 using nlohmann::json;

@@ -10,9 +10,9 @@
 #include "reference/coupling/coupling.hpp"
 #include "reference/fluid/deformation_rate.hpp"
 #include "reference/fluid/gradient.hpp"
-#include "reference/viz/image.hpp"
 #include "reference/fluid/viscosity.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/viz/image.hpp"
 
 using namespace monolith;
 
@@ -20,7 +20,7 @@ namespace {
 
 ShapePtr<2> box_shape(const Vec<2>& c, const Vec<2>& half) {
   ShapeSpec spec;
-  spec.type = "box";
+  spec.type = ShapeType::box;
   spec.center = {c[0], c[1]};
   spec.half_size = {half[0], half[1]};
   return make_shape<2>(spec, "notebook.box");
@@ -28,7 +28,7 @@ ShapePtr<2> box_shape(const Vec<2>& c, const Vec<2>& half) {
 
 ShapePtr<2> disk_shape(const Vec<2>& c, double r) {
   ShapeSpec spec;
-  spec.type = "sphere";
+  spec.type = ShapeType::sphere;
   spec.center = {c[0], c[1]};
   spec.radius = r;
   return make_shape<2>(spec, "notebook.disk");

@@ -70,7 +70,7 @@ notebook::CoupledStep<Dim> tank_step(double side, int cells) {
 template <int Dim>
 MonolithicSystem<Dim> make_system(const notebook::CoupledStep<Dim>& s) {
   return MonolithicSystem<Dim>(s.grid, StressForm::full, s.w, s.dt, s.u_star, s.bodies, s.solids,
-                               s.contact_system);
+                               s.contact_system, Backend::explicit_matrices);
 }
 
 /// The dense pieces of eq. (24): F the fluid part (the Stokes matrix in the (tau, p) corner),

@@ -56,7 +56,7 @@ notebook::CoupledStep<2> floor_step(double speed) {
 
 MonolithicSystem<2> make_system(const notebook::CoupledStep<2>& s) {
   return MonolithicSystem<2>(s.grid, StressForm::full, s.w, s.dt, s.u_star, s.bodies, s.solids,
-                             s.contact_system);
+                             s.contact_system, Backend::explicit_matrices);
 }
 
 /// The by-hand staggered projections: what each round did.

@@ -11,10 +11,10 @@
 #include "notebooks_cpp/notebook.hpp"
 #include "reference/fluid/deformation_rate.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
-#include "reference/grid/mac_grid.hpp"
-#include "reference/viz/plot.hpp"
 #include "reference/fluid/stokes_system.hpp"
+#include "reference/grid/mac_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/viz/plot.hpp"
 
 using namespace monolith;
 
@@ -59,7 +59,7 @@ std::vector<double> channel_residuals(const HerschelBulkley& m, int rounds) {
     w.viscosity = eta;
     VectorX u = u_star;
     return solve_stokes(grid, w, 0.01, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                        "matrixfree", settings, u)
+                        Backend::matrix_free, settings, u)
         .stress;
   });
   return nn.residuals();

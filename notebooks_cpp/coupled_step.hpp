@@ -11,14 +11,14 @@
 #include <array>
 #include <vector>
 
+#include "reference/app/scene_file.hpp"
 #include "reference/contact/collision.hpp"
 #include "reference/contact/contact_system.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
 #include "reference/coupling/coupling.hpp"
+#include "reference/fluid/stokes_system.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/rigid/rigid_body.hpp"
-#include "reference/app/scene.hpp"
-#include "reference/fluid/stokes_system.hpp"
 
 namespace notebook {
 

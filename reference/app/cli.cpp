@@ -10,9 +10,9 @@
 #include <algorithm>
 #include <iomanip>
 
-#include "reference/app/embedded_data.hpp"
+#include "reference/app/embedded_scenes.hpp"
+#include "reference/app/scene_file.hpp"
 #include "reference/core/errors.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/sim/simulation.hpp"
 
 #ifndef MONOLITH_VERSION
@@ -145,8 +145,7 @@ RunOptions parse_options(const std::string& command, const std::vector<std::stri
 
 int cmd_check(const std::vector<std::string>& args, std::ostream& out) {
   const RunOptions o = parse_options("check", args, false);
-  const SceneDesc scene = load_scene(o.scene, o.overrides);
-  require_supported(scene);
+  const SceneFile scene = load_scene(o.scene, o.overrides);
   long long cells = 1;
   for (int c : scene.domain.cells) cells *= c;
   out << scene.source_label << ": ok: \"" << scene.name << "\", " << scene.dim << "D, " << cells << " cells, "
@@ -198,7 +197,7 @@ int run_cli(const std::vector<std::string>& args, std::ostream& out, std::ostrea
 }
 
 int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::ostream& err,
-                 const SimulationFactory& factory) {
+                 const SimulationFactory& factory, const FrameRenderer& render) {
   try {
     if (args.empty()) {
       err << "monolith: missing command\n" << kUsage;
@@ -214,7 +213,7 @@ int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::o
       out << "monolith " << MONOLITH_VERSION << "\n";
       return 0;
     }
-    if (command == "run") return run_scene(parse_options("run", rest, true), err, factory);
+    if (command == "run") return run_scene(parse_options("run", rest, true), err, factory, render);
     if (command == "check") return cmd_check(rest, out);
     if (command == "list") return cmd_list(rest, out);
     if (command == "convert") return cmd_convert(rest, out);

@@ -7,7 +7,6 @@
 #include <omp.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -15,8 +14,9 @@
 #include <iostream>
 #include <sstream>
 
+#include "reference/app/stats_json.hpp"
 #include "reference/core/errors.hpp"
-#include "reference/sim/stats.hpp"
+#include "reference/core/timer.hpp"
 
 #ifndef MONOLITH_VERSION
 #define MONOLITH_VERSION "0.0.0"
@@ -47,7 +47,7 @@ std::string seconds_text(double s) {
 }
 
 /// Writes summary.json (the scene as run, the version, totals, the status).
-void write_summary(const fs::path& dir, const SceneDesc& scene, const json& totals, bool failed, int failed_frame,
+void write_summary(const fs::path& dir, const SceneFile& scene, const json& totals, bool failed, int failed_frame,
                    const std::string& message) {
   json s;
   s["format"] = "monolith-summary/1";
@@ -65,9 +65,10 @@ void write_summary(const fs::path& dir, const SceneDesc& scene, const json& tota
 
 /// Renders the current state into frames/frame_NNNNN.ppm; a file that cannot be written is an
 /// input error (the output folder), not an internal one.
-void write_frame(const AnySimulation& sim, const SceneDesc& scene, const fs::path& dir, int k) {
+void write_frame(const AnySimulation& sim, const FrameRenderer& render, const SceneFile& scene,
+                 const fs::path& dir, int k) {
   const fs::path path = dir / "frames" / frame_file(k);
-  const Image image = sim.render(scene.render);
+  const Image image = render(sim, scene.render);
   try {
     image.write_ppm(path.string());
   } catch (const std::runtime_error& e) {
@@ -77,15 +78,15 @@ void write_frame(const AnySimulation& sim, const SceneDesc& scene, const fs::pat
 
 }  // namespace
 
-int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& factory) {
+int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& factory,
+              const FrameRenderer& renderer) {
   // --no-render acts as a last --set render.enabled=false
   std::vector<std::string> overrides = o.overrides;
   if (o.no_render) overrides.push_back("render.enabled=false");
   if (o.threads > 0) omp_set_num_threads(o.threads);
 
   // scene and simulation
-  const SceneDesc scene = load_scene(o.scene, overrides);
-  require_supported(scene);
+  const SceneFile scene = load_scene(o.scene, overrides);
   const fs::path dir = o.out_dir.empty() ? fs::path("out") / scene.name : fs::path(o.out_dir);
   std::error_code ec;
   fs::create_directories(dir, ec);
@@ -112,8 +113,8 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
   const bool live = !o.quiet && &err == &std::cerr && isatty(STDERR_FILENO);
   const bool lines = !o.quiet && !live;
   const int frames = scene.time.frames;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+  const Stopwatch watch;
+  auto elapsed = [&] { return watch.seconds(); };
 
   // totals, kept up to date for summary.json
   long total_steps = 0;
@@ -136,15 +137,15 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
     // frame 0: the initial state
     FrameStats st = sim->current_stats();
     volume0 = volume = st.liquid_volume;
-    stats << st.to_json().dump() << "\n" << std::flush;
-    if (render) write_frame(*sim, scene, dir, 0);
+    stats << frame_stats_json(st).dump() << "\n" << std::flush;
+    if (render) write_frame(*sim, renderer, scene, dir, 0);
     for (frame = 1; frame <= frames; ++frame) {
       st = sim->advance_frame();
       st.frame = frame;
       total_steps += st.steps;
       volume = st.liquid_volume;
-      stats << st.to_json().dump() << "\n" << std::flush;
-      if (render) write_frame(*sim, scene, dir, frame);
+      stats << frame_stats_json(st).dump() << "\n" << std::flush;
+      if (render) write_frame(*sim, renderer, scene, dir, frame);
       done = frame;
       // progress
       const double el = elapsed();

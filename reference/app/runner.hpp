@@ -2,7 +2,8 @@
 /// \file runner.hpp
 /// The `run` command of docs/cli.md: loads a scene, advances the simulation frame by frame and
 /// writes frames/frame_NNNNN.ppm, stats.jsonl and summary.json. The simulation is made by an
-/// injectable factory so that the output logic can be tested with a stand-in simulation.
+/// injectable factory and drawn by an injectable renderer, so that the output logic can be
+/// tested with a stand-in simulation.
 
 #include <functional>
 #include <memory>
@@ -10,8 +11,10 @@
 #include <string>
 #include <vector>
 
-#include "reference/app/scene.hpp"
+#include "reference/app/scene_file.hpp"
 #include "reference/sim/simulation.hpp"
+#include "reference/viz/image.hpp"
+#include "reference/viz/render.hpp"
 
 namespace monolith {
 
@@ -26,13 +29,17 @@ struct RunOptions {
 };
 
 using SimulationFactory = std::function<std::unique_ptr<AnySimulation>(const SceneDesc&)>;
+/// Draws the current state of a simulation made by the factory (render_simulation for the
+/// simulations of make_simulation).
+using FrameRenderer = std::function<Image(const AnySimulation&, const RenderSpec&)>;
 
 /// Runs a scene and writes its outputs. Returns 0 on success and 3 after a SimulationError
 /// (summary.json then has status "failed" and the frame); throws InputError for bad input.
-int run_scene(const RunOptions& options, std::ostream& err, const SimulationFactory& factory);
+int run_scene(const RunOptions& options, std::ostream& err, const SimulationFactory& factory,
+              const FrameRenderer& render = render_simulation);
 
-/// run_cli (reference/app/cli.hpp) with the simulation factory injected.
+/// run_cli (reference/app/cli.hpp) with the simulation factory and renderer injected.
 int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::ostream& err,
-                 const SimulationFactory& factory);
+                 const SimulationFactory& factory, const FrameRenderer& render = render_simulation);
 
 }  // namespace monolith

@@ -10,7 +10,7 @@
 
 #include "reference/core/common.hpp"
 #include "reference/rigid/rigid_body.hpp"
-#include "reference/app/scene.hpp"
+#include "reference/sim/scene_desc.hpp"
 
 namespace monolith {
 

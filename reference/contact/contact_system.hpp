@@ -18,8 +18,8 @@
 
 #include "reference/contact/collision.hpp"
 #include "reference/core/common.hpp"
-#include "reference/solvers/mprgp.hpp"
 #include "reference/rigid/rigid_body.hpp"
+#include "reference/solvers/mprgp.hpp"
 
 namespace monolith {
 

@@ -4,96 +4,22 @@
 #include "reference/coupling/coupled_schemes.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <limits>
 #include <memory>
 #include <stdexcept>
 
-#include "reference/solvers/colouring.hpp"
 #include "reference/core/errors.hpp"
+#include "reference/core/timer.hpp"
 #include "reference/coupling/monolithic_system.hpp"
-#include "reference/solvers/mprgp.hpp"
-#include "reference/solvers/pcg.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/solvers/colouring.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/solvers/pcg.hpp"
 
 namespace monolith {
 
 namespace {
-
-struct SchemeEntry {
-  CouplingScheme scheme;
-  const char* name;
-};
-
-constexpr SchemeEntry kSchemes[] = {
-    {CouplingScheme::p_c, "P-C"},
-    {CouplingScheme::c_p, "C-P"},
-    {CouplingScheme::pc_iterative, "PC-iterative"},
-    {CouplingScheme::pc_unified, "PC-unified"},
-    {CouplingScheme::pc_vc_pc_unified, "PC-VC-PC-unified"},
-    {CouplingScheme::pv_c, "PV-C"},
-    {CouplingScheme::c_pv, "C-PV"},
-    {CouplingScheme::pvc_iterative, "PVC-iterative"},
-    {CouplingScheme::pvc_unified, "PVC-unified"},
-};
-
-}  // namespace
-
-CouplingScheme parse_coupling_scheme(const std::string& name) {
-  for (const SchemeEntry& e : kSchemes)
-    if (name == e.name) return e.scheme;
-  std::string list;
-  for (const SchemeEntry& e : kSchemes) list += (list.empty() ? "" : ", ") + std::string(e.name);
-  throw std::invalid_argument("unknown coupling scheme \"" + name + "\" (one of " + list + ")");
-}
-
-std::string coupling_scheme_name(CouplingScheme s) {
-  for (const SchemeEntry& e : kSchemes)
-    if (e.scheme == s) return e.name;
-  throw std::invalid_argument("coupling_scheme_name: not a scheme");
-}
-
-const std::vector<std::string>& coupling_scheme_names() {
-  static const std::vector<std::string> names = [] {
-    std::vector<std::string> out;
-    for (const SchemeEntry& e : kSchemes) out.emplace_back(e.name);
-    return out;
-  }();
-  return names;
-}
-
-const std::vector<CouplingScheme>& coupling_schemes() {
-  static const std::vector<CouplingScheme> schemes = [] {
-    std::vector<CouplingScheme> out;
-    for (const SchemeEntry& e : kSchemes) out.push_back(e.scheme);
-    return out;
-  }();
-  return schemes;
-}
-
-bool scheme_uses_viscosity(CouplingScheme s) {
-  switch (s) {
-    case CouplingScheme::pc_vc_pc_unified:
-    case CouplingScheme::pv_c:
-    case CouplingScheme::c_pv:
-    case CouplingScheme::pvc_iterative:
-    case CouplingScheme::pvc_unified: return true;
-    default: return false;
-  }
-}
-
-bool scheme_is_iterative(CouplingScheme s) {
-  return s == CouplingScheme::pc_iterative || s == CouplingScheme::pvc_iterative;
-}
-
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 double inf_norm(const VectorX& v) { return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0; }
 
@@ -265,10 +191,10 @@ std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>&
                                                     const StokesWeights& w, StressForm form,
                                                     StokesUnknowns unknowns, const VectorX& u_star,
                                                     const std::vector<RigidBody<Dim>>& bodies,
-                                                    const std::string& backend) {
+                                                    Backend backend) {
   const ContactSystem<Dim> contacts(bodies, in.contacts, in.contact_params);
   return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, w, in.dt, u_star, bodies,
-                                                 in.solids, contacts, unknowns, backend);
+                                                 in.solids, contacts, backend, unknowns);
 }
 
 /// u, p, tau, v, lambda, z of the final system and unknowns.
@@ -297,22 +223,22 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
                            const StaggeredSettings& settings, const CoupledSchemeOptions& options,
                            CoupledSolveResult& r) {
   // the operators, timed with their solves (the unified solves' timings include theirs too)
-  auto t0 = Clock::now();
+  Stopwatch t0;
   const FluidBodyOperator<Dim> fluid(s);
-  r.fluid_seconds += seconds_since(t0);
-  t0 = Clock::now();
+  r.fluid_seconds += t0.seconds();
+  t0.restart();
   const ContactSolve<Dim> contact(s, settings);
-  r.contact_seconds += seconds_since(t0);
+  r.contact_seconds += t0.seconds();
   Unknowns x = zero_unknowns(s);
   auto run_fluid = [&]() {
-    const auto t0 = Clock::now();
+    const Stopwatch t0;
     r.fluid_iterations += fluid_solve(s, fluid, settings, x, r);
-    r.fluid_seconds += seconds_since(t0);
+    r.fluid_seconds += t0.seconds();
   };
   auto run_contact = [&](int rounds, bool cold = false) {
-    const auto t0 = Clock::now();
+    const Stopwatch t0;
     const int done = contact.solve(x, rounds, cold, r.contact_iterations, r);
-    r.contact_seconds += seconds_since(t0);
+    r.contact_seconds += t0.seconds();
     return done;
   };
   const int rounds = std::max(1, settings.max_iterations);
@@ -363,14 +289,11 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
 
 template <int Dim>
 CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme,
-                                      const StaggeredSettings& settings,
+                                      Backend backend, const StaggeredSettings& settings,
                                       const CoupledSchemeOptions& options) {
-  const auto t_start = Clock::now();
+  const Stopwatch t_start;
   if (in.u_star.size() != in.grid.num_faces())
     throw std::invalid_argument("solve_coupled_step: u_star must have one entry per face");
-  if (options.backend != "explicit" && options.backend != "matrixfree")
-    throw std::invalid_argument("solve_coupled_step: unknown back end \"" + options.backend +
-                                "\" (one of explicit, matrixfree)");
   CoupledSolveResult r;
   // P.. C schemes: inviscid (viscosity zeroed, so no stress unknowns)
   StokesWeights inviscid = in.weights;
@@ -383,10 +306,10 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     // section 6.2: PC-unified -> (u1, v1), VC-unified -> (u2, v2), PC-unified -> final
     const auto s1 = build_system(in, inviscid, StressForm::reduced,
                                  StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
-                                 options.backend);
-    const auto t1 = Clock::now();
+                                 backend);
+    const Stopwatch t1;
     const Unknowns x1 = unified_solve(*s1, settings, r, r.coupled_iterations);
-    const double pc1_seconds = seconds_since(t1);
+    const double pc1_seconds = t1.seconds();
     const VectorX u1 = s1->fluid_velocities(x1.x_fluid);
     const VectorX v1 = s1->body_velocities(x1.x_fluid, x1.lambda, x1.z);
     const VectorX p1 = s1->pressure_cells(x1.x_fluid);
@@ -396,10 +319,10 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     Unknowns x2;
     if (!non_newtonian) {
       s2 = build_system(in, in.weights, StressForm::full, StokesUnknowns::stress_only, u1,
-                        with_velocities(in.bodies, dof, v1), options.backend);
-      const auto t2 = Clock::now();
+                        with_velocities(in.bodies, dof, v1), backend);
+      const Stopwatch t2;
       x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
-      r.viscosity_coupled_seconds = seconds_since(t2);
+      r.viscosity_coupled_seconds = t2.seconds();
     } else {
       // Algorithm 2 around VC-unified, every round from (u1, v1) with eta^k
       StokesWeights w = in.weights;
@@ -407,10 +330,10 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
       for (int k = 0; k < viscosity_rounds; ++k) {
         w.viscosity = eta;
         s2 = build_system(in, w, StressForm::full, StokesUnknowns::stress_only, u1,
-                          with_velocities(in.bodies, dof, v1), options.backend);
-        const auto t2 = Clock::now();
+                          with_velocities(in.bodies, dof, v1), backend);
+        const Stopwatch t2;
         x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
-        r.viscosity_coupled_seconds += seconds_since(t2);
+        r.viscosity_coupled_seconds += t2.seconds();
         eta = options.update_viscosity(s2->stress_full(x2.x_fluid), w.viscosity);
       }
     }
@@ -420,17 +343,17 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
 
     const auto s3 = build_system(in, inviscid, StressForm::reduced,
                                  StokesUnknowns::pressure_and_stress, u2,
-                                 with_velocities(in.bodies, dof, v2), options.backend);
-    const auto t3 = Clock::now();
+                                 with_velocities(in.bodies, dof, v2), backend);
+    const Stopwatch t3;
     const Unknowns x3 = unified_solve(*s3, settings, r, r.coupled_iterations);
-    r.coupled_seconds = pc1_seconds + r.viscosity_coupled_seconds + seconds_since(t3);
+    r.coupled_seconds = pc1_seconds + r.viscosity_coupled_seconds + t3.seconds();
     r.coupled_iterations += r.viscosity_coupled_iterations;
     finish(*s3, x3, r);
     r.pressure = p1 + r.pressure;
     r.stress = tau2;
     count_dofs(*s1, r);
     r.stress_dofs = s2->num_stress();
-    r.total_seconds = seconds_since(t_start);
+    r.total_seconds = t_start.seconds();
     return r;
   }
 
@@ -444,11 +367,11 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     for (int k = 0; k < viscosity_rounds; ++k) {
       w.viscosity = eta;
       s = build_system(in, w, StressForm::reduced, StokesUnknowns::pressure_and_stress, in.u_star,
-                       in.bodies, options.backend);
+                       in.bodies, backend);
       if (scheme == CouplingScheme::pvc_unified) {
-        const auto t0 = Clock::now();
+        const Stopwatch t0;
         x = unified_solve(*s, settings, r, r.coupled_iterations);
-        r.coupled_seconds += seconds_since(t0);
+        r.coupled_seconds += t0.seconds();
       } else {
         x = partitioned_solve(*s, scheme, settings, options, r);
       }
@@ -456,23 +379,23 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     }
     count_dofs(*s, r);
     finish(*s, x, r);
-    r.total_seconds = seconds_since(t_start);
+    r.total_seconds = t_start.seconds();
     return r;
   }
   const auto s = build_system(in, viscous ? in.weights : inviscid, StressForm::reduced,
                               StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
-                              options.backend);
+                              backend);
   count_dofs(*s, r);
   Unknowns x;
   if (scheme == CouplingScheme::pc_unified || scheme == CouplingScheme::pvc_unified) {
-    const auto t0 = Clock::now();
+    const Stopwatch t0;
     x = unified_solve(*s, settings, r, r.coupled_iterations);
-    r.coupled_seconds = seconds_since(t0);
+    r.coupled_seconds = t0.seconds();
   } else {
     x = partitioned_solve(*s, scheme, settings, options, r);
   }
   finish(*s, x, r);
-  r.total_seconds = seconds_since(t_start);
+  r.total_seconds = t_start.seconds();
   return r;
 }
 
@@ -501,10 +424,10 @@ template StokesWeights coupled_stokes_weights<3>(const MacGrid<3>&, const SolidW
                                                  const VectorX&, double, double);
 
 template CoupledSolveResult solve_coupled_step<2>(const CoupledStepInput<2>&, CouplingScheme,
-                                                  const StaggeredSettings&,
+                                                  Backend, const StaggeredSettings&,
                                                   const CoupledSchemeOptions&);
 template CoupledSolveResult solve_coupled_step<3>(const CoupledStepInput<3>&, CouplingScheme,
-                                                  const StaggeredSettings&,
+                                                  Backend, const StaggeredSettings&,
                                                   const CoupledSchemeOptions&);
 
 }  // namespace monolith

@@ -19,52 +19,25 @@
 ///     solve_staggered_projections (friction first, normal last), by MPRGP on the coloured
 ///     sparse A33 / A44 with the diagonal boost gamma of section 4.4.5, for given x_f.
 ///
-/// Both back ends of MonolithicSystem run every scheme (CoupledSchemeOptions::backend): the
+/// Both back ends of MonolithicSystem run every scheme (solve_coupled_step's `backend`): the
 /// operators (FluidBodyOperator, MonolithicOperator) and the solver code are the same, only the
 /// fluid part and the rigid products are explicit matrices or stencils (docs/coupling.md, "Back
 /// ends of the coupled step").
 
 #include <functional>
-#include <string>
 #include <vector>
 
 #include "reference/contact/collision.hpp"
-#include "reference/core/common.hpp"
 #include "reference/contact/contact_system.hpp"
+#include "reference/core/common.hpp"
 #include "reference/coupling/coupling.hpp"
+#include "reference/coupling/coupling_scheme.hpp"
+#include "reference/fluid/stokes_system.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/rigid/rigid_body.hpp"
-#include "reference/fluid/stokes_system.hpp"
+#include "reference/solvers/backend.hpp"
 
 namespace monolith {
-
-/// Section 6: the nine ways of solving one step's pressure, viscosity and contact.
-enum class CouplingScheme {
-  p_c,               ///< P-C: fluid solve (no viscosity), then contact solve (section 6.1)
-  c_p,               ///< C-P: contact solve, then fluid solve (no viscosity)
-  pc_iterative,      ///< PC-iterative: block Gauss-Seidel P, C, P, C, ... (staggered projections)
-  pc_unified,        ///< PC-unified: the MLCP (26) without stress unknowns
-  pc_vc_pc_unified,  ///< PC-VC-PC-unified: PC-unified, VC-unified, PC-unified (section 6.2)
-  pv_c,              ///< PV-C: Stokes solve, then contact solve (section 6.3)
-  c_pv,              ///< C-PV: contact solve, then Stokes solve
-  pvc_iterative,     ///< PVC-iterative: block Gauss-Seidel PV, C, PV, C, ...
-  pvc_unified        ///< PVC-unified: the MLCP (26) over (tau, p, lambda) (section 4.2)
-};
-
-/// The paper's names "P-C", "C-P", "PC-iterative", "PC-unified", "PC-VC-PC-unified", "PV-C",
-/// "C-PV", "PVC-iterative", "PVC-unified"; std::invalid_argument (listing all nine) otherwise.
-CouplingScheme parse_coupling_scheme(const std::string& name);
-/// The paper's name of `s`.
-std::string coupling_scheme_name(CouplingScheme s);
-/// The nine names, in the order of the enum.
-const std::vector<std::string>& coupling_scheme_names();
-/// The nine schemes, in the order of the enum.
-const std::vector<CouplingScheme>& coupling_schemes();
-/// true for PC-VC-PC-unified, PV-C, C-PV, PVC-iterative, PVC-unified. The P.. C schemes drop
-/// viscosity: the liquid is treated as inviscid, as the simulator does without bodies.
-bool scheme_uses_viscosity(CouplingScheme s);
-/// true for PC-iterative and PVC-iterative.
-bool scheme_is_iterative(CouplingScheme s);
 
 /// One step's inputs to the pressure / viscosity / contact solves.
 template <int Dim>
@@ -143,14 +116,11 @@ struct CoupledSchemeOptions {
   /// (herschel_bulkley.hpp) provides both. The viscosity of in.weights is then ignored.
   std::function<VectorX(const VectorX& u_star)> initial_viscosity;
   std::function<VectorX(const VectorX& stress, const VectorX& viscosity)> update_viscosity;
-  /// The back end of every MonolithicSystem (eq. (24)) the step builds: "explicit" (assembled
-  /// sparse matrices, the reference oracle) or "matrixfree" (stencils applied on the fly, the
-  /// production path; solver.backend of the scene file). solve_coupled_step throws
-  /// std::invalid_argument on any other name.
-  std::string backend = "explicit";
 };
 
-/// One step's pressure / viscosity / contact solves under `scheme` (section 6). Builds
+/// One step's pressure / viscosity / contact solves under `scheme` (section 6), every
+/// MonolithicSystem on `backend` (assembled sparse matrices, the reference oracle, or stencils
+/// applied on the fly, the production path; solver.backend of a scene). Builds
 /// MonolithicSystem (eq. (24)) once: PV schemes with StressForm::reduced and the input viscosity,
 /// PC schemes with the viscosity zeroed (no stress unknowns). Then, with "fluid" and "contact"
 /// solves as in the file comment:
@@ -189,7 +159,7 @@ struct CoupledSchemeOptions {
 /// breakdown, std::invalid_argument on inconsistent input.
 template <int Dim>
 CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme,
-                                      const StaggeredSettings& settings,
+                                      Backend backend, const StaggeredSettings& settings,
                                       const CoupledSchemeOptions& options = {});
 
 }  // namespace monolith

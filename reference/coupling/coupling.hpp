@@ -20,12 +20,12 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
+#include "reference/grid/stress_grid.hpp"
 #include "reference/rigid/mass_properties.hpp"
 #include "reference/rigid/rigid_body.hpp"
-#include "reference/app/scene.hpp"
-#include "reference/geometry/shape.hpp"
-#include "reference/grid/stress_grid.hpp"
 
 namespace monolith {
 

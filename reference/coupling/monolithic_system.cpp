@@ -47,13 +47,6 @@ class ExplicitStokesOperator : public LinearOperator {
   VectorX diagonal_;
 };
 
-bool parse_backend(const std::string& backend) {
-  if (backend == "explicit") return false;
-  if (backend == "matrixfree") return true;
-  throw std::invalid_argument("MonolithicSystem: unknown back end \"" + backend +
-                              "\" (one of explicit, matrixfree)");
-}
-
 }  // namespace
 
 template <int Dim>
@@ -62,9 +55,9 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
                                         const std::vector<RigidBody<Dim>>& bodies,
                                         const SolidWeights<Dim>& solids,
                                         const ContactSystem<Dim>& contacts,
-                                        StokesUnknowns unknowns, const std::string& backend)
+                                        Backend backend, StokesUnknowns unknowns)
     : grid_(grid), stress_(grid), layout_(stress_, form), w_(w), dt_(dt), u_star_(u_star),
-      backend_(backend), matrix_free_(parse_backend(backend)), contacts_(contacts) {
+      backend_(backend), matrix_free_(backend == Backend::matrix_free), contacts_(contacts) {
   // alpha = 1 / dx^Dim, shared with the contact blocks (section 4.1)
   alpha_ = 1.0 / std::pow(grid.dx(), Dim);
   if (std::abs(contacts.alpha - alpha_) > 1e-12 * alpha_)

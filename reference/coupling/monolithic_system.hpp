@@ -23,15 +23,15 @@
 #include <string>
 #include <vector>
 
-#include "reference/core/common.hpp"
 #include "reference/contact/contact_system.hpp"
+#include "reference/core/common.hpp"
 #include "reference/coupling/coupling.hpp"
-#include "reference/solvers/linear_operator.hpp"
-#include "reference/grid/mac_grid.hpp"
-#include "reference/rigid/rigid_body.hpp"
 #include "reference/fluid/stokes_system.hpp"
-#include "reference/grid/stress_grid.hpp"
 #include "reference/fluid/viscosity.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/rigid/rigid_body.hpp"
+#include "reference/solvers/linear_operator.hpp"
 
 namespace monolith {
 
@@ -60,13 +60,13 @@ class MonolithicSystem {
   /// ContactSystem of the same bodies (its v* is the two-way bodies' v*, its alpha must equal
   /// 1 / dx^Dim: std::invalid_argument otherwise). One-way (fixed, kinematic) bodies enter b1,
   /// b2 only (section 4.4.4). `unknowns` = stress_only drops the pressure block (p fixed at
-  /// zero: the "VC" solve of PC-VC-PC-unified, section 6.2); n_p = 0 then. `backend` is
-  /// "explicit" or "matrixfree" (std::invalid_argument naming both otherwise).
+  /// zero: the "VC" solve of PC-VC-PC-unified, section 6.2); n_p = 0 then. `backend` chooses
+  /// assembled matrices or stencils for the fluid part and the rigid products.
   MonolithicSystem(const MacGrid<Dim>& grid, StressForm form, const StokesWeights& w, double dt,
                    const VectorX& u_star, const std::vector<RigidBody<Dim>>& bodies,
                    const SolidWeights<Dim>& solids, const ContactSystem<Dim>& contacts,
-                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress,
-                   const std::string& backend = "explicit");
+                   Backend backend,
+                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
 
   int num_stress() const { return dofs_.num_stress(); }
   int num_pressure() const { return dofs_.num_pressure(); }
@@ -165,8 +165,7 @@ class MonolithicSystem {
   VectorX pressure_cells(const VectorX& x_fluid) const;
   VectorX stress_full(const VectorX& x_fluid) const;
 
-  /// "explicit" or "matrixfree".
-  const std::string& backend() const { return backend_; }
+  Backend backend() const { return backend_; }
   bool matrix_free() const { return matrix_free_; }
   /// The fluid part F = A_stokes of eq. (24) (the (tau, p) blocks without bodies) as a
   /// LinearOperator: explicit, stokes().A with row-order SSOR sweeps; matrixfree, the
@@ -205,7 +204,7 @@ class MonolithicSystem {
   StokesWeights w_;
   double dt_ = 0.0, alpha_ = 1.0;
   VectorX u_star_;
-  std::string backend_;
+  Backend backend_;
   bool matrix_free_ = false;
   StokesDofs dofs_;
   std::shared_ptr<const ExplicitStokesSystem> stokes_;                 ///< explicit only

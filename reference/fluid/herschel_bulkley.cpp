@@ -13,7 +13,7 @@
 namespace monolith {
 
 HerschelBulkley HerschelBulkley::from_spec(const ViscositySpec& spec) {
-  if (spec.model == "herschel-bulkley") return {spec.k, spec.n, spec.tau0, spec.gamma0};
+  if (spec.model == ViscosityModel::herschel_bulkley) return {spec.k, spec.n, spec.tau0, spec.gamma0};
   HerschelBulkley m;
   m.k = spec.eta;
   m.gamma0 = spec.gamma0;
@@ -36,7 +36,7 @@ HerschelBulkley bingham_model(double k, double tau0, double gamma0) {
 
 bool has_non_newtonian(const std::vector<LiquidSpec>& liquids) {
   return std::any_of(liquids.begin(), liquids.end(), [](const LiquidSpec& l) {
-    return l.viscosity.model == "herschel-bulkley";
+    return l.viscosity.model == ViscosityModel::herschel_bulkley;
   });
 }
 

@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
-#include "reference/app/scene.hpp"
+#include "reference/fluid/liquid_spec.hpp"
 #include "reference/grid/stress_grid.hpp"
 
 namespace monolith {

@@ -423,7 +423,7 @@ VectorX scatter_pressure(const PressureDofs& dofs, const VectorX& p_dofs, int nu
 
 template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
-                                   const std::string& backend, const PcgSettings& settings,
+                                   Backend backend, const PcgSettings& settings,
                                    VectorX& u) {
   PressureSolveResult result;
   // line 7: active DOFs
@@ -431,16 +431,18 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
   result.dofs = dofs.size();
   VectorX p = VectorX::Zero(dofs.size());
   // lines 8-10: assemble (or set up the stencil) and solve
-  if (backend == "explicit") {
-    const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
-    const SparseMatrixOperator op(sys.A, dofs.null_space);
-    result.pcg = pcg_solve(op, sys.b, p, settings);
-  } else if (backend == "matrixfree") {
-    const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
-    result.pcg = pcg_solve(op, op.rhs(u), p, settings);
-  } else {
-    throw std::invalid_argument("solve_pressure: unknown backend '" + backend +
-                                "' (explicit, matrixfree)");
+  switch (backend) {
+    case Backend::explicit_matrices: {
+      const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
+      const SparseMatrixOperator op(sys.A, dofs.null_space);
+      result.pcg = pcg_solve(op, sys.b, p, settings);
+      break;
+    }
+    case Backend::matrix_free: {
+      const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
+      result.pcg = pcg_solve(op, op.rhs(u), p, settings);
+      break;
+    }
   }
   // line 11: velocity update
   result.pressure = scatter_pressure(dofs, p, grid.num_cells());
@@ -458,7 +460,7 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
   template void apply_pressure_update<D>(const MacGrid<D>&, const PressureWeights&, double,      \
                                          const VectorX&, VectorX&);                              \
   template PressureSolveResult solve_pressure<D>(const MacGrid<D>&, const PressureWeights&,      \
-                                                 double, const std::string&, const PcgSettings&, \
+                                                 double, Backend, const PcgSettings&, \
                                                  VectorX&);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)

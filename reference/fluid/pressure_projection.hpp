@@ -17,8 +17,9 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
-#include "reference/solvers/linear_operator.hpp"
 #include "reference/grid/mac_grid.hpp"
+#include "reference/solvers/backend.hpp"
+#include "reference/solvers/linear_operator.hpp"
 #include "reference/solvers/pcg.hpp"
 
 namespace monolith {
@@ -143,11 +144,11 @@ struct PressureSolveResult {
 };
 
 /// Lines 7-11 of Algorithm 1 for the pressure alone: selects DOFs, builds the system with the
-/// back end `backend` ("explicit" or "matrixfree"), solves it with SSOR-PCG and updates u
-/// (which enters as u*). Throws std::invalid_argument on an unknown backend name.
+/// back end `backend` (assembled matrices or stencils), solves it with SSOR-PCG and updates u
+/// (which enters as u*).
 template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
-                                   const std::string& backend, const PcgSettings& settings,
+                                   Backend backend, const PcgSettings& settings,
                                    VectorX& u);
 
 }  // namespace monolith

@@ -874,7 +874,7 @@ double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
 template <int Dim>
 StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
                                StokesUnknowns unknowns, StressForm form,
-                               const std::string& backend, const PcgSettings& settings,
+                               Backend backend, const PcgSettings& settings,
                                VectorX& u) {
   StokesSolveResult result;
   const StressLayout<Dim> layout(StressGrid<Dim>(grid), form);
@@ -884,16 +884,18 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   result.pressure_dofs = dofs.num_pressure();
   VectorX x = VectorX::Zero(dofs.size());
   // lines 8-10: assemble (or set up the stencils) and solve
-  if (backend == "explicit") {
-    const ExplicitStokesSystem sys = assemble_explicit_stokes(grid, layout, w, dofs, dt, u);
-    const SparseMatrixOperator op(sys.A, dofs.null_space);
-    result.pcg = pcg_solve(op, sys.b, x, settings);
-  } else if (backend == "matrixfree") {
-    const MatrixFreeStokesOperator<Dim> op(grid, layout, w, dofs, dt);
-    result.pcg = pcg_solve(op, op.rhs(u), x, settings);
-  } else {
-    throw std::invalid_argument("solve_stokes: unknown backend '" + backend +
-                                "' (explicit, matrixfree)");
+  switch (backend) {
+    case Backend::explicit_matrices: {
+      const ExplicitStokesSystem sys = assemble_explicit_stokes(grid, layout, w, dofs, dt, u);
+      const SparseMatrixOperator op(sys.A, dofs.null_space);
+      result.pcg = pcg_solve(op, sys.b, x, settings);
+      break;
+    }
+    case Backend::matrix_free: {
+      const MatrixFreeStokesOperator<Dim> op(grid, layout, w, dofs, dt);
+      result.pcg = pcg_solve(op, op.rhs(u), x, settings);
+      break;
+    }
   }
   // line 11: velocity update
   result.stress = scatter_stress(layout, dofs, x);
@@ -941,7 +943,7 @@ StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& so
                                    const StokesWeights&, const StokesDofs&, double,              \
                                    const VectorX&, const VectorX&);                              \
   template StokesSolveResult solve_stokes<D>(const MacGrid<D>&, const StokesWeights&, double,    \
-                                             StokesUnknowns, StressForm, const std::string&,     \
+                                             StokesUnknowns, StressForm, Backend,     \
                                              const PcgSettings&, VectorX&);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)

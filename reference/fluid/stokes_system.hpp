@@ -26,13 +26,14 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
-#include "reference/solvers/linear_operator.hpp"
-#include "reference/grid/mac_grid.hpp"
-#include "reference/solvers/pcg.hpp"
 #include "reference/fluid/pressure_projection.hpp"
-#include "reference/app/scene.hpp"
-#include "reference/grid/stress_grid.hpp"
 #include "reference/fluid/viscosity.hpp"
+#include "reference/grid/boundary.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/solvers/backend.hpp"
+#include "reference/solvers/linear_operator.hpp"
+#include "reference/solvers/pcg.hpp"
 
 namespace monolith {
 
@@ -257,13 +258,12 @@ struct StokesSolveResult {
   int pressure_dofs = 0, stress_dofs = 0;
 };
 
-/// Lines 7-11 of Algorithm 1 for the Stokes problem: select DOFs, build (backend "explicit" or
-/// "matrixfree"), SSOR-PCG, update u (which enters as u*). Throws std::invalid_argument on an
-/// unknown backend name.
+/// Lines 7-11 of Algorithm 1 for the Stokes problem: select DOFs, build (assembled matrices or
+/// stencils, by `backend`), SSOR-PCG, update u (which enters as u*).
 template <int Dim>
 StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
                                StokesUnknowns unknowns, StressForm form,
-                               const std::string& backend, const PcgSettings& settings,
+                               Backend backend, const PcgSettings& settings,
                                VectorX& u);
 
 }  // namespace monolith

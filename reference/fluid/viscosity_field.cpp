@@ -10,7 +10,8 @@ namespace monolith {
 std::vector<double> liquid_viscosities(const std::vector<LiquidSpec>& liquids) {
   std::vector<double> eta;
   eta.reserve(liquids.size());
-  for (const auto& l : liquids) eta.push_back(l.viscosity.model == "newtonian" ? l.viscosity.eta : 0.0);
+  for (const auto& l : liquids)
+    eta.push_back(l.viscosity.model == ViscosityModel::newtonian ? l.viscosity.eta : 0.0);
   return eta;
 }
 

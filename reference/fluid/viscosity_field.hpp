@@ -8,10 +8,10 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/fluid/liquid_spec.hpp"
 #include "reference/grid/mac_grid.hpp"
-#include "reference/particles/particles.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/grid/stress_grid.hpp"
+#include "reference/particles/particles.hpp"
 
 namespace monolith {
 

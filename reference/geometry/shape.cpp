@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 #include <utility>
 
 #include "reference/core/errors.hpp"
@@ -358,70 +359,76 @@ ShapePtr<Dim> make_shape(const ShapeSpec& spec, const std::string& key_path) {
                      " numbers (" + (Dim == 2 ? "one angle in 2D" : "an axis-angle 3-vector in 3D") +
                      ")");
   }
-  // dimension-specific types first (polygon, mesh, bunny)
-  if (ShapePtr<Dim> s = make_dimension_shape<Dim>(spec, key_path)) return s;
-
-  const std::string& t = spec.type;
-  if (t == "box") {
-    const Vec<Dim> c = vec_param<Dim>(spec.center, key_path, "center");
-    const Vec<Dim> h = vec_param<Dim>(spec.half_size, key_path, "half_size");
-    if (!(h.minCoeff() > 0.0)) {
-      throw InputError(key_path + ".half_size: " + describe(spec.half_size) +
-                       " (positive numbers)");
+  switch (spec.type) {
+    case ShapeType::polygon:
+    case ShapeType::mesh:
+    case ShapeType::bunny:
+      // the dimension-specific types (dim2/shapes_2d.cpp, dim3/shapes_3d.cpp)
+      return make_dimension_shape<Dim>(spec, key_path);
+    case ShapeType::box: {
+      const Vec<Dim> c = vec_param<Dim>(spec.center, key_path, "center");
+      const Vec<Dim> h = vec_param<Dim>(spec.half_size, key_path, "half_size");
+      if (!(h.minCoeff() > 0.0)) {
+        throw InputError(key_path + ".half_size: " + describe(spec.half_size) +
+                         " (positive numbers)");
+      }
+      return apply_rotation<Dim>(std::make_shared<BoxShape<Dim>>(c, h), spec, c);
     }
-    return apply_rotation<Dim>(std::make_shared<BoxShape<Dim>>(c, h), spec, c);
+    case ShapeType::sphere: {
+      const Vec<Dim> c = vec_param<Dim>(spec.center, key_path, "center");
+      require_positive(spec.radius, key_path, "radius");
+      // a sphere is rotation invariant about its centre
+      return std::make_shared<SphereShape<Dim>>(c, spec.radius);
+    }
+    case ShapeType::shell:
+    case ShapeType::bowl: {
+      const Vec<Dim> c = vec_param<Dim>(spec.center, key_path, "center");
+      require_positive(spec.radius, key_path, "radius");
+      require_positive(spec.thickness, key_path, "thickness");
+      if (spec.thickness > spec.radius) {
+        std::ostringstream s;
+        s << key_path << ".thickness: " << spec.thickness << " exceeds the radius " << spec.radius
+          << " (0 < thickness <= radius)";
+        throw InputError(s.str());
+      }
+      if (spec.type == ShapeType::shell)
+        return std::make_shared<ShellShape<Dim>>(c, spec.radius, spec.thickness);
+      return apply_rotation<Dim>(std::make_shared<BowlShape<Dim>>(c, spec.radius, spec.thickness),
+                                 spec, c);
+    }
+    case ShapeType::halfspace: {
+      const Vec<Dim> n = vec_param<Dim>(spec.normal, key_path, "normal");
+      if (!(n.norm() > 0.0) || !n.allFinite()) {
+        throw InputError(key_path + ".normal: " + describe(spec.normal) + " (a non-zero vector)");
+      }
+      return apply_rotation<Dim>(std::make_shared<HalfspaceShape<Dim>>(n, spec.offset), spec,
+                                 Vec<Dim>::Zero());
+    }
+    case ShapeType::set_union:
+    case ShapeType::set_difference: {
+      if (spec.shapes.empty()) {
+        throw InputError(key_path + ".shapes: is empty (at least one shape)");
+      }
+      std::vector<ShapePtr<Dim>> children;
+      for (std::size_t i = 0; i < spec.shapes.size(); ++i) {
+        children.push_back(
+            make_shape<Dim>(spec.shapes[i], key_path + ".shapes[" + std::to_string(i) + "]"));
+      }
+      // rotation centre: the centre of the first child's bounds (the origin if unbounded)
+      const Box<Dim> first = children.front()->bounds();
+      Vec<Dim> pivot = Vec<Dim>::Zero();
+      if (!first.isEmpty() && first.min().allFinite() && first.max().allFinite()) {
+        pivot = first.center();
+      }
+      ShapePtr<Dim> s;
+      if (spec.type == ShapeType::set_union)
+        s = std::make_shared<UnionShape<Dim>>(std::move(children));
+      else
+        s = std::make_shared<DifferenceShape<Dim>>(std::move(children));
+      return apply_rotation<Dim>(std::move(s), spec, pivot);
+    }
   }
-  if (t == "sphere") {
-    const Vec<Dim> c = vec_param<Dim>(spec.center, key_path, "center");
-    require_positive(spec.radius, key_path, "radius");
-    // a sphere is rotation invariant about its centre
-    return std::make_shared<SphereShape<Dim>>(c, spec.radius);
-  }
-  if (t == "shell" || t == "bowl") {
-    const Vec<Dim> c = vec_param<Dim>(spec.center, key_path, "center");
-    require_positive(spec.radius, key_path, "radius");
-    require_positive(spec.thickness, key_path, "thickness");
-    if (spec.thickness > spec.radius) {
-      std::ostringstream s;
-      s << key_path << ".thickness: " << spec.thickness << " exceeds the radius " << spec.radius
-        << " (0 < thickness <= radius)";
-      throw InputError(s.str());
-    }
-    if (t == "shell") return std::make_shared<ShellShape<Dim>>(c, spec.radius, spec.thickness);
-    return apply_rotation<Dim>(std::make_shared<BowlShape<Dim>>(c, spec.radius, spec.thickness),
-                               spec, c);
-  }
-  if (t == "halfspace") {
-    const Vec<Dim> n = vec_param<Dim>(spec.normal, key_path, "normal");
-    if (!(n.norm() > 0.0) || !n.allFinite()) {
-      throw InputError(key_path + ".normal: " + describe(spec.normal) + " (a non-zero vector)");
-    }
-    return apply_rotation<Dim>(std::make_shared<HalfspaceShape<Dim>>(n, spec.offset), spec,
-                               Vec<Dim>::Zero());
-  }
-  if (t == "union" || t == "difference") {
-    if (spec.shapes.empty()) {
-      throw InputError(key_path + ".shapes: is empty (at least one shape)");
-    }
-    std::vector<ShapePtr<Dim>> children;
-    for (std::size_t i = 0; i < spec.shapes.size(); ++i) {
-      children.push_back(
-          make_shape<Dim>(spec.shapes[i], key_path + ".shapes[" + std::to_string(i) + "]"));
-    }
-    // rotation centre: the centre of the first child's bounds (the origin if unbounded)
-    const Box<Dim> first = children.front()->bounds();
-    Vec<Dim> pivot = Vec<Dim>::Zero();
-    if (!first.isEmpty() && first.min().allFinite() && first.max().allFinite()) {
-      pivot = first.center();
-    }
-    ShapePtr<Dim> s;
-    if (t == "union") s = std::make_shared<UnionShape<Dim>>(std::move(children));
-    else s = std::make_shared<DifferenceShape<Dim>>(std::move(children));
-    return apply_rotation<Dim>(std::move(s), spec, pivot);
-  }
-  throw InputError(key_path + ".type: unknown shape type \"" + t +
-                   "\" (box, sphere, bowl, shell, halfspace, polygon, mesh, bunny, union, "
-                   "difference)");
+  throw std::invalid_argument("make_shape: not a shape type");
 }
 
 // --- volume_inside -----------------------------------------------------------------------------

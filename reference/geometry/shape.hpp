@@ -9,7 +9,7 @@
 #include <string>
 
 #include "reference/core/common.hpp"
-#include "reference/app/scene.hpp"
+#include "reference/geometry/shape_spec.hpp"
 
 namespace monolith {
 

@@ -11,8 +11,8 @@
 /// Numbering: cell index = c[0] + cells[0] (c[1] + cells[1] c[2]) (x fastest). Faces of all axes are
 /// numbered in one vector, axis 0 first: face index = face_offset(a) + linear index within axis a.
 /// This is the order of the velocity vector u of the paper, so G is num_faces x num_cells.
-/// The stress DOFs of issue 3 (cell centres for diagonal components, nodes in 2D / edges in 3D
-/// for off-diagonal ones) extend this numbering in the same way.
+/// The stress DOFs (stress_grid.hpp: cell centres for diagonal components, nodes in 2D / edges in
+/// 3D for off-diagonal ones) extend this numbering in the same way.
 
 #include <array>
 #include <utility>
@@ -124,7 +124,7 @@ class MacGrid {
 /// A regular lattice of sample points origin + index * spacing, index in [0, dims) (x fastest).
 /// The canonical one is the half lattice of a MacGrid (spacing dx/2, dims 2 cells + 1): it holds
 /// every cell centre, face centre, node and (3D) edge centre, so the corners of every control
-/// volume (cell, face, and the stress control volumes of issue 3) are lattice points, and level
+/// volume (cell, face, and the stress control volumes of stress_grid.hpp) are lattice points, and level
 /// sets sampled on it give all volume fractions (volume_fractions.hpp) without re-sampling.
 template <int Dim>
 struct SampleLattice {

@@ -29,8 +29,8 @@
 #include <array>
 
 #include "reference/core/common.hpp"
+#include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/grid/stress_grid.hpp"
 
 namespace monolith {

@@ -17,9 +17,9 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
-#include "reference/grid/mac_grid.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/geometry/shape.hpp"
+#include "reference/grid/boundary.hpp"
+#include "reference/grid/mac_grid.hpp"
 
 namespace monolith {
 

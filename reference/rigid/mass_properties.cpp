@@ -187,7 +187,7 @@ bool dimension_properties(const ShapeSpec& spec, double density, MassProperties<
 }  // namespace
 
 bool unrotated_geometry(const ShapeSpec& spec, std::vector<Vec<2>>* outline, Vec<2>* pivot) {
-  if (spec.type == "polygon") {
+  if (spec.type == ShapeType::polygon) {
     // the vertices as given, rotated about their mean
     outline->clear();
     for (const auto& q : spec.points) outline->emplace_back(q[0], q[1]);
@@ -196,7 +196,7 @@ bool unrotated_geometry(const ShapeSpec& spec, std::vector<Vec<2>>* outline, Vec
     *pivot = centroid / static_cast<double>(outline->size());
     return true;
   }
-  if (spec.type == "bunny") {
+  if (spec.type == ShapeType::bunny) {
     *pivot = to_vec<2>(spec.center);
     *outline = bunny_outline(*pivot, spec.size);
     return true;
@@ -205,7 +205,7 @@ bool unrotated_geometry(const ShapeSpec& spec, std::vector<Vec<2>>* outline, Vec
 }
 
 bool unrotated_geometry(const ShapeSpec& spec, TriangleMesh* mesh, Vec<3>* pivot) {
-  if (spec.type == "mesh") {
+  if (spec.type == ShapeType::mesh) {
     // the unrotated mesh, as make_shape reads it (flipped if inward-oriented)
     ShapeSpec plain = spec;
     plain.rotation.clear();
@@ -216,7 +216,7 @@ bool unrotated_geometry(const ShapeSpec& spec, TriangleMesh* mesh, Vec<3>* pivot
     *pivot = spec.translate.empty() ? Vec<3>(Vec<3>::Zero()) : to_vec<3>(spec.translate);
     return true;
   }
-  if (spec.type == "bunny") {
+  if (spec.type == ShapeType::bunny) {
     *pivot = to_vec<3>(spec.center);
     *mesh = placed_bunny_mesh(*pivot, spec.size);
     return true;
@@ -354,22 +354,22 @@ MassProperties<Dim> integrate_mass_properties(const Shape<Dim>& shape, const Box
 template <int Dim>
 MassProperties<Dim> mass_properties(const ShapeSpec& spec, const Shape<Dim>& shape,
                                     double density) {
-  const std::string& t = spec.type;
-  if (t == "box") {
+  const ShapeType t = spec.type;
+  if (t == ShapeType::box) {
     const Vec<Dim> c = to_vec<Dim>(spec.center);
     return rotate<Dim>(box_properties<Dim>(c, to_vec<Dim>(spec.half_size), density), spec, c);
   }
-  if (t == "sphere") return ball_properties<Dim>(to_vec<Dim>(spec.center), spec.radius, 0.0, density);
-  if (t == "shell") {
+  if (t == ShapeType::sphere) return ball_properties<Dim>(to_vec<Dim>(spec.center), spec.radius, 0.0, density);
+  if (t == ShapeType::shell) {
     return ball_properties<Dim>(to_vec<Dim>(spec.center), spec.radius,
                                 spec.radius - spec.thickness, density);
   }
-  if (t == "bowl") {
+  if (t == ShapeType::bowl) {
     const Vec<Dim> c = to_vec<Dim>(spec.center);
     return rotate<Dim>(bowl_properties<Dim>(c, spec.radius, spec.radius - spec.thickness, density),
                        spec, c);
   }
-  if (t == "halfspace") {
+  if (t == ShapeType::halfspace) {
     throw InputError("shape.type: a halfspace has no finite volume (a bounded shape for a "
                      "dynamic or kinematic body)");
   }
@@ -378,8 +378,8 @@ MassProperties<Dim> mass_properties(const ShapeSpec& spec, const Shape<Dim>& sha
   // union, difference, anything else: lattice integration of the SDF
   const Box<Dim> b = shape.bounds();
   if (b.isEmpty() || !b.min().allFinite() || !b.max().allFinite()) {
-    throw InputError("shape.type: \"" + t + "\" is unbounded (a bounded shape for a dynamic or "
-                     "kinematic body)");
+    throw InputError("shape.type: \"" + enum_name(t) +
+                     "\" is unbounded (a bounded shape for a dynamic or kinematic body)");
   }
   return integrate_mass_properties<Dim>(shape, b, Dim == 2 ? kIntegrationCells2d
                                                             : kIntegrationCells3d, density);

@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/geometry/shape.hpp"
+#include "reference/geometry/shape_spec.hpp"
 
 namespace monolith {
 

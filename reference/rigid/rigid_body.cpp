@@ -276,25 +276,18 @@ bool dimension_samples(const ShapeSpec& spec, double spacing, std::vector<Vec<3>
 
 }  // namespace
 
-BodyMotion parse_body_motion(const std::string& motion) {
-  if (motion == "dynamic") return BodyMotion::dynamic;
-  if (motion == "static") return BodyMotion::fixed;
-  if (motion == "kinematic") return BodyMotion::kinematic;
-  throw InputError("motion: \"" + motion + "\" (dynamic, static, kinematic)");
-}
-
 template <int Dim>
 std::vector<Vec<Dim>> make_surface_samples(const ShapeSpec& spec, const Shape<Dim>& shape,
                                            double spacing) {
   std::vector<Vec<Dim>> pts;
   if (!is_bounded(shape.bounds()) || !(spacing > 0.0)) return pts;
-  if (spec.type == "box") {
+  if (spec.type == ShapeType::box) {
     const Vec<Dim> c = to_vec<Dim>(spec.center);
     pts = box_samples<Dim>(c, to_vec<Dim>(spec.half_size), spacing);
     rotate_points<Dim>(&pts, spec, c);
-  } else if (spec.type == "sphere") {
+  } else if (spec.type == ShapeType::sphere) {
     pts = sphere_samples<Dim>(to_vec<Dim>(spec.center), spec.radius, spacing);
-  } else if (spec.type == "shell") {
+  } else if (spec.type == ShapeType::shell) {
     // outer and inner spheres
     const Vec<Dim> c = to_vec<Dim>(spec.center);
     pts = sphere_samples<Dim>(c, spec.radius, spacing);
@@ -312,7 +305,7 @@ template <int Dim>
 RigidBody<Dim>::RigidBody(const BodySpec& spec, ShapePtr<Dim> shape,
                           const MassProperties<Dim>& props, double sample_spacing)
     : name(spec.name),
-      motion(parse_body_motion(spec.motion)),
+      motion(spec.motion),
       friction(spec.friction),
       restitution(spec.restitution),
       path(spec.path),
@@ -327,7 +320,7 @@ RigidBody<Dim>::RigidBody(const BodySpec& spec, ShapePtr<Dim> shape,
       rest_shape_(std::move(shape)),
       rest_com_(props.center_of_mass),
       shape_type_(spec.shape.type) {
-  if (spec.shape.type == "box") {
+  if (spec.shape.type == ShapeType::box) {
     // exact gradients for boxes (collision normals at edges)
     is_box_ = true;
     box_center_ = to_vec<Dim>(spec.shape.center);
@@ -357,7 +350,7 @@ RigidBody<Dim>::RigidBody(const BodySpec& spec, ShapePtr<Dim> shape,
     sample_spacing_ = s;
     samples_ = make_surface_samples<Dim>(spec.shape, *rest_shape_, s);
   }
-  if (spec.shape.type == "sphere") {
+  if (spec.shape.type == ShapeType::sphere) {
     is_sphere_ = true;
     sphere_radius_ = spec.shape.radius;
   }
@@ -577,11 +570,11 @@ std::vector<RigidBody<Dim>> make_bodies(const SceneDesc& scene, double sample_sp
     const BodySpec& spec = scene.bodies[i];
     const std::string key = "bodies[" + std::to_string(i) + "].shape";
     ShapePtr<Dim> shape = make_shape<Dim>(spec.shape, key);
-    const BodyMotion motion = parse_body_motion(spec.motion);
     MassProperties<Dim> props;
     const Box<Dim> b = shape->bounds();
-    const bool lattice_only = spec.shape.type == "union" || spec.shape.type == "difference";
-    if (motion == BodyMotion::fixed && (!is_bounded(b) || lattice_only)) {
+    const bool lattice_only =
+        spec.shape.type == ShapeType::set_union || spec.shape.type == ShapeType::set_difference;
+    if (spec.motion == BodyMotion::fixed && (!is_bounded(b) || lattice_only)) {
       // fixed bodies need no mass: the reference point is the centre of the bounds (origin if
       // unbounded) and the lattice integration is skipped
       props.center_of_mass = is_bounded(b) ? Vec<Dim>(b.center()) : Vec<Dim>(Vec<Dim>::Zero());

@@ -9,18 +9,12 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
-#include "reference/rigid/mass_properties.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/geometry/shape.hpp"
+#include "reference/rigid/body_spec.hpp"
+#include "reference/rigid/mass_properties.hpp"
+#include "reference/sim/scene_desc.hpp"
 
 namespace monolith {
-
-/// Motion type of a body: `dynamic` (two-way coupled), `fixed` ("static" in scenes) and
-/// `kinematic` (prescribed path, one-way).
-enum class BodyMotion { dynamic, fixed, kinematic };
-
-/// "dynamic" / "static" / "kinematic" -> BodyMotion; throws InputError otherwise.
-BodyMotion parse_body_motion(const std::string& motion);
 
 template <int Dim>
 class RigidBody {
@@ -106,8 +100,8 @@ class RigidBody {
   /// Boxes: true when the surface point x lies inside one face (not on an edge or a corner);
   /// `normal` receives that face's outward normal (world). False for other shapes.
   bool box_face_normal(const Vec<Dim>& x_world, Vec<Dim>* normal) const;
-  /// Shape type from the scene ("box", "sphere", ...).
-  const std::string& shape_type() const { return shape_type_; }
+  /// The type of the body's shape.
+  ShapeType shape_type() const { return shape_type_; }
 
  private:
   ShapePtr<Dim> rest_shape_;
@@ -122,7 +116,7 @@ class RigidBody {
   Vec<Dim> box_center_ = Vec<Dim>::Zero(), box_half_ = Vec<Dim>::Zero();  ///< rest frame
   Mat<Dim> box_rotation_ = Mat<Dim>::Identity();                         ///< rest frame
   double sphere_radius_ = 0;
-  std::string shape_type_;
+  ShapeType shape_type_ = ShapeType::box;
   Mat<Dim> principal_axes_ = Mat<Dim>::Identity();      ///< body frame, columns (3D only)
   Vec<Dim> principal_moments_ = Vec<Dim>::Zero();       ///< 3D only
 };

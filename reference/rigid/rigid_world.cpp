@@ -5,11 +5,11 @@
 #include "reference/rigid/rigid_world.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 
 #include "reference/core/errors.hpp"
+#include "reference/core/timer.hpp"
 
 namespace monolith {
 
@@ -163,10 +163,11 @@ RigidStepStats RigidWorld<Dim>::step(double dt, double t, const Vec<Dim>& gravit
   ss.diagonal_boost = settings_.diagonal_boost;
   ss.mprgp.tolerance = settings_.tolerance;
   ss.mprgp.max_iterations = settings_.max_iterations;
-  const auto start = std::chrono::steady_clock::now();
-  StaggeredResult solve = solve_staggered_projections<Dim>(system, ss, lambda0, z0);
-  stats.solve_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  StaggeredResult solve;
+  {
+    ScopedTimer timer(stats.solve_seconds);
+    solve = solve_staggered_projections<Dim>(system, ss, lambda0, z0);
+  }
   stats.staggered_iterations = solve.staggered_iterations;
   stats.iterations = solve.mprgp_iterations;
   stats.max_relative_residual = solve.max_relative_residual;

@@ -11,20 +11,21 @@
 #include "reference/contact/collision.hpp"
 #include "reference/contact/contact_system.hpp"
 #include "reference/rigid/rigid_body.hpp"
-#include "reference/app/scene.hpp"
-#include "reference/sim/stats.hpp"
+#include "reference/sim/frame_stats.hpp"
+#include "reference/sim/scene_desc.hpp"
 
 namespace monolith {
 
-/// What the world needs from the scene's solver keys (all lengths in metres except the margin).
+/// What the world needs from the scene's solver keys (all lengths in metres except the margin),
+/// with the scene's defaults (SolverSpec).
 struct RigidWorldSettings {
-  double dx = 1.0;               ///< cell width: margin epsilon = margin_cells dx, alpha = 1/dx^Dim
-  double baumgarte = 0.2;        ///< beta of eq. (16)
-  double margin_cells = 0.1;     ///< epsilon / dx (solver.contact_margin)
-  double diagonal_boost = 1e-4;  ///< gamma of section 4.4.5
-  int staggered_iterations = 2;  ///< outer iterations of section 4.2
-  double tolerance = 1e-6;       ///< MPRGP and staggered-projection tolerance
-  int max_iterations = 2000;     ///< MPRGP iterations per QP
+  double dx = 1.0;  ///< cell width: margin epsilon = margin_cells dx, alpha = 1/dx^Dim
+  double baumgarte = SolverSpec{}.baumgarte;            ///< beta of eq. (16)
+  double margin_cells = SolverSpec{}.contact_margin;    ///< epsilon / dx (solver.contact_margin)
+  double diagonal_boost = SolverSpec{}.diagonal_boost;  ///< gamma of section 4.4.5
+  int staggered_iterations = SolverSpec{}.staggered_iterations;  ///< outer iterations of 4.2
+  double tolerance = SolverSpec{}.tolerance;  ///< MPRGP and staggered-projection tolerance
+  int max_iterations = SolverSpec{}.max_iterations;  ///< MPRGP iterations per QP
   /// Start each solve from the previous step's forces of matching contacts (same pair, wall
   /// face and a point within dx / 2). Not in the paper; it saves iterations on resting stacks.
   bool warm_start = true;

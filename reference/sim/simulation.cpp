@@ -1,41 +1,38 @@
 /// \file simulation.cpp
-/// Simulation<Dim>: the time loop of Algorithm 1 for liquids with static solids. The scheme picks
-/// the solves of eq. (8): the pressure alone, the unified pressure-viscosity (Stokes) solve, or
-/// the decoupled pressure / viscosity / pressure sequence of section 6.2 (solve_sequence).
+/// Simulation<Dim>: the time loop of Algorithm 1 (simulation.hpp). Liquids beside static solids
+/// only take the solves of eq. (8) that the scheme picks (solve_sequence): the pressure alone,
+/// the unified pressure-viscosity (Stokes) solve, or the decoupled pressure / viscosity /
+/// pressure sequence of section 6.2. With moving bodies the step runs the coupled solve of the
+/// scheme (solve_coupled_step); bodies without liquid step through RigidWorld.
 
 #include "reference/sim/simulation.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <sstream>
 #include <utility>
 
+#include "reference/core/errors.hpp"
+#include "reference/core/timer.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/fluid/deformation_rate.hpp"
-#include "reference/core/errors.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
-#include "reference/particles/particles.hpp"
 #include "reference/fluid/pressure_projection.hpp"
-#include "reference/rigid/rigid_world.hpp"
-#include "reference/geometry/shape.hpp"
 #include "reference/fluid/stokes_system.hpp"
-#include "reference/grid/stress_grid.hpp"
-#include "reference/grid/stress_weights.hpp"
 #include "reference/fluid/viscosity.hpp"
 #include "reference/fluid/viscosity_field.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/rigid/rigid_world.hpp"
 
 namespace monolith {
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 template <int Dim>
 Vec<Dim> to_vec(const std::vector<double>& v, const Vec<Dim>& fallback) {
@@ -123,116 +120,13 @@ constexpr int kAirVelocityLayers = 2;
 
 }  // namespace
 
-SolveSequence solve_sequence(const std::string& scheme, bool viscous) {
+SolveSequence solve_sequence(CouplingScheme scheme, bool viscous) {
   // without viscous liquid (or under a scheme that leaves viscosity out) there are no stress
   // unknowns: every scheme is the pressure solve
-  if (!viscous) return SolveSequence::pressure;
-  if (scheme == "PV-C" || scheme == "C-PV" || scheme == "PVC-iterative" || scheme == "PVC-unified")
-    return SolveSequence::unified;
-  if (scheme == "PC-VC-PC-unified") return SolveSequence::decoupled;
-  return SolveSequence::pressure;
+  if (!viscous || !scheme_uses_viscosity(scheme)) return SolveSequence::pressure;
+  if (scheme == CouplingScheme::pc_vc_pc_unified) return SolveSequence::decoupled;
+  return SolveSequence::unified;
 }
-
-template <int Dim>
-class Simulation : public AnySimulation {
- public:
-  explicit Simulation(const SceneDesc& scene);
-  FrameStats current_stats() const override { return stats_; }
-  FrameStats advance_frame() override;
-  Image render(const RenderSpec& spec) const override;
-  double liquid_potential_energy() const override;
-
- private:
-  /// One step of Algorithm 1 of length dt: the liquid part, and for scenes with moving bodies
-  /// (no liquid yet) the body lines 3, 6, 8, 10, 12 and 13 through RigidWorld.
-  void step(double dt);
-  /// The body part of a step: RigidWorld::step, with its statistics added to the frame's.
-  void step_bodies(double dt);
-  /// The CFL-limited step size: min(max_dt, cfl dx / max speed), and with moving bodies at most
-  /// kBodyCellFraction dx / (largest |v| + |omega| R of a body point).
-  double cfl_dt() const;
-  /// Liquid level set and the liquid weights W_L^p, W_L^u from the particles (lines 4-5).
-  void update_liquid_weights();
-  /// On faces whose centre lies inside a solid, removes the velocity component into the solid
-  /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
-  /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
-  /// particles near a solid are not carried into it.
-  void constrain_velocity_in_solids();
-  /// Sections 3.1.2, 4.4.6 with moving bodies: W_F^u, W_F^s and the solid level set from every
-  /// body at its current pose (fixed bodies included, as one-way bodies), shrunk by zeta, and the
-  /// SolidField of the particles (static shapes and posed bodies).
-  void update_moving_solids();
-  /// Lines 6-12 of Algorithm 1 with moving bodies next to a liquid: contacts, the coupled
-  /// pressure / viscosity / contact solve of the scene's scheme (section 6), and the new body
-  /// velocities (eq. (21)). Updates u_ to the solved face velocities.
-  void solve_coupled(double dt);
-  /// Velocity of the solid at a point x inside the solids: the point velocity of the moving
-  /// body whose (unshrunk) SDF is smallest there when that is a moving body, zero otherwise.
-  Vec<Dim> solid_velocity(const Vec<Dim>& x) const;
-  /// Throws SimulationError if the state holds a non-finite value.
-  void check_finite(const char* after) const;
-  /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
-  void fill_state_stats(FrameStats& s) const;
-  /// Lines 7-11 of Algorithm 1 for the liquid: the solves of solve_sequence(scheme) on u_, their
-  /// statistics added to stats_.
-  void solve_liquid(double dt);
-  /// solve_liquid for scenes with a herschel-bulkley liquid (section 5): the unified or decoupled
-  /// sequence with Algorithm 2 around its viscous solve (staggered_iterations rounds), started
-  /// from the previous step's shear rate where there is one (departure: line 1 as printed only
-  /// in the first step and on newly active DOFs; docs/non-newtonian.md, departure 4).
-  void solve_liquid_non_newtonian(double dt);
-  /// Algorithm 2's model for the current weights (W_F^s, W_L^s, the liquids' mass fractions).
-  NonNewtonianViscosity<Dim> non_newtonian_model() const;
-  /// The residuals of one step's viscosity rounds into stats_ (SolverStats::viscosity_residuals).
-  void record_viscosity_rounds(const std::vector<double>& residuals);
-  /// Adds one solve's iterations, residual and DOF counts to stats_; throws SimulationError on a
-  /// breakdown (`what` names the solve).
-  void record_solve(const PcgResult& pcg, long pressure_dofs, long stress_dofs, const char* what);
-
-  SceneDesc scene_;
-  MacGrid<Dim> grid_;
-  SampleLattice<Dim> lattice_;
-  std::array<BoundaryType, 2 * Dim> boundary_{};
-  Vec<Dim> gravity_;
-  double reference_density_ = 1000.0;
-  // static solids: shapes, their SolidField, and W_F^u (fixed for the whole run)
-  std::vector<ShapePtr<Dim>> solid_shapes_;
-  SolidField<Dim> solids_;
-  VectorX solid_phi_;
-  PressureWeights weights_;
-  // viscosity (section 3.1): eta of each liquid, the stress DOF layout, W_F^s (fixed), W_L^s,
-  // eta per stress DOF and per cell (render), the last stress solution
-  std::vector<double> liquid_eta_;
-  SolveSequence sequence_ = SolveSequence::pressure;
-  StressGrid<Dim> stress_grid_;
-  VectorX stress_fluid_, stress_liquid_, stress_eta_, cell_eta_, stress_;
-  // non-Newtonian liquids (section 5): the liquids' models and mass fractions per stress DOF;
-  // cell_eta_ is then the effective viscosity of the last solve (its cell-centred diagonal DOFs)
-  bool non_newtonian_ = false;
-  ViscosityMixture mixture_;
-  std::shared_ptr<const SparseMatrix> deformation_rate_;  ///< D of eq. (8), built once
-  /// Algorithm 2's start (departure, docs/non-newtonian.md): the shear rate s per stress DOF at
-  /// the end of the previous step, NaN where that step had no unknown (line 1 there); empty
-  /// before the first step or with solver.viscosity_warm_start off
-  VectorX previous_shear_rate_;
-  // liquid state
-  Particles<Dim> particles_;
-  VectorX liquid_phi_;
-  VectorX raw_liquid_face_;              ///< W_L^u before the clamp of kMinLiquidFaceFraction
-  double liquid_volume_ = 0.0;          ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
-  bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
-  VectorX u_, face_mass_, face_density_, pressure_;
-  PcgSettings pcg_settings_;
-  // time and statistics
-  int frame_ = 0;
-  double time_ = 0.0;
-  FrameStats stats_;
-  // rigid bodies with contact (scenes with dynamic or kinematic bodies)
-  std::unique_ptr<RigidWorld<Dim>> rigid_;
-  /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
-  bool coupled_ = false;
-  SolidWeights<Dim> solid_weights_;  ///< of the last update_moving_solids
-};
 
 template <int Dim>
 Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
@@ -250,11 +144,12 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   }
   grid_ = MacGrid<Dim>(lower, scene.dx(), cells, periodic);
   lattice_ = half_lattice(grid_);
-  gravity_ = to_vec<Dim>(scene.gravity, Vec<Dim>(-9.81 * Vec<Dim>::Unit(1)));
+  gravity_ = to_vec<Dim>(scene.gravity.empty() ? default_gravity(Dim) : scene.gravity,
+                        Vec<Dim>::Zero());
 
   // static bodies form the solid field (walls are the boundary faces)
   for (std::size_t i = 0; i < scene.bodies.size(); ++i)
-    if (scene.bodies[i].motion == "static")
+    if (scene.bodies[i].motion == BodyMotion::fixed)
       solid_shapes_.push_back(
           make_shape<Dim>(scene.bodies[i].shape, "bodies[" + std::to_string(i) + "].shape"));
   solids_ = make_solid_field<Dim>(solid_shapes_, grid_.dx());
@@ -265,7 +160,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   // moving bodies: the rigid world; next to a liquid they enter the weights of every step
   // (W_F^u, W_F^s from their pose) and the particles never start inside them
   for (const auto& b : scene.bodies)
-    if (b.motion != "static") {
+    if (b.motion != BodyMotion::fixed) {
       rigid_ = std::make_unique<RigidWorld<Dim>>(scene);
       break;
     }
@@ -294,9 +189,8 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
     liquid_shapes.push_back(
         make_shape<Dim>(scene.liquids[i].shape, "liquids[" + std::to_string(i) + "].shape"));
   if (!scene.liquids.empty()) reference_density_ = scene.liquids.front().density;
-  const int per_cell = scene.particles.per_cell > 0 ? scene.particles.per_cell : (Dim == 2 ? 4 : 8);
-  particles_ =
-      seed_particles(grid_, scene.liquids, liquid_shapes, solids_, per_cell, scene.particles.seed);
+  particles_ = seed_particles(grid_, scene.liquids, liquid_shapes, solids_,
+                              scene.particles.count_per_cell(Dim), scene.particles.seed);
 
   // solver settings
   pcg_settings_.tolerance = scene.solver.tolerance;
@@ -386,7 +280,7 @@ void Simulation<Dim>::step_bodies(double dt) {
   stats_.solver.converged = stats_.solver.converged && s.converged;
   stats_.solver.dofs_contact = std::max(stats_.solver.dofs_contact, s.dofs_contact);
   stats_.solver.dofs_friction = std::max(stats_.solver.dofs_friction, s.dofs_friction);
-  stats_.timing_solve += s.solve_seconds;
+  stats_.timing[FramePhase::solve] += s.solve_seconds;
 }
 
 template <int Dim>
@@ -427,14 +321,15 @@ void Simulation<Dim>::step(double dt) {
   // (6) contacts, (7)-(10) active DOFs, assembly (or stencil set-up) and the solves of the
   // scheme; (11) velocity update u = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau) and
   // (12) the bodies' velocities (eq. (21))
-  const auto solve_start = Clock::now();
-  if (coupled_) {
-    solve_coupled(dt);
-  } else {
-    solve_liquid(dt);
-    stats_.solver.fluid_seconds += seconds_since(solve_start);
+  {
+    ScopedTimer timer(stats_.timing[FramePhase::solve]);
+    if (coupled_) {
+      solve_coupled(dt);
+    } else {
+      solve_liquid(dt);
+      stats_.solver.fluid_seconds += timer.seconds();
+    }
   }
-  stats_.timing_solve += seconds_since(solve_start);
   check_finite("the pressure/viscosity/contact solve");
   // extrapolate the velocity from the trusted liquid faces into air and solid, then zero the
   // normal velocity on walls and give fully solid faces their solid's velocity (zero for
@@ -548,7 +443,6 @@ void Simulation<Dim>::solve_coupled(double dt) {
   ss.mprgp.max_iterations = scene_.solver.max_iterations;
   // non-Newtonian liquids: Algorithm 2 alongside the scheme's staggered rounds (section 5)
   CoupledSchemeOptions options;
-  options.backend = scene_.solver.backend;
   std::unique_ptr<NonNewtonianViscosity<Dim>> model;
   VectorX eta;
   if (non_newtonian_ && stress) {
@@ -564,7 +458,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
     };
   }
   const CoupledSolveResult r =
-      solve_coupled_step<Dim>(in, parse_coupling_scheme(scene_.solver.scheme), ss, options);
+      solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options);
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
   if (model) {
@@ -765,7 +659,7 @@ void Simulation<Dim>::check_finite(const char* after) const {
 
 template <int Dim>
 FrameStats Simulation<Dim>::advance_frame() {
-  const auto frame_start = Clock::now();
+  const Stopwatch frame_watch;
   stats_ = FrameStats{};
   stats_.solver.scheme = scene_.solver.scheme;
   stats_.dt_min = std::numeric_limits<double>::infinity();
@@ -792,7 +686,7 @@ FrameStats Simulation<Dim>::advance_frame() {
   update_liquid_weights();
   liquid_weights_current_ = true;
   fill_state_stats(stats_);
-  stats_.timing_total = seconds_since(frame_start);
+  stats_.timing[FramePhase::total] = frame_watch.seconds();
   return stats_;
 }
 
@@ -840,39 +734,7 @@ double Simulation<Dim>::liquid_potential_energy() const {
   return energy;
 }
 
-template <int Dim>
-Image Simulation<Dim>::render(const RenderSpec& spec) const {
-  RenderView<Dim> view;
-  view.grid = &grid_;
-  view.liquid_phi = &liquid_phi_;
-  view.particles = &particles_.x;
-  view.velocity = &u_;
-  view.pressure = &pressure_;
-  view.viscosity = &cell_eta_;
-  for (const auto& shape : solid_shapes_) {
-    RenderSolid<Dim> solid;
-    solid.shape = shape;
-    view.solids.push_back(solid);
-  }
-  // moving bodies at their current pose: dynamic in blue, kinematic in green
-  if (rigid_)
-    for (const auto& b : rigid_->bodies()) {
-      if (!b.moves()) continue;
-      RenderSolid<Dim> solid;
-      solid.shape = b.posed_shape();
-      solid.color = b.is_dynamic() ? Rgb{70, 110, 180} : Rgb{110, 160, 90};
-      view.solids.push_back(solid);
-    }
-  view.boundary = boundary_;
-  view.time = time_;
-  return render_frame<Dim>(view, spec);
-}
-
 std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene) {
-  require_supported(scene);
-  if (scene.solver.backend != "explicit" && scene.solver.backend != "matrixfree")
-    throw InputError(scene.source_label + ": solver.backend: unknown back end \"" +
-                     scene.solver.backend + "\" (explicit, matrixfree)");
   if (scene.dim == 3) return std::make_unique<Simulation<3>>(scene);
   return std::make_unique<Simulation<2>>(scene);
 }

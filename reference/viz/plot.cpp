@@ -317,17 +317,17 @@ int draw_color_bar(Image& img, int x, int y, int w, int h, Rgb (*map)(double), d
   return h + 3 * scale + text_height(scale) + 2 * scale;
 }
 
-ColorScale make_color_scale(const std::string& color_by, const std::vector<double>& values) {
+ColorScale make_color_scale(ColorBy color_by, const std::vector<double>& values) {
   ColorScale scale;
   // no liquid sample: nothing is coloured and no colour bar is drawn
   if (values.empty()) return scale;
-  if (color_by == "speed" || color_by == "viscosity") {
+  if (color_by == ColorBy::speed || color_by == ColorBy::viscosity) {
     scale.active = true;
     scale.map = colormap_viridis;
     scale.lo = 0.0;
     scale.hi = std::max(percentile(values, 0.99), 1e-12);
-    scale.label = color_by == "speed" ? "|u| (m/s)" : "eta (Pa s)";
-  } else if (color_by == "pressure") {
+    scale.label = color_by == ColorBy::speed ? "|u| (m/s)" : "eta (Pa s)";
+  } else if (color_by == ColorBy::pressure) {
     scale.active = true;
     scale.map = colormap_coolwarm;
     double lo = percentile(values, 0.01), hi = percentile(values, 0.99);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "reference/viz/image.hpp"
+#include "reference/viz/render_spec.hpp"
 
 namespace monolith {
 
@@ -64,11 +65,11 @@ struct ColorScale {
   std::string label;              ///< colour bar caption, e.g. "|u| (m/s)"
   Rgb color(double v) const { return map(hi > lo ? (v - lo) / (hi - lo) : 0.5); }
 };
-/// The colour scale for color_by ("speed", "pressure", "viscosity"; anything else, or no values
-/// (no liquid in the picture), gives an inactive scale) from the field's values over the liquid: speed and viscosity map [0, p99]
+/// The colour scale for color_by (speed, pressure, viscosity; none, or no values (no liquid in
+/// the picture), gives an inactive scale) from the field's values over the liquid: speed and viscosity map [0, p99]
 /// with viridis (p99 = 99th percentile, robust to a few fast spray samples); pressure maps
 /// [p1, p99] with coolwarm, symmetric about zero when the range contains zero.
-ColorScale make_color_scale(const std::string& color_by, const std::vector<double>& values);
+ColorScale make_color_scale(ColorBy color_by, const std::vector<double>& values);
 
 // --- line plots -------------------------------------------------------------------------------
 

@@ -1,21 +1,24 @@
 #pragma once
 /// \file render.hpp
-/// Frame pictures. The simulation exposes a RenderView (read-only references to its state); the
-/// 2D renderer lives in dim2/render_2d.cpp and the 3D ray marcher in dim3/render_3d.cpp.
+/// Frame pictures. A RenderView holds read-only references to the state to draw; render_view
+/// reads it from a Simulation<Dim> (its const accessors, reference/sim/simulation.hpp), so the
+/// solver core never depends on the pictures. The 2D renderer lives in dim2/render_2d.cpp and
+/// the 3D ray marcher in dim3/render_3d.cpp.
 
 #include <array>
-#include <string>
 #include <vector>
 
 #include "reference/core/common.hpp"
-#include "reference/viz/image.hpp"
-#include "reference/grid/mac_grid.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/geometry/shape.hpp"
+#include "reference/grid/boundary.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/sim/simulation.hpp"
+#include "reference/viz/image.hpp"
+#include "reference/viz/render_spec.hpp"
 
 namespace monolith {
 
-/// A solid to draw (a wall-less static body now; posed dynamic bodies arrive with issue 4).
+/// A solid to draw: a static solid, or a moving body at its current pose.
 template <int Dim>
 struct RenderSolid {
   ShapePtr<Dim> shape;
@@ -37,12 +40,22 @@ struct RenderView {
   double time = 0.0;
 };
 
+/// The view of a simulation's current state: its grid, liquid level set, particles, velocity,
+/// pressure and cell viscosity; its static solids (brown), dynamic bodies (blue) and kinematic
+/// bodies (green) at their current pose. Holds references into `sim`.
+template <int Dim>
+RenderView<Dim> render_view(const Simulation<Dim>& sim);
+
+/// Renders the current state of `sim` (a Simulation<2> or Simulation<3>; std::invalid_argument
+/// for any other AnySimulation) at spec.size with colouring spec.color_by.
+Image render_simulation(const AnySimulation& sim, const RenderSpec& spec);
+
 /// Values of the colour field `color_by` (speed, pressure, viscosity) at the centres of the cells
 /// whose centre lies inside the liquid: the sample set both renderers take their robust colour
 /// range from. `lattice` is half_lattice(*view.grid).
 template <int Dim>
 std::vector<double> liquid_field_values(const RenderView<Dim>& view, const SampleLattice<Dim>& lattice,
-                                        const std::string& color_by);
+                                        ColorBy color_by);
 
 /// Renders one frame at spec.size with colouring spec.color_by.
 template <int Dim>

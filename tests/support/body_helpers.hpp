@@ -8,22 +8,21 @@
 
 #include "reference/contact/collision.hpp"
 #include "reference/core/common.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/rigid/body_spec.hpp"
 #include "reference/rigid/mass_properties.hpp"
 #include "reference/rigid/rigid_body.hpp"
-#include "reference/app/scene.hpp"
-#include "reference/geometry/shape.hpp"
 #include "tests/support/test_helpers.hpp"
 
 namespace monolith::testing {
 
 /// A rigid body of `shape` (named after its type) with the given density (kg/m^3), friction
-/// coefficient and motion ("dynamic", "kinematic", "static"), at rest; mass properties from
-/// mass_properties.
+/// coefficient and motion, at rest; mass properties from mass_properties.
 template <int Dim>
 RigidBody<Dim> make_body(const ShapeSpec& shape, double density, double friction = 0.0,
-                         const std::string& motion = "dynamic") {
+                         BodyMotion motion = BodyMotion::dynamic) {
   BodySpec spec;
-  spec.name = shape.type;
+  spec.name = enum_name(shape.type);
   spec.motion = motion;
   spec.shape = shape;
   spec.density = density;
@@ -35,7 +34,7 @@ RigidBody<Dim> make_body(const ShapeSpec& shape, double density, double friction
 /// An axis-aligned box body of centre `centre` and half sizes `half` (make_body).
 template <int Dim>
 RigidBody<Dim> make_box(const Vec<Dim>& centre, const Vec<Dim>& half, double density,
-                        double friction = 0.0, const std::string& motion = "dynamic") {
+                        double friction = 0.0, BodyMotion motion = BodyMotion::dynamic) {
   return make_body<Dim>(box_spec<Dim>(centre, half), density, friction, motion);
 }
 

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "reference/app/scene_file.hpp"
 #include "reference/coupling/coupling.hpp"
-#include "reference/app/scene.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/sim/simulation.hpp"
 

@@ -8,11 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "reference/app/scene_file.hpp"
 #include "reference/core/common.hpp"
 #include "reference/fluid/pressure_projection.hpp"
-#include "reference/app/scene.hpp"
-#include "reference/geometry/shape.hpp"
 #include "reference/fluid/stokes_system.hpp"
+#include "reference/geometry/shape.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
 
@@ -62,16 +62,16 @@ std::vector<double> as_std(const Vec<Dim>& v) {
 template <int Dim>
 ShapeSpec box_spec(const Vec<Dim>& c, const Vec<Dim>& h, std::vector<double> rotation = {}) {
   ShapeSpec s;
-  s.type = "box";
+  s.type = ShapeType::box;
   s.center = as_std<Dim>(c);
   s.half_size = as_std<Dim>(h);
   s.rotation = std::move(rotation);
   return s;
 }
 
-/// The scene spec of a round shape ("sphere", "bowl", "shell", ...) of radius r and thickness t.
+/// The scene spec of a round shape (sphere, bowl, shell) of radius r and thickness t.
 template <int Dim>
-ShapeSpec round_spec(const std::string& type, const Vec<Dim>& c, double r, double t = 0.0) {
+ShapeSpec round_spec(ShapeType type, const Vec<Dim>& c, double r, double t = 0.0) {
   ShapeSpec s;
   s.type = type;
   s.center = as_std<Dim>(c);

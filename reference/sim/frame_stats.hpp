@@ -1,0 +1,80 @@
+#pragma once
+/// \file frame_stats.hpp
+/// Per-frame statistics as a plain struct: the simulation fills a FrameStats per frame; the
+/// application writes it as one line of stats.jsonl (reference/app/stats_json.hpp, the keys of
+/// docs/cli.md). Fields a scene has no use for (bodies, contacts, stress DOFs of a scene without
+/// them) keep their shape with empty or zero values.
+
+#include <string>
+#include <vector>
+
+#include "reference/core/timer.hpp"
+#include "reference/coupling/coupling_scheme.hpp"
+
+namespace monolith {
+
+/// The phases of a frame's wall time (FrameStats::timing), each with its stats.jsonl name: the
+/// whole frame and its pressure / viscosity / contact solves. A new phase is one enumerator and
+/// its name; ScopedTimer fills it where it is measured.
+enum class FramePhase { total, solve };
+
+template <>
+struct EnumNames<FramePhase> {
+  static constexpr std::array<std::pair<FramePhase, const char*>, 2> values{
+      {{FramePhase::total, "total"}, {FramePhase::solve, "solve"}}};
+};
+
+struct BodyStats {
+  std::string name;
+  std::vector<double> position;          ///< centre of mass
+  std::vector<double> orientation;       ///< 2D: [angle]; 3D: quaternion [w, x, y, z]
+  std::vector<double> velocity;
+  std::vector<double> angular_velocity;  ///< 2D: [omega]; 3D: 3-vector
+};
+
+struct ProbeStats {
+  std::string name;
+  std::vector<double> position;
+  std::vector<double> velocity;
+  double pressure = 0.0;
+};
+
+struct SolverStats {
+  CouplingScheme scheme = CouplingScheme::pvc_unified;
+  long iterations = 0;            ///< summed over the frame's steps
+  int staggered_iterations = 0;   ///< summed over the frame's steps
+  double max_relative_residual = 0.0;
+  bool converged = true;          ///< all solves of the frame converged
+  long dofs_pressure = 0, dofs_stress = 0, dofs_contact = 0, dofs_friction = 0;  ///< max
+  /// The phases of the paper's Tables 1-3, summed over the frame's steps: separate liquid
+  /// solves (P, PV or VC without contact rows), separate contact solves (C), and unified solves
+  /// (PC, PVC; the VC step of PC-VC-PC-unified counts here): iterations and wall time.
+  long fluid_iterations = 0, contact_iterations = 0, coupled_iterations = 0;
+  double fluid_seconds = 0.0, contact_seconds = 0.0, coupled_seconds = 0.0;
+  /// Non-Newtonian liquids (Algorithm 2, section 5): the residual of each viscosity round of
+  /// the frame's last step (NonNewtonianViscosity::residuals, Fig. 9's convergence plot) and
+  /// the largest last-round residual over the frame's steps. Empty / 0 (and left out of the
+  /// JSON) for Newtonian liquids.
+  std::vector<double> viscosity_residuals;
+  double max_viscosity_residual = 0.0;
+};
+
+struct FrameStats {
+  int frame = 0;
+  double time = 0.0;
+  int steps = 0;
+  double dt_min = 0.0, dt_max = 0.0;
+  double liquid_volume = 0.0;  ///< sum of W_L^p dx^Dim
+  long particles = 0;
+  std::vector<double> liquid_bounds_lower, liquid_bounds_upper;
+  double kinetic_energy_liquid = 0.0, kinetic_energy_bodies = 0.0;
+  std::vector<BodyStats> bodies;
+  int contact_count = 0;
+  double max_penetration = 0.0;
+  std::vector<ProbeStats> probes;
+  SolverStats solver;
+  /// Wall time of the frame per phase (s): the `timing` object of stats.jsonl.
+  TimingTable<FramePhase> timing;
+};
+
+}  // namespace monolith

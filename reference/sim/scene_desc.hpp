@@ -1,0 +1,90 @@
+#pragma once
+/// \file scene_desc.hpp
+/// The plain description of a scene that the simulation takes (Simulation<Dim>, make_simulation):
+/// domain, time stepping, solver settings, particles, liquids, bodies and probes, as structs and
+/// enums without any file format. The scene file format "monolith-scene/1" (docs/scene-format.md)
+/// is read into it by the application (reference/app/scene_file.hpp); C++ users may fill it
+/// directly. Every option has its one default here, in the member initialisers. A SceneDesc is
+/// dimension-agnostic: vectors are std::vector<double> of `dim` entries, converted to Vec<Dim>
+/// by the simulation.
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "reference/coupling/coupling_scheme.hpp"
+#include "reference/fluid/liquid_spec.hpp"
+#include "reference/geometry/shape_spec.hpp"
+#include "reference/grid/boundary.hpp"
+#include "reference/rigid/body_spec.hpp"
+#include "reference/solvers/backend.hpp"
+
+namespace monolith {
+
+struct ProbeSpec {
+  std::string name;
+  std::vector<double> position;
+};
+
+struct DomainSpec {
+  std::vector<double> lower, upper;
+  std::vector<int> cells;
+  /// Per face in the order x-, x+, y-, y+, z-, z+ (the first 2*dim are used).
+  std::array<BoundaryType, 6> boundary{BoundaryType::wall, BoundaryType::wall, BoundaryType::wall,
+                                       BoundaryType::wall, BoundaryType::wall, BoundaryType::wall};
+  double wall_friction = 0.0;
+  double wall_restitution = 0.0;
+};
+
+struct TimeSpec {
+  double fps = 50.0;
+  int frames = 100;
+  double cfl = 3.0;
+  double max_dt = 0.02;
+};
+
+struct SolverSpec {
+  CouplingScheme scheme = CouplingScheme::pvc_unified;
+  double tolerance = 1e-6;
+  int max_iterations = 2000;
+  int staggered_iterations = 2;
+  Backend backend = Backend::matrix_free;
+  double baumgarte = 0.2;
+  double contact_margin = 0.1;  ///< epsilon of section 3.2.4, in units of dx
+  double shrink = 0.01;         ///< zeta of section 4.4.6, in units of dx
+  double diagonal_boost = 1e-4; ///< gamma of section 4.4.5
+  /// Algorithm 2's line 1 in the simulator (section 5): true (default) starts each step's
+  /// viscosity rounds from the previous step's shear rate where it has one, false from the rate
+  /// of u* as printed (docs/non-newtonian.md). Not a scene key: set from C++ (tests, benches).
+  bool viscosity_warm_start = true;
+};
+
+/// Particle seeding and maintenance.
+struct ParticleSpec {
+  int per_cell = 0;                  ///< 0 = the default of the dimension (count_per_cell)
+  unsigned seed = 1;                 ///< jitter seed: runs are reproducible
+  bool position_correction = true;   ///< keep particles evenly spread (volume steady)
+  /// Particles seeded per liquid cell: per_cell, or by default 4 in 2D and 8 in 3D.
+  int count_per_cell(int dim) const { return per_cell > 0 ? per_cell : (dim == 2 ? 4 : 8); }
+};
+
+struct SceneDesc {
+  std::string name;
+  int dim = 2;
+  DomainSpec domain;
+  std::vector<double> gravity;  ///< dim numbers (m/s^2); empty = default_gravity(dim)
+  TimeSpec time;
+  SolverSpec solver;
+  ParticleSpec particles;
+  std::vector<LiquidSpec> liquids;
+  std::vector<BodySpec> bodies;
+  std::vector<ProbeSpec> probes;
+
+  /// Cell width (cells are cubic: validated).
+  double dx() const { return (domain.upper[0] - domain.lower[0]) / domain.cells[0]; }
+};
+
+/// The default gravity of a scene of `dim` dimensions: 9.81 m/s^2 along -y.
+std::vector<double> default_gravity(int dim);
+
+}  // namespace monolith

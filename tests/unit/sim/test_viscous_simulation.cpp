@@ -1,0 +1,352 @@
+// Viscous liquids in the whole simulation (particles, Algorithm 1): a rigidly rotating free blob
+// keeps its angular velocity, a film on a wall under gravity along it stays attached with the
+// half-parabolic profile, two liquids of different viscosity in one scene each behave as their
+// own viscosity says, and the scheme picks the solves (2D and 3D).
+#include <catch2/catch.hpp>
+#include <cmath>
+
+#include "reference/app/scene_file.hpp"
+#include "reference/fluid/viscosity_field.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/sim/simulation.hpp"
+
+using namespace monolith;
+
+namespace {
+
+nlohmann::json base_scene(int dim, const std::vector<double>& upper, const std::vector<int>& cells) {
+  nlohmann::json j;
+  j["format"] = "monolith-scene/1";
+  j["dim"] = dim;
+  j["domain"]["lower"] = std::vector<double>(dim, 0.0);
+  j["domain"]["upper"] = upper;
+  j["domain"]["cells"] = cells;
+  j["solver"] = {{"tolerance", 1e-8}, {"max_iterations", 20000}, {"backend", "matrixfree"}};
+  j["render"] = {{"enabled", false}};
+  j["probes"] = nlohmann::json::array();
+  return j;
+}
+
+std::unique_ptr<AnySimulation> build(const nlohmann::json& j) {
+  return make_simulation(parse_scene(j, "test.json", "."));
+}
+
+/// A free blob (disk / ball of radius 0.2 at the centre of the unit box, no gravity) in rigid
+/// rotation at omega about z; probes on a ring of radius 0.1 in the plane z = 0.5. Returns the
+/// mean angular velocity sum (r x v)_z / r^2 over the probes after each frame.
+std::vector<double> rotating_blob(int dim, int n, const std::string& scheme, int frames,
+                                  double eta, double omega) {
+  nlohmann::json j = base_scene(dim, std::vector<double>(dim, 1.0), std::vector<int>(dim, n));
+  j["gravity"] = std::vector<double>(dim, 0.0);
+  j["time"] = {{"fps", 50}, {"frames", frames}, {"cfl", 1.0}, {"max_dt", 0.02}};
+  j["solver"]["scheme"] = scheme;
+  nlohmann::json spin = omega;
+  if (dim == 3) spin = std::vector<double>{0.0, 0.0, omega};
+  j["liquids"] = {{{"name", "blob"},
+                   {"shape", {{"type", "sphere"}, {"center", std::vector<double>(dim, 0.5)}, {"radius", 0.2}}},
+                   {"density", 1000.0},
+                   {"angular_velocity", spin},
+                   {"viscosity", {{"eta", eta}}}}};
+  const double r = 0.1;
+  for (int k = 0; k < 8; ++k) {
+    std::vector<double> x(dim, 0.5);
+    x[0] += r * std::cos(k * 3.14159265358979 / 4);
+    x[1] += r * std::sin(k * 3.14159265358979 / 4);
+    j["probes"].push_back({{"name", "p" + std::to_string(k)}, {"position", x}});
+  }
+  auto sim = build(j);
+  std::vector<double> omegas;
+  for (int f = 0; f < frames; ++f) {
+    const FrameStats s = sim->advance_frame();
+    REQUIRE(s.solver.converged);
+    double sum = 0.0;
+    for (const auto& p : s.probes) {
+      const double dx = p.position[0] - 0.5, dy = p.position[1] - 0.5;
+      sum += (dx * p.velocity[1] - dy * p.velocity[0]) / (dx * dx + dy * dy);
+    }
+    omegas.push_back(sum / s.probes.size());
+  }
+  return omegas;
+}
+
+}  // namespace
+
+TEST_CASE("a rigidly rotating free viscous blob keeps its angular velocity (2D and 3D)",
+          "[validation]") {
+  // source: a rigid rotation has zero strain rate, so the viscous stress of eq. (5) vanishes and
+  // a free liquid body keeps its angular momentum (docs/validation.md lists the measured losses;
+  // the paper's claim is that the unified solve has no artificial damping of rigid motion).
+  const double omega = 2.0, eta = 10.0;
+  for (int dim : {2, 3}) {
+    const int n = dim == 2 ? 40 : 24, frames = 10;
+    const auto unified = rotating_blob(dim, n, "PVC-unified", frames, eta, omega);
+    const auto decoupled = rotating_blob(dim, n, "PC-VC-PC-unified", frames, eta, omega);
+    const auto inviscid = rotating_blob(dim, n, "PVC-unified", frames, 0.0, omega);
+    const double loss_unified = 1.0 - unified.back() / omega;
+    const double loss_decoupled = 1.0 - decoupled.back() / omega;
+    const double loss_inviscid = 1.0 - inviscid.back() / omega;
+    WARN(dim << "D rotating blob, eta " << eta << ", " << frames << " frames: angular velocity lost "
+             << 100 * loss_unified << " % (PVC-unified), " << 100 * loss_decoupled
+             << " % (PC-VC-PC-unified), " << 100 * loss_inviscid << " % (inviscid)");
+    // the transfers, advection and the discrete surface lose some rotation with or without
+    // viscosity (the inviscid run); the viscous stress adds only a little to that. Measured over
+    // 10 frames (0.2 s at 2 rad/s: 0.4 rad of rotation): inviscid 0.63 % (2D) and
+    // 4.24 % (3D); viscous (eta 10) PVC-unified 0.90 % / 4.38 %, PC-VC-PC-unified 0.90 % / 4.36 %.
+    // The extra 0.28 % / 0.15 % comes from the surface: stress DOFs straddling it read the air
+    // faces, whose u* is extrapolated by neighbour averaging (simulation.cpp,
+    // kAirVelocityLayers), not by the rigid rotation, so D u is not zero there. Without that
+    // extrapolation (air faces at rest) the extra loss is 0.40 % / 0.20 %. Bound: 0.4 %.
+    CHECK(loss_unified - loss_inviscid < 0.004);
+  }
+}
+
+namespace {
+
+/// A film of thickness h on the floor of a domain periodic along x (and z), open at the top,
+/// gravity tilted by angle theta towards +x. Probes on a vertical line; returns the probe speeds
+/// along x at the last frame and their heights.
+struct FilmResult {
+  std::vector<double> y, u;
+  double top = 0.0;  ///< highest particle (the film surface)
+};
+
+FilmResult film(int dim, int n, double h, double eta, double sin_theta, double seconds) {
+  // the flow does not depend on x (and z): 4 periodic cells along them are enough
+  const double width = 4 * 0.5 / n;
+  std::vector<double> upper(dim, width);
+  upper[1] = 0.5;
+  std::vector<int> cells(dim, 4);
+  cells[1] = n;
+  nlohmann::json j = base_scene(dim, upper, cells);
+  j["domain"]["boundary"] = {{"x-", "periodic"}, {"x+", "periodic"}, {"y-", "wall"}, {"y+", "open"}};
+  if (dim == 3) {
+    j["domain"]["boundary"]["z-"] = "periodic";
+    j["domain"]["boundary"]["z+"] = "periodic";
+  }
+  const double g = 9.81, cos_theta = std::sqrt(1 - sin_theta * sin_theta);
+  std::vector<double> gravity(dim, 0.0);
+  gravity[0] = g * sin_theta;
+  gravity[1] = -g * cos_theta;
+  j["gravity"] = gravity;
+  const int fps = 10;
+  j["time"] = {{"fps", fps}, {"frames", 1}, {"cfl", 2.0}, {"max_dt", 0.02}};
+  std::vector<double> centre(dim, width / 2), half(dim, width);
+  centre[1] = h / 2;
+  half[1] = h / 2;
+  j["liquids"] = {{{"name", "film"},
+                   {"shape", {{"type", "box"}, {"center", centre}, {"half_size", half}}},
+                   {"density", 1000.0},
+                   {"viscosity", {{"eta", eta}}}}};
+  const double dx = 0.5 / n;
+  FilmResult r;
+  for (int k = 0; (k + 0.5) * dx < h - dx; ++k) {
+    std::vector<double> x(dim, width / 2 + 0.5 * dx);
+    x[1] = (k + 0.5) * dx;
+    r.y.push_back(x[1]);
+    j["probes"].push_back({{"name", "y" + std::to_string(k)}, {"position", x}});
+  }
+  auto sim = build(j);
+  FrameStats s;
+  for (int f = 0; f < static_cast<int>(std::lround(seconds * fps)); ++f) {
+    s = sim->advance_frame();
+    REQUIRE(s.solver.converged);
+    REQUIRE(s.solver.dofs_stress > 0);
+  }
+  for (const auto& p : s.probes) r.u.push_back(p.velocity[0]);
+  r.top = s.liquid_bounds_upper[1];
+  return r;
+}
+
+}  // namespace
+
+TEST_CASE("a viscous film on a wall under gravity along it stays attached with the film-flow profile",
+          "[validation]") {
+  // source: steady gravity-driven film flow down an incline (Nusselt film; e.g. Bird, Stewart &
+  // Lightfoot, Transport Phenomena, section 2.2): u(y) = (g sin(theta) / nu) (h y - y^2 / 2),
+  // no slip at the wall (y = 0), no shear at the free surface (y = h). After 5 viscous times
+  // h^2 / nu the start-up transient has decayed to exp(-4 pi^2 / 4) = 5e-5.
+  const double h = 0.125, eta = 20.0, sin_theta = 0.1, nu = eta / 1000.0;
+  const double seconds = 4 * h * h / nu;
+  for (int dim : {2, 3}) {
+    CAPTURE(dim);
+    const int n = 64;
+    const FilmResult r = film(dim, n, h, eta, sin_theta, seconds);
+    const double g = 9.81 * sin_theta;
+    double err = 0.0, u_max = 0.0;
+    for (std::size_t k = 0; k < r.y.size(); ++k) {
+      const double exact = g / nu * (h * r.y[k] - r.y[k] * r.y[k] / 2);
+      err = std::max(err, std::abs(r.u[k] - exact));
+      u_max = std::max(u_max, exact);
+    }
+    WARN(dim << "D film flow: relative max error of the profile " << err / u_max
+             << ", bottom probe speed " << r.u.front() << " m/s (exact "
+             << g / nu * (h * r.y.front() - r.y.front() * r.y.front() / 2) << "), film top "
+             << r.top);
+    // attached: the liquid stays a film on the floor
+    CHECK(r.top < 1.5 * h);
+    CHECK(err / u_max < 0.05);
+  }
+}
+
+namespace {
+
+/// Two columns collapsing on either side of a static dividing wall, liquid A on the left with
+/// viscosity eta_left, B on the right with eta_right; a probe in each at the same place relative
+/// to its column. Returns the two probes' speeds after `frames` frames.
+std::pair<double, double> two_columns(int dim, int n, double eta_left, double eta_right, int frames) {
+  nlohmann::json j = base_scene(dim, std::vector<double>(dim, 1.0), std::vector<int>(dim, n));
+  j["time"] = {{"fps", 50}, {"frames", frames}, {"cfl", 2.0}, {"max_dt", 0.02}};
+  std::vector<double> wall_c(dim, 0.5), wall_h(dim, 0.5);
+  wall_c[1] = 0.4;
+  wall_h[0] = 0.04;
+  wall_h[1] = 0.4;
+  j["bodies"] = {{{"name", "divider"}, {"motion", "static"},
+                  {"shape", {{"type", "box"}, {"center", wall_c}, {"half_size", wall_h}}}}};
+  nlohmann::json liquids = nlohmann::json::array();
+  for (int side = 0; side < 2; ++side) {
+    std::vector<double> c(dim, 0.5), half(dim, 0.5);
+    c[0] = side == 0 ? 0.1 : 0.9;
+    c[1] = 0.25;
+    half[0] = 0.1;
+    half[1] = 0.25;
+    liquids.push_back({{"name", side == 0 ? "left" : "right"},
+                       {"shape", {{"type", "box"}, {"center", c}, {"half_size", half}}},
+                       {"density", 1000.0},
+                       {"viscosity", {{"eta", side == 0 ? eta_left : eta_right}}}});
+    // the probe sits at the foot of the column, on the side the column collapses towards
+    std::vector<double> x(dim, 0.5);
+    x[0] = side == 0 ? 0.3 : 0.7;
+    x[1] = 0.03;
+    j["probes"].push_back({{"name", side == 0 ? "left" : "right"}, {"position", x}});
+  }
+  j["liquids"] = liquids;
+  auto sim = build(j);
+  FrameStats s;
+  for (int f = 0; f < frames; ++f) s = sim->advance_frame();
+  auto speed = [&](int k) {
+    double v2 = 0.0;
+    for (double v : s.probes[k].velocity) v2 += v * v;
+    return std::sqrt(v2);
+  };
+  return {speed(0), speed(1)};
+}
+
+}  // namespace
+
+TEST_CASE("two liquids of different viscosity in one scene each follow their own viscosity",
+          "[validation]") {
+  // two columns separated by a static wall: with eta 0.05 Pa s on the left and 50 Pa s on the
+  // right, the left column must behave as in a scene where both are 0.05, the right one as where
+  // both are 50 (eta sampled per stress DOF from the particles' liquid index), and the two sides
+  // must differ clearly (the thin liquid collapses faster)
+  const double thin = 0.05, thick = 50.0;
+  for (int dim : {2, 3}) {
+    CAPTURE(dim);
+    const int n = dim == 2 ? 40 : 20, frames = 6;
+    const auto mixed = two_columns(dim, n, thin, thick, frames);
+    const auto all_thin = two_columns(dim, n, thin, thin, frames);
+    const auto all_thick = two_columns(dim, n, thick, thick, frames);
+    WARN(dim << "D two columns: left/right probe speed " << mixed.first << " / " << mixed.second
+             << " (all thin: " << all_thin.first << ", all thick: " << all_thick.second << ")");
+    CHECK(mixed.first > 2 * mixed.second);
+    CHECK(mixed.first == Approx(all_thin.first).epsilon(0.02));
+    CHECK(mixed.second == Approx(all_thick.second).epsilon(0.02));
+  }
+}
+
+TEST_CASE("the scheme decides the solves: unified, decoupled or pressure only", "[unit]") {
+  using S = CouplingScheme;
+  CHECK(solve_sequence(S::pvc_unified, true) == SolveSequence::unified);
+  CHECK(solve_sequence(S::pv_c, true) == SolveSequence::unified);
+  CHECK(solve_sequence(S::c_pv, true) == SolveSequence::unified);
+  CHECK(solve_sequence(S::pvc_iterative, true) == SolveSequence::unified);
+  CHECK(solve_sequence(S::pc_vc_pc_unified, true) == SolveSequence::decoupled);
+  for (const S s : {S::p_c, S::c_p, S::pc_iterative, S::pc_unified})
+    CHECK(solve_sequence(s, true) == SolveSequence::pressure);
+  for (const S s : enum_values<CouplingScheme>()) CHECK(solve_sequence(s, false) == SolveSequence::pressure);
+
+  // statistics: stress DOFs and the number of solves per step follow the scheme
+  for (int dim : {2, 3}) {
+    const int n = dim == 2 ? 16 : 8;
+    nlohmann::json j = base_scene(dim, std::vector<double>(dim, 1.0), std::vector<int>(dim, n));
+    j["domain"]["boundary"] = {{"y+", "open"}};
+    j["time"] = {{"fps", 50}, {"frames", 1}, {"cfl", 3.0}, {"max_dt", 0.02}};
+    // a block resting on the floor (a free-falling one would need no pressure or stress at all)
+    std::vector<double> c(dim, 0.5), half(dim, 0.25);
+    c[1] = 0.25;
+    j["liquids"] = {{{"name", "a"},
+                     {"shape", {{"type", "box"}, {"center", c}, {"half_size", half}}},
+                     {"density", 1000.0},
+                     {"viscosity", {{"eta", 1.0}}}}};
+    for (const auto& [scheme, solves, stress] :
+         {std::tuple{"PVC-unified", 1, true}, std::tuple{"PC-VC-PC-unified", 3, true},
+          std::tuple{"PC-unified", 1, false}}) {
+      CAPTURE(dim, scheme);
+      j["solver"]["scheme"] = scheme;
+      auto sim = build(j);
+      const FrameStats s = sim->advance_frame();
+      CHECK(s.solver.staggered_iterations == solves * s.steps);
+      CHECK((s.solver.dofs_stress > 0) == stress);
+      CHECK(s.solver.dofs_pressure > 0);
+      CHECK(s.solver.iterations > 0);
+    }
+    // an inviscid liquid under a PV scheme has no stress unknowns
+    j["liquids"][0]["viscosity"]["eta"] = 0.0;
+    j["solver"]["scheme"] = "PVC-unified";
+    const FrameStats s = build(j)->advance_frame();
+    CHECK(s.solver.dofs_stress == 0);
+    CHECK(s.solver.staggered_iterations == s.steps);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("eta per stress DOF from the particles: exact for one liquid, split between two",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // particles filling the lower half of a periodic-in-x box: liquid 0 (eta 2) at x < 0.5,
+  // liquid 1 (eta 8) at x > 0.5
+  const int n = 8;
+  std::array<bool, Dim> periodic{};
+  periodic[0] = true;
+  const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+  Particles<Dim> p;
+  for (int c = 0; c < grid.num_cells(); ++c) {
+    const Vec<Dim> x = grid.cell_center(grid.cell_coord(c));
+    if (x[1] > 0.5) continue;
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(1.0);
+    p.density.push_back(1000.0);
+    p.liquid.push_back(x[0] < 0.5 ? 0 : 1);
+  }
+  const StressGrid<Dim> stress(grid);
+  // one viscosity everywhere: reproduced exactly on every DOF (reached or filled)
+  const VectorX same = stress_viscosity(stress, p, {3.0, 3.0});
+  CHECK((same.array() - 3.0).abs().maxCoeff() < 1e-14);
+  // two: each DOF whose stencil only reaches one liquid takes its eta; the rest lie between
+  const VectorX two = stress_viscosity(stress, p, {2.0, 8.0});
+  CHECK(two.minCoeff() >= 2.0 - 1e-14);
+  CHECK(two.maxCoeff() <= 8.0 + 1e-14);
+  int left = 0, right = 0;
+  for (int i = 0; i < stress.num_dofs(); ++i) {
+    const auto [k, c] = stress.coord(i);
+    const Vec<Dim> x = stress.position(k, c);
+    if (x[1] > 0.45) continue;
+    // more than a cell from the interfaces at x = 0.5 and at the periodic seam x = 0 = 1
+    if (x[0] > 0.15 && x[0] < 0.35) {
+      CHECK(two[i] == Approx(2.0).epsilon(1e-12));
+      ++left;
+    }
+    if (x[0] > 0.65 && x[0] < 0.85) {
+      CHECK(two[i] == Approx(8.0).epsilon(1e-12));
+      ++right;
+    }
+  }
+  CHECK(left > 0);
+  CHECK(right > 0);
+  // per cell for the renderer: the same rule on the cell centres
+  const VectorX cells = cell_viscosity(grid, p, {2.0, 8.0});
+  CHECK(cells[grid.cell_index(VecI<Dim>::Constant(1))] == Approx(2.0));
+  CHECK(cells[grid.cell_index(VecI<Dim>::Unit(0) * 5 + VecI<Dim>::Constant(1) - VecI<Dim>::Unit(0))] ==
+        Approx(8.0));
+}
