@@ -8,6 +8,7 @@
 #include <memory>
 #include <stdexcept>
 
+#include "reference/contact/staggered_projections.hpp"
 #include "reference/core/errors.hpp"
 #include "reference/core/timer.hpp"
 #include "reference/coupling/monolithic_system.hpp"
@@ -20,14 +21,6 @@
 namespace monolith {
 
 namespace {
-
-double inf_norm(const VectorX& v) { return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0; }
-
-/// ||new - old||_inf / ||new||_inf (0 when both vanish).
-double relative_change(const VectorX& next, const VectorX& previous) {
-  if (next.size() == 0) return 0.0;
-  return inf_norm(next - previous) / std::max(inf_norm(next), 1e-300);
-}
 
 /// The unknowns of eq. (24) during a scheme: x_f = (tau, p), lambda, z.
 struct Unknowns {
@@ -65,85 +58,53 @@ long fluid_solve(const MonolithicSystem<Dim>& s, const FluidBodyOperator<Dim>& o
 
 /// The contact solve of the partitioned schemes for a fixed x_f: the normal QP
 /// A33 lambda = b3 - A31 tau - A32 p - A34 z, lambda >= 0 (eq. (24) row 3) and, with friction,
-/// the friction QP (25), staggered as solve_staggered_projections does (friction first, normal
+/// the friction QP (25), in the staggered rounds of staggered_rounds (friction first, normal
 /// last). Operators, colourings and ||A|| estimates are built once per system.
 template <int Dim>
 class ContactSolve {
  public:
   ContactSolve(const MonolithicSystem<Dim>& s, const StaggeredSettings& settings)
-      : s_(s), settings_(settings) {
-    const int nc = s.num_contacts();
-    if (nc == 0) return;
-    const ContactSystem<Dim>& c = s.contacts();
-    friction_ = c.mu.maxCoeff() > 0.0 && s.num_body_dofs() > 0;
-    // A33 with SSOR sweeps over Welsh-Powell colours of the contact graph, boosted by gamma
-    const Colouring colours = welsh_powell(contact_adjacency(c.dynamic_pairs, c.num_dynamic_bodies));
-    a33_ = std::make_unique<ColouredSparseOperator>(c.a33(), colours);
-    a33_boosted_ = std::make_unique<DiagonalBoost>(*a33_, settings.diagonal_boost);
-    normal_settings_ = with_norm_estimate(*a33_boosted_, settings.mprgp);
-    if (friction_) {
-      a44_ = std::make_unique<ColouredSparseOperator>(c.a44(), expand_colouring(colours, Dim - 1));
-      a44_boosted_ = std::make_unique<DiagonalBoost>(*a44_, settings.diagonal_boost);
-      friction_settings_ = with_norm_estimate(*a44_boosted_, settings.mprgp);
-    }
-  }
+      : s_(s), settings_(settings), qp_(s.contacts(), settings) {}
 
-  bool friction() const { return friction_; }
+  bool friction() const { return qp_.friction(); }
 
   /// Up to `rounds` friction-normal rounds (one normal solve without friction), warm-started
   /// from x.lambda, x.z (`cold`: every QP from zero, the friction bounds still from the current
   /// lambda); stops when lambda changes by <= the tolerance. Returns the rounds done.
   int solve(Unknowns& x, int rounds, bool cold, long& iterations, CoupledSolveResult& r) const {
-    const int nc = s_.num_contacts(), nz = s_.num_friction();
-    if (nc == 0) return 0;
-    const double inf = std::numeric_limits<double>::infinity();
-    const VectorX zero_n = VectorX::Zero(nc), inf_n = VectorX::Constant(nc, inf);
-    if (!friction_) {
+    if (s_.num_contacts() == 0) return 0;
+    // the normal QP given (tau, p, z)
+    auto solve_normal = [&]() {
       if (cold) x.lambda.setZero();
-      const MprgpResult m = mprgp_solve(*a33_boosted_, s_.contact_rhs(x.x_fluid, x.z), zero_n, inf_n,
-                                        x.lambda, normal_settings_);
+      const MprgpResult m = mprgp_solve(qp_.normal(), s_.contact_rhs(x.x_fluid, x.z),
+                                        qp_.normal_lower(), qp_.normal_upper(), x.lambda,
+                                        qp_.normal_settings());
       record_mprgp(m, r, "contact solve");
       iterations += m.iterations;
+    };
+    if (!qp_.friction()) {
+      solve_normal();
       return 1;
     }
-    const int nf = s_.num_fluid();
-    VectorX lower(nz), upper(nz), xl(nf + nc);
-    int done = 0;
-    for (int k = 0; k < std::max(1, rounds); ++k) {
-      // eq. (25) given (tau, p, lambda): the pyramid bounds of the current lambda
-      const ContactSystem<Dim>& c = s_.contacts();
-      for (int i = 0; i < nc; ++i)
-        for (int j = 0; j < Dim - 1; ++j) {
-          const double bound = c.mu[i] * std::max(x.lambda[i], 0.0);
-          lower[(Dim - 1) * i + j] = -bound;
-          upper[(Dim - 1) * i + j] = bound;
-        }
+    // eq. (25) given (tau, p, lambda)
+    VectorX xl(s_.num_fluid() + s_.num_contacts());
+    auto solve_friction = [&](const VectorX& lower, const VectorX& upper) {
       xl << x.x_fluid, x.lambda;
       if (cold) x.z.setZero();
-      const MprgpResult mz = mprgp_solve(*a44_boosted_, s_.friction_rhs(xl), lower, upper, x.z,
-                                         friction_settings_);
-      record_mprgp(mz, r, "friction solve");
-      iterations += mz.iterations;
-      // the normal QP given (tau, p, z)
-      const VectorX previous = x.lambda;
-      if (cold) x.lambda.setZero();
-      const MprgpResult mn = mprgp_solve(*a33_boosted_, s_.contact_rhs(x.x_fluid, x.z), zero_n,
-                                         inf_n, x.lambda, normal_settings_);
-      record_mprgp(mn, r, "contact solve");
-      iterations += mn.iterations;
-      ++done;
-      if (relative_change(x.lambda, previous) <= settings_.tolerance) break;
-    }
-    return done;
+      const MprgpResult m =
+          mprgp_solve(qp_.tangential(), s_.friction_rhs(xl), lower, upper, x.z, qp_.friction_settings());
+      record_mprgp(m, r, "friction solve");
+      iterations += m.iterations;
+    };
+    return staggered_rounds<Dim>(s_.contacts().mu, rounds, 0, settings_.tolerance,
+                                 [&]() { return x.lambda; }, solve_friction, solve_normal)
+        .rounds;
   }
 
  private:
   const MonolithicSystem<Dim>& s_;
   StaggeredSettings settings_;
-  bool friction_ = false;
-  std::unique_ptr<ColouredSparseOperator> a33_, a44_;
-  std::unique_ptr<DiagonalBoost> a33_boosted_, a44_boosted_;
-  MprgpSettings normal_settings_, friction_settings_;
+  ContactQpOperators<Dim> qp_;
 };
 
 /// PC-unified / PVC-unified / VC-unified on one system: the MLCP (26) by solve_pvc_unified, or
