@@ -12,6 +12,7 @@
 #include "reference/core/errors.hpp"
 #include "reference/core/timer.hpp"
 #include "reference/coupling/monolithic_system.hpp"
+#include "reference/coupling/solve_sequence.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/solvers/colouring.hpp"
@@ -158,18 +159,6 @@ std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>&
                                                  in.solids, contacts, backend, unknowns);
 }
 
-/// u, p, tau, v, lambda, z of the final system and unknowns.
-template <int Dim>
-void finish(const MonolithicSystem<Dim>& s, const Unknowns& x, CoupledSolveResult& r) {
-  r.u = s.fluid_velocities(x.x_fluid);
-  r.pressure = s.pressure_cells(x.x_fluid);
-  r.stress = s.stress_full(x.x_fluid);
-  r.body_velocity = s.body_velocities(x.x_fluid, x.lambda, x.z);
-  r.lambda = x.lambda;
-  r.z = x.z;
-  r.body_dof = s.contacts().body_dof;
-}
-
 template <int Dim>
 void count_dofs(const MonolithicSystem<Dim>& s, CoupledSolveResult& r) {
   r.pressure_dofs = s.num_pressure();
@@ -256,106 +245,87 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   if (in.u_star.size() != in.grid.num_faces())
     throw std::invalid_argument("solve_coupled_step: u_star must have one entry per face");
   CoupledSolveResult r;
-  // P.. C schemes: inviscid (viscosity zeroed, so no stress unknowns)
+  // the inviscid solves: viscosity zeroed, so no stress unknowns
   StokesWeights inviscid = in.weights;
   inviscid.viscosity.setZero();
-  // Algorithm 2 (section 5) for non-Newtonian liquids: rounds of (viscosity, viscous solve)
-  const bool non_newtonian = options.initial_viscosity && options.update_viscosity;
-  const int viscosity_rounds = std::max(1, settings.max_iterations);
-
-  if (scheme == CouplingScheme::pc_vc_pc_unified) {
-    // section 6.2: PC-unified -> (u1, v1), VC-unified -> (u2, v2), PC-unified -> final
-    const auto s1 = build_system(in, inviscid, StressForm::reduced,
-                                 StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
-                                 backend);
-    const Stopwatch t1;
-    const Unknowns x1 = unified_solve(*s1, settings, r, r.coupled_iterations);
-    const double pc1_seconds = t1.seconds();
-    const VectorX u1 = s1->fluid_velocities(x1.x_fluid);
-    const VectorX v1 = s1->body_velocities(x1.x_fluid, x1.lambda, x1.z);
-    const VectorX p1 = s1->pressure_cells(x1.x_fluid);
-    const std::vector<int>& dof = s1->contacts().body_dof;
-
-    std::unique_ptr<MonolithicSystem<Dim>> s2;
-    Unknowns x2;
-    if (!non_newtonian) {
-      s2 = build_system(in, in.weights, StressForm::full, StokesUnknowns::stress_only, u1,
-                        with_velocities(in.bodies, dof, v1), backend);
-      const Stopwatch t2;
-      x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
-      r.viscosity_coupled_seconds = t2.seconds();
-    } else {
-      // Algorithm 2 around VC-unified, every round from (u1, v1) with eta^k
-      StokesWeights w = in.weights;
-      VectorX eta = options.initial_viscosity(u1);
-      for (int k = 0; k < viscosity_rounds; ++k) {
-        w.viscosity = eta;
-        s2 = build_system(in, w, StressForm::full, StokesUnknowns::stress_only, u1,
-                          with_velocities(in.bodies, dof, v1), backend);
-        const Stopwatch t2;
-        x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
-        r.viscosity_coupled_seconds += t2.seconds();
-        eta = options.update_viscosity(s2->stress_full(x2.x_fluid), w.viscosity);
-      }
-    }
-    const VectorX u2 = s2->fluid_velocities(x2.x_fluid);
-    const VectorX v2 = s2->body_velocities(x2.x_fluid, x2.lambda, x2.z);
-    const VectorX tau2 = s2->stress_full(x2.x_fluid);
-
-    const auto s3 = build_system(in, inviscid, StressForm::reduced,
-                                 StokesUnknowns::pressure_and_stress, u2,
-                                 with_velocities(in.bodies, dof, v2), backend);
-    const Stopwatch t3;
-    const Unknowns x3 = unified_solve(*s3, settings, r, r.coupled_iterations);
-    r.coupled_seconds = pc1_seconds + r.viscosity_coupled_seconds + t3.seconds();
-    r.coupled_iterations += r.viscosity_coupled_iterations;
-    finish(*s3, x3, r);
-    r.pressure = p1 + r.pressure;
-    r.stress = tau2;
-    count_dofs(*s1, r);
-    r.stress_dofs = s2->num_stress();
-    r.total_seconds = t_start.seconds();
-    return r;
-  }
-
-  const bool viscous = scheme_uses_viscosity(scheme);
-  if (viscous && non_newtonian) {
-    // Algorithm 2 around the scheme's solve: every round from u* with eta^k
-    StokesWeights w = in.weights;
-    VectorX eta = options.initial_viscosity(in.u_star);
-    std::unique_ptr<MonolithicSystem<Dim>> s;
+  // the state between the solves of the sequence: the system and unknowns of the last solve
+  // and the velocities (u, v) the next solve starts from (v empty: the bodies as given)
+  struct State {
+    std::shared_ptr<const MonolithicSystem<Dim>> system;
     Unknowns x;
-    for (int k = 0; k < viscosity_rounds; ++k) {
-      w.viscosity = eta;
-      s = build_system(in, w, StressForm::reduced, StokesUnknowns::pressure_and_stress, in.u_star,
-                       in.bodies, backend);
-      if (scheme == CouplingScheme::pvc_unified) {
-        const Stopwatch t0;
-        x = unified_solve(*s, settings, r, r.coupled_iterations);
-        r.coupled_seconds += t0.seconds();
-      } else {
-        x = partitioned_solve(*s, scheme, settings, options, r);
-      }
-      eta = options.update_viscosity(s->stress_full(x.x_fluid), w.viscosity);
+    VectorX u, v, pressure, stress;
+  };
+  // builds eq. (24) from `from` and runs the scheme's solve (unified: the MLCP; otherwise the
+  // partitioned solves), booking iterations and time as coupled or VC-coupled
+  auto solve = [&](const State& from, const StokesWeights& w, StressForm form,
+                   StokesUnknowns unknowns, bool unified, bool viscosity_stage) {
+    State out;
+    const std::vector<RigidBody<Dim>> bodies =
+        from.v.size() ? with_velocities(in.bodies, from.system->contacts().body_dof, from.v)
+                      : in.bodies;
+    out.system = build_system(in, w, form, unknowns, from.u, bodies, backend);
+    const MonolithicSystem<Dim>& sys = *out.system;
+    if (unified) {
+      const Stopwatch t0;
+      out.x = unified_solve(sys, settings, r,
+                            viscosity_stage ? r.viscosity_coupled_iterations : r.coupled_iterations);
+      const double seconds = t0.seconds();
+      r.coupled_seconds += seconds;
+      if (viscosity_stage) r.viscosity_coupled_seconds += seconds;
+    } else {
+      out.x = partitioned_solve(sys, scheme, settings, options, r);
     }
-    count_dofs(*s, r);
-    finish(*s, x, r);
-    r.total_seconds = t_start.seconds();
-    return r;
+    out.u = sys.fluid_velocities(out.x.x_fluid);
+    out.v = sys.body_velocities(out.x.x_fluid, out.x.lambda, out.x.z);
+    out.pressure = sys.pressure_cells(out.x.x_fluid);
+    out.stress = sys.stress_full(out.x.x_fluid);
+    return out;
+  };
+  const bool pc_vc_pc = scheme == CouplingScheme::pc_vc_pc_unified;
+  // P.. C schemes, and the P solves of PC-VC-PC-unified (as PC-unified)
+  auto pressure = [&](const State& from, SolveStage stage) {
+    const State out = solve(from, inviscid, StressForm::reduced,
+                            StokesUnknowns::pressure_and_stress,
+                            pc_vc_pc || scheme == CouplingScheme::pc_unified, false);
+    if (stage != SolveStage::second_pressure) count_dofs(*out.system, r);
+    return out;
+  };
+  // PV.. C schemes: (tau, p) with the input viscosity or eta^k of Algorithm 2
+  auto unified = [&](const State& from, const VectorX* eta) {
+    StokesWeights w = in.weights;
+    if (eta) w.viscosity = *eta;
+    const State out = solve(from, w, StressForm::reduced, StokesUnknowns::pressure_and_stress,
+                            scheme == CouplingScheme::pvc_unified, false);
+    count_dofs(*out.system, r);
+    return out;
+  };
+  // the VC-unified solve of PC-VC-PC: stress only (p fixed at 0), the full form
+  auto viscous = [&](const State& from, const VectorX* eta) {
+    StokesWeights w = in.weights;
+    if (eta) w.viscosity = *eta;
+    const State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true);
+    r.stress_dofs = out.system->num_stress();
+    return out;
+  };
+  ViscosityRounds viscosity;
+  viscosity.rounds = std::max(1, settings.max_iterations);
+  if (options.initial_viscosity && options.update_viscosity) {
+    viscosity.initial = options.initial_viscosity;
+    viscosity.update = options.update_viscosity;
   }
-  const auto s = build_system(in, viscous ? in.weights : inviscid, StressForm::reduced,
-                              StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
-                              backend);
-  count_dofs(*s, r);
-  Unknowns x;
-  if (scheme == CouplingScheme::pc_unified || scheme == CouplingScheme::pvc_unified) {
-    const Stopwatch t0;
-    x = unified_solve(*s, settings, r, r.coupled_iterations);
-    r.coupled_seconds = t0.seconds();
-  } else {
-    x = partitioned_solve(*s, scheme, settings, options, r);
-  }
-  finish(*s, x, r);
+  State start;
+  start.u = in.u_star;
+  // with bodies every scheme keeps its own sequence, viscous liquid or not
+  const State end = run_solve_sequence(solve_sequence(scheme, true), start, viscosity, pressure,
+                                       unified, viscous);
+  if (pc_vc_pc) r.coupled_iterations += r.viscosity_coupled_iterations;
+  r.u = end.u;
+  r.pressure = end.pressure;
+  r.stress = end.stress;
+  r.body_velocity = end.v;
+  r.lambda = end.x.lambda;
+  r.z = end.x.z;
+  r.body_dof = end.system->contacts().body_dof;
   r.total_seconds = t_start.seconds();
   return r;
 }

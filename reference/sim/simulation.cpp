@@ -17,6 +17,7 @@
 #include "reference/core/timer.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
 #include "reference/coupling/coupling.hpp"
+#include "reference/coupling/solve_sequence.hpp"
 #include "reference/fluid/deformation_rate.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
@@ -119,14 +120,6 @@ constexpr double kBodyCellFraction = 0.5;
 constexpr int kAirVelocityLayers = 2;
 
 }  // namespace
-
-SolveSequence solve_sequence(CouplingScheme scheme, bool viscous) {
-  // without viscous liquid (or under a scheme that leaves viscosity out) there are no stress
-  // unknowns: every scheme is the pressure solve
-  if (!viscous || !scheme_uses_viscosity(scheme)) return SolveSequence::pressure;
-  if (scheme == CouplingScheme::pc_vc_pc_unified) return SolveSequence::decoupled;
-  return SolveSequence::unified;
-}
 
 template <int Dim>
 Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
@@ -494,105 +487,79 @@ void Simulation<Dim>::solve_coupled(double dt) {
 
 template <int Dim>
 void Simulation<Dim>::solve_liquid(double dt) {
-  // pressure only: eq. (8) without stress
-  if (sequence_ == SolveSequence::pressure) {
+  // the state between the solves of the sequence (solve_stokes / solve_pressure update u)
+  struct State {
+    VectorX u, pressure, stress;
+  };
+  const Backend backend = scene_.solver.backend;
+  // eq. (8) without stress
+  auto pressure = [&](const State& from, SolveStage stage) {
+    State out = from;
     const PressureSolveResult solve =
-        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-    pressure_ = solve.pressure;
-    record_solve(solve.pcg, solve.dofs, 0, "pressure");
-    return;
-  }
-  if (non_newtonian_) {
-    solve_liquid_non_newtonian(dt);
-    return;
-  }
+        solve_pressure(grid_, weights_, dt, backend, pcg_settings_, out.u);
+    record_solve(solve.pcg, solve.dofs, 0, solve_stage_name(stage));
+    out.pressure = solve.pressure;
+    return out;
+  };
   StokesWeights w;
   w.pressure = weights_;
   w.fluid_stress = stress_fluid_;
   w.liquid_stress = stress_liquid_;
-  w.viscosity = stress_eta_;
-  if (sequence_ == SolveSequence::unified) {
-    // PVC without bodies: eq. (8) in (tau, p) at once, reduced stress (section 4.4.2)
+  // PVC without bodies: eq. (8) in (tau, p) at once, reduced stress (section 4.4.2)
+  auto unified = [&](const State& from, const VectorX* eta) {
+    w.viscosity = eta ? *eta : stress_eta_;
+    State out = from;
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                     scene_.solver.backend, pcg_settings_, u_);
-    pressure_ = solve.pressure;
-    stress_ = solve.stress;
+                     backend, pcg_settings_, out.u);
     record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
-    return;
+    out.pressure = solve.pressure;
+    out.stress = solve.stress;
+    return out;
+  };
+  // the VC solve of PC-VC-PC: stress unknowns only (p = 0; the full form, since the trace
+  // vanishes only together with the pressure)
+  auto viscous = [&](const State& from, const VectorX* eta) {
+    w.viscosity = eta ? *eta : stress_eta_;
+    State out = from;
+    const StokesSolveResult solve = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
+                                                 StressForm::full, backend, pcg_settings_, out.u);
+    record_solve(solve.pcg, 0, solve.stress_dofs, "viscosity");
+    out.stress = solve.stress;
+    return out;
+  };
+  // herschel-bulkley liquids: Algorithm 2 around the viscous solve (section 5), started from the
+  // previous step's shear rate where there is one (departure from line 1, docs/non-newtonian.md)
+  ViscosityRounds viscosity;
+  std::unique_ptr<NonNewtonianViscosity<Dim>> model;
+  VectorX eta;
+  if (non_newtonian_ && sequence_ != SolveSequence::pressure) {
+    model = std::make_unique<NonNewtonianViscosity<Dim>>(non_newtonian_model());
+    viscosity.rounds = std::max(1, scene_.solver.staggered_iterations);
+    viscosity.initial = [&](const VectorX& u) {
+      return model->initial_viscosity(weights_.fluid_face, u, previous_shear_rate_);
+    };
+    viscosity.update = [&](const VectorX& tau, const VectorX& used) {
+      eta = model->update(tau, used);
+      return eta;
+    };
   }
-  // PC-VC-PC without bodies (section 6.2): pressure, viscosity with stress unknowns (p = 0; the
-  // full form, since the trace vanishes only together with the pressure), pressure again
-  const PressureSolveResult first =
-      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-  record_solve(first.pcg, first.dofs, 0, "first pressure");
-  const StokesSolveResult viscous = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
-                                                 StressForm::full, scene_.solver.backend,
-                                                 pcg_settings_, u_);
-  record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
-  const PressureSolveResult second =
-      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-  record_solve(second.pcg, second.dofs, 0, "second pressure");
-  pressure_ = first.pressure + second.pressure;
-  stress_ = viscous.stress;
+  const State end = run_solve_sequence(sequence_, State{u_, pressure_, stress_}, viscosity,
+                                       pressure, unified, viscous);
+  u_ = end.u;
+  pressure_ = end.pressure;
+  stress_ = end.stress;
+  if (!model) return;
+  // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
+  cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
+  record_viscosity_rounds(model->residuals());
+  if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
 }
 
 template <int Dim>
 NonNewtonianViscosity<Dim> Simulation<Dim>::non_newtonian_model() const {
   return NonNewtonianViscosity<Dim>(stress_grid_, deformation_rate_, stress_fluid_, stress_liquid_,
                                     mixture_);
-}
-
-template <int Dim>
-void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
-  StokesWeights w;
-  w.pressure = weights_;
-  w.fluid_stress = stress_fluid_;
-  w.liquid_stress = stress_liquid_;
-  NonNewtonianViscosity<Dim> model = non_newtonian_model();
-  const int rounds = std::max(1, scene_.solver.staggered_iterations);
-  VectorX eta;
-  if (sequence_ == SolveSequence::unified) {
-    // Algorithm 2 around the unified solve: each round eq. (29) in (tau, p) from the same u*
-    // with N(eta^k), so each round ends with tau, p optimal for the current viscosity
-    const VectorX u_star = u_;
-    eta = run_algorithm2<Dim>(model, weights_.fluid_face, u_star, rounds, [&](const VectorX& e) {
-      w.viscosity = e;
-      u_ = u_star;
-      const StokesSolveResult solve =
-          solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                       scene_.solver.backend, pcg_settings_, u_);
-      record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
-      pressure_ = solve.pressure;
-      stress_ = solve.stress;
-      return solve.stress;
-    }, previous_shear_rate_);
-  } else {
-    // PC-VC-PC: Algorithm 2 around the viscosity solve, from the first pressure solve's u
-    const PressureSolveResult first =
-        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-    record_solve(first.pcg, first.dofs, 0, "first pressure");
-    const VectorX u_first = u_;
-    eta = run_algorithm2<Dim>(model, weights_.fluid_face, u_first, rounds, [&](const VectorX& e) {
-      w.viscosity = e;
-      u_ = u_first;
-      const StokesSolveResult viscous =
-          solve_stokes(grid_, w, dt, StokesUnknowns::stress_only, StressForm::full,
-                       scene_.solver.backend, pcg_settings_, u_);
-      record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
-      stress_ = viscous.stress;
-      return viscous.stress;
-    }, previous_shear_rate_);
-    const PressureSolveResult second =
-        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-    record_solve(second.pcg, second.dofs, 0, "second pressure");
-    pressure_ = first.pressure + second.pressure;
-  }
-  // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
-  cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
-  record_viscosity_rounds(model.residuals());
-  // the next step starts from this step's rate (departure from line 1, docs/non-newtonian.md)
-  if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model.previous_shear_rate();
 }
 
 template <int Dim>

@@ -12,6 +12,7 @@
 #include "reference/core/common.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/coupling/coupling_scheme.hpp"
+#include "reference/coupling/solve_sequence.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/geometry/shape.hpp"
@@ -41,18 +42,6 @@ class AnySimulation {
   /// total energy that a liquid in a static container must never gain.
   virtual double liquid_potential_energy() const { return 0.0; }
 };
-
-/// The solves of lines 7-11 of Algorithm 1 for the liquid, without dynamic bodies.
-enum class SolveSequence {
-  pressure,   ///< eq. (8) without stress (solve_pressure)
-  unified,    ///< eq. (8) in (tau, p) together, reduced stress (solve_stokes)
-  decoupled,  ///< section 6.2: pressure, then stress only (p = 0), then pressure again
-};
-
-/// The sequence a scheme runs when no body is dynamic: P-C, C-P, PC-iterative, PC-unified ->
-/// pressure (viscosity ignored); PV-C, C-PV, PVC-iterative, PVC-unified -> unified;
-/// PC-VC-PC-unified -> decoupled. Without viscous liquid (`viscous` false) always pressure.
-SolveSequence solve_sequence(CouplingScheme scheme, bool viscous);
 
 /// Algorithm 1 for one scene: liquids (particles, eq. (8) with or without stress unknowns,
 /// herschel-bulkley liquids by Algorithm 2), static, dynamic and kinematic bodies with
@@ -119,14 +108,13 @@ class Simulation : public AnySimulation {
   void check_finite(const char* after) const;
   /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
   void fill_state_stats(FrameStats& s) const;
-  /// Lines 7-11 of Algorithm 1 for the liquid: the solves of solve_sequence(scheme) on u_, their
-  /// statistics added to stats_.
+  /// Lines 7-11 of Algorithm 1 for the liquid beside static solids: the solves of
+  /// solve_sequence(scheme) (run_solve_sequence, solve_sequence.hpp) on u_, their statistics
+  /// added to stats_. Herschel-bulkley liquids (section 5) run Algorithm 2 around the viscous
+  /// solve (staggered_iterations rounds), started from the previous step's shear rate where there
+  /// is one (departure: line 1 as printed only in the first step and on newly active DOFs;
+  /// docs/non-newtonian.md, departure 4).
   void solve_liquid(double dt);
-  /// solve_liquid for scenes with a herschel-bulkley liquid (section 5): the unified or decoupled
-  /// sequence with Algorithm 2 around its viscous solve (staggered_iterations rounds), started
-  /// from the previous step's shear rate where there is one (departure: line 1 as printed only
-  /// in the first step and on newly active DOFs; docs/non-newtonian.md, departure 4).
-  void solve_liquid_non_newtonian(double dt);
   /// Algorithm 2's model for the current weights (W_F^s, W_L^s, the liquids' mass fractions).
   NonNewtonianViscosity<Dim> non_newtonian_model() const;
   /// The residuals of one step's viscosity rounds into stats_ (SolverStats::viscosity_residuals).
