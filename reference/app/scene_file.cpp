@@ -581,45 +581,13 @@ double estimate_memory_bytes(int dim, const std::vector<int>& cells, double part
   return 8.0 * (16.0 * n_cells + 8.0 * n_faces + 2.0 * n_half + per_particle * particles) * 1.5;
 }
 
-SceneFile parse_scene(const json& j, const std::string& label, const std::filesystem::path& base_dir) {
-  SceneParser p(label, base_dir);
-  // refuse absurdly deep documents before anything copies or walks them recursively
-  if (json_depth(j, kMaxJsonDepth) > kMaxJsonDepth) {
-    p.add("", "the document is nested too deeply", "at most " + std::to_string(kMaxJsonDepth) + " levels of arrays and objects");
-    throw InputError(p.problems);
-  }
-  SceneFile s;
-  s.source_label = label;
-  s.base_dir = base_dir;
-  s.as_run = j;
+namespace {
 
-  // the root
-  if (!j.is_object()) {
-    p.add("", "expected a JSON object, got " + describe(j), "a scene object with \"format\": \"" + std::string(kFormat) + "\"");
-    throw InputError(p.problems);
-  }
-  p.check_keys(j, "", {"format", "name", "description", "dim", "domain", "gravity", "time", "solver",
-                       "particles", "liquids", "bodies", "probes", "render"});
-
-  // format and dim first: every vector length depends on dim
-  if (const json* f = p.member(j, "format", "", true, "\"" + std::string(kFormat) + "\"")) {
-    std::string fs;
-    if (p.read_string(*f, "format", "\"" + std::string(kFormat) + "\"", fs) && fs != kFormat)
-      p.add("format", "unsupported format " + describe(*f), "\"" + std::string(kFormat) + "\"");
-  }
-  if (const json* d = p.member(j, "dim", "", true, "2 or 3")) {
-    long long dv = 0;
-    if (p.read_int(*d, "dim", 2, 3, "2 or 3", dv)) p.dim = static_cast<int>(dv);
-  }
-  s.dim = p.dim ? p.dim : 2;
+/// "domain": lower, upper, cells (cubic, at most kMaxCells), boundary, wall coefficients. true when
+/// the box is usable for the checks against it.
+bool parse_domain(SceneParser& p, const json& j, SceneFile& s) {
   const int dim = p.dim;
   const std::size_t n = static_cast<std::size_t>(s.dim);
-
-  // name and description
-  std::vector<std::string> scene_names;
-  p.read_name(j, "", default_name(label), scene_names, s.name);
-  if (const json* d = p.member(j, "description", "", false, "")) p.read_string(*d, "description", "a string", s.description);
-
   // domain
   bool domain_ok = false;
   if (const json* dj = p.member(j, "domain", "", true, "an object with lower, upper, cells")) {
@@ -697,7 +665,11 @@ SceneFile parse_scene(const json& j, const std::string& label, const std::filesy
     domain_ok = geometry_problems == 0 && dim && s.domain.cells.size() == n && s.domain.lower.size() == n &&
                 s.domain.upper.size() == n;
   }
+  return domain_ok;
+}
 
+/// "gravity", "time", "solver" and "particles": the scalar settings.
+void parse_settings(SceneParser& p, const json& j, SceneFile& s) {
   // gravity
   s.gravity = default_gravity(s.dim);
   if (const json* g = p.member(j, "gravity", "", false, "")) p.read_dim_vector(*g, "gravity", kAnyNumber, s.gravity);
@@ -740,10 +712,11 @@ SceneFile parse_scene(const json& j, const std::string& label, const std::filesy
       p.opt_bool(*pj, "particles", "position_correction", s.particles.position_correction);
     }
   }
+}
 
-  // shapes to check against the domain once everything is parsed
-  std::vector<PlacedShape> placed;
-
+/// "liquids": each liquid's shape (added to `placed`), density, velocity and viscosity model.
+void parse_liquids(SceneParser& p, const json& j, SceneFile& s, std::vector<PlacedShape>& placed) {
+  const std::size_t n = static_cast<std::size_t>(s.dim);
   // liquids
   if (const json* lj = p.member(j, "liquids", "", false, "")) {
     if (!lj->is_array()) {
@@ -798,7 +771,12 @@ SceneFile parse_scene(const json& j, const std::string& label, const std::filesy
       }
     }
   }
+}
 
+/// "bodies": each body's motion, shape (added to `placed`), density, velocities, coefficients and
+/// kinematic path.
+void parse_bodies(SceneParser& p, const json& j, SceneFile& s, std::vector<PlacedShape>& placed) {
+  const std::size_t n = static_cast<std::size_t>(s.dim);
   // bodies
   if (const json* bj = p.member(j, "bodies", "", false, "")) {
     if (!bj->is_array()) {
@@ -855,7 +833,11 @@ SceneFile parse_scene(const json& j, const std::string& label, const std::filesy
       }
     }
   }
+}
 
+/// "probes": named points, inside the domain when it is usable.
+void parse_probes(SceneParser& p, const json& j, SceneFile& s, bool domain_ok) {
+  const std::size_t n = static_cast<std::size_t>(s.dim);
   // probes
   if (const json* pj = p.member(j, "probes", "", false, "")) {
     if (!pj->is_array()) {
@@ -884,7 +866,10 @@ SceneFile parse_scene(const json& j, const std::string& label, const std::filesy
       }
     }
   }
+}
 
+/// "render": enabled, size, color_by.
+void parse_render(SceneParser& p, const json& j, SceneFile& s) {
   // render
   if (const json* rj = p.member(j, "render", "", false, "")) {
     if (p.expect_object(*rj, "render", "an object with enabled, size, color_by")) {
@@ -904,28 +889,79 @@ SceneFile parse_scene(const json& j, const std::string& label, const std::filesy
       p.opt_enum(*rj, "render", "color_by", s.render.color_by);
     }
   }
+}
 
-  // shapes against the domain, then the memory estimate (only with a valid domain)
-  if (domain_ok) {
-    double liquid_cells = 0.0;
-    if (dim == 2)
-      liquid_cells = check_shapes_in_domain<2>(s, placed, p);
-    else
-      liquid_cells = check_shapes_in_domain<3>(s, placed, p);
-    const int per_cell = s.particles.count_per_cell(dim);
-    double total_cells = 1.0;
-    for (int c : s.domain.cells) total_cells *= c;
-    if (total_cells <= kMaxCells) {
-      const double particles = per_cell * std::min(liquid_cells, total_cells);
-      const double bytes = estimate_memory_bytes(dim, s.domain.cells, particles);
-      const double limit = memory_limit_bytes();
-      if (bytes > limit)
-        p.add("domain.cells", "the scene would need about " + gib(bytes) + " of memory (grid of " + num(total_cells) +
-                                  " cells, about " + num(particles) + " particles)",
-              "at most " + gib(limit) + " on this machine: use fewer cells or particles.per_cell");
-    }
+/// The placed shapes against the domain, then the memory estimate of the grid and the particles
+/// (estimate_memory_bytes) against memory_limit_bytes. Needs a usable domain.
+void check_domain_contents(SceneParser& p, SceneFile& s, const std::vector<PlacedShape>& placed) {
+  const int dim = p.dim;
+  double liquid_cells = 0.0;
+  if (dim == 2)
+    liquid_cells = check_shapes_in_domain<2>(s, placed, p);
+  else
+    liquid_cells = check_shapes_in_domain<3>(s, placed, p);
+  const int per_cell = s.particles.count_per_cell(dim);
+  double total_cells = 1.0;
+  for (int c : s.domain.cells) total_cells *= c;
+  if (total_cells <= kMaxCells) {
+    const double particles = per_cell * std::min(liquid_cells, total_cells);
+    const double bytes = estimate_memory_bytes(dim, s.domain.cells, particles);
+    const double limit = memory_limit_bytes();
+    if (bytes > limit)
+      p.add("domain.cells", "the scene would need about " + gib(bytes) + " of memory (grid of " + num(total_cells) +
+                                " cells, about " + num(particles) + " particles)",
+            "at most " + gib(limit) + " on this machine: use fewer cells or particles.per_cell");
   }
+}
 
+}  // namespace
+
+SceneFile parse_scene(const json& j, const std::string& label, const std::filesystem::path& base_dir) {
+  SceneParser p(label, base_dir);
+  // refuse absurdly deep documents before anything copies or walks them recursively
+  if (json_depth(j, kMaxJsonDepth) > kMaxJsonDepth) {
+    p.add("", "the document is nested too deeply", "at most " + std::to_string(kMaxJsonDepth) + " levels of arrays and objects");
+    throw InputError(p.problems);
+  }
+  SceneFile s;
+  s.source_label = label;
+  s.base_dir = base_dir;
+  s.as_run = j;
+
+  // the root
+  if (!j.is_object()) {
+    p.add("", "expected a JSON object, got " + describe(j), "a scene object with \"format\": \"" + std::string(kFormat) + "\"");
+    throw InputError(p.problems);
+  }
+  p.check_keys(j, "", {"format", "name", "description", "dim", "domain", "gravity", "time", "solver",
+                       "particles", "liquids", "bodies", "probes", "render"});
+
+  // format and dim first: every vector length depends on dim
+  if (const json* f = p.member(j, "format", "", true, "\"" + std::string(kFormat) + "\"")) {
+    std::string fs;
+    if (p.read_string(*f, "format", "\"" + std::string(kFormat) + "\"", fs) && fs != kFormat)
+      p.add("format", "unsupported format " + describe(*f), "\"" + std::string(kFormat) + "\"");
+  }
+  if (const json* d = p.member(j, "dim", "", true, "2 or 3")) {
+    long long dv = 0;
+    if (p.read_int(*d, "dim", 2, 3, "2 or 3", dv)) p.dim = static_cast<int>(dv);
+  }
+  s.dim = p.dim ? p.dim : 2;
+
+  // name and description
+  std::vector<std::string> scene_names;
+  p.read_name(j, "", default_name(label), scene_names, s.name);
+  if (const json* d = p.member(j, "description", "", false, "")) p.read_string(*d, "description", "a string", s.description);
+
+  const bool domain_ok = parse_domain(p, j, s);
+  parse_settings(p, j, s);
+  // shapes to check against the domain once everything is parsed
+  std::vector<PlacedShape> placed;
+  parse_liquids(p, j, s, placed);
+  parse_bodies(p, j, s, placed);
+  parse_probes(p, j, s, domain_ok);
+  parse_render(p, j, s);
+  if (domain_ok) check_domain_contents(p, s, placed);
   if (!p.problems.empty()) throw InputError(p.problems);
   return s;
 }

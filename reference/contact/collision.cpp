@@ -216,231 +216,302 @@ std::vector<Contact<Dim>> reduce_contacts(std::vector<Contact<Dim>> cand,
 
 // --- detection -----------------------------------------------------------------------------------
 
+namespace {
+
+/// The broad phase: every body's world box grown by the search distance, the pairs (i < j) with
+/// at least one dynamic body whose boxes overlap, and the world positions of the surface samples
+/// of every body that takes part (pairs and walls; none for spheres, which are exact).
 template <int Dim>
-std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bodies,
-                                          const Walls<Dim>& walls, double search_distance,
-                                          const ContactReduction& reduction) {
-  const int n = static_cast<int>(bodies.size());
-  // broad phase: grown world boxes; pairs (i < j) with at least one dynamic body
-  std::vector<Box<Dim>> boxes(n);
-  for (int i = 0; i < n; ++i) boxes[i] = grown<Dim>(bodies[i].bounds(), search_distance);
+struct BroadPhase {
+  std::vector<Box<Dim>> boxes;
   std::vector<std::pair<int, int>> pairs;
+  std::vector<std::vector<Vec<Dim>>> world;
+};
+
+/// What the narrow phase of every pair reads: the bodies, the broad phase, the search distance
+/// and the reduction settings.
+template <int Dim>
+struct PairQuery {
+  const std::vector<RigidBody<Dim>>& bodies;
+  const BroadPhase<Dim>& bp;
+  double search_distance;
+  const ContactReduction& reduction;
+};
+
+template <int Dim>
+BroadPhase<Dim> broad_phase(const std::vector<RigidBody<Dim>>& bodies, double search_distance) {
+  const int n = static_cast<int>(bodies.size());
+  BroadPhase<Dim> bp;
+  bp.boxes.resize(n);
+  for (int i = 0; i < n; ++i) bp.boxes[i] = grown<Dim>(bodies[i].bounds(), search_distance);
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1; j < n; ++j) {
       if (!bodies[i].is_dynamic() && !bodies[j].is_dynamic()) continue;
-      if (boxes_overlap<Dim>(boxes[i], boxes[j])) pairs.emplace_back(i, j);
+      if (boxes_overlap<Dim>(bp.boxes[i], bp.boxes[j])) bp.pairs.emplace_back(i, j);
     }
   }
-  // world positions of the surface samples of every body taking part
   std::vector<char> needed(n, 0);
-  for (const auto& p : pairs) needed[p.first] = needed[p.second] = 1;
+  for (const auto& p : bp.pairs) needed[p.first] = needed[p.second] = 1;
   for (int i = 0; i < n; ++i) needed[i] = needed[i] || bodies[i].is_dynamic();
-  std::vector<std::vector<Vec<Dim>>> world(n);
+  bp.world.resize(n);
 #pragma omp parallel for schedule(dynamic)
   for (int i = 0; i < n; ++i) {
     if (!needed[i] || bodies[i].is_sphere()) continue;
     const Mat<Dim> r = bodies[i].rotation();
     const Vec<Dim> shift = bodies[i].position - r * bodies[i].rest_center_of_mass();
-    world[i].reserve(bodies[i].surface_samples().size());
-    for (const auto& x : bodies[i].surface_samples()) world[i].push_back(r * x + shift);
+    bp.world[i].reserve(bodies[i].surface_samples().size());
+    for (const auto& x : bodies[i].surface_samples()) bp.world[i].push_back(r * x + shift);
   }
+  return bp;
+}
 
-  // a candidate's normal, as an outward direction of the sampled body, must fit its cone
-  auto fits_cone = [&](const RigidBody<Dim>& body, const Vec<Dim>& x, const Vec<Dim>& outward) {
-    const double needed = body.is_box() ? reduction.box_cone_cosine : reduction.accept_cosine;
-    return body.normal_cone_cosine(x, outward) >= needed;
-  };
-  // the contact normal (out of q, towards p) for a sample x of p with gap phi to q: the SDF
-  // gradient of q, or, when that comes from an edge or corner of a box q and x lies inside a
-  // face of a box p, that face's normal (the normal of a face-edge contact is the face's: the
-  // gradient near the edge fans out); false if the normal does not fit p's cone
-  auto sample_normal = [&](const RigidBody<Dim>& p, const RigidBody<Dim>& q, const Vec<Dim>& x,
-                           double phi, Vec<Dim>* normal) {
-    const Vec<Dim> g = q.gradient(x);
-    if (!fits_cone(p, x, Vec<Dim>(-g))) return false;
-    Vec<Dim> face, q_face;
-    if (q.is_box() && !q.box_face_normal(Vec<Dim>(x - phi * g), &q_face) &&
-        p.box_face_normal(x, &face)) {
-      *normal = -face;
+/// A candidate's normal, as an outward direction of the sampled body, must fit its cone.
+template <int Dim>
+bool fits_cone(const ContactReduction& reduction, const RigidBody<Dim>& body, const Vec<Dim>& x,
+               const Vec<Dim>& outward) {
+  const double needed = body.is_box() ? reduction.box_cone_cosine : reduction.accept_cosine;
+  return body.normal_cone_cosine(x, outward) >= needed;
+}
+
+/// The contact normal (out of q, towards p) for a sample x of p with gap phi to q: the SDF
+/// gradient of q, or, when that comes from an edge or corner of a box q and x lies inside a face
+/// of a box p, that face's normal (the normal of a face-edge contact is the face's: the gradient
+/// near the edge fans out); false if the normal does not fit p's cone.
+template <int Dim>
+bool sample_normal(const ContactReduction& reduction, const RigidBody<Dim>& p,
+                   const RigidBody<Dim>& q, const Vec<Dim>& x, double phi, Vec<Dim>* normal) {
+  const Vec<Dim> g = q.gradient(x);
+  if (!fits_cone<Dim>(reduction, p, x, Vec<Dim>(-g))) return false;
+  Vec<Dim> face, q_face;
+  if (q.is_box() && !q.box_face_normal(Vec<Dim>(x - phi * g), &q_face) &&
+      p.box_face_normal(x, &face)) {
+    *normal = -face;
+  } else {
+    *normal = g;
+  }
+  return true;
+}
+
+/// Two spheres: at most one exact contact from the centre distance.
+template <int Dim>
+std::vector<Contact<Dim>> sphere_sphere_contacts(const Contact<Dim>& proto, const RigidBody<Dim>& ba,
+                                                 const RigidBody<Dim>& bb, double search_distance) {
+  std::vector<Contact<Dim>> cand;
+  const Vec<Dim> d = ba.position - bb.position;
+  const double len = d.norm();
+  const double phi = len - ba.sphere_radius() - bb.sphere_radius();
+  if (phi < search_distance) {
+    Contact<Dim> c = proto;
+    c.normal = len > 0.0 ? Vec<Dim>(d / len) : Vec<Dim>(Vec<Dim>::UnitY());
+    c.point = bb.position + bb.sphere_radius() * c.normal;
+    c.phi = phi;
+    cand.push_back(c);
+  }
+  return cand;
+}
+
+/// A sphere against any shape: the point of the other surface nearest the centre (exact for an
+/// exact SDF), plus the other body's samples against the sphere's exact SDF so that a concave
+/// shape touched in two places (a groove, a bowl's rim) gives both; each patch keeps only its
+/// deepest point. a, b as in the pair (a dynamic); one of them is the sphere.
+template <int Dim>
+std::vector<Contact<Dim>> sphere_shape_contacts(const PairQuery<Dim>& in, const Contact<Dim>& proto,
+                                                int a, int b) {
+  const RigidBody<Dim>& ba = in.bodies[a];
+  const RigidBody<Dim>& bb = in.bodies[b];
+  std::vector<Contact<Dim>> cand;
+  const bool a_round = ba.is_sphere();
+  const int other_index = a_round ? b : a;
+  const RigidBody<Dim>& round = a_round ? ba : bb;
+  const RigidBody<Dim>& other = a_round ? bb : ba;
+  const double radius = round.sphere_radius();
+  // orient a contact given the unit direction g out of `other` towards the sphere, the point q
+  // on other's surface and the gap
+  auto add = [&](const Vec<Dim>& g, const Vec<Dim>& q, double phi) {
+    Contact<Dim> c = proto;
+    c.phi = phi;
+    if (a_round) {
+      c.normal = g;
+      c.point = q;
     } else {
-      *normal = g;
+      c.normal = -g;
+      c.point = q + phi * g;  // on the sphere
     }
-    return true;
+    cand.push_back(c);
   };
+  const double d = other.distance(round.position);
+  if (d - radius < in.search_distance) {
+    const Vec<Dim> g = other.gradient(round.position);
+    add(g, Vec<Dim>(round.position - d * g), d - radius);
+  }
+  for (const auto& x : in.bp.world[other_index]) {
+    if (!in.bp.boxes[a_round ? a : b].contains(x)) continue;
+    const Vec<Dim> r = round.position - x;
+    const double len = r.norm();
+    if (!(len - radius < in.search_distance) || len == 0.0) continue;
+    // the sample must face the centre (within ~8 degrees)
+    const Vec<Dim> towards = r / len;
+    if (other.normal_cone_cosine(x, towards) < kSphereSampleCosine) continue;
+    Vec<Dim> face;
+    if (other.is_box() && !other.box_face_normal(x, &face)) {
+      // an edge or corner sample: the exact gap from that point
+      add(towards, x, len - radius);
+    } else {
+      // a face (or smooth) sample: the touching point of the tangent plane at x, exact for a
+      // flat face wherever the sample lies on it
+      const Vec<Dim> n = other.is_box() ? face : other.gradient(x);
+      const double height = n.dot(r);
+      add(n, Vec<Dim>(round.position - height * n), height - radius);
+    }
+  }
+  ContactReduction sphere_reduction = in.reduction;
+  sphere_reduction.max_points_2d = sphere_reduction.max_points_3d = 1;
+  if (!(sphere_reduction.merge_distance > 0.0)) {
+    sphere_reduction.merge_distance = std::max(other.sample_spacing(), 0.25 * radius);
+  }
+  return reduce_contacts<Dim>(std::move(cand), sphere_reduction);
+}
 
-  // narrow phase per pair
-  std::vector<std::vector<Contact<Dim>>> pair_contacts(pairs.size());
-#pragma omp parallel for schedule(dynamic)
-  for (std::size_t k = 0; k < pairs.size(); ++k) {
-    // a: the dynamic body (the lower index if both are)
-    int a = pairs[k].first, b = pairs[k].second;
-    if (!bodies[a].is_dynamic()) std::swap(a, b);
-    const RigidBody<Dim>& ba = bodies[a];
-    const RigidBody<Dim>& bb = bodies[b];
-    Contact<Dim> proto;
-    proto.body_a = a;
-    proto.body_b = b;
-    proto.friction = std::sqrt(ba.friction * bb.friction);
-    proto.restitution = std::max(ba.restitution, bb.restitution);
-    std::vector<Contact<Dim>> cand;
-    if (ba.is_sphere() && bb.is_sphere()) {
-      // two spheres: one exact contact from the centre distance
-      const Vec<Dim> d = ba.position - bb.position;
-      const double len = d.norm();
-      const double phi = len - ba.sphere_radius() - bb.sphere_radius();
-      if (phi < search_distance) {
-        Contact<Dim> c = proto;
-        c.normal = len > 0.0 ? Vec<Dim>(d / len) : Vec<Dim>(Vec<Dim>::UnitY());
-        c.point = bb.position + bb.sphere_radius() * c.normal;
-        c.phi = phi;
-        cand.push_back(c);
-      }
-      pair_contacts[k] = std::move(cand);
-      continue;
-    }
-    if (ba.is_sphere() || bb.is_sphere()) {
-      // a sphere against any shape: the point of the other surface nearest the centre (exact
-      // for an exact SDF), plus the other body's samples against the sphere's exact SDF so
-      // that a concave shape touched in two places (a groove, a bowl's rim) gives both; each
-      // patch keeps only its deepest point
-      const bool a_round = ba.is_sphere();
-      const int other_index = a_round ? b : a;
-      const RigidBody<Dim>& round = a_round ? ba : bb;
-      const RigidBody<Dim>& other = a_round ? bb : ba;
-      const double radius = round.sphere_radius();
-      // orient a contact given the unit direction g out of `other` towards the sphere, the
-      // point q on other's surface and the gap
-      auto add = [&](const Vec<Dim>& g, const Vec<Dim>& q, double phi) {
-        Contact<Dim> c = proto;
-        c.phi = phi;
-        if (a_round) {
-          c.normal = g;
-          c.point = q;
-        } else {
-          c.normal = -g;
-          c.point = q + phi * g;  // on the sphere
-        }
-        cand.push_back(c);
-      };
-      const double d = other.distance(round.position);
-      if (d - radius < search_distance) {
-        const Vec<Dim> g = other.gradient(round.position);
-        add(g, Vec<Dim>(round.position - d * g), d - radius);
-      }
-      for (const auto& x : world[other_index]) {
-        if (!boxes[a_round ? a : b].contains(x)) continue;
-        const Vec<Dim> r = round.position - x;
-        const double len = r.norm();
-        if (!(len - radius < search_distance) || len == 0.0) continue;
-        // the sample must face the centre (within ~8 degrees)
-        const Vec<Dim> towards = r / len;
-        if (other.normal_cone_cosine(x, towards) < kSphereSampleCosine) continue;
-        Vec<Dim> face;
-        if (other.is_box() && !other.box_face_normal(x, &face)) {
-          // an edge or corner sample: the exact gap from that point
-          add(towards, x, len - radius);
-        } else {
-          // a face (or smooth) sample: the touching point of the tangent plane at x, exact
-          // for a flat face wherever the sample lies on it
-          const Vec<Dim> n = other.is_box() ? face : other.gradient(x);
-          const double height = n.dot(r);
-          add(n, Vec<Dim>(round.position - height * n), height - radius);
-        }
-      }
-      ContactReduction sphere_reduction = reduction;
-      sphere_reduction.max_points_2d = sphere_reduction.max_points_3d = 1;
-      if (!(sphere_reduction.merge_distance > 0.0)) {
-        sphere_reduction.merge_distance = std::max(other.sample_spacing(), 0.25 * radius);
-      }
-      pair_contacts[k] = reduce_contacts<Dim>(std::move(cand), sphere_reduction);
-      continue;
-    }
-    // samples of a against the SDF of b: normal = grad d_b, point on b = x - phi n
-    for (const auto& x : world[a]) {
-      if (!boxes[b].contains(x)) continue;
-      const double phi = bb.distance(x);
-      if (!(phi < search_distance)) continue;
-      Vec<Dim> normal;
-      if (!sample_normal(ba, bb, x, phi, &normal)) continue;
-      Contact<Dim> c = proto;
+/// The samples of body p (world positions, inside q's grown box `q_box`) within the search
+/// distance of q's SDF, appended to `cand`. p = a (p_is_a): normal = grad d_q, the point on q =
+/// x - phi n; p = b: normal = -grad d_q (the normal points from b to a), the point is the sample.
+template <int Dim>
+void add_sample_contacts(const Contact<Dim>& proto, const RigidBody<Dim>& p, const RigidBody<Dim>& q,
+                         const std::vector<Vec<Dim>>& world, const Box<Dim>& q_box, bool p_is_a,
+                         double search_distance, const ContactReduction& reduction,
+                         std::vector<Contact<Dim>>& cand) {
+  for (const auto& x : world) {
+    if (!q_box.contains(x)) continue;
+    const double phi = q.distance(x);
+    if (!(phi < search_distance)) continue;
+    Vec<Dim> normal;
+    if (!sample_normal<Dim>(reduction, p, q, x, phi, &normal)) continue;
+    Contact<Dim> c = proto;
+    c.phi = phi;
+    if (p_is_a) {
       c.normal = normal;
-      c.phi = phi;
       c.point = x - phi * c.normal;
-      cand.push_back(c);
-    }
-    // samples of b against the SDF of a: normal = -grad d_a, the point is the sample
-    for (const auto& x : world[b]) {
-      if (!boxes[a].contains(x)) continue;
-      const double phi = ba.distance(x);
-      if (!(phi < search_distance)) continue;
-      Vec<Dim> normal;
-      if (!sample_normal(bb, ba, x, phi, &normal)) continue;
-      normal = -normal;
-      Contact<Dim> c = proto;
-      c.normal = normal;
-      c.phi = phi;
+    } else {
+      c.normal = -normal;
       c.point = x;
-      cand.push_back(c);
     }
-    ContactReduction pair_reduction = reduction;
-    if (!(pair_reduction.merge_distance > 0.0)) {
-      pair_reduction.merge_distance = 0.5 * std::max(ba.sample_spacing(), bb.sample_spacing());
-    }
-    pair_contacts[k] = reduce_contacts<Dim>(std::move(cand), pair_reduction);
+    cand.push_back(c);
   }
+}
 
-  // walls: dynamic bodies against each wall face
-  std::vector<std::vector<Contact<Dim>>> wall_contacts(n);
-#pragma omp parallel for schedule(dynamic)
-  for (int i = 0; i < n; ++i) {
-    if (!bodies[i].is_dynamic()) continue;
-    const RigidBody<Dim>& body = bodies[i];
-    for (int f = 0; f < 2 * Dim; ++f) {
-      if (!walls.is_wall[f]) continue;
-      // reject by the grown box's nearest extent
-      const int axis = f / 2;
-      const double gap = f % 2 == 0 ? boxes[i].min()[axis] - walls.lower[axis]
-                                     : walls.upper[axis] - boxes[i].max()[axis];
-      if (gap > 0.0) continue;
-      Contact<Dim> proto;
-      proto.body_a = i;
-      proto.body_b = -1;
-      proto.wall_face = f;
-      proto.normal = Walls<Dim>::face_normal(f);
-      // a wall counts as a body with the domain's coefficients
-      proto.friction = std::sqrt(body.friction * walls.friction);
-      proto.restitution = std::max(body.restitution, walls.restitution);
-      std::vector<Contact<Dim>> cand;
-      if (body.is_sphere()) {
-        // exact: the centre's distance to the plane minus the radius
-        const double d = walls.face_distance(f, body.position);
-        if (d - body.sphere_radius() < search_distance) {
-          Contact<Dim> c = proto;
-          c.phi = d - body.sphere_radius();
-          c.point = body.position - d * c.normal;
-          cand.push_back(c);
-        }
-      } else {
-        for (const auto& x : world[i]) {
-          const double phi = walls.face_distance(f, x);
-          if (!(phi < search_distance)) continue;
-          if (!fits_cone(body, x, Vec<Dim>(-proto.normal))) continue;
-          Contact<Dim> c = proto;
-          c.phi = phi;
-          c.point = x - phi * c.normal;
-          cand.push_back(c);
-        }
-        ContactReduction wall_reduction = reduction;
-        if (!(wall_reduction.merge_distance > 0.0)) wall_reduction.merge_distance = 0.5 * body.sample_spacing();
-        cand = reduce_contacts<Dim>(std::move(cand), wall_reduction);
+/// Two sampled shapes: the samples of a against the SDF of b and those of b against the SDF of
+/// a (add_sample_contacts), reduced.
+template <int Dim>
+std::vector<Contact<Dim>> sampled_pair_contacts(const PairQuery<Dim>& in, const Contact<Dim>& proto,
+                                                int a, int b) {
+  const RigidBody<Dim>& ba = in.bodies[a];
+  const RigidBody<Dim>& bb = in.bodies[b];
+  std::vector<Contact<Dim>> cand;
+  add_sample_contacts<Dim>(proto, ba, bb, in.bp.world[a], in.bp.boxes[b], true, in.search_distance,
+                           in.reduction, cand);
+  add_sample_contacts<Dim>(proto, bb, ba, in.bp.world[b], in.bp.boxes[a], false, in.search_distance,
+                           in.reduction, cand);
+  ContactReduction pair_reduction = in.reduction;
+  if (!(pair_reduction.merge_distance > 0.0)) {
+    pair_reduction.merge_distance = 0.5 * std::max(ba.sample_spacing(), bb.sample_spacing());
+  }
+  return reduce_contacts<Dim>(std::move(cand), pair_reduction);
+}
+
+/// The narrow phase of one broad-phase pair: body_a is the dynamic body (the lower index if
+/// both are), friction sqrt(mu_a mu_b) and restitution max(e_a, e_b) of the pair.
+template <int Dim>
+std::vector<Contact<Dim>> narrow_phase(const PairQuery<Dim>& in, std::pair<int, int> pair) {
+  int a = pair.first, b = pair.second;
+  if (!in.bodies[a].is_dynamic()) std::swap(a, b);
+  const RigidBody<Dim>& ba = in.bodies[a];
+  const RigidBody<Dim>& bb = in.bodies[b];
+  Contact<Dim> proto;
+  proto.body_a = a;
+  proto.body_b = b;
+  proto.friction = std::sqrt(ba.friction * bb.friction);
+  proto.restitution = std::max(ba.restitution, bb.restitution);
+  if (ba.is_sphere() && bb.is_sphere())
+    return sphere_sphere_contacts<Dim>(proto, ba, bb, in.search_distance);
+  if (ba.is_sphere() || bb.is_sphere()) return sphere_shape_contacts<Dim>(in, proto, a, b);
+  return sampled_pair_contacts<Dim>(in, proto, a, b);
+}
+
+/// A dynamic body against the domain's wall faces: per face whose plane the grown box reaches,
+/// a sphere's exact contact or the body's samples within the search distance (reduced); a wall
+/// counts as a body with the domain's coefficients.
+template <int Dim>
+std::vector<Contact<Dim>> wall_contacts(const RigidBody<Dim>& body, int index, const Box<Dim>& box,
+                                        const std::vector<Vec<Dim>>& world, const Walls<Dim>& walls,
+                                        double search_distance, const ContactReduction& reduction) {
+  std::vector<Contact<Dim>> out;
+  for (int f = 0; f < 2 * Dim; ++f) {
+    if (!walls.is_wall[f]) continue;
+    // reject by the grown box's nearest extent
+    const int axis = f / 2;
+    const double gap = f % 2 == 0 ? box.min()[axis] - walls.lower[axis]
+                                  : walls.upper[axis] - box.max()[axis];
+    if (gap > 0.0) continue;
+    Contact<Dim> proto;
+    proto.body_a = index;
+    proto.body_b = -1;
+    proto.wall_face = f;
+    proto.normal = Walls<Dim>::face_normal(f);
+    proto.friction = std::sqrt(body.friction * walls.friction);
+    proto.restitution = std::max(body.restitution, walls.restitution);
+    std::vector<Contact<Dim>> cand;
+    if (body.is_sphere()) {
+      // exact: the centre's distance to the plane minus the radius
+      const double d = walls.face_distance(f, body.position);
+      if (d - body.sphere_radius() < search_distance) {
+        Contact<Dim> c = proto;
+        c.phi = d - body.sphere_radius();
+        c.point = body.position - d * c.normal;
+        cand.push_back(c);
       }
-      wall_contacts[i].insert(wall_contacts[i].end(), cand.begin(), cand.end());
+    } else {
+      for (const auto& x : world) {
+        const double phi = walls.face_distance(f, x);
+        if (!(phi < search_distance)) continue;
+        if (!fits_cone<Dim>(reduction, body, x, Vec<Dim>(-proto.normal))) continue;
+        Contact<Dim> c = proto;
+        c.phi = phi;
+        c.point = x - phi * c.normal;
+        cand.push_back(c);
+      }
+      ContactReduction wall_reduction = reduction;
+      if (!(wall_reduction.merge_distance > 0.0)) wall_reduction.merge_distance = 0.5 * body.sample_spacing();
+      cand = reduce_contacts<Dim>(std::move(cand), wall_reduction);
     }
+    out.insert(out.end(), cand.begin(), cand.end());
   }
+  return out;
+}
 
+}  // namespace
+
+template <int Dim>
+std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bodies,
+                                          const Walls<Dim>& walls, double search_distance,
+                                          const ContactReduction& reduction) {
+  const int n = static_cast<int>(bodies.size());
+  const BroadPhase<Dim> bp = broad_phase<Dim>(bodies, search_distance);
+  const PairQuery<Dim> query{bodies, bp, search_distance, reduction};
+  // narrow phase per pair, then the dynamic bodies against the walls, each in parallel
+  std::vector<std::vector<Contact<Dim>>> pair_contacts(bp.pairs.size());
+#pragma omp parallel for schedule(dynamic)
+  for (std::size_t k = 0; k < bp.pairs.size(); ++k)
+    pair_contacts[k] = narrow_phase<Dim>(query, bp.pairs[k]);
+  std::vector<std::vector<Contact<Dim>>> body_wall_contacts(n);
+#pragma omp parallel for schedule(dynamic)
+  for (int i = 0; i < n; ++i)
+    if (bodies[i].is_dynamic())
+      body_wall_contacts[i] = wall_contacts<Dim>(bodies[i], i, bp.boxes[i], bp.world[i], walls,
+                                                 search_distance, reduction);
+  // in a fixed order whatever the threads: the pairs', then the walls'
   std::vector<Contact<Dim>> out;
   for (auto& v : pair_contacts) out.insert(out.end(), v.begin(), v.end());
-  for (auto& v : wall_contacts) out.insert(out.end(), v.begin(), v.end());
+  for (auto& v : body_wall_contacts) out.insert(out.end(), v.begin(), v.end());
   return out;
 }
 

@@ -8,6 +8,8 @@
 #include <cmath>
 #include <limits>
 
+#include "reference/contact/staggered_projections.hpp"
+
 namespace monolith {
 
 namespace {
@@ -20,10 +22,6 @@ void add_jacobian_row(std::vector<Triplet>& t, int row, int dof, const Vec<Dim>&
   for (int a = 0; a < Dim; ++a) t.emplace_back(row, dof + a, sign * d[a]);
   const AngularVec<Dim> ang = moment<Dim>(r, d);
   for (int a = 0; a < kAngularDofs<Dim>; ++a) t.emplace_back(row, dof + Dim + a, sign * ang[a]);
-}
-
-double inf_norm(const VectorX& v) {
-  return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0;
 }
 
 }  // namespace
@@ -213,63 +211,40 @@ StaggeredResult solve_staggered_projections(const ContactSystem<Dim>& system,
   result.lambda = lambda0.size() == nc ? lambda0 : VectorX::Zero(nc);
   result.z = z0.size() == nf ? z0 : VectorX::Zero(nf);
   if (nc == 0) return result;
-  const bool friction = system.mu.maxCoeff() > 0.0 && system.num_body_dofs() > 0;
-  if (!friction) result.z.setZero();
-
-  // the normal operator: A33 with SSOR sweeps over Welsh-Powell colours of the contact graph,
-  // its diagonal scaled by (1 + gamma) (section 4.4.5)
-  const Colouring colours =
-      welsh_powell(contact_adjacency(system.dynamic_pairs, system.num_dynamic_bodies));
-  const ColouredSparseOperator a33(system.a33(), colours);
-  const DiagonalBoost a33_boosted(a33, settings.diagonal_boost);
+  const ContactQpOperators<Dim> qp(system, settings);
+  if (!qp.friction()) result.z.setZero();
   const VectorX b3 = system.b3();
-  const VectorX zero_n = VectorX::Zero(nc);
-  const VectorX inf_n = VectorX::Constant(nc, std::numeric_limits<double>::infinity());
 
   auto record = [&result](const MprgpResult& r) {
     result.mprgp_iterations += r.iterations;
     result.max_relative_residual = std::max(result.max_relative_residual, r.relative_residual);
     result.converged = result.converged && r.converged;
   };
-
-  if (!friction) {
-    // mu = 0: a single normal solve (eq. (16))
-    const MprgpResult r = mprgp_solve(a33_boosted, b3, zero_n, inf_n, result.lambda, settings.mprgp);
-    record(r);
+  // eq. (26) without tau and p (eq. (16) when z = 0): normal forces given the friction
+  const SparseMatrix a34 = qp.friction() ? system.a34() : SparseMatrix();
+  auto solve_normal = [&]() {
+    const VectorX rhs = qp.friction() ? VectorX(b3 - a34 * result.z) : b3;
+    record(mprgp_solve(qp.normal(), rhs, qp.normal_lower(), qp.normal_upper(), result.lambda,
+                       qp.normal_settings()));
+  };
+  if (!qp.friction()) {
+    // mu = 0: a single normal solve
+    solve_normal();
     result.staggered_iterations = 1;
     return result;
   }
-
-  // the friction operator A44, rows coloured per contact block, and the coupling A34
-  const SparseMatrix a34 = system.a34();
+  // eq. (25): friction given lambda
   const SparseMatrix a34t = a34.transpose();
-  const ColouredSparseOperator a44(system.a44(), expand_colouring(colours, Dim - 1));
-  const DiagonalBoost a44_boosted(a44, settings.diagonal_boost);
   const VectorX b4 = system.b4();
-  // ||A|| once per operator for all the staggered solves (each would estimate it again)
-  const MprgpSettings normal_settings = with_norm_estimate(a33_boosted, settings.mprgp);
-  const MprgpSettings friction_settings = with_norm_estimate(a44_boosted, settings.mprgp);
-  VectorX lower(nf), upper(nf);
-  for (int k = 0; k < std::max(1, settings.max_iterations); ++k) {
-    // eq. (25): friction with the pyramid bounds of the current lambda
-    for (int c = 0; c < nc; ++c)
-      for (int j = 0; j < Dim - 1; ++j) {
-        const double bound = system.mu[c] * std::max(result.lambda[c], 0.0);
-        lower[(Dim - 1) * c + j] = -bound;
-        upper[(Dim - 1) * c + j] = bound;
-      }
-    const VectorX rhs_z = b4 - a34t * result.lambda;
-    record(mprgp_solve(a44_boosted, rhs_z, lower, upper, result.z, friction_settings));
-    // eq. (26) without tau and p: normal forces given the friction
-    const VectorX previous = result.lambda;
-    const VectorX rhs_l = b3 - a34 * result.z;
-    record(mprgp_solve(a33_boosted, rhs_l, zero_n, inf_n, result.lambda, normal_settings));
-    ++result.staggered_iterations;
-    // stop when lambda has settled
-    const double scale = std::max(inf_norm(result.lambda), 1e-300);
-    result.last_change = inf_norm(result.lambda - previous) / scale;
-    if (result.last_change <= settings.tolerance) break;
-  }
+  auto solve_friction = [&](const VectorX& lower, const VectorX& upper) {
+    record(mprgp_solve(qp.tangential(), b4 - a34t * result.lambda, lower, upper, result.z,
+                       qp.friction_settings()));
+  };
+  const StaggeredRounds rounds = staggered_rounds<Dim>(
+      system.mu, settings.max_iterations, 0, settings.tolerance,
+      [&]() { return result.lambda; }, solve_friction, solve_normal);
+  result.staggered_iterations = rounds.rounds;
+  result.last_change = rounds.last_change;
   return result;
 }
 

@@ -162,7 +162,8 @@ struct StaggeredResult {
 ///   eq. (25): z^(k+1) = argmin 1/2 z^T A44 z - (b4 - A34^T lambda^k)^T z,
 ///             -mu lambda^k <= z <= mu lambda^k,
 ///   eq. (26): lambda^(k+1) = argmin 1/2 l^T A33 l - (b3 - A34 z^(k+1))^T l,  l >= 0,
-/// until lambda changes by less than the tolerance or max_iterations is reached, always ending on
+/// (the loop of staggered_rounds, staggered_projections.hpp) until lambda changes by less than
+/// the tolerance or max_iterations is reached, always ending on
 /// the normal solve. Each QP is solved by MPRGP on A (1 + gamma) on the diagonal (section 4.4.5)
 /// with the SSOR preconditioner, its sweeps run in parallel over Welsh-Powell colours of the
 /// contact graph. `lambda0` and `z0` are a warm start (size nc and nf, or empty for zero).

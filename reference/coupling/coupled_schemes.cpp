@@ -8,9 +8,11 @@
 #include <memory>
 #include <stdexcept>
 
+#include "reference/contact/staggered_projections.hpp"
 #include "reference/core/errors.hpp"
 #include "reference/core/timer.hpp"
 #include "reference/coupling/monolithic_system.hpp"
+#include "reference/coupling/solve_sequence.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/solvers/colouring.hpp"
@@ -20,14 +22,6 @@
 namespace monolith {
 
 namespace {
-
-double inf_norm(const VectorX& v) { return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0; }
-
-/// ||new - old||_inf / ||new||_inf (0 when both vanish).
-double relative_change(const VectorX& next, const VectorX& previous) {
-  if (next.size() == 0) return 0.0;
-  return inf_norm(next - previous) / std::max(inf_norm(next), 1e-300);
-}
 
 /// The unknowns of eq. (24) during a scheme: x_f = (tau, p), lambda, z.
 struct Unknowns {
@@ -65,85 +59,53 @@ long fluid_solve(const MonolithicSystem<Dim>& s, const FluidBodyOperator<Dim>& o
 
 /// The contact solve of the partitioned schemes for a fixed x_f: the normal QP
 /// A33 lambda = b3 - A31 tau - A32 p - A34 z, lambda >= 0 (eq. (24) row 3) and, with friction,
-/// the friction QP (25), staggered as solve_staggered_projections does (friction first, normal
+/// the friction QP (25), in the staggered rounds of staggered_rounds (friction first, normal
 /// last). Operators, colourings and ||A|| estimates are built once per system.
 template <int Dim>
 class ContactSolve {
  public:
   ContactSolve(const MonolithicSystem<Dim>& s, const StaggeredSettings& settings)
-      : s_(s), settings_(settings) {
-    const int nc = s.num_contacts();
-    if (nc == 0) return;
-    const ContactSystem<Dim>& c = s.contacts();
-    friction_ = c.mu.maxCoeff() > 0.0 && s.num_body_dofs() > 0;
-    // A33 with SSOR sweeps over Welsh-Powell colours of the contact graph, boosted by gamma
-    const Colouring colours = welsh_powell(contact_adjacency(c.dynamic_pairs, c.num_dynamic_bodies));
-    a33_ = std::make_unique<ColouredSparseOperator>(c.a33(), colours);
-    a33_boosted_ = std::make_unique<DiagonalBoost>(*a33_, settings.diagonal_boost);
-    normal_settings_ = with_norm_estimate(*a33_boosted_, settings.mprgp);
-    if (friction_) {
-      a44_ = std::make_unique<ColouredSparseOperator>(c.a44(), expand_colouring(colours, Dim - 1));
-      a44_boosted_ = std::make_unique<DiagonalBoost>(*a44_, settings.diagonal_boost);
-      friction_settings_ = with_norm_estimate(*a44_boosted_, settings.mprgp);
-    }
-  }
+      : s_(s), settings_(settings), qp_(s.contacts(), settings) {}
 
-  bool friction() const { return friction_; }
+  bool friction() const { return qp_.friction(); }
 
   /// Up to `rounds` friction-normal rounds (one normal solve without friction), warm-started
   /// from x.lambda, x.z (`cold`: every QP from zero, the friction bounds still from the current
   /// lambda); stops when lambda changes by <= the tolerance. Returns the rounds done.
   int solve(Unknowns& x, int rounds, bool cold, long& iterations, CoupledSolveResult& r) const {
-    const int nc = s_.num_contacts(), nz = s_.num_friction();
-    if (nc == 0) return 0;
-    const double inf = std::numeric_limits<double>::infinity();
-    const VectorX zero_n = VectorX::Zero(nc), inf_n = VectorX::Constant(nc, inf);
-    if (!friction_) {
+    if (s_.num_contacts() == 0) return 0;
+    // the normal QP given (tau, p, z)
+    auto solve_normal = [&]() {
       if (cold) x.lambda.setZero();
-      const MprgpResult m = mprgp_solve(*a33_boosted_, s_.contact_rhs(x.x_fluid, x.z), zero_n, inf_n,
-                                        x.lambda, normal_settings_);
+      const MprgpResult m = mprgp_solve(qp_.normal(), s_.contact_rhs(x.x_fluid, x.z),
+                                        qp_.normal_lower(), qp_.normal_upper(), x.lambda,
+                                        qp_.normal_settings());
       record_mprgp(m, r, "contact solve");
       iterations += m.iterations;
+    };
+    if (!qp_.friction()) {
+      solve_normal();
       return 1;
     }
-    const int nf = s_.num_fluid();
-    VectorX lower(nz), upper(nz), xl(nf + nc);
-    int done = 0;
-    for (int k = 0; k < std::max(1, rounds); ++k) {
-      // eq. (25) given (tau, p, lambda): the pyramid bounds of the current lambda
-      const ContactSystem<Dim>& c = s_.contacts();
-      for (int i = 0; i < nc; ++i)
-        for (int j = 0; j < Dim - 1; ++j) {
-          const double bound = c.mu[i] * std::max(x.lambda[i], 0.0);
-          lower[(Dim - 1) * i + j] = -bound;
-          upper[(Dim - 1) * i + j] = bound;
-        }
+    // eq. (25) given (tau, p, lambda)
+    VectorX xl(s_.num_fluid() + s_.num_contacts());
+    auto solve_friction = [&](const VectorX& lower, const VectorX& upper) {
       xl << x.x_fluid, x.lambda;
       if (cold) x.z.setZero();
-      const MprgpResult mz = mprgp_solve(*a44_boosted_, s_.friction_rhs(xl), lower, upper, x.z,
-                                         friction_settings_);
-      record_mprgp(mz, r, "friction solve");
-      iterations += mz.iterations;
-      // the normal QP given (tau, p, z)
-      const VectorX previous = x.lambda;
-      if (cold) x.lambda.setZero();
-      const MprgpResult mn = mprgp_solve(*a33_boosted_, s_.contact_rhs(x.x_fluid, x.z), zero_n,
-                                         inf_n, x.lambda, normal_settings_);
-      record_mprgp(mn, r, "contact solve");
-      iterations += mn.iterations;
-      ++done;
-      if (relative_change(x.lambda, previous) <= settings_.tolerance) break;
-    }
-    return done;
+      const MprgpResult m =
+          mprgp_solve(qp_.tangential(), s_.friction_rhs(xl), lower, upper, x.z, qp_.friction_settings());
+      record_mprgp(m, r, "friction solve");
+      iterations += m.iterations;
+    };
+    return staggered_rounds<Dim>(s_.contacts().mu, rounds, 0, settings_.tolerance,
+                                 [&]() { return x.lambda; }, solve_friction, solve_normal)
+        .rounds;
   }
 
  private:
   const MonolithicSystem<Dim>& s_;
   StaggeredSettings settings_;
-  bool friction_ = false;
-  std::unique_ptr<ColouredSparseOperator> a33_, a44_;
-  std::unique_ptr<DiagonalBoost> a33_boosted_, a44_boosted_;
-  MprgpSettings normal_settings_, friction_settings_;
+  ContactQpOperators<Dim> qp_;
 };
 
 /// PC-unified / PVC-unified / VC-unified on one system: the MLCP (26) by solve_pvc_unified, or
@@ -195,18 +157,6 @@ std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>&
   const ContactSystem<Dim> contacts(bodies, in.contacts, in.contact_params);
   return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, w, in.dt, u_star, bodies,
                                                  in.solids, contacts, backend, unknowns);
-}
-
-/// u, p, tau, v, lambda, z of the final system and unknowns.
-template <int Dim>
-void finish(const MonolithicSystem<Dim>& s, const Unknowns& x, CoupledSolveResult& r) {
-  r.u = s.fluid_velocities(x.x_fluid);
-  r.pressure = s.pressure_cells(x.x_fluid);
-  r.stress = s.stress_full(x.x_fluid);
-  r.body_velocity = s.body_velocities(x.x_fluid, x.lambda, x.z);
-  r.lambda = x.lambda;
-  r.z = x.z;
-  r.body_dof = s.contacts().body_dof;
 }
 
 template <int Dim>
@@ -295,106 +245,87 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   if (in.u_star.size() != in.grid.num_faces())
     throw std::invalid_argument("solve_coupled_step: u_star must have one entry per face");
   CoupledSolveResult r;
-  // P.. C schemes: inviscid (viscosity zeroed, so no stress unknowns)
+  // the inviscid solves: viscosity zeroed, so no stress unknowns
   StokesWeights inviscid = in.weights;
   inviscid.viscosity.setZero();
-  // Algorithm 2 (section 5) for non-Newtonian liquids: rounds of (viscosity, viscous solve)
-  const bool non_newtonian = options.initial_viscosity && options.update_viscosity;
-  const int viscosity_rounds = std::max(1, settings.max_iterations);
-
-  if (scheme == CouplingScheme::pc_vc_pc_unified) {
-    // section 6.2: PC-unified -> (u1, v1), VC-unified -> (u2, v2), PC-unified -> final
-    const auto s1 = build_system(in, inviscid, StressForm::reduced,
-                                 StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
-                                 backend);
-    const Stopwatch t1;
-    const Unknowns x1 = unified_solve(*s1, settings, r, r.coupled_iterations);
-    const double pc1_seconds = t1.seconds();
-    const VectorX u1 = s1->fluid_velocities(x1.x_fluid);
-    const VectorX v1 = s1->body_velocities(x1.x_fluid, x1.lambda, x1.z);
-    const VectorX p1 = s1->pressure_cells(x1.x_fluid);
-    const std::vector<int>& dof = s1->contacts().body_dof;
-
-    std::unique_ptr<MonolithicSystem<Dim>> s2;
-    Unknowns x2;
-    if (!non_newtonian) {
-      s2 = build_system(in, in.weights, StressForm::full, StokesUnknowns::stress_only, u1,
-                        with_velocities(in.bodies, dof, v1), backend);
-      const Stopwatch t2;
-      x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
-      r.viscosity_coupled_seconds = t2.seconds();
-    } else {
-      // Algorithm 2 around VC-unified, every round from (u1, v1) with eta^k
-      StokesWeights w = in.weights;
-      VectorX eta = options.initial_viscosity(u1);
-      for (int k = 0; k < viscosity_rounds; ++k) {
-        w.viscosity = eta;
-        s2 = build_system(in, w, StressForm::full, StokesUnknowns::stress_only, u1,
-                          with_velocities(in.bodies, dof, v1), backend);
-        const Stopwatch t2;
-        x2 = unified_solve(*s2, settings, r, r.viscosity_coupled_iterations);
-        r.viscosity_coupled_seconds += t2.seconds();
-        eta = options.update_viscosity(s2->stress_full(x2.x_fluid), w.viscosity);
-      }
-    }
-    const VectorX u2 = s2->fluid_velocities(x2.x_fluid);
-    const VectorX v2 = s2->body_velocities(x2.x_fluid, x2.lambda, x2.z);
-    const VectorX tau2 = s2->stress_full(x2.x_fluid);
-
-    const auto s3 = build_system(in, inviscid, StressForm::reduced,
-                                 StokesUnknowns::pressure_and_stress, u2,
-                                 with_velocities(in.bodies, dof, v2), backend);
-    const Stopwatch t3;
-    const Unknowns x3 = unified_solve(*s3, settings, r, r.coupled_iterations);
-    r.coupled_seconds = pc1_seconds + r.viscosity_coupled_seconds + t3.seconds();
-    r.coupled_iterations += r.viscosity_coupled_iterations;
-    finish(*s3, x3, r);
-    r.pressure = p1 + r.pressure;
-    r.stress = tau2;
-    count_dofs(*s1, r);
-    r.stress_dofs = s2->num_stress();
-    r.total_seconds = t_start.seconds();
-    return r;
-  }
-
-  const bool viscous = scheme_uses_viscosity(scheme);
-  if (viscous && non_newtonian) {
-    // Algorithm 2 around the scheme's solve: every round from u* with eta^k
-    StokesWeights w = in.weights;
-    VectorX eta = options.initial_viscosity(in.u_star);
-    std::unique_ptr<MonolithicSystem<Dim>> s;
+  // the state between the solves of the sequence: the system and unknowns of the last solve
+  // and the velocities (u, v) the next solve starts from (v empty: the bodies as given)
+  struct State {
+    std::shared_ptr<const MonolithicSystem<Dim>> system;
     Unknowns x;
-    for (int k = 0; k < viscosity_rounds; ++k) {
-      w.viscosity = eta;
-      s = build_system(in, w, StressForm::reduced, StokesUnknowns::pressure_and_stress, in.u_star,
-                       in.bodies, backend);
-      if (scheme == CouplingScheme::pvc_unified) {
-        const Stopwatch t0;
-        x = unified_solve(*s, settings, r, r.coupled_iterations);
-        r.coupled_seconds += t0.seconds();
-      } else {
-        x = partitioned_solve(*s, scheme, settings, options, r);
-      }
-      eta = options.update_viscosity(s->stress_full(x.x_fluid), w.viscosity);
+    VectorX u, v, pressure, stress;
+  };
+  // builds eq. (24) from `from` and runs the scheme's solve (unified: the MLCP; otherwise the
+  // partitioned solves), booking iterations and time as coupled or VC-coupled
+  auto solve = [&](const State& from, const StokesWeights& w, StressForm form,
+                   StokesUnknowns unknowns, bool unified, bool viscosity_stage) {
+    State out;
+    const std::vector<RigidBody<Dim>> bodies =
+        from.v.size() ? with_velocities(in.bodies, from.system->contacts().body_dof, from.v)
+                      : in.bodies;
+    out.system = build_system(in, w, form, unknowns, from.u, bodies, backend);
+    const MonolithicSystem<Dim>& sys = *out.system;
+    if (unified) {
+      const Stopwatch t0;
+      out.x = unified_solve(sys, settings, r,
+                            viscosity_stage ? r.viscosity_coupled_iterations : r.coupled_iterations);
+      const double seconds = t0.seconds();
+      r.coupled_seconds += seconds;
+      if (viscosity_stage) r.viscosity_coupled_seconds += seconds;
+    } else {
+      out.x = partitioned_solve(sys, scheme, settings, options, r);
     }
-    count_dofs(*s, r);
-    finish(*s, x, r);
-    r.total_seconds = t_start.seconds();
-    return r;
+    out.u = sys.fluid_velocities(out.x.x_fluid);
+    out.v = sys.body_velocities(out.x.x_fluid, out.x.lambda, out.x.z);
+    out.pressure = sys.pressure_cells(out.x.x_fluid);
+    out.stress = sys.stress_full(out.x.x_fluid);
+    return out;
+  };
+  const bool pc_vc_pc = scheme == CouplingScheme::pc_vc_pc_unified;
+  // P.. C schemes, and the P solves of PC-VC-PC-unified (as PC-unified)
+  auto pressure = [&](const State& from, SolveStage stage) {
+    const State out = solve(from, inviscid, StressForm::reduced,
+                            StokesUnknowns::pressure_and_stress,
+                            pc_vc_pc || scheme == CouplingScheme::pc_unified, false);
+    if (stage != SolveStage::second_pressure) count_dofs(*out.system, r);
+    return out;
+  };
+  // PV.. C schemes: (tau, p) with the input viscosity or eta^k of Algorithm 2
+  auto unified = [&](const State& from, const VectorX* eta) {
+    StokesWeights w = in.weights;
+    if (eta) w.viscosity = *eta;
+    const State out = solve(from, w, StressForm::reduced, StokesUnknowns::pressure_and_stress,
+                            scheme == CouplingScheme::pvc_unified, false);
+    count_dofs(*out.system, r);
+    return out;
+  };
+  // the VC-unified solve of PC-VC-PC: stress only (p fixed at 0), the full form
+  auto viscous = [&](const State& from, const VectorX* eta) {
+    StokesWeights w = in.weights;
+    if (eta) w.viscosity = *eta;
+    const State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true);
+    r.stress_dofs = out.system->num_stress();
+    return out;
+  };
+  ViscosityRounds viscosity;
+  viscosity.rounds = std::max(1, settings.max_iterations);
+  if (options.initial_viscosity && options.update_viscosity) {
+    viscosity.initial = options.initial_viscosity;
+    viscosity.update = options.update_viscosity;
   }
-  const auto s = build_system(in, viscous ? in.weights : inviscid, StressForm::reduced,
-                              StokesUnknowns::pressure_and_stress, in.u_star, in.bodies,
-                              backend);
-  count_dofs(*s, r);
-  Unknowns x;
-  if (scheme == CouplingScheme::pc_unified || scheme == CouplingScheme::pvc_unified) {
-    const Stopwatch t0;
-    x = unified_solve(*s, settings, r, r.coupled_iterations);
-    r.coupled_seconds = t0.seconds();
-  } else {
-    x = partitioned_solve(*s, scheme, settings, options, r);
-  }
-  finish(*s, x, r);
+  State start;
+  start.u = in.u_star;
+  // with bodies every scheme keeps its own sequence, viscous liquid or not
+  const State end = run_solve_sequence(solve_sequence(scheme, true), start, viscosity, pressure,
+                                       unified, viscous);
+  if (pc_vc_pc) r.coupled_iterations += r.viscosity_coupled_iterations;
+  r.u = end.u;
+  r.pressure = end.pressure;
+  r.stress = end.stress;
+  r.body_velocity = end.v;
+  r.lambda = end.x.lambda;
+  r.z = end.x.z;
+  r.body_dof = end.system->contacts().body_dof;
   r.total_seconds = t_start.seconds();
   return r;
 }

@@ -3,6 +3,8 @@
 /// The nine pressure / viscosity / contact coupling schemes of section 6 (P-C, C-P, PC-iterative,
 /// PC-unified, PC-VC-PC-unified, PV-C, C-PV, PVC-iterative, PVC-unified) as options of one
 /// library function, solve_coupled_step. docs/coupling.md, "The nine schemes", explains them.
+/// Which solves a scheme runs (one, the unified one with Algorithm 2 around it, or PC-VC-PC's
+/// three) is run_solve_sequence of solve_sequence.hpp, shared with the liquid-only simulator.
 ///
 /// All nine build one MonolithicSystem (eq. (24)) and differ only in which blocks are solved
 /// together. With x_f = (tau, p) the fluid unknowns, the partition of eq. (24) is

@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "reference/contact/staggered_projections.hpp"
 #include "reference/solvers/colouring.hpp"
 #include "reference/solvers/mprgp.hpp"
 
@@ -733,12 +734,7 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   r.z = VectorX::Zero(nz);
   // ||A|| once per operator for all the staggered solves (each would estimate it again)
   const MprgpSettings mlcp_settings = with_norm_estimate(op, settings.mprgp);
-  auto solve_mlcp = [&]() {
-    // in y = S^-1 x with right-hand side S b (the bounds 0 and +-inf are unchanged)
-    VectorX y = r.x.cwiseQuotient(s);
-    const MprgpResult m =
-        mprgp_solve(op, s.cwiseProduct(system.mlcp_rhs(r.z)), lower, upper, y, mlcp_settings);
-    r.x = s.cwiseProduct(y);
+  auto record = [&r](const MprgpResult& m) {
     r.mprgp_iterations += m.iterations;
     r.converged = r.converged && m.converged;
     r.max_relative_residual = std::max(r.max_relative_residual, m.relative_residual);
@@ -746,38 +742,31 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
       r.breakdown = true;
       r.message = m.message;
     }
+  };
+  // eq. (26) given z
+  auto solve_mlcp = [&]() {
+    // in y = S^-1 x with right-hand side S b (the bounds 0 and +-inf are unchanged)
+    VectorX y = r.x.cwiseQuotient(s);
+    const MprgpResult m =
+        mprgp_solve(op, s.cwiseProduct(system.mlcp_rhs(r.z)), lower, upper, y, mlcp_settings);
+    r.x = s.cwiseProduct(y);
+    record(m);
     ++r.staggered_iterations;
   };
   solve_mlcp();
   const bool friction = nc > 0 && system.contacts().mu.maxCoeff() > 0.0;
   if (friction) {
+    // staggered projections: eq. (25), z given (tau, p, lambda), then (26) given z
     const SparseMatrixOperator fop = friction_operator(system, gamma);
     const MprgpSettings friction_settings = with_norm_estimate(fop, settings.mprgp);
-    for (int k = 1; k < std::max(1, settings.max_iterations); ++k) {
-      // eq. (25): z given (tau, p, lambda), -mu lambda <= z <= mu lambda
-      const VectorX lambda_old = r.x.tail(nc);
-      VectorX zl(nz), zu(nz);
-      for (int c = 0; c < nc; ++c)
-        for (int j = 0; j < Dim - 1; ++j) {
-          const double bound = system.contacts().mu[c] * lambda_old[c];
-          zl[(Dim - 1) * c + j] = -bound;
-          zu[(Dim - 1) * c + j] = bound;
-        }
-      const MprgpResult m = mprgp_solve(fop, system.friction_rhs(r.x), zl, zu, r.z, friction_settings);
-      r.mprgp_iterations += m.iterations;
-      r.converged = r.converged && m.converged;
-      r.max_relative_residual = std::max(r.max_relative_residual, m.relative_residual);
-      if (m.breakdown && !r.breakdown) {
-        r.breakdown = true;
-        r.message = m.message;
-      }
-      // eq. (26) given z
-      solve_mlcp();
-      const VectorX lambda_new = r.x.tail(nc);
-      const double norm = std::max(lambda_new.cwiseAbs().maxCoeff(), 1e-300);
-      r.last_change = (lambda_new - lambda_old).cwiseAbs().maxCoeff() / norm;
-      if (r.last_change <= settings.tolerance) break;
-    }
+    auto solve_friction = [&](const VectorX& zl, const VectorX& zu) {
+      record(mprgp_solve(fop, system.friction_rhs(r.x), zl, zu, r.z, friction_settings));
+    };
+    r.last_change = staggered_rounds<Dim>(system.contacts().mu, settings.max_iterations, 1,
+                                          settings.tolerance,
+                                          [&]() { return VectorX(r.x.tail(nc)); }, solve_friction,
+                                          solve_mlcp)
+                        .last_change;
   }
   // eq. (8) and eq. (21) updates
   const VectorX xf = r.x.head(nf);

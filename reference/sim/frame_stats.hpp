@@ -5,6 +5,7 @@
 /// docs/cli.md). Fields a scene has no use for (bodies, contacts, stress DOFs of a scene without
 /// them) keep their shape with empty or zero values.
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,22 @@ struct SolverStats {
   /// JSON) for Newtonian liquids.
   std::vector<double> viscosity_residuals;
   double max_viscosity_residual = 0.0;
+
+  /// Books one solve (or one step's solves): iterations and staggered rounds summed, the
+  /// largest relative residual, convergence of all.
+  void add_solve(long solve_iterations, int staggered, double relative_residual, bool solve_converged) {
+    iterations += solve_iterations;
+    staggered_iterations += staggered;
+    max_relative_residual = std::max(max_relative_residual, relative_residual);
+    converged = converged && solve_converged;
+  }
+  /// The unknowns of a solve: each count the largest over the frame's solves.
+  void add_dofs(long pressure, long stress, long contact, long friction) {
+    dofs_pressure = std::max(dofs_pressure, pressure);
+    dofs_stress = std::max(dofs_stress, stress);
+    dofs_contact = std::max(dofs_contact, contact);
+    dofs_friction = std::max(dofs_friction, friction);
+  }
 };
 
 struct FrameStats {

@@ -1,9 +1,9 @@
 /// \file simulation.cpp
-/// Simulation<Dim>: the time loop of Algorithm 1 (simulation.hpp). Liquids beside static solids
-/// only take the solves of eq. (8) that the scheme picks (solve_sequence): the pressure alone,
-/// the unified pressure-viscosity (Stokes) solve, or the decoupled pressure / viscosity /
-/// pressure sequence of section 6.2. With moving bodies the step runs the coupled solve of the
-/// scheme (solve_coupled_step); bodies without liquid step through RigidWorld.
+/// Simulation<Dim>: the time loop of Algorithm 1 (simulation.hpp). step() lists the algorithm's
+/// stages, one member function each. Lines 7-11 run the solves of the scene's scheme through
+/// run_solve_sequence (solve_sequence.hpp): for a liquid beside static solids by PCG on eq. (8)
+/// (solve_liquid), with moving bodies by solve_coupled_step on eq. (24) (solve_coupled); bodies
+/// without liquid step through RigidWorld.
 
 #include "reference/sim/simulation.hpp"
 
@@ -17,6 +17,7 @@
 #include "reference/core/timer.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
 #include "reference/coupling/coupling.hpp"
+#include "reference/coupling/solve_sequence.hpp"
 #include "reference/fluid/deformation_rate.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
@@ -119,14 +120,6 @@ constexpr double kBodyCellFraction = 0.5;
 constexpr int kAirVelocityLayers = 2;
 
 }  // namespace
-
-SolveSequence solve_sequence(CouplingScheme scheme, bool viscous) {
-  // without viscous liquid (or under a scheme that leaves viscosity out) there are no stress
-  // unknowns: every scheme is the pressure solve
-  if (!viscous || !scheme_uses_viscosity(scheme)) return SolveSequence::pressure;
-  if (scheme == CouplingScheme::pc_vc_pc_unified) return SolveSequence::decoupled;
-  return SolveSequence::unified;
-}
 
 template <int Dim>
 Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
@@ -271,15 +264,11 @@ void Simulation<Dim>::step_bodies(double dt) {
   const RigidStepStats s = rigid_->step(dt, time_, gravity_);
   stats_.contact_count = std::max(stats_.contact_count, s.contacts);
   stats_.max_penetration = std::max(stats_.max_penetration, s.max_penetration);
-  stats_.solver.iterations += s.iterations;
-  stats_.solver.contact_iterations += s.iterations;
-  stats_.solver.contact_seconds += s.solve_seconds;
-  stats_.solver.staggered_iterations += s.staggered_iterations;
-  stats_.solver.max_relative_residual =
-      std::max(stats_.solver.max_relative_residual, s.max_relative_residual);
-  stats_.solver.converged = stats_.solver.converged && s.converged;
-  stats_.solver.dofs_contact = std::max(stats_.solver.dofs_contact, s.dofs_contact);
-  stats_.solver.dofs_friction = std::max(stats_.solver.dofs_friction, s.dofs_friction);
+  SolverStats& st = stats_.solver;
+  st.add_solve(s.iterations, s.staggered_iterations, s.max_relative_residual, s.converged);
+  st.add_dofs(0, 0, s.dofs_contact, s.dofs_friction);
+  st.contact_iterations += s.iterations;
+  st.contact_seconds += s.solve_seconds;
   stats_.timing[FramePhase::solve] += s.solve_seconds;
 }
 
@@ -290,12 +279,31 @@ void Simulation<Dim>::step(double dt) {
     step_bodies(dt);
     return;
   }
+  particles_to_grid_with_forces(dt);  // (1)-(3)
+  update_step_weights();              // (4)-(5)
+  extrapolate_into_air();             // u* on the faces the particles did not reach
+  solve_step(dt);                     // (6)-(12)
+  check_finite("the pressure/viscosity/contact solve");
+  extrapolate_from_trusted_faces();   // the solved velocity into air and solid
+  apply_wall_and_solid_velocities();
+  move_bodies(dt);                    // (13)
+  advect(dt);                         // (14)
+  correct_volume(dt);                 // (15)
+  check_finite("advection");
+}
+
+template <int Dim>
+void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   // (1) map velocity from particles to grid (APIC)
   particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   for (int f = 0; f < grid_.num_faces(); ++f)
     if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
   if (coupled_) rigid_->apply_gravity(dt, gravity_);
+}
+
+template <int Dim>
+void Simulation<Dim>::update_step_weights() {
   // (4) liquid/air domain: level set from the particles on the half lattice
   // (5) volume fractions: W_F^u, W_F^s from the solids at the bodies' pose (section 4.4.6),
   // W_L^p, W_L^u, W_L^s from the liquid; the particles and bodies have not moved since the end
@@ -306,6 +314,10 @@ void Simulation<Dim>::step(double dt) {
   }
   liquid_weights_current_ = false;
   weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+}
+
+template <int Dim>
+void Simulation<Dim>::extrapolate_into_air() {
   // the solve reads u* on faces the particles did not reach: with stress unknowns D reads the
   // air faces next to the surface (b1 of eq. (24)), and the weighted divergence of a surface
   // cell (b2) reads its faces towards the air, whose W_L^u is small but not zero. Extend u*
@@ -313,35 +325,50 @@ void Simulation<Dim>::step(double dt) {
   // to traction-free) rather than air at rest (a no-slip lid, and a spurious divergence: a
   // liquid ball in free fall felt a pressure of 1e-4 rho g dx), as Batty & Bridson (2008)
   // extrapolate before their viscosity solve
-  {
-    std::vector<char> carried(grid_.num_faces(), 0);
-    for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
-    extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
-  }
+  std::vector<char> carried(grid_.num_faces(), 0);
+  for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
+  extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
+}
+
+template <int Dim>
+void Simulation<Dim>::solve_step(double dt) {
   // (6) contacts, (7)-(10) active DOFs, assembly (or stencil set-up) and the solves of the
   // scheme; (11) velocity update u = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau) and
   // (12) the bodies' velocities (eq. (21))
-  {
-    ScopedTimer timer(stats_.timing[FramePhase::solve]);
-    if (coupled_) {
-      solve_coupled(dt);
-    } else {
-      solve_liquid(dt);
-      stats_.solver.fluid_seconds += timer.seconds();
-    }
+  ScopedTimer timer(stats_.timing[FramePhase::solve]);
+  if (coupled_) {
+    solve_coupled(dt);
+  } else {
+    solve_liquid(dt);
+    stats_.solver.fluid_seconds += timer.seconds();
   }
-  check_finite("the pressure/viscosity/contact solve");
-  // extrapolate the velocity from the trusted liquid faces into air and solid, then zero the
-  // normal velocity on walls and give fully solid faces their solid's velocity (zero for
-  // static solids), and remove the inflow into solids
-  std::vector<char> valid(grid_.num_faces(), 0);
+}
+
+template <int Dim>
+std::vector<char> Simulation<Dim>::trusted_faces() const {
+  // faces with fluid whose weight W_F^u W_L^u (W_L^u before the clamp) reaches
+  // kTrustedLiquidFaceFraction, and faces that carry mass outside the liquid's weights
+  std::vector<char> trusted(grid_.num_faces(), 0);
   for (int f = 0; f < grid_.num_faces(); ++f)
-    valid[f] =
+    trusted[f] =
         weights_.fluid_face[f] > 0.0 &&
         (weights_.fluid_face[f] * raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
          (weights_.liquid_face[f] == 0.0 && face_mass_[f] > 0.0));
+  return trusted;
+}
+
+template <int Dim>
+void Simulation<Dim>::extrapolate_from_trusted_faces() {
+  // as far as the particles travel in a step (cfl cells) and two more for the stencils
   const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
-  extrapolate_velocity(grid_, u_, valid, layers);
+  std::vector<char> trusted = trusted_faces();
+  extrapolate_velocity(grid_, u_, trusted, layers);
+}
+
+template <int Dim>
+void Simulation<Dim>::apply_wall_and_solid_velocities() {
+  // zero the normal velocity on walls, give fully solid faces their solid's velocity (zero for
+  // static solids), then remove the inflow into solids
   for (int f = 0; f < grid_.num_faces(); ++f) {
     const auto [axis, coord] = grid_.face_coord(f);
     const bool wall = grid_.is_boundary_face(axis, coord) &&
@@ -352,26 +379,39 @@ void Simulation<Dim>::step(double dt) {
       u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
   }
   constrain_velocity_in_solids();
+}
+
+template <int Dim>
+void Simulation<Dim>::move_bodies(double dt) {
   // (13) body positions; the particles then see the solids at the new pose
-  if (coupled_) {
-    rigid_->integrate(dt, time_, "the coupled solve");
-    std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
-    for (const auto& b : rigid_->bodies())
-      if (b.moves()) shapes.push_back(b.posed_shape());
-    solids_ = make_solid_field<Dim>(shapes, grid_.dx());
-  }
+  if (!coupled_) return;
+  rigid_->integrate(dt, time_, "the coupled solve");
+  rebuild_solid_field();
+}
+
+template <int Dim>
+void Simulation<Dim>::rebuild_solid_field() {
+  std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
+  for (const auto& b : rigid_->bodies())
+    if (b.moves()) shapes.push_back(b.posed_shape());
+  solids_ = make_solid_field<Dim>(shapes, grid_.dx());
+}
+
+template <int Dim>
+void Simulation<Dim>::advect(double dt) {
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
   // leaving through open faces are removed, particles that end up inside a solid are pushed out
   grid_to_particles(particles_, grid_, u_);
   advect_particles(particles_, grid_, u_, dt, solids_, boundary_);
-  // (15) position correction for volume preservation
-  // and the grid density projection that keeps the particle volume and the level set's volume
-  // equal (docs/particles.md)
-  if (scene_.particles.position_correction) {
-    correct_positions(particles_, grid_, dt, solids_, boundary_);
-    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
-  }
-  check_finite("advection");
+}
+
+template <int Dim>
+void Simulation<Dim>::correct_volume(double dt) {
+  // (15) position correction for volume preservation, and the grid density projection that
+  // keeps the particle volume and the level set's volume equal (docs/particles.md)
+  if (!scene_.particles.position_correction) return;
+  correct_positions(particles_, grid_, dt, solids_, boundary_);
+  project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
 }
 
 template <int Dim>
@@ -383,10 +423,7 @@ void Simulation<Dim>::update_moving_solids() {
   solid_phi_ = solid_weights_.lattice_phi;
   weights_.fluid_face = solid_weights_.fluid_face;
   if (sequence_ != SolveSequence::pressure) stress_fluid_ = solid_weights_.fluid_stress;
-  std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
-  for (const auto& b : rigid_->bodies())
-    if (b.moves()) shapes.push_back(b.posed_shape());
-  solids_ = make_solid_field<Dim>(shapes, grid_.dx());
+  rebuild_solid_field();
 }
 
 template <int Dim>
@@ -476,123 +513,92 @@ void Simulation<Dim>::solve_coupled(double dt) {
   rigid_->remember(std::move(in.contacts), kept);
   // statistics: the phases of the paper's Tables 1-3
   SolverStats& st = stats_.solver;
-  st.iterations += r.fluid_iterations + r.contact_iterations + r.coupled_iterations;
+  st.add_solve(r.fluid_iterations + r.contact_iterations + r.coupled_iterations,
+               r.staggered_iterations, r.max_relative_residual, r.converged);
+  st.add_dofs(r.pressure_dofs, r.stress_dofs, r.contact_dofs, r.friction_dofs);
   st.fluid_iterations += r.fluid_iterations;
   st.contact_iterations += r.contact_iterations;
   st.coupled_iterations += r.coupled_iterations;
   st.fluid_seconds += r.fluid_seconds;
   st.contact_seconds += r.contact_seconds;
   st.coupled_seconds += r.coupled_seconds;
-  st.staggered_iterations += r.staggered_iterations;
-  st.converged = st.converged && r.converged;
-  st.max_relative_residual = std::max(st.max_relative_residual, r.max_relative_residual);
-  st.dofs_pressure = std::max(st.dofs_pressure, r.pressure_dofs);
-  st.dofs_stress = std::max(st.dofs_stress, r.stress_dofs);
-  st.dofs_contact = std::max(st.dofs_contact, r.contact_dofs);
-  st.dofs_friction = std::max(st.dofs_friction, r.friction_dofs);
 }
 
 template <int Dim>
 void Simulation<Dim>::solve_liquid(double dt) {
-  // pressure only: eq. (8) without stress
-  if (sequence_ == SolveSequence::pressure) {
+  // the state between the solves of the sequence (solve_stokes / solve_pressure update u)
+  struct State {
+    VectorX u, pressure, stress;
+  };
+  const Backend backend = scene_.solver.backend;
+  // eq. (8) without stress
+  auto pressure = [&](const State& from, SolveStage stage) {
+    State out = from;
     const PressureSolveResult solve =
-        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-    pressure_ = solve.pressure;
-    record_solve(solve.pcg, solve.dofs, 0, "pressure");
-    return;
-  }
-  if (non_newtonian_) {
-    solve_liquid_non_newtonian(dt);
-    return;
-  }
+        solve_pressure(grid_, weights_, dt, backend, pcg_settings_, out.u);
+    record_solve(solve.pcg, solve.dofs, 0, solve_stage_name(stage));
+    out.pressure = solve.pressure;
+    return out;
+  };
   StokesWeights w;
   w.pressure = weights_;
   w.fluid_stress = stress_fluid_;
   w.liquid_stress = stress_liquid_;
-  w.viscosity = stress_eta_;
-  if (sequence_ == SolveSequence::unified) {
-    // PVC without bodies: eq. (8) in (tau, p) at once, reduced stress (section 4.4.2)
+  // PVC without bodies: eq. (8) in (tau, p) at once, reduced stress (section 4.4.2)
+  auto unified = [&](const State& from, const VectorX* eta) {
+    w.viscosity = eta ? *eta : stress_eta_;
+    State out = from;
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                     scene_.solver.backend, pcg_settings_, u_);
-    pressure_ = solve.pressure;
-    stress_ = solve.stress;
+                     backend, pcg_settings_, out.u);
     record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
-    return;
+    out.pressure = solve.pressure;
+    out.stress = solve.stress;
+    return out;
+  };
+  // the VC solve of PC-VC-PC: stress unknowns only (p = 0; the full form, since the trace
+  // vanishes only together with the pressure)
+  auto viscous = [&](const State& from, const VectorX* eta) {
+    w.viscosity = eta ? *eta : stress_eta_;
+    State out = from;
+    const StokesSolveResult solve = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
+                                                 StressForm::full, backend, pcg_settings_, out.u);
+    record_solve(solve.pcg, 0, solve.stress_dofs, "viscosity");
+    out.stress = solve.stress;
+    return out;
+  };
+  // herschel-bulkley liquids: Algorithm 2 around the viscous solve (section 5), started from the
+  // previous step's shear rate where there is one (departure from line 1, docs/non-newtonian.md)
+  ViscosityRounds viscosity;
+  std::unique_ptr<NonNewtonianViscosity<Dim>> model;
+  VectorX eta;
+  if (non_newtonian_ && sequence_ != SolveSequence::pressure) {
+    model = std::make_unique<NonNewtonianViscosity<Dim>>(non_newtonian_model());
+    viscosity.rounds = std::max(1, scene_.solver.staggered_iterations);
+    viscosity.initial = [&](const VectorX& u) {
+      return model->initial_viscosity(weights_.fluid_face, u, previous_shear_rate_);
+    };
+    viscosity.update = [&](const VectorX& tau, const VectorX& used) {
+      eta = model->update(tau, used);
+      return eta;
+    };
   }
-  // PC-VC-PC without bodies (section 6.2): pressure, viscosity with stress unknowns (p = 0; the
-  // full form, since the trace vanishes only together with the pressure), pressure again
-  const PressureSolveResult first =
-      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-  record_solve(first.pcg, first.dofs, 0, "first pressure");
-  const StokesSolveResult viscous = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
-                                                 StressForm::full, scene_.solver.backend,
-                                                 pcg_settings_, u_);
-  record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
-  const PressureSolveResult second =
-      solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-  record_solve(second.pcg, second.dofs, 0, "second pressure");
-  pressure_ = first.pressure + second.pressure;
-  stress_ = viscous.stress;
+  const State end = run_solve_sequence(sequence_, State{u_, pressure_, stress_}, viscosity,
+                                       pressure, unified, viscous);
+  u_ = end.u;
+  pressure_ = end.pressure;
+  stress_ = end.stress;
+  if (!model) return;
+  // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
+  cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
+  record_viscosity_rounds(model->residuals());
+  if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
 }
 
 template <int Dim>
 NonNewtonianViscosity<Dim> Simulation<Dim>::non_newtonian_model() const {
   return NonNewtonianViscosity<Dim>(stress_grid_, deformation_rate_, stress_fluid_, stress_liquid_,
                                     mixture_);
-}
-
-template <int Dim>
-void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
-  StokesWeights w;
-  w.pressure = weights_;
-  w.fluid_stress = stress_fluid_;
-  w.liquid_stress = stress_liquid_;
-  NonNewtonianViscosity<Dim> model = non_newtonian_model();
-  const int rounds = std::max(1, scene_.solver.staggered_iterations);
-  VectorX eta;
-  if (sequence_ == SolveSequence::unified) {
-    // Algorithm 2 around the unified solve: each round eq. (29) in (tau, p) from the same u*
-    // with N(eta^k), so each round ends with tau, p optimal for the current viscosity
-    const VectorX u_star = u_;
-    eta = run_algorithm2<Dim>(model, weights_.fluid_face, u_star, rounds, [&](const VectorX& e) {
-      w.viscosity = e;
-      u_ = u_star;
-      const StokesSolveResult solve =
-          solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                       scene_.solver.backend, pcg_settings_, u_);
-      record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
-      pressure_ = solve.pressure;
-      stress_ = solve.stress;
-      return solve.stress;
-    }, previous_shear_rate_);
-  } else {
-    // PC-VC-PC: Algorithm 2 around the viscosity solve, from the first pressure solve's u
-    const PressureSolveResult first =
-        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-    record_solve(first.pcg, first.dofs, 0, "first pressure");
-    const VectorX u_first = u_;
-    eta = run_algorithm2<Dim>(model, weights_.fluid_face, u_first, rounds, [&](const VectorX& e) {
-      w.viscosity = e;
-      u_ = u_first;
-      const StokesSolveResult viscous =
-          solve_stokes(grid_, w, dt, StokesUnknowns::stress_only, StressForm::full,
-                       scene_.solver.backend, pcg_settings_, u_);
-      record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
-      stress_ = viscous.stress;
-      return viscous.stress;
-    }, previous_shear_rate_);
-    const PressureSolveResult second =
-        solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
-    record_solve(second.pcg, second.dofs, 0, "second pressure");
-    pressure_ = first.pressure + second.pressure;
-  }
-  // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
-  cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
-  record_viscosity_rounds(model.residuals());
-  // the next step starts from this step's rate (departure from line 1, docs/non-newtonian.md)
-  if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model.previous_shear_rate();
 }
 
 template <int Dim>
@@ -611,14 +617,9 @@ void Simulation<Dim>::record_solve(const PcgResult& pcg, long pressure_dofs, lon
     msg << "t = " << time_ << " s: " << what << " solver broke down: " << pcg.message;
     throw SimulationError(msg.str());
   }
-  stats_.solver.iterations += pcg.iterations;
+  stats_.solver.add_solve(pcg.iterations, 1, pcg.relative_residual, pcg.converged);
+  stats_.solver.add_dofs(pressure_dofs, stress_dofs, 0, 0);
   stats_.solver.fluid_iterations += pcg.iterations;
-  stats_.solver.staggered_iterations += 1;
-  stats_.solver.max_relative_residual =
-      std::max(stats_.solver.max_relative_residual, pcg.relative_residual);
-  stats_.solver.converged = stats_.solver.converged && pcg.converged;
-  stats_.solver.dofs_pressure = std::max(stats_.solver.dofs_pressure, pressure_dofs);
-  stats_.solver.dofs_stress = std::max(stats_.solver.dofs_stress, stress_dofs);
 }
 
 template <int Dim>

@@ -12,6 +12,7 @@
 #include "reference/core/common.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/coupling/coupling_scheme.hpp"
+#include "reference/coupling/solve_sequence.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/geometry/shape.hpp"
@@ -41,18 +42,6 @@ class AnySimulation {
   /// total energy that a liquid in a static container must never gain.
   virtual double liquid_potential_energy() const { return 0.0; }
 };
-
-/// The solves of lines 7-11 of Algorithm 1 for the liquid, without dynamic bodies.
-enum class SolveSequence {
-  pressure,   ///< eq. (8) without stress (solve_pressure)
-  unified,    ///< eq. (8) in (tau, p) together, reduced stress (solve_stokes)
-  decoupled,  ///< section 6.2: pressure, then stress only (p = 0), then pressure again
-};
-
-/// The sequence a scheme runs when no body is dynamic: P-C, C-P, PC-iterative, PC-unified ->
-/// pressure (viscosity ignored); PV-C, C-PV, PVC-iterative, PVC-unified -> unified;
-/// PC-VC-PC-unified -> decoupled. Without viscous liquid (`viscous` false) always pressure.
-SolveSequence solve_sequence(CouplingScheme scheme, bool viscous);
 
 /// Algorithm 1 for one scene: liquids (particles, eq. (8) with or without stress unknowns,
 /// herschel-bulkley liquids by Algorithm 2), static, dynamic and kinematic bodies with
@@ -92,6 +81,34 @@ class Simulation : public AnySimulation {
   /// solve when bodies move), or for scenes of bodies without liquid the body lines 3, 6, 8,
   /// 10, 12 and 13 through RigidWorld.
   void step(double dt);
+  // The stages of step, in Algorithm 1's order.
+  /// Lines 1-3: APIC particles to grid, gravity on the faces that carry mass and on the
+  /// dynamic bodies.
+  void particles_to_grid_with_forces(double dt);
+  /// Lines 4-5: the solid weights at the bodies' pose and the liquid weights (unless the end of
+  /// the last frame left them current), and the density diagonal P.
+  void update_step_weights();
+  /// u* extended kAirVelocityLayers faces beyond the faces that carry mass (the surface's b1, b2
+  /// read them).
+  void extrapolate_into_air();
+  /// Lines 6-12: solve_coupled with moving bodies, solve_liquid otherwise, timed.
+  void solve_step(double dt);
+  /// The faces whose solved velocity is fed back to the particles: W_F^u > 0 and W_F^u W_L^u
+  /// (unclamped) >= kTrustedLiquidFaceFraction, or mass outside the liquid weights.
+  std::vector<char> trusted_faces() const;
+  /// The solved velocity extrapolated from the trusted faces, ceil(cfl) + 2 layers.
+  void extrapolate_from_trusted_faces();
+  /// Walls: zero normal velocity; fully solid faces: the solid's velocity; then
+  /// constrain_velocity_in_solids.
+  void apply_wall_and_solid_velocities();
+  /// Line 13: the bodies' poses (coupled scenes) and the particles' SolidField at the new pose.
+  void move_bodies(double dt);
+  /// The particles' SolidField from the static shapes and the posed moving bodies.
+  void rebuild_solid_field();
+  /// Line 14: grid to particles (APIC) and RK2 advection.
+  void advect(double dt);
+  /// Line 15: position correction and the particle density projection (when enabled).
+  void correct_volume(double dt);
   /// The body part of a step: RigidWorld::step, with its statistics added to the frame's.
   void step_bodies(double dt);
   /// The CFL-limited step size: min(max_dt, cfl dx / max speed), and with moving bodies at most
@@ -119,14 +136,13 @@ class Simulation : public AnySimulation {
   void check_finite(const char* after) const;
   /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
   void fill_state_stats(FrameStats& s) const;
-  /// Lines 7-11 of Algorithm 1 for the liquid: the solves of solve_sequence(scheme) on u_, their
-  /// statistics added to stats_.
+  /// Lines 7-11 of Algorithm 1 for the liquid beside static solids: the solves of
+  /// solve_sequence(scheme) (run_solve_sequence, solve_sequence.hpp) on u_, their statistics
+  /// added to stats_. Herschel-bulkley liquids (section 5) run Algorithm 2 around the viscous
+  /// solve (staggered_iterations rounds), started from the previous step's shear rate where there
+  /// is one (departure: line 1 as printed only in the first step and on newly active DOFs;
+  /// docs/non-newtonian.md, departure 4).
   void solve_liquid(double dt);
-  /// solve_liquid for scenes with a herschel-bulkley liquid (section 5): the unified or decoupled
-  /// sequence with Algorithm 2 around its viscous solve (staggered_iterations rounds), started
-  /// from the previous step's shear rate where there is one (departure: line 1 as printed only
-  /// in the first step and on newly active DOFs; docs/non-newtonian.md, departure 4).
-  void solve_liquid_non_newtonian(double dt);
   /// Algorithm 2's model for the current weights (W_F^s, W_L^s, the liquids' mass fractions).
   NonNewtonianViscosity<Dim> non_newtonian_model() const;
   /// The residuals of one step's viscosity rounds into stats_ (SolverStats::viscosity_residuals).
@@ -135,23 +151,34 @@ class Simulation : public AnySimulation {
   /// breakdown (`what` names the solve).
   void record_solve(const PcgResult& pcg, long pressure_dofs, long stress_dofs, const char* what);
 
+  // the scene, the grid and its boundary
   SceneDesc scene_;
   MacGrid<Dim> grid_;
   SampleLattice<Dim> lattice_;
   std::array<BoundaryType, 2 * Dim> boundary_{};
   Vec<Dim> gravity_;
-  double reference_density_ = 1000.0;
-  // static solids: shapes, their SolidField, and W_F^u (fixed for the whole run)
+  double reference_density_ = 1000.0;  ///< the first liquid's density (P of eq. (8) in air)
+  // solids: the static bodies' shapes (fixed for the whole run); the particles' SolidField and
+  // the solid level set on the half lattice, rebuilt at every pose when bodies move
   std::vector<ShapePtr<Dim>> solid_shapes_;
   SolidField<Dim> solids_;
   VectorX solid_phi_;
+  // moving bodies with contact (scenes with dynamic or kinematic bodies)
+  std::unique_ptr<RigidWorld<Dim>> rigid_;
+  /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
+  bool coupled_ = false;
+  SolidWeights<Dim> solid_weights_;  ///< of the last update_moving_solids
+  // the weights of eq. (8): W_F^u, W_L^p, W_L^u, P (weights_), W_F^s, W_L^s
   PressureWeights weights_;
-  // viscosity (section 3.1): eta of each liquid, the stress DOF layout, W_F^s (fixed), W_L^s,
-  // eta per stress DOF and per cell (render), the last stress solution
-  std::vector<double> liquid_eta_;
+  VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
+  VectorX stress_fluid_, stress_liquid_;
+  bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
+  // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF
+  // layout, eta per stress DOF and per cell (render)
   SolveSequence sequence_ = SolveSequence::pressure;
+  std::vector<double> liquid_eta_;
   StressGrid<Dim> stress_grid_;
-  VectorX stress_fluid_, stress_liquid_, stress_eta_, cell_eta_, stress_;
+  VectorX stress_eta_, cell_eta_;
   // non-Newtonian liquids (section 5): the liquids' models and mass fractions per stress DOF;
   // cell_eta_ is then the effective viscosity of the last solve (its cell-centred diagonal DOFs)
   bool non_newtonian_ = false;
@@ -161,23 +188,16 @@ class Simulation : public AnySimulation {
   /// the end of the previous step, NaN where that step had no unknown (line 1 there); empty
   /// before the first step or with solver.viscosity_warm_start off
   VectorX previous_shear_rate_;
-  // liquid state
+  // the liquid: particles, their level set and volume, and the grid fields of the last step
   Particles<Dim> particles_;
   VectorX liquid_phi_;
-  VectorX raw_liquid_face_;              ///< W_L^u before the clamp of kMinLiquidFaceFraction
-  double liquid_volume_ = 0.0;          ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
-  bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
-  VectorX u_, face_mass_, face_density_, pressure_;
+  double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
+  VectorX u_, face_mass_, face_density_, pressure_, stress_;
   PcgSettings pcg_settings_;
   // time and statistics
   int frame_ = 0;
   double time_ = 0.0;
   FrameStats stats_;
-  // rigid bodies with contact (scenes with dynamic or kinematic bodies)
-  std::unique_ptr<RigidWorld<Dim>> rigid_;
-  /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
-  bool coupled_ = false;
-  SolidWeights<Dim> solid_weights_;  ///< of the last update_moving_solids
 };
 
 
