@@ -129,7 +129,8 @@ SolveSequence solve_sequence(CouplingScheme scheme, bool viscous) {
 }
 
 template <int Dim>
-Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
+Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switches)
+    : scene_(scene), switches_(switches) {
   // grid and boundary
   Vec<Dim> lower, upper;
   VecI<Dim> cells;
@@ -197,7 +198,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   pcg_settings_.max_iterations = scene.solver.max_iterations;
 
   // the seeded particles spread so that their volume and the level set's agree from frame 0
-  if (scene.particles.position_correction)
+  if (scene.particles.position_correction && switches_.density_projection)
     project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
                              kSeedProjectionIterations);
   // frame 0: the seeded state on the grid (no pressure yet)
@@ -287,11 +288,22 @@ template <int Dim>
 void Simulation<Dim>::step(double dt) {
   // a scene of bodies without liquid: (3), (6), (8), (10), (12), (13) through RigidWorld
   if (rigid_ && scene_.liquids.empty()) {
+    const double kinetic = rigid_->kinetic_energy(), potential = body_potential_energy();
     step_bodies(dt);
+    frame_ledger_.forces_and_solve += rigid_->kinetic_energy() - kinetic;
+    frame_ledger_.advection += body_potential_energy() - potential;
     return;
   }
+  // the energy ledger: kinetic energy before and after each stage, potential energy around moves
+  double energy = particle_kinetic_energy();
+  auto account = [&](double& stage, double now) {
+    stage += now - energy;
+    energy = now;
+  };
   // (1) map velocity from particles to grid (APIC)
   particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  account(frame_ledger_.to_grid, face_kinetic_energy());
+  if (coupled_) energy += rigid_->kinetic_energy();
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   for (int f = 0; f < grid_.num_faces(); ++f)
     if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
@@ -313,7 +325,7 @@ void Simulation<Dim>::step(double dt) {
   // to traction-free) rather than air at rest (a no-slip lid, and a spurious divergence: a
   // liquid ball in free fall felt a pressure of 1e-4 rho g dx), as Batty & Bridson (2008)
   // extrapolate before their viscosity solve
-  {
+  if (switches_.air_velocity) {
     std::vector<char> carried(grid_.num_faces(), 0);
     for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
     extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
@@ -331,6 +343,8 @@ void Simulation<Dim>::step(double dt) {
     }
   }
   check_finite("the pressure/viscosity/contact solve");
+  account(frame_ledger_.forces_and_solve,
+          face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0));
   // extrapolate the velocity from the trusted liquid faces into air and solid, then zero the
   // normal velocity on walls and give fully solid faces their solid's velocity (zero for
   // static solids), and remove the inflow into solids
@@ -339,9 +353,11 @@ void Simulation<Dim>::step(double dt) {
     valid[f] =
         weights_.fluid_face[f] > 0.0 &&
         (weights_.fluid_face[f] * raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
-         (weights_.liquid_face[f] == 0.0 && face_mass_[f] > 0.0));
+         (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
+          face_mass_[f] > 0.0) ||
+         (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
   const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
-  extrapolate_velocity(grid_, u_, valid, layers);
+  if (switches_.extrapolate_after_solve) extrapolate_velocity(grid_, u_, valid, layers);
   for (int f = 0; f < grid_.num_faces(); ++f) {
     const auto [axis, coord] = grid_.face_coord(f);
     const bool wall = grid_.is_boundary_face(axis, coord) &&
@@ -352,9 +368,14 @@ void Simulation<Dim>::step(double dt) {
       u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
   }
   constrain_velocity_in_solids();
+  account(frame_ledger_.velocity_extension,
+          face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0));
   // (13) body positions; the particles then see the solids at the new pose
   if (coupled_) {
+    const double potential = body_potential_energy();
     rigid_->integrate(dt, time_, "the coupled solve");
+    frame_ledger_.advection += body_potential_energy() - potential;
+    energy -= rigid_->kinetic_energy();
     std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
     for (const auto& b : rigid_->bodies())
       if (b.moves()) shapes.push_back(b.posed_shape());
@@ -363,13 +384,22 @@ void Simulation<Dim>::step(double dt) {
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
   // leaving through open faces are removed, particles that end up inside a solid are pushed out
   grid_to_particles(particles_, grid_, u_);
+  if (!switches_.apic)
+    for (auto& c : particles_.c) c.setZero();
+  account(frame_ledger_.to_particles, particle_kinetic_energy());
+  energy = liquid_potential_energy();
   advect_particles(particles_, grid_, u_, dt, solids_, boundary_);
+  account(frame_ledger_.advection, liquid_potential_energy());
   // (15) position correction for volume preservation
   // and the grid density projection that keeps the particle volume and the level set's volume
   // equal (docs/particles.md)
   if (scene_.particles.position_correction) {
-    correct_positions(particles_, grid_, dt, solids_, boundary_);
-    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
+    if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
+    account(frame_ledger_.position_correction, liquid_potential_energy());
+    if (switches_.density_projection)
+      project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_,
+                               boundary_);
+    account(frame_ledger_.density_projection, liquid_potential_energy());
   }
   check_finite("advection");
 }
@@ -661,6 +691,7 @@ template <int Dim>
 FrameStats Simulation<Dim>::advance_frame() {
   const Stopwatch frame_watch;
   stats_ = FrameStats{};
+  frame_ledger_ = EnergyLedger{};
   stats_.solver.scheme = scene_.solver.scheme;
   stats_.dt_min = std::numeric_limits<double>::infinity();
   // substeps that land exactly on the frame time (frame + 1) / fps
@@ -686,6 +717,7 @@ FrameStats Simulation<Dim>::advance_frame() {
   update_liquid_weights();
   liquid_weights_current_ = true;
   fill_state_stats(stats_);
+  ledger_ = frame_ledger_;
   stats_.timing[FramePhase::total] = frame_watch.seconds();
   return stats_;
 }
@@ -707,10 +739,7 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
     s.liquid_bounds_lower = to_std<Dim>(lo);
     s.liquid_bounds_upper = to_std<Dim>(hi);
   }
-  double energy = 0.0;
-  for (std::size_t p = 0; p < particles_.size(); ++p)
-    energy += 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
-  s.kinetic_energy_liquid = energy;
+  s.kinetic_energy_liquid = particle_kinetic_energy();
   s.kinetic_energy_bodies = rigid_ ? rigid_->kinetic_energy() : 0.0;
   s.bodies = rigid_ ? rigid_->body_stats() : std::vector<BodyStats>{};
   // probes: grid velocity and cell pressure interpolated at the probe
@@ -727,6 +756,30 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
 }
 
 template <int Dim>
+double Simulation<Dim>::face_kinetic_energy() const {
+  double energy = 0.0;
+  for (int f = 0; f < grid_.num_faces(); ++f) energy += 0.5 * face_mass_[f] * u_[f] * u_[f];
+  return energy;
+}
+
+template <int Dim>
+double Simulation<Dim>::particle_kinetic_energy() const {
+  double energy = 0.0;
+  for (std::size_t p = 0; p < particles_.size(); ++p)
+    energy += 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
+  return energy;
+}
+
+template <int Dim>
+double Simulation<Dim>::body_potential_energy() const {
+  double energy = 0.0;
+  if (rigid_)
+    for (const auto& b : rigid_->bodies())
+      if (b.is_dynamic()) energy -= b.mass * gravity_.dot(b.position);
+  return energy;
+}
+
+template <int Dim>
 double Simulation<Dim>::liquid_potential_energy() const {
   double energy = 0.0;
   for (std::size_t p = 0; p < particles_.size(); ++p)
@@ -735,8 +788,13 @@ double Simulation<Dim>::liquid_potential_energy() const {
 }
 
 std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene) {
-  if (scene.dim == 3) return std::make_unique<Simulation<3>>(scene);
-  return std::make_unique<Simulation<2>>(scene);
+  return make_simulation(scene, StageSwitches{});
+}
+
+std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene,
+                                               const StageSwitches& switches) {
+  if (scene.dim == 3) return std::make_unique<Simulation<3>>(scene, switches);
+  return std::make_unique<Simulation<2>>(scene, switches);
 }
 
 template class Simulation<2>;
