@@ -214,7 +214,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
 
 template <int Dim>
 void Simulation<Dim>::update_liquid_weights() {
-  liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_);
+  liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
   const bool solids = !solid_shapes_.empty() || coupled_;
