@@ -214,7 +214,11 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
 
 template <int Dim>
 void Simulation<Dim>::update_liquid_weights() {
-  liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_);
+  {
+    ScopedTimer timer(stats_.timing[FramePhase::particles]);
+    liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_);
+  }
+  ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
   const bool solids = !solid_shapes_.empty() || coupled_;
@@ -301,7 +305,10 @@ void Simulation<Dim>::step(double dt) {
     energy = now;
   };
   // (1) map velocity from particles to grid (APIC)
-  particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  {
+    ScopedTimer timer(stats_.timing[FramePhase::particles]);
+    particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  }
   account(frame_ledger_.to_grid, face_kinetic_energy());
   if (coupled_) energy += rigid_->kinetic_energy();
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
@@ -317,7 +324,10 @@ void Simulation<Dim>::step(double dt) {
     update_liquid_weights();
   }
   liquid_weights_current_ = false;
-  weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+  {
+    ScopedTimer timer(stats_.timing[FramePhase::weights]);
+    weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+  }
   // the solve reads u* on faces the particles did not reach: with stress unknowns D reads the
   // air faces next to the surface (b1 of eq. (24)), and the weighted divergence of a surface
   // cell (b2) reads its faces towards the air, whose W_L^u is small but not zero. Extend u*
@@ -326,6 +336,7 @@ void Simulation<Dim>::step(double dt) {
   // liquid ball in free fall felt a pressure of 1e-4 rho g dx), as Batty & Bridson (2008)
   // extrapolate before their viscosity solve
   if (switches_.air_velocity) {
+    ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
     std::vector<char> carried(grid_.num_faces(), 0);
     for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
     extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
@@ -348,26 +359,29 @@ void Simulation<Dim>::step(double dt) {
   // extrapolate the velocity from the trusted liquid faces into air and solid, then zero the
   // normal velocity on walls and give fully solid faces their solid's velocity (zero for
   // static solids), and remove the inflow into solids
-  std::vector<char> valid(grid_.num_faces(), 0);
-  for (int f = 0; f < grid_.num_faces(); ++f)
-    valid[f] =
-        weights_.fluid_face[f] > 0.0 &&
-        (weights_.fluid_face[f] * raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
-         (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
-          face_mass_[f] > 0.0) ||
-         (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
-  const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
-  if (switches_.extrapolate_after_solve) extrapolate_velocity(grid_, u_, valid, layers);
-  for (int f = 0; f < grid_.num_faces(); ++f) {
-    const auto [axis, coord] = grid_.face_coord(f);
-    const bool wall = grid_.is_boundary_face(axis, coord) &&
-                      boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
-    if (wall)
-      u_[f] = 0.0;
-    else if (weights_.fluid_face[f] == 0.0)
-      u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
+  {
+    ScopedTimer extrapolation_timer(stats_.timing[FramePhase::extrapolation]);
+    std::vector<char> valid(grid_.num_faces(), 0);
+    for (int f = 0; f < grid_.num_faces(); ++f)
+      valid[f] =
+          weights_.fluid_face[f] > 0.0 &&
+          (weights_.fluid_face[f] * raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
+           (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
+            face_mass_[f] > 0.0) ||
+           (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
+    const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
+    if (switches_.extrapolate_after_solve) extrapolate_velocity(grid_, u_, valid, layers);
+    for (int f = 0; f < grid_.num_faces(); ++f) {
+      const auto [axis, coord] = grid_.face_coord(f);
+      const bool wall = grid_.is_boundary_face(axis, coord) &&
+                        boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
+      if (wall)
+        u_[f] = 0.0;
+      else if (weights_.fluid_face[f] == 0.0)
+        u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
   }
   constrain_velocity_in_solids();
+  }
   account(frame_ledger_.velocity_extension,
           face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0));
   // (13) body positions; the particles then see the solids at the new pose
@@ -376,6 +390,7 @@ void Simulation<Dim>::step(double dt) {
     rigid_->integrate(dt, time_, "the coupled solve");
     frame_ledger_.advection += body_potential_energy() - potential;
     energy -= rigid_->kinetic_energy();
+    ScopedTimer timer(stats_.timing[FramePhase::weights]);
     std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
     for (const auto& b : rigid_->bodies())
       if (b.moves()) shapes.push_back(b.posed_shape());
@@ -383,6 +398,7 @@ void Simulation<Dim>::step(double dt) {
   }
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
   // leaving through open faces are removed, particles that end up inside a solid are pushed out
+  ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
   grid_to_particles(particles_, grid_, u_);
   if (!switches_.apic)
     for (auto& c : particles_.c) c.setZero();
@@ -406,6 +422,7 @@ void Simulation<Dim>::step(double dt) {
 
 template <int Dim>
 void Simulation<Dim>::update_moving_solids() {
+  ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // every body is a coupling body (fixed ones one-way at zero velocity), so the weights are
   // indexed like the bodies of the contact system; the static shapes are those fixed bodies
   solid_weights_ = solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
@@ -741,6 +758,8 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
   }
   s.kinetic_energy_liquid = particle_kinetic_energy();
   s.kinetic_energy_bodies = rigid_ ? rigid_->kinetic_energy() : 0.0;
+  s.potential_energy_liquid = liquid_potential_energy();
+  s.potential_energy_bodies = body_potential_energy();
   s.bodies = rigid_ ? rigid_->body_stats() : std::vector<BodyStats>{};
   // probes: grid velocity and cell pressure interpolated at the probe
   s.probes.clear();
