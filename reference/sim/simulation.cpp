@@ -131,6 +131,7 @@ SolveSequence solve_sequence(CouplingScheme scheme, bool viscous) {
 template <int Dim>
 Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switches)
     : scene_(scene), switches_(switches) {
+  const Stopwatch setup_watch;  // frame 0's timing: the set-up (solids, seeding, first weights)
   // grid and boundary
   Vec<Dim> lower, upper;
   VecI<Dim> cells;
@@ -210,6 +211,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
   stats_.time = 0.0;
   stats_.solver.scheme = scene.solver.scheme;
   fill_state_stats(stats_);
+  stats_.timing[FramePhase::total] = setup_watch.seconds();
 }
 
 template <int Dim>

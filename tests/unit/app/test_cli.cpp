@@ -248,6 +248,9 @@ TEST_CASE("run writes frames, stats.jsonl and summary.json (2D and 3D)", "[unit]
     for (const char* key : {"total", "solve", "particles", "weights", "extrapolation", "render", "output"})
       CHECK(stats[1]["timing"].contains(key));
     CHECK(stats[1]["timing"]["render"].get<double>() > 0.0);
+    // frame 0 times the set-up, which holds the first level set and weights
+    CHECK(stats[0]["timing"]["total"].get<double>() >=
+          stats[0]["timing"]["particles"].get<double>() + stats[0]["timing"]["weights"].get<double>());
     CHECK(stats[1]["timing"]["total"].get<double>() >=
           stats[1]["timing"]["render"].get<double>() + stats[1]["timing"]["particles"].get<double>() +
               stats[1]["timing"]["solve"].get<double>());
