@@ -64,11 +64,18 @@ void write_summary(const fs::path& dir, const SceneFile& scene, const json& tota
 }
 
 /// Renders the current state into frames/frame_NNNNN.ppm; a file that cannot be written is an
-/// input error (the output folder), not an internal one.
+/// input error (the output folder), not an internal one. The wall times of the picture and of
+/// its file are added to the frame's `render` and `output` phases and to its `total`.
 void write_frame(const AnySimulation& sim, const FrameRenderer& render, const SceneFile& scene,
-                 const fs::path& dir, int k) {
+                 const fs::path& dir, int k, FrameStats& stats) {
   const fs::path path = dir / "frames" / frame_file(k);
-  const Image image = render(sim, scene.render);
+  ScopedTimer total(stats.timing[FramePhase::total]);
+  Image image;
+  {
+    ScopedTimer timer(stats.timing[FramePhase::render]);
+    image = render(sim, scene.render);
+  }
+  ScopedTimer timer(stats.timing[FramePhase::output]);
   try {
     image.write_ppm(path.string());
   } catch (const std::runtime_error& e) {
@@ -137,15 +144,15 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
     // frame 0: the initial state
     FrameStats st = sim->current_stats();
     volume0 = volume = st.liquid_volume;
+    if (render) write_frame(*sim, renderer, scene, dir, 0, st);
     stats << frame_stats_json(st).dump() << "\n" << std::flush;
-    if (render) write_frame(*sim, renderer, scene, dir, 0);
     for (frame = 1; frame <= frames; ++frame) {
       st = sim->advance_frame();
       st.frame = frame;
       total_steps += st.steps;
       volume = st.liquid_volume;
+      if (render) write_frame(*sim, renderer, scene, dir, frame, st);
       stats << frame_stats_json(st).dump() << "\n" << std::flush;
-      if (render) write_frame(*sim, renderer, scene, dir, frame);
       done = frame;
       // progress
       const double el = elapsed();

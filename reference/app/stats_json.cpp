@@ -35,6 +35,8 @@ json frame_stats_json(const FrameStats& s) {
   j["particles"] = s.particles;
   j["liquid_bounds"] = {{"lower", vector(s.liquid_bounds_lower)}, {"upper", vector(s.liquid_bounds_upper)}};
   j["kinetic_energy"] = {{"liquid", number(s.kinetic_energy_liquid)}, {"bodies", number(s.kinetic_energy_bodies)}};
+  j["potential_energy"] = {{"liquid", number(s.potential_energy_liquid)},
+                           {"bodies", number(s.potential_energy_bodies)}};
   // bodies and contacts
   json bs = json::array();
   for (const auto& b : s.bodies)

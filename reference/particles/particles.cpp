@@ -860,7 +860,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     }
   }
   // liquid fractions of the particle level set, smoothed by the same hat
-  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice);
+  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice, boundary);
   const VectorX target = hat_liquid_fractions(grid, lattice, phi);
 
   // unknowns: cells holding particle volume or smoothed liquid
@@ -984,12 +984,16 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
 /// The liquid/air domain of Algorithm 1 line 4, after Zhu & Bridson (2005):
 /// phi(x) = |x - x_bar(x)| - r_bar(x), with x_bar and r_bar the kernel-
 /// weighted averages of the particle positions and radii, k(s) = max(0, 1 - s^2)^3, s = |x - x_p|
-/// / R. Particles splat onto the lattice points within R; slabs of the last axis wider than 2 R
-/// are processed even/odd in parallel, so no two threads touch the same point and every point
-/// sums its contributions in particle order (deterministic for any thread count).
+/// / R. Particles splat onto the lattice points within R, with their images: shifted by the
+/// period on periodic axes, reflected across wall faces within R (x' = 2 x_wall - x per
+/// reflected axis, which puts the points on the wall at the centre of a symmetric cloud). A
+/// reflected image reaches only lattice points its particle reaches. Slabs of the last axis wider
+/// than 2 R are processed even/odd in parallel, so no two threads touch the same point and every
+/// point sums its contributions in particle order (deterministic for any thread count).
 template <int Dim>
 VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
-                              const SampleLattice<Dim>& lattice) {
+                              const SampleLattice<Dim>& lattice,
+                              const std::array<BoundaryType, 2 * Dim>& boundary) {
   const int nl = lattice.size();
   const long np = static_cast<long>(particles.size());
   const double h = lattice.spacing;
@@ -1023,15 +1027,20 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
     for (long p = 0; p < np; ++p) order[fill[slab_of[p]]++] = static_cast<int>(p);
   }
 
-  // periodic images: shift by +-L on periodic axes
+  // periodic images: shift by +-L on periodic axes; mirror images across wall faces
   std::array<double, Dim> period{};
   for (int a = 0; a < Dim; ++a) period[a] = grid.periodic(a) ? grid.cells()[a] * dx : 0.0;
+  const Box<Dim> box = grid.domain_box();
+  std::array<bool, 2 * Dim> mirror{};
+  for (int a = 0; a < Dim; ++a)
+    for (int side = 0; side < 2; ++side)
+      mirror[2 * a + side] = !grid.periodic(a) && boundary[2 * a + side] == BoundaryType::wall;
 
   VectorX wsum = VectorX::Zero(nl), rsum = VectorX::Zero(nl);
   Eigen::Matrix<double, Dim, Eigen::Dynamic> xsum =
       Eigen::Matrix<double, Dim, Eigen::Dynamic>::Zero(Dim, nl);
 
-  // splat one particle (all its periodic images) onto the lattice
+  // splat one particle (with its periodic and wall images) onto the lattice
   auto splat = [&](int p) {
     const Vec<Dim> xp = particles.x[p];
     const double R = support[p];
@@ -1043,8 +1052,16 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
     for (int a = 0; a < Dim; ++a) {
       nseg[a] = 0;
       for (int k = -1; k <= 1; ++k) {
-        if (k != 0 && period[a] == 0.0) continue;
-        const double xa = xp[a] + k * period[a];
+        double xa = xp[a];
+        if (period[a] != 0.0) {
+          xa += k * period[a];
+        } else if (k != 0) {
+          // the mirror image across a wall within the support
+          const int side = k < 0 ? 0 : 1;
+          const double wall = k < 0 ? box.min()[a] : box.max()[a];
+          if (!mirror[2 * a + side] || std::abs(xp[a] - wall) >= R) continue;
+          xa = 2.0 * wall - xp[a];
+        }
         const int i0 = std::max(0, static_cast<int>(std::ceil((xa - R - lattice.origin[a]) / h)));
         const int i1 = std::min(lattice.dims[a] - 1,
                                 static_cast<int>(std::floor((xa + R - lattice.origin[a]) / h)));
@@ -1159,7 +1176,8 @@ double max_particle_speed(const Particles<Dim>& particles) {
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
       const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int);                          \
   template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
-                                         const SampleLattice<D>&);                                 \
+                                         const SampleLattice<D>&,                                  \
+                                         const std::array<BoundaryType, 2 * D>&);                  \
   template double max_particle_speed(const Particles<D>&);
 
 MONOLITH_INSTANTIATE_PARTICLES(2)

@@ -119,10 +119,16 @@ inline constexpr int kSeedProjectionIterations = 2;
 /// The liquid's signed distance (negative inside) sampled on `lattice` (normally half_lattice of
 /// the grid), reconstructed from the particles after Zhu & Bridson (2005). Calibrated so that a
 /// uniformly seeded block of liquid gives a zero level set on the block's boundary (within a
-/// small fraction of dx) and so the volume of {phi < 0} matches the seeded volume.
+/// small fraction of dx) and so the volume of {phi < 0} matches the seeded volume. Particles
+/// within the kernel support of a `wall` face of `boundary` are mirrored across it (and across
+/// two walls at a corner), so liquid against a wall reads as liquid up to and beyond the wall:
+/// without the images a lattice point near a wall averages particles on one side only, the
+/// level set bulges inward there and the cells along the wall get liquid fractions below one,
+/// which drives a flow in liquid at rest (docs/particles.md, "Still water").
 template <int Dim>
 VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
-                              const SampleLattice<Dim>& lattice);
+                              const SampleLattice<Dim>& lattice,
+                              const std::array<BoundaryType, 2 * Dim>& boundary);
 
 /// Largest particle speed (for the CFL condition).
 template <int Dim>

@@ -14,15 +14,28 @@
 
 namespace monolith {
 
-/// The phases of a frame's wall time (FrameStats::timing), each with its stats.jsonl name: the
-/// whole frame and its pressure / viscosity / contact solves. A new phase is one enumerator and
-/// its name; ScopedTimer fills it where it is measured.
-enum class FramePhase { total, solve };
+/// The phases of a frame's wall time (FrameStats::timing), each with its stats.jsonl name. A new
+/// phase is one enumerator and its name; ScopedTimer fills it where it is measured.
+enum class FramePhase {
+  total,          ///< the whole frame: its steps, and in a run its picture and output files
+  solve,          ///< the pressure / viscosity / contact solves (lines 6-12 of Algorithm 1)
+  particles,      ///< transfers, advection, position correction, density projection, level set
+  weights,        ///< volume fractions and the solve's set-up (W_F, W_L, eta, face densities)
+  extrapolation,  ///< velocity extrapolation, wall and solid velocity conditions
+  render,         ///< the frame's picture (run only)
+  output,         ///< writing the frame's picture file (run only)
+};
 
 template <>
 struct EnumNames<FramePhase> {
-  static constexpr std::array<std::pair<FramePhase, const char*>, 2> values{
-      {{FramePhase::total, "total"}, {FramePhase::solve, "solve"}}};
+  static constexpr std::array<std::pair<FramePhase, const char*>, 7> values{
+      {{FramePhase::total, "total"},
+       {FramePhase::solve, "solve"},
+       {FramePhase::particles, "particles"},
+       {FramePhase::weights, "weights"},
+       {FramePhase::extrapolation, "extrapolation"},
+       {FramePhase::render, "render"},
+       {FramePhase::output, "output"}}};
 };
 
 struct BodyStats {
@@ -85,6 +98,9 @@ struct FrameStats {
   long particles = 0;
   std::vector<double> liquid_bounds_lower, liquid_bounds_upper;
   double kinetic_energy_liquid = 0.0, kinetic_energy_bodies = 0.0;
+  /// Gravitational potential energy -sum m g . x of the particles (liquid) and of the dynamic
+  /// bodies' centres of mass (bodies), zero at the origin (J; 2D: J per metre of depth).
+  double potential_energy_liquid = 0.0, potential_energy_bodies = 0.0;
   std::vector<BodyStats> bodies;
   int contact_count = 0;
   double max_penetration = 0.0;

@@ -122,7 +122,9 @@ constexpr int kAirVelocityLayers = 2;
 }  // namespace
 
 template <int Dim>
-Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
+Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switches)
+    : scene_(scene), switches_(switches) {
+  const Stopwatch setup_watch;  // frame 0's timing: the set-up (solids, seeding, first weights)
   // grid and boundary
   Vec<Dim> lower, upper;
   VecI<Dim> cells;
@@ -190,7 +192,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   pcg_settings_.max_iterations = scene.solver.max_iterations;
 
   // the seeded particles spread so that their volume and the level set's agree from frame 0
-  if (scene.particles.position_correction)
+  if (scene.particles.position_correction && switches_.density_projection)
     project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
                              kSeedProjectionIterations);
   // frame 0: the seeded state on the grid (no pressure yet)
@@ -202,11 +204,16 @@ Simulation<Dim>::Simulation(const SceneDesc& scene) : scene_(scene) {
   stats_.time = 0.0;
   stats_.solver.scheme = scene.solver.scheme;
   fill_state_stats(stats_);
+  stats_.timing[FramePhase::total] = setup_watch.seconds();
 }
 
 template <int Dim>
 void Simulation<Dim>::update_liquid_weights() {
-  liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_);
+  {
+    ScopedTimer timer(stats_.timing[FramePhase::particles]);
+    liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_);
+  }
+  ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
   const bool solids = !solid_shapes_.empty() || coupled_;
@@ -276,16 +283,24 @@ template <int Dim>
 void Simulation<Dim>::step(double dt) {
   // a scene of bodies without liquid: (3), (6), (8), (10), (12), (13) through RigidWorld
   if (rigid_ && scene_.liquids.empty()) {
+    const double kinetic = rigid_->kinetic_energy(), potential = body_potential_energy();
     step_bodies(dt);
+    frame_ledger_.forces_and_solve += rigid_->kinetic_energy() - kinetic;
+    frame_ledger_.advection += body_potential_energy() - potential;
     return;
   }
+  ledger_energy_ = particle_kinetic_energy();  // the energy ledger (energy_ledger())
   particles_to_grid_with_forces(dt);  // (1)-(3)
   update_step_weights();              // (4)-(5)
   extrapolate_into_air();             // u* on the faces the particles did not reach
   solve_step(dt);                     // (6)-(12)
   check_finite("the pressure/viscosity/contact solve");
+  account(frame_ledger_.forces_and_solve,
+          face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0));
   extrapolate_from_trusted_faces();   // the solved velocity into air and solid
   apply_wall_and_solid_velocities();
+  account(frame_ledger_.velocity_extension,
+          face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0));
   move_bodies(dt);                    // (13)
   advect(dt);                         // (14)
   correct_volume(dt);                 // (15)
@@ -293,9 +308,20 @@ void Simulation<Dim>::step(double dt) {
 }
 
 template <int Dim>
+void Simulation<Dim>::account(double& stage, double now) {
+  stage += now - ledger_energy_;
+  ledger_energy_ = now;
+}
+
+template <int Dim>
 void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   // (1) map velocity from particles to grid (APIC)
-  particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  {
+    ScopedTimer timer(stats_.timing[FramePhase::particles]);
+    particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  }
+  account(frame_ledger_.to_grid, face_kinetic_energy());
+  if (coupled_) ledger_energy_ += rigid_->kinetic_energy();
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   for (int f = 0; f < grid_.num_faces(); ++f)
     if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
@@ -313,7 +339,10 @@ void Simulation<Dim>::update_step_weights() {
     update_liquid_weights();
   }
   liquid_weights_current_ = false;
-  weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+  {
+    ScopedTimer timer(stats_.timing[FramePhase::weights]);
+    weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+  }
 }
 
 template <int Dim>
@@ -325,6 +354,8 @@ void Simulation<Dim>::extrapolate_into_air() {
   // to traction-free) rather than air at rest (a no-slip lid, and a spurious divergence: a
   // liquid ball in free fall felt a pressure of 1e-4 rho g dx), as Batty & Bridson (2008)
   // extrapolate before their viscosity solve
+  if (!switches_.air_velocity) return;
+  ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   std::vector<char> carried(grid_.num_faces(), 0);
   for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
   extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
@@ -347,18 +378,23 @@ void Simulation<Dim>::solve_step(double dt) {
 template <int Dim>
 std::vector<char> Simulation<Dim>::trusted_faces() const {
   // faces with fluid whose weight W_F^u W_L^u (W_L^u before the clamp) reaches
-  // kTrustedLiquidFaceFraction, and faces that carry mass outside the liquid's weights
+  // kTrustedLiquidFaceFraction, and faces that carry mass outside the liquid's weights (the
+  // stage switches, for diagnosis only, can drop the second kind or trust every liquid face)
   std::vector<char> trusted(grid_.num_faces(), 0);
   for (int f = 0; f < grid_.num_faces(); ++f)
     trusted[f] =
         weights_.fluid_face[f] > 0.0 &&
         (weights_.fluid_face[f] * raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
-         (weights_.liquid_face[f] == 0.0 && face_mass_[f] > 0.0));
+         (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
+          face_mass_[f] > 0.0) ||
+         (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
   return trusted;
 }
 
 template <int Dim>
 void Simulation<Dim>::extrapolate_from_trusted_faces() {
+  if (!switches_.extrapolate_after_solve) return;
+  ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   // as far as the particles travel in a step (cfl cells) and two more for the stencils
   const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
   std::vector<char> trusted = trusted_faces();
@@ -367,6 +403,7 @@ void Simulation<Dim>::extrapolate_from_trusted_faces() {
 
 template <int Dim>
 void Simulation<Dim>::apply_wall_and_solid_velocities() {
+  ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   // zero the normal velocity on walls, give fully solid faces their solid's velocity (zero for
   // static solids), then remove the inflow into solids
   for (int f = 0; f < grid_.num_faces(); ++f) {
@@ -385,12 +422,16 @@ template <int Dim>
 void Simulation<Dim>::move_bodies(double dt) {
   // (13) body positions; the particles then see the solids at the new pose
   if (!coupled_) return;
+  const double potential = body_potential_energy();
   rigid_->integrate(dt, time_, "the coupled solve");
+  frame_ledger_.advection += body_potential_energy() - potential;
+  ledger_energy_ -= rigid_->kinetic_energy();
   rebuild_solid_field();
 }
 
 template <int Dim>
 void Simulation<Dim>::rebuild_solid_field() {
+  ScopedTimer timer(stats_.timing[FramePhase::weights]);
   std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
   for (const auto& b : rigid_->bodies())
     if (b.moves()) shapes.push_back(b.posed_shape());
@@ -401,8 +442,14 @@ template <int Dim>
 void Simulation<Dim>::advect(double dt) {
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
   // leaving through open faces are removed, particles that end up inside a solid are pushed out
+  ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
   grid_to_particles(particles_, grid_, u_);
+  if (!switches_.apic)
+    for (auto& c : particles_.c) c.setZero();
+  account(frame_ledger_.to_particles, particle_kinetic_energy());
+  ledger_energy_ = liquid_potential_energy();
   advect_particles(particles_, grid_, u_, dt, solids_, boundary_);
+  account(frame_ledger_.advection, liquid_potential_energy());
 }
 
 template <int Dim>
@@ -410,12 +457,17 @@ void Simulation<Dim>::correct_volume(double dt) {
   // (15) position correction for volume preservation, and the grid density projection that
   // keeps the particle volume and the level set's volume equal (docs/particles.md)
   if (!scene_.particles.position_correction) return;
-  correct_positions(particles_, grid_, dt, solids_, boundary_);
-  project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
+  ScopedTimer timer(stats_.timing[FramePhase::particles]);
+  if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
+  account(frame_ledger_.position_correction, liquid_potential_energy());
+  if (switches_.density_projection)
+    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
+  account(frame_ledger_.density_projection, liquid_potential_energy());
 }
 
 template <int Dim>
 void Simulation<Dim>::update_moving_solids() {
+  ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // every body is a coupling body (fixed ones one-way at zero velocity), so the weights are
   // indexed like the bodies of the contact system; the static shapes are those fixed bodies
   solid_weights_ = solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
@@ -662,6 +714,7 @@ template <int Dim>
 FrameStats Simulation<Dim>::advance_frame() {
   const Stopwatch frame_watch;
   stats_ = FrameStats{};
+  frame_ledger_ = EnergyLedger{};
   stats_.solver.scheme = scene_.solver.scheme;
   stats_.dt_min = std::numeric_limits<double>::infinity();
   // substeps that land exactly on the frame time (frame + 1) / fps
@@ -687,6 +740,7 @@ FrameStats Simulation<Dim>::advance_frame() {
   update_liquid_weights();
   liquid_weights_current_ = true;
   fill_state_stats(stats_);
+  ledger_ = frame_ledger_;
   stats_.timing[FramePhase::total] = frame_watch.seconds();
   return stats_;
 }
@@ -708,11 +762,10 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
     s.liquid_bounds_lower = to_std<Dim>(lo);
     s.liquid_bounds_upper = to_std<Dim>(hi);
   }
-  double energy = 0.0;
-  for (std::size_t p = 0; p < particles_.size(); ++p)
-    energy += 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
-  s.kinetic_energy_liquid = energy;
+  s.kinetic_energy_liquid = particle_kinetic_energy();
   s.kinetic_energy_bodies = rigid_ ? rigid_->kinetic_energy() : 0.0;
+  s.potential_energy_liquid = liquid_potential_energy();
+  s.potential_energy_bodies = body_potential_energy();
   s.bodies = rigid_ ? rigid_->body_stats() : std::vector<BodyStats>{};
   // probes: grid velocity and cell pressure interpolated at the probe
   s.probes.clear();
@@ -728,6 +781,30 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
 }
 
 template <int Dim>
+double Simulation<Dim>::face_kinetic_energy() const {
+  double energy = 0.0;
+  for (int f = 0; f < grid_.num_faces(); ++f) energy += 0.5 * face_mass_[f] * u_[f] * u_[f];
+  return energy;
+}
+
+template <int Dim>
+double Simulation<Dim>::particle_kinetic_energy() const {
+  double energy = 0.0;
+  for (std::size_t p = 0; p < particles_.size(); ++p)
+    energy += 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
+  return energy;
+}
+
+template <int Dim>
+double Simulation<Dim>::body_potential_energy() const {
+  double energy = 0.0;
+  if (rigid_)
+    for (const auto& b : rigid_->bodies())
+      if (b.is_dynamic()) energy -= b.mass * gravity_.dot(b.position);
+  return energy;
+}
+
+template <int Dim>
 double Simulation<Dim>::liquid_potential_energy() const {
   double energy = 0.0;
   for (std::size_t p = 0; p < particles_.size(); ++p)
@@ -736,8 +813,13 @@ double Simulation<Dim>::liquid_potential_energy() const {
 }
 
 std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene) {
-  if (scene.dim == 3) return std::make_unique<Simulation<3>>(scene);
-  return std::make_unique<Simulation<2>>(scene);
+  return make_simulation(scene, StageSwitches{});
+}
+
+std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene,
+                                               const StageSwitches& switches) {
+  if (scene.dim == 3) return std::make_unique<Simulation<3>>(scene, switches);
+  return std::make_unique<Simulation<2>>(scene, switches);
 }
 
 template class Simulation<2>;

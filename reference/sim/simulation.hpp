@@ -27,6 +27,45 @@
 
 namespace monolith {
 
+/// Stages of the step that a diagnosis can switch off or replace, to measure what each one
+/// contributes (tests/bench/bench_still_water.cpp; docs/particles.md, "Still water"). The defaults
+/// are the simulator; scene files do not reach these switches.
+struct StageSwitches {
+  bool position_correction = true;  ///< correct_positions (Algorithm 1, line 15)
+  bool density_projection = true;   ///< project_particle_density (line 15)
+  bool apic = true;                 ///< false: PIC, the particles' affine matrices c are dropped
+  /// u* extrapolated kAirVelocityLayers faces beyond the particles' reach before the solve
+  bool air_velocity = true;
+  /// Only faces with W_F^u W_L^u >= kTrustedLiquidFaceFraction hand their solved velocity to the
+  /// particles (false: every face with W_L^u > 0 does)
+  bool trusted_faces = true;
+  /// Faces that carry particle mass but no liquid fraction (W_L^u = 0) keep u* (false: they are
+  /// extrapolated like the air)
+  bool unreached_faces_keep_u_star = true;
+  /// The velocity is extrapolated from the trusted faces after the solve (false: every other
+  /// face keeps what the solve, or the extrapolation before it, left there)
+  bool extrapolate_after_solve = true;
+};
+
+/// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
+/// frame's steps, in J (2D: J per metre of depth). Kinetic energy is measured on the particles
+/// (1/2 m |v|^2) and on the faces (1/2 m_f u_f^2 with the face masses of particles_to_grid, and
+/// the bodies' kinetic energy), potential energy on the particles (-m g . x) and the dynamic
+/// bodies' centres of mass. Their sum is the frame's change of kinetic + potential energy.
+struct EnergyLedger {
+  double to_grid = 0.0;             ///< particles_to_grid: face KE - particle KE
+  double forces_and_solve = 0.0;    ///< gravity, the solve (eq. (8) / (24)): KE after - before
+  double velocity_extension = 0.0;  ///< trusted faces, extrapolation, walls, solids (face KE)
+  double to_particles = 0.0;        ///< grid_to_particles: particle KE - face KE
+  double advection = 0.0;           ///< advect_particles and the bodies' positions: PE change
+  double position_correction = 0.0;  ///< correct_positions: PE after - before
+  double density_projection = 0.0;   ///< project_particle_density: PE after - before
+  double total() const {
+    return to_grid + forces_and_solve + velocity_extension + to_particles + advection +
+           position_correction + density_projection;
+  }
+};
+
 /// Dimension-erased interface used by the application (runner) and tests.
 class AnySimulation {
  public:
@@ -41,6 +80,8 @@ class AnySimulation {
   /// metre of depth), zero at the origin; with the kinetic energy of FrameStats it gives the
   /// total energy that a liquid in a static container must never gain.
   virtual double liquid_potential_energy() const { return 0.0; }
+  /// The energy ledger of the last frame (advance_frame), all zero before the first.
+  virtual EnergyLedger energy_ledger() const { return {}; }
 };
 
 /// Algorithm 1 for one scene: liquids (particles, eq. (8) with or without stress unknowns,
@@ -49,10 +90,11 @@ class AnySimulation {
 template <int Dim>
 class Simulation : public AnySimulation {
  public:
-  explicit Simulation(const SceneDesc& scene);
+  explicit Simulation(const SceneDesc& scene, const StageSwitches& switches = {});
   FrameStats current_stats() const override { return stats_; }
   FrameStats advance_frame() override;
   double liquid_potential_energy() const override;
+  EnergyLedger energy_ledger() const override { return ledger_; }
 
   // The current state, read-only (pictures: render_view in reference/viz/render.hpp).
   const SceneDesc& scene() const { return scene_; }
@@ -109,6 +151,15 @@ class Simulation : public AnySimulation {
   void advect(double dt);
   /// Line 15: position correction and the particle density projection (when enabled).
   void correct_volume(double dt);
+  /// The energy ledger: adds now - (the energy after the previous stage) to stage and makes now
+  /// the energy after this one.
+  void account(double& stage, double now);
+  /// Kinetic energy on the faces, sum 1/2 m_f u_f^2 (face masses of the last particles_to_grid).
+  double face_kinetic_energy() const;
+  /// Kinetic energy of the particles, sum 1/2 m_p |v_p|^2.
+  double particle_kinetic_energy() const;
+  /// Potential energy of the dynamic bodies, -sum m g . x_c (x_c the centre of mass).
+  double body_potential_energy() const;
   /// The body part of a step: RigidWorld::step, with its statistics added to the frame's.
   void step_bodies(double dt);
   /// The CFL-limited step size: min(max_dt, cfl dx / max speed), and with moving bodies at most
@@ -198,11 +249,18 @@ class Simulation : public AnySimulation {
   int frame_ = 0;
   double time_ = 0.0;
   FrameStats stats_;
+  // diagnosis: stages switched off, and the energy changes per stage of the current frame
+  StageSwitches switches_;
+  EnergyLedger ledger_, frame_ledger_;
+  double ledger_energy_ = 0.0;  ///< the energy after the last accounted stage of the step
 };
 
 
 /// Builds the simulation for scene.dim.
 std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene);
+/// The same with some stages switched off (diagnosis only).
+std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene,
+                                               const StageSwitches& switches);
 
 extern template class Simulation<2>;
 extern template class Simulation<3>;

@@ -424,10 +424,11 @@ inline std::pair<double, bool> square_log(int dim, int n, double s, double start
     // [w, x, y, z], a rotation about z by 2 atan2(z, w))
     const auto& o = st[f].bodies[0].orientation;
     const double turned = dim == 2 ? o[0] : 2.0 * std::atan2(o[3], o[0]);
-    sum += folded_tilt(angle + turned);
+    // averaged before folding: a tilt that rocks across +-45 deg folds to both ends
+    sum += angle + turned;
     ++count;
   }
-  return {sum / count, converged};
+  return {folded_tilt(sum / count), converged};
 }
 
 }  // namespace monolith::validation

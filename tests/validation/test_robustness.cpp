@@ -155,7 +155,7 @@ double resting_layer_speed(bool extend, double sliver) {
   boundary[2] = BoundaryType::wall;
   boundary[3] = BoundaryType::open;
   w.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
-  VectorX phi = liquid_phi_on_lattice(particles, grid, lattice);
+  VectorX phi = liquid_phi_on_lattice(particles, grid, lattice, boundary);
   if (extend) phi = extend_liquid_into_solids(grid, phi, solid_phi, kLiquidSolidReach * dx);
   w.liquid_cell = liquid_cell_weights(grid, lattice, phi);
   w.liquid_face = liquid_face_weights(grid, lattice, phi, w.liquid_cell);

@@ -241,8 +241,19 @@ TEST_CASE("run writes frames, stats.jsonl and summary.json (2D and 3D)", "[unit]
     REQUIRE(stats.size() == 5);
     for (int k = 0; k <= 4; ++k) CHECK(stats[k]["frame"] == k);
     for (const char* key : {"frame", "time", "steps", "dt_min", "dt_max", "liquid_volume", "particles", "liquid_bounds",
-                            "kinetic_energy", "bodies", "contacts", "probes", "solver", "timing"})
+                            "kinetic_energy", "potential_energy", "bodies", "contacts", "probes", "solver",
+                            "timing"})
       CHECK(stats[1].contains(key));
+    // the timing breakdown: every phase, the picture's inside the frame's total
+    for (const char* key : {"total", "solve", "particles", "weights", "extrapolation", "render", "output"})
+      CHECK(stats[1]["timing"].contains(key));
+    CHECK(stats[1]["timing"]["render"].get<double>() > 0.0);
+    // frame 0 times the set-up, which holds the first level set and weights
+    CHECK(stats[0]["timing"]["total"].get<double>() >=
+          stats[0]["timing"]["particles"].get<double>() + stats[0]["timing"]["weights"].get<double>());
+    CHECK(stats[1]["timing"]["total"].get<double>() >=
+          stats[1]["timing"]["render"].get<double>() + stats[1]["timing"]["particles"].get<double>() +
+              stats[1]["timing"]["solve"].get<double>());
     // summary.json
     std::ifstream in(out / "summary.json");
     const json s = json::parse(in);
@@ -338,11 +349,16 @@ TEST_CASE("frame_stats_json has every key of the contract", "[unit]") {
   st.solver.dofs_pressure = 12;
   st.timing[FramePhase::total] = 0.5;
   st.timing[FramePhase::solve] = 0.25;
+  st.timing[FramePhase::particles] = 0.125;
+  st.potential_energy_liquid = -2.5;
+  st.potential_energy_bodies = 4.0;
   st.max_penetration = std::numeric_limits<double>::quiet_NaN();
   const json j = frame_stats_json(st);
   CHECK(j["frame"] == 7);
   for (const char* k : {"lower", "upper"}) CHECK(j["liquid_bounds"].contains(k));
   for (const char* k : {"liquid", "bodies"}) CHECK(j["kinetic_energy"].contains(k));
+  CHECK(j["potential_energy"]["liquid"] == -2.5);
+  CHECK(j["potential_energy"]["bodies"] == 4.0);
   for (const char* k : {"name", "position", "orientation", "velocity", "angular_velocity"}) CHECK(j["bodies"][0].contains(k));
   CHECK(j["contacts"]["count"] == 0);
   CHECK(j["contacts"]["max_penetration"].is_null());  // non-finite numbers become null
@@ -352,9 +368,11 @@ TEST_CASE("frame_stats_json has every key of the contract", "[unit]") {
   for (const char* k : {"pressure", "stress", "contact", "friction"}) CHECK(j["solver"]["dofs"].contains(k));
   CHECK(j["solver"]["dofs"]["pressure"] == 12);
   CHECK(j["solver"]["scheme"] == "PC-VC-PC-unified");  // the paper's name
-  CHECK(j["timing"].size() == 2);
+  CHECK(j["timing"].size() == 7);
   CHECK(j["timing"]["total"] == 0.5);
   CHECK(j["timing"]["solve"] == 0.25);
+  CHECK(j["timing"]["particles"] == 0.125);
+  for (const char* k : {"weights", "extrapolation", "render", "output"}) CHECK(j["timing"][k] == 0.0);
   CHECK(j.dump().find('\n') == std::string::npos);  // one line
 }
 

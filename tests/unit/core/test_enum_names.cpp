@@ -51,7 +51,7 @@ TEST_CASE("every option enum has one scene name per value, in the documented ord
   check_table<ViscosityModel>({"newtonian", "herschel-bulkley"});
   check_table<ViscosityPreset>({"newtonian", "shear-thinning", "shear-thickening", "bingham"});
   check_table<ColorBy>({"none", "speed", "pressure", "viscosity"});
-  check_table<FramePhase>({"total", "solve"});
+  check_table<FramePhase>({"total", "solve", "particles", "weights", "extrapolation", "render", "output"});
 }
 
 TEST_CASE("the one default of each option is the member initialiser of its struct", "[unit]") {

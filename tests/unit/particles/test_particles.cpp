@@ -505,7 +505,7 @@ void check_correction_keeps_volume() {
                                          SolidField<Dim>{}, Dim == 2 ? 4 : 8, 4u);
   const SampleLattice<Dim> lattice = half_lattice(grid);
   auto volume = [&]() {
-    const VectorX phi = liquid_phi_on_lattice(p, grid, lattice);
+    const VectorX phi = liquid_phi_on_lattice(p, grid, lattice, walls<Dim>());
     double v = 0.0;
     for (int k = 0; k < phi.size(); ++k) v += phi[k] < 0.0 ? 1.0 : 0.0;
     return v * std::pow(lattice.spacing, Dim);
@@ -635,7 +635,7 @@ VectorX open_fluid_faces(const MacGrid<Dim>& grid) {
 template <int Dim>
 double level_set_volume(const Particles<Dim>& p, const MacGrid<Dim>& grid) {
   const SampleLattice<Dim> lattice = half_lattice(grid);
-  const VectorX phi = liquid_phi_on_lattice(p, grid, lattice);
+  const VectorX phi = liquid_phi_on_lattice(p, grid, lattice, walls<Dim>());
   double frac = 0.0;
   // each cell's 2^Dim lattice cells, fraction from the corner values
   const VecI<Dim> dims = 2 * grid.cells();
@@ -695,8 +695,12 @@ void check_projection_even_block() {
   CHECK(first.max_move < 0.125 * dx);
   CHECK(again.max_move < 0.5 * first.max_move);
   CHECK(again.error_before < 0.75 * first.error_before);
-  // the level set's volume moves onto the particle volume: the mismatch at least halves
-  CHECK(std::abs(v1 / vp - 1.0) < 0.5 * std::abs(v0 / vp - 1.0));
+  // with the particles mirrored across the two walls the block's level set encloses the particle
+  // volume from the start (measured -0.03 % in 2D, +0.14 % in 3D; without the images -0.33 % and
+  // -1.25 %), and the projection keeps it there up to the level set's sub-cell response to the
+  // moves (+0.11 %, +0.37 %)
+  CHECK(std::abs(v0 / vp - 1.0) < 0.0025);
+  CHECK(std::abs(v1 / vp - 1.0) < 0.005);
   for (const auto& x : p.x) REQUIRE(grid.domain_box().contains(x));
 }
 

@@ -226,3 +226,36 @@ TEST_CASE("explicit and matrix-free back ends run the same simulation", "[proper
     CHECK(last[1].steps == last[0].steps);
   }
 }
+
+TEST_CASE("potential energy in the frame statistics: a column of water and a dynamic box",
+          "[unit]") {
+  // a column of height H over the whole unit width (depth): mass M = rho H, centre of mass at
+  // H / 2, so -sum m g . x = M g H / 2 (J per metre of depth in 2D); the seeded particles sit
+  // on a jittered lattice, whose centre of mass is H / 2 to within a small part of a cell
+  const double g = 9.81, rho = 1000.0, height = 0.5;
+  for (int dim : {2, 3}) {
+    const int n = dim == 2 ? 32 : 12;
+    nlohmann::json j = column_scene(dim, n, height, "matrixfree");
+    // a dynamic box of known mass above the water, in the air (no contact in frame 0)
+    std::vector<double> centre(dim, 0.5), half(dim, 0.05);
+    centre[1] = 0.8;
+    j["bodies"] = {{{"name", "box"},
+                    {"density", 500.0},
+                    {"shape", {{"type", "box"}, {"center", centre}, {"half_size", half}}}}};
+    auto sim = make_simulation(parse_scene(j, "column", "."));
+    const FrameStats s = sim->current_stats();
+    const double liquid = rho * height * g * height / 2.0;
+    const double box_mass = 500.0 * std::pow(0.1, dim);
+    INFO("dim " << dim << ": liquid " << s.potential_energy_liquid << " (M g H / 2 = " << liquid
+                << "), bodies " << s.potential_energy_bodies);
+    CHECK(s.potential_energy_liquid == sim->liquid_potential_energy());
+    CHECK(std::abs(s.potential_energy_liquid / liquid - 1.0) < 0.01);
+    CHECK(s.potential_energy_bodies == Approx(box_mass * g * 0.8).epsilon(1e-12));
+    // a frame later the box has fallen: its potential energy follows its centre of mass
+    const FrameStats s1 = sim->advance_frame();
+    REQUIRE(s1.bodies.size() == 1);
+    CHECK(s1.bodies[0].position[1] < 0.8);
+    CHECK(s1.potential_energy_bodies ==
+          Approx(box_mass * g * s1.bodies[0].position[1]).epsilon(1e-12));
+  }
+}

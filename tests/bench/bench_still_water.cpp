@@ -1,0 +1,202 @@
+// Still water, stage by stage: a tank of water at rest (unit box, walls, open top, 0.5 m deep,
+// inviscid, PVC-unified) run once with the simulator as it is and once with each stage of the
+// step switched off or replaced (StageSwitches), printing the kinetic energy over time, the
+// largest probe speed, the volume drift and the energy ledger of each stage (EnergyLedger)
+// summed over the run. docs/particles.md ("Still water") shows its table.
+//
+//   bench_still_water [--dim 2|3] [--cells N] [--seconds T] [--backend NAME]
+//                     [--only NAME[,NAME...]] [--set KEY=VALUE]...
+//
+// A measurement program, not a test: it asserts nothing. Run it with OMP_NUM_THREADS=1.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <functional>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "reference/app/scene_file.hpp"
+#include "reference/core/errors.hpp"
+#include "reference/sim/simulation.hpp"
+
+using namespace monolith;
+
+namespace {
+
+nlohmann::json still_water_scene(int dim, int cells, double seconds, const std::string& backend) {
+  using nlohmann::json;
+  const bool d3 = dim == 3;
+  json j;
+  j["format"] = "monolith-scene/1";
+  j["name"] = d3 ? "still-water-3d" : "still-water-2d";
+  j["dim"] = dim;
+  j["domain"]["lower"] = d3 ? json::array({0, 0, 0}) : json::array({0, 0});
+  j["domain"]["upper"] = d3 ? json::array({1, 1, 1}) : json::array({1, 1});
+  j["domain"]["cells"] = d3 ? json::array({cells, cells, cells}) : json::array({cells, cells});
+  json boundary = {{"x-", "wall"}, {"x+", "wall"}, {"y-", "wall"}, {"y+", "open"}};
+  if (d3) {
+    boundary["z-"] = "wall";
+    boundary["z+"] = "wall";
+  }
+  j["domain"]["boundary"] = boundary;
+  j["gravity"] = d3 ? json::array({0, -9.81, 0}) : json::array({0, -9.81});
+  j["time"] = {{"fps", 50}, {"frames", static_cast<int>(std::lround(50 * seconds))},
+               {"cfl", 3.0}, {"max_dt", 0.02}};
+  j["solver"] = {{"scheme", "PVC-unified"}, {"tolerance", 1e-6}, {"max_iterations", 2000},
+                 {"backend", backend}};
+  json water;
+  water["name"] = "water";
+  water["density"] = 1000;
+  water["shape"] = {{"type", "box"},
+                    {"center", d3 ? json::array({0.5, 0.25, 0.5}) : json::array({0.5, 0.25})},
+                    {"half_size", d3 ? json::array({0.5, 0.25, 0.5}) : json::array({0.5, 0.25})}};
+  j["liquids"] = json::array({water});
+  json probes = json::array();
+  const double points[5][2] = {{0.25, 0.25}, {0.5, 0.45}, {0.9, 0.1}, {0.05, 0.4}, {0.5, 0.05}};
+  for (int k = 0; k < 5; ++k) {
+    json position = d3 ? json::array({points[k][0], points[k][1], 0.5})
+                       : json::array({points[k][0], points[k][1]});
+    probes.push_back({{"name", "p" + std::to_string(k)}, {"position", position}});
+  }
+  j["probes"] = probes;
+  j["render"] = {{"enabled", false}};
+  return j;
+}
+
+struct Variant {
+  std::string name;
+  std::string what;
+  std::function<void(StageSwitches&)> apply;
+};
+
+std::vector<Variant> variants() {
+  return {
+      {"simulator", "every stage as in the simulator", [](StageSwitches&) {}},
+      {"no-correction", "correct_positions off", [](StageSwitches& s) { s.position_correction = false; }},
+      {"no-projection", "project_particle_density off (also before frame 0)",
+       [](StageSwitches& s) { s.density_projection = false; }},
+      {"no-line-15", "both position corrections off",
+       [](StageSwitches& s) { s.position_correction = s.density_projection = false; }},
+      {"pic", "PIC instead of APIC (c = 0)", [](StageSwitches& s) { s.apic = false; }},
+      {"no-air-u*", "no u* extrapolation into air before the solve",
+       [](StageSwitches& s) { s.air_velocity = false; }},
+      {"all-faces-trusted", "every face with W_L^u > 0 hands its solved velocity on",
+       [](StageSwitches& s) { s.trusted_faces = false; }},
+      {"unreached-extrapolated", "faces with mass but W_L^u = 0 extrapolated, not u*",
+       [](StageSwitches& s) { s.unreached_faces_keep_u_star = false; }},
+      {"no-extrapolation", "no extrapolation after the solve",
+       [](StageSwitches& s) { s.extrapolate_after_solve = false; }},
+  };
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int dim = 2, cells = 0;
+  double seconds = 10.0;
+  std::string backend = "matrixfree";
+  std::vector<std::string> only, overrides;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::cerr << a << " needs a value\n";
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--dim") {
+      dim = std::atoi(next().c_str());
+    } else if (a == "--cells") {
+      cells = std::atoi(next().c_str());
+    } else if (a == "--seconds") {
+      seconds = std::atof(next().c_str());
+    } else if (a == "--backend") {
+      backend = next();
+    } else if (a == "--only") {
+      std::stringstream list(next());
+      for (std::string item; std::getline(list, item, ',');) only.push_back(item);
+    } else if (a == "--set") {
+      overrides.push_back(next());
+    } else {
+      std::cerr << "unknown argument " << a
+                << "\nusage: bench_still_water [--dim 2|3] [--cells N] [--seconds T] [--backend "
+                   "NAME] [--only NAME,...] [--set KEY=VALUE]...\n";
+      return 2;
+    }
+  }
+  if (dim != 2 && dim != 3) {
+    std::cerr << "--dim must be 2 or 3\n";
+    return 2;
+  }
+  if (cells <= 0) cells = dim == 2 ? 64 : 32;
+  SceneDesc scene;
+  try {
+    nlohmann::json j = still_water_scene(dim, cells, seconds, backend);
+    j = apply_overrides(j, "still water", overrides);
+    scene = parse_scene(j, "still water", ".");
+  } catch (const InputError& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  }
+  const double mass = 1000.0 * 0.5, depth = 0.5;  // per metre of depth in 2D, per unit area in 3D
+  const double mgh = mass * 9.81 * depth;
+  std::printf("still water %dD, %d cells per axis, %.1f s, %s; M g H = %.1f J, 1e-5 of it %.4f J\n",
+              dim, cells, seconds, backend.c_str(), mgh, 1e-5 * mgh);
+  std::printf("%-24s %9s %9s %9s %9s %9s %8s | %8s %8s %8s %8s %8s %8s %8s %8s\n", "variant",
+              "KE 1s", "KE 5s", "KE end", "KE max", "probe", "volume", "to_grid", "solve",
+              "extend", "to_part", "advect", "correct", "project", "total");
+  for (const Variant& v : variants()) {
+    if (!only.empty() && std::find(only.begin(), only.end(), v.name) == only.end()) continue;
+    StageSwitches switches;
+    v.apply(switches);
+    auto sim = make_simulation(scene, switches);
+    FrameStats s = sim->current_stats();
+    const double volume0 = s.liquid_volume;
+    double ke1 = 0.0, ke5 = 0.0, ke_max = 0.0, probe = 0.0, drift = 0.0;
+    EnergyLedger sum;
+    const int frames = scene.time.frames;
+    try {
+      for (int f = 1; f <= frames; ++f) {
+        s = sim->advance_frame();
+        const EnergyLedger l = sim->energy_ledger();
+        sum.to_grid += l.to_grid;
+        sum.forces_and_solve += l.forces_and_solve;
+        sum.velocity_extension += l.velocity_extension;
+        sum.to_particles += l.to_particles;
+        sum.advection += l.advection;
+        sum.position_correction += l.position_correction;
+        sum.density_projection += l.density_projection;
+        const double ke = s.kinetic_energy_liquid;
+        if (std::abs(s.time - 1.0) < 1e-9) ke1 = ke;
+        if (std::abs(s.time - 5.0) < 1e-9) ke5 = ke;
+        ke_max = std::max(ke_max, ke);
+        drift = std::max(drift, std::abs(s.liquid_volume / volume0 - 1.0));
+        // the largest probe speed over the second half of the run
+        if (s.time > 0.5 * seconds + 1e-9)
+          for (const auto& p : s.probes) {
+            double speed2 = 0.0;
+            for (double c : p.velocity) speed2 += c * c;
+            probe = std::max(probe, std::sqrt(speed2));
+          }
+      }
+    } catch (const std::exception& e) {
+      std::printf("%-24s failed: %s\n", v.name.c_str(), e.what());
+      continue;
+    }
+    std::printf("%-24s %9.2e %9.2e %9.2e %9.2e %9.2e %7.3f%% | %+8.3f %+8.3f %+8.3f %+8.3f %+8.3f "
+                "%+8.3f %+8.3f %+8.3f\n",
+                v.name.c_str(), ke1, ke5, s.kinetic_energy_liquid, ke_max, probe, 100.0 * drift,
+                sum.to_grid, sum.forces_and_solve, sum.velocity_extension, sum.to_particles,
+                sum.advection, sum.position_correction, sum.density_projection, sum.total());
+    std::fflush(stdout);
+  }
+  std::printf("KE in J, probe = largest probe speed (m/s) in the second half, volume = largest "
+              "|drift| of liquid_volume; stage columns: the energy ledger summed over the run (J)\n");
+  return 0;
+}
