@@ -285,6 +285,39 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
   return x;
 }
 
+/// options.export_sink with the SystemExport of `s` (built from `bodies`) and its unified
+/// solution: `solved` when it came from unified_solve on `s`, otherwise a fresh unified_solve.
+template <int Dim>
+void export_step(const CoupledSchemeOptions& options, const MonolithicSystem<Dim>& s,
+                 const std::vector<RigidBody<Dim>>& bodies, const CoupledStepInput<Dim>& in,
+                 const StaggeredSettings& settings, CouplingScheme scheme, const Unknowns& solved,
+                 bool solved_unified) {
+  if (!options.export_sink) return;
+  Unknowns x = solved;
+  std::string source = std::string("the step's own solve (") + enum_name(scheme) + ")";
+  if (!solved_unified) {
+    CoupledSolveResult scratch;
+    long iterations = 0;
+    x = unified_solve(s, settings, scratch, iterations);
+    source = std::string("a unified solve of this system (") + enum_name(scheme) +
+             " solves it partitioned, so its own step result is not a solution of eq. (24))";
+  }
+  source += s.num_contacts() > 0
+                ? ": MPRGP on the Jacobi-scaled MLCP (26), staggered with the friction LCP (25)"
+                : ": SSOR-PCG on the fluid-body block (no contacts)";
+  VectorX stacked(s.num_fluid() + s.num_contacts() + s.num_friction());
+  stacked << x.x_fluid, x.lambda, x.z;
+  SystemExport e = export_system<Dim>(s, bodies, in.solids, in.contacts, stacked,
+                                      settings.diagonal_boost);
+  e.x_source = source;
+  e.tolerance = settings.mprgp.tolerance;
+  e.jacobi_scaled = s.num_contacts() > 0;
+  const SparseMatrix& a = e.matrix("A")->value;
+  e.x_check = check_solution(a, e.vector("b")->value, e.num_tau, e.num_p, e.num_lambda, e.num_z,
+                             e.mu, e.x, e.x, e.jacobi_scaled, e.tolerance);
+  options.export_sink(e);
+}
+
 }  // namespace
 
 template <int Dim>
@@ -349,6 +382,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     r.coupled_seconds = pc1_seconds + r.viscosity_coupled_seconds + t3.seconds();
     r.coupled_iterations += r.viscosity_coupled_iterations;
     finish(*s3, x3, r);
+    export_step(options, *s3, with_velocities(in.bodies, dof, v2), in, settings, scheme, x3, true);
     r.pressure = p1 + r.pressure;
     r.stress = tau2;
     count_dofs(*s1, r);
@@ -379,6 +413,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     }
     count_dofs(*s, r);
     finish(*s, x, r);
+    export_step(options, *s, in.bodies, in, settings, scheme, x,
+                scheme == CouplingScheme::pvc_unified);
     r.total_seconds = t_start.seconds();
     return r;
   }
@@ -395,6 +431,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     x = partitioned_solve(*s, scheme, settings, options, r);
   }
   finish(*s, x, r);
+  export_step(options, *s, in.bodies, in, settings, scheme, x,
+              scheme == CouplingScheme::pc_unified || scheme == CouplingScheme::pvc_unified);
   r.total_seconds = t_start.seconds();
   return r;
 }

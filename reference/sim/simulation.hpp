@@ -6,12 +6,14 @@
 /// pictures (reference/viz/render.hpp) draw it from outside the solver core.
 
 #include <array>
+#include <functional>
 #include <memory>
 #include <vector>
 
 #include "reference/core/common.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/coupling/coupling_scheme.hpp"
+#include "reference/coupling/system_export.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/geometry/shape.hpp"
@@ -40,6 +42,14 @@ class AnySimulation {
   /// metre of depth), zero at the origin; with the kinetic energy of FrameStats it gives the
   /// total energy that a liquid in a static container must never gain.
   virtual double liquid_potential_energy() const { return 0.0; }
+  /// The oracle (reference/coupling/system_export.hpp): during the next advance_frame only, hand
+  /// the coupled system of eq. (24) of that frame's step `step` (1 = its first step) to `sink`.
+  /// The sink is not called when that step does not exist or has no coupled solve (no moving
+  /// body next to a liquid). Simulations without coupled steps ignore the request.
+  virtual void request_system_export(int step, std::function<void(const SystemExport&)> sink) {
+    (void)step;
+    (void)sink;
+  }
 };
 
 /// The solves of lines 7-11 of Algorithm 1 for the liquid, without dynamic bodies.
@@ -64,6 +74,10 @@ class Simulation : public AnySimulation {
   FrameStats current_stats() const override { return stats_; }
   FrameStats advance_frame() override;
   double liquid_potential_energy() const override;
+  void request_system_export(int step, std::function<void(const SystemExport&)> sink) override {
+    export_step_ = step;
+    export_sink_ = std::move(sink);
+  }
 
   // The current state, read-only (pictures: render_view in reference/viz/render.hpp).
   const SceneDesc& scene() const { return scene_; }
@@ -178,6 +192,9 @@ class Simulation : public AnySimulation {
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
   bool coupled_ = false;
   SolidWeights<Dim> solid_weights_;  ///< of the last update_moving_solids
+  /// request_system_export: the step of the next frame whose system goes to the sink
+  int export_step_ = 0;
+  std::function<void(const SystemExport&)> export_sink_;
 };
 
 
