@@ -131,8 +131,11 @@ SystemExport export_system(const MonolithicSystem<Dim>& system,
       // section 4.4.5: the contact rows' diagonal scaled by (1 + gamma)
       if (it.row() == it.col() && it.row() >= nf) t.emplace_back(it.row(), it.col(), diagonal_boost * it.value());
     }
-  SparseMatrix a(n, n);
-  a.setFromTriplets(t.begin(), t.end());
+  SparseMatrix assembled(n, n);
+  assembled.setFromTriplets(t.begin(), t.end());
+  // A is symmetric; the sparse products leave round-off asymmetry (summation order), which
+  // the mean removes, so A_ji = A_ij^T bit for bit in the files
+  SparseMatrix a = 0.5 * (assembled + SparseMatrix(assembled.transpose()));
   a.prune(0.0);
   const VectorX b = system.rhs();
 
