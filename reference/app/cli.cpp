@@ -11,6 +11,7 @@
 #include <iomanip>
 
 #include "reference/app/embedded_scenes.hpp"
+#include "reference/app/oracle.hpp"
 #include "reference/app/scene_file.hpp"
 #include "reference/core/errors.hpp"
 #include "reference/sim/simulation.hpp"
@@ -32,6 +33,8 @@ const char* kUsage =
     "  monolith check SCENE [--set KEY=VALUE]...\n"
     "  monolith list\n"
     "  monolith convert IN.ppm OUT.png\n"
+    "  monolith export SCENE --frame N [--step K] --out DIR [--set KEY=VALUE]...\n"
+    "  monolith verify DIR CANDIDATE.mtx [--tolerance T]\n"
     "  monolith --help | --version\n";
 
 const char* kHelp =
@@ -44,6 +47,12 @@ const char* kHelp =
     "  check SCENE   validate SCENE and print every problem found (exit 0 if valid, 2 if not)\n"
     "  list          the built-in scenes: name, dimension, description\n"
     "  convert       re-encode a PPM picture (a frame or a plot) as PNG for web pages\n"
+    "  export SCENE  run SCENE to frame N and write its step K's coupled system of eq. (24)\n"
+    "                (every named matrix, A, b and the reference solution x) as Matrix Market\n"
+    "                files with manifest.json into DIR (docs/oracle.md)\n"
+    "  verify DIR X  check a candidate solution X.mtx of an exported system: residual of the\n"
+    "                free rows, complementarity, bound and friction-cone violations (exit 0 ok,\n"
+    "                1 outside the tolerance, 2 unreadable or mis-sized input)\n"
     "\n"
     "options of run (check takes --set too):\n"
     "  --frames N        number of frames to simulate (same as --set time.frames=N)\n"
@@ -217,8 +226,10 @@ int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::o
     if (command == "check") return cmd_check(rest, out);
     if (command == "list") return cmd_list(rest, out);
     if (command == "convert") return cmd_convert(rest, out);
+    if (command == "export") return export_command(rest, out, factory);
+    if (command == "verify") return verify_command(rest, out);
     err << "monolith: unknown command \"" << command.substr(0, 80)
-        << "\" (run, check, list, convert, --help, --version)\n"
+        << "\" (run, check, list, convert, export, verify, --help, --version)\n"
         << kUsage;
     return 2;
   } catch (const InputError& e) {

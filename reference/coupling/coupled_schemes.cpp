@@ -235,6 +235,39 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
   return x;
 }
 
+/// options.export_sink with the SystemExport of `s` (built from `bodies`) and its unified
+/// solution: `solved` when it came from unified_solve on `s`, otherwise a fresh unified_solve.
+template <int Dim>
+void export_step(const CoupledSchemeOptions& options, const MonolithicSystem<Dim>& s,
+                 const std::vector<RigidBody<Dim>>& bodies, const CoupledStepInput<Dim>& in,
+                 const StaggeredSettings& settings, CouplingScheme scheme, const Unknowns& solved,
+                 bool solved_unified) {
+  if (!options.export_sink) return;
+  Unknowns x = solved;
+  std::string source = std::string("the step's own solve (") + enum_name(scheme) + ")";
+  if (!solved_unified) {
+    CoupledSolveResult scratch;
+    long iterations = 0;
+    x = unified_solve(s, settings, scratch, iterations);
+    source = std::string("a unified solve of this system (") + enum_name(scheme) +
+             " solves it partitioned, so its own step result is not a solution of eq. (24))";
+  }
+  source += s.num_contacts() > 0
+                ? ": MPRGP on the Jacobi-scaled MLCP (26), staggered with the friction LCP (25)"
+                : ": SSOR-PCG on the fluid-body block (no contacts)";
+  VectorX stacked(s.num_fluid() + s.num_contacts() + s.num_friction());
+  stacked << x.x_fluid, x.lambda, x.z;
+  SystemExport e = export_system<Dim>(s, bodies, in.solids, in.contacts, stacked,
+                                      settings.diagonal_boost);
+  e.x_source = source;
+  e.tolerance = settings.mprgp.tolerance;
+  e.jacobi_scaled = s.num_contacts() > 0;
+  const SparseMatrix& a = e.matrix("A")->value;
+  e.x_check = check_solution(a, e.vector("b")->value, e.num_tau, e.num_p, e.num_lambda, e.num_z,
+                             e.mu, e.x, e.x, e.jacobi_scaled, e.tolerance);
+  options.export_sink(e);
+}
+
 }  // namespace
 
 template <int Dim>
@@ -252,6 +285,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   // and the velocities (u, v) the next solve starts from (v empty: the bodies as given)
   struct State {
     std::shared_ptr<const MonolithicSystem<Dim>> system;
+    std::vector<RigidBody<Dim>> bodies;  ///< the bodies `system` was built from
     Unknowns x;
     VectorX u, v, pressure, stress;
   };
@@ -264,6 +298,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
         from.v.size() ? with_velocities(in.bodies, from.system->contacts().body_dof, from.v)
                       : in.bodies;
     out.system = build_system(in, w, form, unknowns, from.u, bodies, backend);
+    out.bodies = bodies;
     const MonolithicSystem<Dim>& sys = *out.system;
     if (unified) {
       const Stopwatch t0;
@@ -319,6 +354,9 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   const State end = run_solve_sequence(solve_sequence(scheme, true), start, viscosity, pressure,
                                        unified, viscous);
   if (pc_vc_pc) r.coupled_iterations += r.viscosity_coupled_iterations;
+  export_step(options, *end.system, end.bodies, in, settings, scheme, end.x,
+              pc_vc_pc || scheme == CouplingScheme::pc_unified ||
+                  scheme == CouplingScheme::pvc_unified);
   r.u = end.u;
   r.pressure = end.pressure;
   r.stress = end.stress;

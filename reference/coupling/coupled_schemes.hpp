@@ -34,6 +34,7 @@
 #include "reference/core/common.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/coupling/coupling_scheme.hpp"
+#include "reference/coupling/system_export.hpp"
 #include "reference/fluid/stokes_system.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/rigid/rigid_body.hpp"
@@ -118,6 +119,13 @@ struct CoupledSchemeOptions {
   /// (herschel_bulkley.hpp) provides both. The viscosity of in.weights is then ignored.
   std::function<VectorX(const VectorX& u_star)> initial_viscosity;
   std::function<VectorX(const VectorX& stress, const VectorX& viscosity)> update_viscosity;
+  /// The oracle (system_export.hpp): when set, called once per call with the step's final
+  /// system of eq. (24) (PC-VC-PC-unified: the last PC-unified system; non-Newtonian: the last
+  /// viscosity round's) and its solution under the unified convention: the scheme's own x for
+  /// PC-unified, PVC-unified and PC-VC-PC-unified, an extra unified solve of the same system for
+  /// the partitioned schemes (whose own step does not solve eq. (24); their results are
+  /// unchanged). Not set: nothing is built.
+  std::function<void(const SystemExport&)> export_sink;
 };
 
 /// One step's pressure / viscosity / contact solves under `scheme` (section 6), every

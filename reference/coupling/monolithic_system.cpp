@@ -58,7 +58,8 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
                                         const ContactSystem<Dim>& contacts,
                                         Backend backend, StokesUnknowns unknowns)
     : grid_(grid), stress_(grid), layout_(stress_, form), w_(w), dt_(dt), u_star_(u_star),
-      backend_(backend), matrix_free_(backend == Backend::matrix_free), contacts_(contacts) {
+      backend_(backend), unknowns_(unknowns), matrix_free_(backend == Backend::matrix_free),
+      contacts_(contacts) {
   // alpha = 1 / dx^Dim, shared with the contact blocks (section 4.1)
   alpha_ = 1.0 / std::pow(grid.dx(), Dim);
   if (std::abs(contacts.alpha - alpha_) > 1e-12 * alpha_)

@@ -182,6 +182,13 @@ class MonolithicSystem {
   const SparseMatrix& j_lambda_transpose() const { return j_lambda_t_; }
   double dt() const { return dt_; }
   double alpha() const { return alpha_; }
+  /// The inputs the system was built from (the export of system_export.hpp rebuilds the
+  /// explicit twin of a matrix-free system from them).
+  const MacGrid<Dim>& grid() const { return grid_; }
+  const StressLayout<Dim>& layout() const { return layout_; }
+  const StokesWeights& weights() const { return w_; }
+  const VectorX& u_star() const { return u_star_; }
+  StokesUnknowns unknowns() const { return unknowns_; }
 
  private:
   /// One non-zero column block of B_f (matrixfree): fluid unknown, first row of the body, the
@@ -205,6 +212,7 @@ class MonolithicSystem {
   double dt_ = 0.0, alpha_ = 1.0;
   VectorX u_star_;
   Backend backend_;
+  StokesUnknowns unknowns_ = StokesUnknowns::pressure_and_stress;
   bool matrix_free_ = false;
   StokesDofs dofs_;
   std::shared_ptr<const ExplicitStokesSystem> stokes_;                 ///< explicit only

@@ -546,6 +546,8 @@ void Simulation<Dim>::solve_coupled(double dt) {
       return eta;
     };
   }
+  // the oracle: this step's system to the requested sink (request_system_export)
+  if (export_sink_ && stats_.steps + 1 == export_step_) options.export_sink = export_sink_;
   const CoupledSolveResult r =
       solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options);
   if (eta.size() == stress_grid_.num_dofs())
@@ -732,6 +734,7 @@ FrameStats Simulation<Dim>::advance_frame() {
     stats_.dt_max = std::max(stats_.dt_max, dt);
   }
   ++frame_;
+  export_sink_ = nullptr;  // a request covers one frame
   stats_.frame = frame_;
   stats_.time = frame_end;
   if (stats_.steps == 0) stats_.dt_min = 0.0;

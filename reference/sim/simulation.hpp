@@ -6,6 +6,7 @@
 /// pictures (reference/viz/render.hpp) draw it from outside the solver core.
 
 #include <array>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -13,6 +14,7 @@
 #include "reference/coupling/coupling.hpp"
 #include "reference/coupling/coupling_scheme.hpp"
 #include "reference/coupling/solve_sequence.hpp"
+#include "reference/coupling/system_export.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/geometry/shape.hpp"
@@ -82,6 +84,14 @@ class AnySimulation {
   virtual double liquid_potential_energy() const { return 0.0; }
   /// The energy ledger of the last frame (advance_frame), all zero before the first.
   virtual EnergyLedger energy_ledger() const { return {}; }
+  /// The oracle (reference/coupling/system_export.hpp): during the next advance_frame only, hand
+  /// the coupled system of eq. (24) of that frame's step `step` (1 = its first step) to `sink`.
+  /// The sink is not called when that step does not exist or has no coupled solve (no moving
+  /// body next to a liquid). Simulations without coupled steps ignore the request.
+  virtual void request_system_export(int step, std::function<void(const SystemExport&)> sink) {
+    (void)step;
+    (void)sink;
+  }
 };
 
 /// Algorithm 1 for one scene: liquids (particles, eq. (8) with or without stress unknowns,
@@ -95,6 +105,10 @@ class Simulation : public AnySimulation {
   FrameStats advance_frame() override;
   double liquid_potential_energy() const override;
   EnergyLedger energy_ledger() const override { return ledger_; }
+  void request_system_export(int step, std::function<void(const SystemExport&)> sink) override {
+    export_step_ = step;
+    export_sink_ = std::move(sink);
+  }
 
   // The current state, read-only (pictures: render_view in reference/viz/render.hpp).
   const SceneDesc& scene() const { return scene_; }
@@ -253,6 +267,9 @@ class Simulation : public AnySimulation {
   StageSwitches switches_;
   EnergyLedger ledger_, frame_ledger_;
   double ledger_energy_ = 0.0;  ///< the energy after the last accounted stage of the step
+  /// request_system_export: the step of the next frame whose system goes to the sink
+  int export_step_ = 0;
+  std::function<void(const SystemExport&)> export_sink_;
 };
 
 
