@@ -246,7 +246,7 @@ TEST_CASE("run writes frames, stats.jsonl and summary.json (2D and 3D)", "[unit]
     // summary.json
     std::ifstream in(out / "summary.json");
     const json s = json::parse(in);
-    CHECK(s["status"] == "ok");
+    CHECK(s["status"] == "completed");
     CHECK(s["failed_frame"].is_null());
     CHECK(s["version"] == MONOLITH_VERSION);
     CHECK(s["totals"]["frames"] == 4);
