@@ -24,6 +24,7 @@
 #include "reference/app/checkpoint.hpp"
 #include "reference/app/cli.hpp"
 #include "reference/core/errors.hpp"
+#include "tests/support/cli_helpers.hpp"
 
 extern char** environ;
 
@@ -39,16 +40,8 @@ fs::path temp_dir() {
   return d;
 }
 
-struct Result {
-  int code;
-  std::string out, err;
-};
-
-Result cli(const std::vector<std::string>& args) {
-  std::ostringstream out, err;
-  const int code = run_cli(args, out, err);
-  return {code, out.str(), err.str()};
-}
+using Result = test::CliResult;
+using test::cli;
 
 std::string read_bytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
