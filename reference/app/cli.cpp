@@ -30,6 +30,8 @@ const char* kUsage =
     "usage:\n"
     "  monolith run SCENE [--frames N] [--out DIR] [--scheme NAME] [--backend matrixfree|explicit]\n"
     "                     [--threads N] [--no-render] [--quiet] [--set KEY=VALUE]...\n"
+    "                     [--checkpoint-every N]\n"
+    "  monolith resume DIR [--frames N] [--threads N] [--quiet] [--checkpoint-every N]\n"
     "  monolith check SCENE [--set KEY=VALUE]...\n"
     "  monolith list\n"
     "  monolith convert IN.ppm OUT.png\n"
@@ -44,6 +46,9 @@ const char* kHelp =
     "commands:\n"
     "  run SCENE     simulate SCENE (a JSON scene file or a built-in scene name) and write\n"
     "                frames/frame_NNNNN.ppm, stats.jsonl and summary.json into the output folder\n"
+    "  resume DIR    continue the run in the output folder DIR from its last checkpoint (written\n"
+    "                by --checkpoint-every or when a run is interrupted), bit for bit as if it\n"
+    "                had not stopped; --frames N sets a new total frame count\n"
     "  check SCENE   validate SCENE and print every problem found (exit 0 if valid, 2 if not)\n"
     "  list          the built-in scenes: name, dimension, description\n"
     "  convert       re-encode a PPM picture (a frame or a plot) as PNG for web pages\n"
@@ -66,8 +71,12 @@ const char* kHelp =
     "  --quiet           no progress output\n"
     "  --set KEY=VALUE   override a scene key by its dotted path, e.g. solver.tolerance=1e-8,\n"
     "                    liquids.0.density=800, gravity=[0,-9.81]; VALUE is JSON or a string\n"
+    "  --checkpoint-every N  write DIR/checkpoint.mckpt every N frames and at the end\n"
     "\n"
-    "exit codes: 0 success, 2 invalid input, 3 simulation failure (outputs so far are kept).\n"
+    "SIGINT (Ctrl-C) or SIGTERM stops a run at the next step boundary: the outputs so far, a\n"
+    "checkpoint and summary.json (status \"interrupted\") are written; a second signal quits at once.\n"
+    "exit codes: 0 success, 2 invalid input, 3 simulation failure (outputs so far are kept),\n"
+    "130 / 143 interrupted by SIGINT / SIGTERM.\n"
     "documentation: docs/cli.md and docs/scene-format.md\n";
 
 bool parse_nonneg_int(const std::string& s, long long max, long long& out) {
@@ -78,8 +87,11 @@ bool parse_nonneg_int(const std::string& s, long long max, long long& out) {
   return out <= max;
 }
 
-/// Parses the arguments after the command name; throws InputError on a bad flag.
+/// Parses the arguments after the command name; throws InputError on a bad flag. `run_flags`:
+/// the flags of run; for resume the positional argument is the run folder and only --frames,
+/// --threads, --quiet and --checkpoint-every are taken.
 RunOptions parse_options(const std::string& command, const std::vector<std::string>& args, bool run_flags) {
+  const bool resume = command == "resume";
   RunOptions o;
   std::vector<std::string> problems;
   for (std::size_t i = 0; i < args.size(); ++i) {
@@ -110,12 +122,16 @@ RunOptions parse_options(const std::string& command, const std::vector<std::stri
         o.scene = a;
       else
         problems.push_back(command + ": unexpected argument \"" + a.substr(0, 80) + "\" (one SCENE only)");
+    } else if (resume && (a == "--set" || a == "--out" || a == "--scheme" || a == "--backend" || a == "--no-render")) {
+      problems.push_back(command + ": " + a + ": a resumed run keeps the scene and folder of its checkpoint (start a new run to change them)");
     } else if (a == "--set") {
       if (take_value(a)) o.overrides.push_back(value);
     } else if (run_flags && a == "--frames") {
       long long n = 0;
       if (take_value(a)) {
-        if (parse_nonneg_int(value, 100000000, n))
+        if (parse_nonneg_int(value, 100000000, n) && resume)
+          o.resume_frames = static_cast<int>(n);
+        else if (parse_nonneg_int(value, 100000000, n))
           o.overrides.push_back("time.frames=" + std::to_string(n));
         else
           problems.push_back(command + ": --frames: bad value \"" + value.substr(0, 40) + "\" (an integer in 0..100000000)");
@@ -139,6 +155,15 @@ RunOptions parse_options(const std::string& command, const std::vector<std::stri
         else
           problems.push_back(command + ": --threads: bad value \"" + value.substr(0, 40) + "\" (an integer in 1..1024)");
       }
+    } else if (run_flags && a == "--checkpoint-every") {
+      long long n = 0;
+      if (take_value(a)) {
+        if (parse_nonneg_int(value, 100000000, n) && n >= 1)
+          o.checkpoint_every = static_cast<int>(n);
+        else
+          problems.push_back(command + ": --checkpoint-every: bad value \"" + value.substr(0, 40) +
+                             "\" (an integer in 1..100000000: frames between checkpoints)");
+      }
     } else if (run_flags && a == "--no-render" && !has_inline) {
       o.no_render = true;
     } else if (run_flags && a == "--quiet" && !has_inline) {
@@ -147,7 +172,12 @@ RunOptions parse_options(const std::string& command, const std::vector<std::stri
       problems.push_back(command + ": unknown option \"" + args[i].substr(0, 80) + "\" (see monolith --help)");
     }
   }
-  if (o.scene.empty()) problems.push_back(command + ": missing SCENE (a scene file or a built-in scene name; see monolith list)");
+  if (resume) {
+    o.resume_dir = o.scene;
+    if (o.scene.empty()) problems.push_back(command + ": missing DIR (the output folder of a run with a checkpoint)");
+  } else if (o.scene.empty()) {
+    problems.push_back(command + ": missing SCENE (a scene file or a built-in scene name; see monolith list)");
+  }
   if (!problems.empty()) throw InputError(problems);
   return o;
 }
@@ -223,13 +253,14 @@ int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::o
       return 0;
     }
     if (command == "run") return run_scene(parse_options("run", rest, true), err, factory, render);
+    if (command == "resume") return resume_run(parse_options("resume", rest, true), err, factory, render);
     if (command == "check") return cmd_check(rest, out);
     if (command == "list") return cmd_list(rest, out);
     if (command == "convert") return cmd_convert(rest, out);
     if (command == "export") return export_command(rest, out, factory);
     if (command == "verify") return verify_command(rest, out);
     err << "monolith: unknown command \"" << command.substr(0, 80)
-        << "\" (run, check, list, convert, export, verify, --help, --version)\n"
+        << "\" (run, resume, check, list, convert, export, verify, --help, --version)\n"
         << kUsage;
     return 2;
   } catch (const InputError& e) {

@@ -26,6 +26,11 @@ struct RunOptions {
   int threads = 0;                     ///< 0: OpenMP's default
   bool no_render = false;
   bool quiet = false;
+  int checkpoint_every = 0;            ///< a checkpoint every N frames and at the end; 0: none
+  /// `resume`: the run folder to continue (scene and out_dir then come from its checkpoint)
+  /// and the new total frame count (-1: the scene's).
+  std::string resume_dir;
+  int resume_frames = -1;
 };
 
 using SimulationFactory = std::function<std::unique_ptr<AnySimulation>(const SceneDesc&)>;
@@ -33,10 +38,20 @@ using SimulationFactory = std::function<std::unique_ptr<AnySimulation>(const Sce
 /// simulations of make_simulation).
 using FrameRenderer = std::function<Image(const AnySimulation&, const RenderSpec&)>;
 
-/// Runs a scene and writes its outputs. Returns 0 on success and 3 after a SimulationError
-/// (summary.json then has status "failed" and the frame); throws InputError for bad input.
+/// Runs a scene and writes its outputs. Returns 0 on success; 3 after a SimulationError, an
+/// output that cannot be written or (solver.on_nonconvergence "fail") a solve that did not
+/// converge (summary.json then has status "failed", the frame and the reason); 130 / 143 after
+/// SIGINT / SIGTERM (stopped at a step boundary, checkpoint written, status "interrupted").
+/// Throws InputError for bad input.
 int run_scene(const RunOptions& options, std::ostream& err, const SimulationFactory& factory,
               const FrameRenderer& render = render_simulation);
+
+/// `monolith resume DIR`: continues the run in options.resume_dir from its checkpoint
+/// (reference/app/checkpoint.hpp), up to options.resume_frames frames when given. Refuses a
+/// checkpoint that is missing, truncated, corrupted, from another build or of another scene
+/// with InputError before any file in the folder is changed. Returns like run_scene.
+int resume_run(const RunOptions& options, std::ostream& err, const SimulationFactory& factory,
+               const FrameRenderer& render = render_simulation);
 
 /// run_cli (reference/app/cli.hpp) with the simulation factory and renderer injected.
 int run_cli_with(const std::vector<std::string>& args, std::ostream& out, std::ostream& err,

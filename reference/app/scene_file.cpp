@@ -690,7 +690,7 @@ void parse_settings(SceneParser& p, const json& j, SceneFile& s) {
     if (p.expect_object(*sv, "solver", "an object with the solver settings")) {
       const json& o = *sv;
       p.check_keys(o, "solver", {"scheme", "tolerance", "max_iterations", "staggered_iterations", "backend",
-                                 "baumgarte", "contact_margin", "shrink", "diagonal_boost"});
+                                 "baumgarte", "contact_margin", "shrink", "diagonal_boost", "on_nonconvergence"});
       p.opt_enum(o, "solver", "scheme", s.solver.scheme);
       p.opt_number(o, "solver", "tolerance", kUnitOpen, s.solver.tolerance);
       p.opt_int(o, "solver", "max_iterations", 1, 100000000, "an integer in 1..100000000", s.solver.max_iterations);
@@ -700,6 +700,7 @@ void parse_settings(SceneParser& p, const json& j, SceneFile& s) {
       p.opt_number(o, "solver", "contact_margin", kNonNegative, s.solver.contact_margin);
       p.opt_number(o, "solver", "shrink", kNonNegative, s.solver.shrink);
       p.opt_number(o, "solver", "diagonal_boost", kNonNegative, s.solver.diagonal_boost);
+      p.opt_enum(o, "solver", "on_nonconvergence", s.solver.on_nonconvergence);
     }
   }
 

@@ -6,10 +6,12 @@
 /// of eqs. (13)-(16) is solved by staggered projections (section 4.2) with MPRGP; the velocities
 /// are updated (eq. (13)) and the positions integrated. docs/rigid-bodies.md, "Contact model".
 
+#include <cstdint>
 #include <vector>
 
 #include "reference/contact/collision.hpp"
 #include "reference/contact/contact_system.hpp"
+#include "reference/core/errors.hpp"
 #include "reference/rigid/rigid_body.hpp"
 #include "reference/sim/frame_stats.hpp"
 #include "reference/sim/scene_desc.hpp"
@@ -104,6 +106,38 @@ class RigidWorld {
   double max_point_speed() const;
   /// Per-body statistics (every body, scene order).
   std::vector<BodyStats> body_stats() const;
+
+  /// The world's part of a simulation checkpoint (reference/core/state_io.hpp): every body's
+  /// pose and velocity, and the last step's contacts and forces (the next step's warm start).
+  /// The bodies' shapes, masses and samples come from the scene.
+  template <class Archive>
+  void state_fields(Archive& a) {
+    std::uint64_t n = bodies_.size();
+    a(n);
+    if (n != bodies_.size()) throw InputError("checkpoint: body count differs from the scene's");
+    for (auto& b : bodies_) {
+      a(b.position);
+      a(b.orientation);
+      a(b.velocity);
+      a(b.angular_velocity);
+    }
+    n = contacts_.size();
+    a(n);
+    if (n > (1u << 28)) throw InputError("checkpoint: implausible contact count");
+    contacts_.resize(n);
+    for (auto& c : contacts_) {
+      a(c.body_a);
+      a(c.body_b);
+      a(c.wall_face);
+      a(c.point);
+      a(c.normal);
+      a(c.phi);
+      a(c.friction);
+      a(c.restitution);
+    }
+    a(solve_.lambda);
+    a(solve_.z);
+  }
 
  private:
   std::vector<RigidBody<Dim>> bodies_;

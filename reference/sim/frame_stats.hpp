@@ -53,12 +53,24 @@ struct ProbeStats {
   double pressure = 0.0;
 };
 
+/// A solve of a frame that stopped without reaching the tolerance (at solver.max_iterations, or
+/// a staggered scheme at its rounds): which solve, its iterations and the relative residual it
+/// reached. Reported on stderr by the runner, not written to stats.jsonl.
+struct UnconvergedSolve {
+  std::string solve;
+  double time = 0.0;  ///< simulation time at the start of the step (s)
+  long iterations = 0;
+  double relative_residual = 0.0;
+};
+
 struct SolverStats {
   CouplingScheme scheme = CouplingScheme::pvc_unified;
   long iterations = 0;            ///< summed over the frame's steps
   int staggered_iterations = 0;   ///< summed over the frame's steps
   double max_relative_residual = 0.0;
   bool converged = true;          ///< all solves of the frame converged
+  /// The solves of the frame that did not converge, in order (empty when converged).
+  std::vector<UnconvergedSolve> unconverged;
   long dofs_pressure = 0, dofs_stress = 0, dofs_contact = 0, dofs_friction = 0;  ///< max
   /// The phases of the paper's Tables 1-3, summed over the frame's steps: separate liquid
   /// solves (P, PV or VC without contact rows), separate contact solves (C), and unified solves

@@ -21,6 +21,20 @@
 
 namespace monolith {
 
+/// `solver.on_nonconvergence`: what a run does with a frame in which a solve stopped at
+/// solver.max_iterations (or a staggered scheme at its rounds) without reaching the tolerance.
+/// Either way the frame's solver.converged is false and stderr names the solve.
+enum class NonconvergencePolicy {
+  warn,  ///< report it and go on (the default)
+  fail,  ///< report it and end the run as a simulation failure (exit 3) after the frame's outputs
+};
+
+template <>
+struct EnumNames<NonconvergencePolicy> {
+  static constexpr std::array<std::pair<NonconvergencePolicy, const char*>, 2> values{
+      {{NonconvergencePolicy::warn, "warn"}, {NonconvergencePolicy::fail, "fail"}}};
+};
+
 struct ProbeSpec {
   std::string name;
   std::vector<double> position;
@@ -53,6 +67,7 @@ struct SolverSpec {
   double contact_margin = 0.1;  ///< epsilon of section 3.2.4, in units of dx
   double shrink = 0.01;         ///< zeta of section 4.4.6, in units of dx
   double diagonal_boost = 1e-4; ///< gamma of section 4.4.5
+  NonconvergencePolicy on_nonconvergence = NonconvergencePolicy::warn;
   /// Algorithm 2's line 1 in the simulator (section 5): true (default) starts each step's
   /// viscosity rounds from the previous step's shear rate where it has one, false from the rate
   /// of u* as printed (docs/non-newtonian.md). Not a scene key: set from C++ (tests, benches).

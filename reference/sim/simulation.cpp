@@ -8,12 +8,14 @@
 #include "reference/sim/simulation.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 #include <sstream>
 #include <utility>
 
 #include "reference/core/errors.hpp"
+#include "reference/core/state_io.hpp"
 #include "reference/core/timer.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
 #include "reference/coupling/coupling.hpp"
@@ -276,6 +278,8 @@ void Simulation<Dim>::step_bodies(double dt) {
   st.add_dofs(0, 0, s.dofs_contact, s.dofs_friction);
   st.contact_iterations += s.iterations;
   st.contact_seconds += s.solve_seconds;
+  if (!s.converged)
+    note_unconverged("contact (staggered projections)", s.iterations, s.max_relative_residual);
   stats_.timing[FramePhase::solve] += s.solve_seconds;
 }
 
@@ -576,6 +580,10 @@ void Simulation<Dim>::solve_coupled(double dt) {
   st.fluid_seconds += r.fluid_seconds;
   st.contact_seconds += r.contact_seconds;
   st.coupled_seconds += r.coupled_seconds;
+  if (!r.converged)
+    note_unconverged("coupled " + enum_name(scene_.solver.scheme),
+                     r.fluid_iterations + r.contact_iterations + r.coupled_iterations,
+                     r.max_relative_residual);
 }
 
 template <int Dim>
@@ -674,6 +682,13 @@ void Simulation<Dim>::record_solve(const PcgResult& pcg, long pressure_dofs, lon
   stats_.solver.add_solve(pcg.iterations, 1, pcg.relative_residual, pcg.converged);
   stats_.solver.add_dofs(pressure_dofs, stress_dofs, 0, 0);
   stats_.solver.fluid_iterations += pcg.iterations;
+  if (!pcg.converged) note_unconverged(what, pcg.iterations, pcg.relative_residual);
+}
+
+template <int Dim>
+void Simulation<Dim>::note_unconverged(const std::string& what, long iterations, double residual) {
+  stats_.solver.converged = false;
+  stats_.solver.unconverged.push_back({what, time_, iterations, residual});
 }
 
 template <int Dim>
@@ -715,10 +730,14 @@ void Simulation<Dim>::check_finite(const char* after) const {
 template <int Dim>
 FrameStats Simulation<Dim>::advance_frame() {
   const Stopwatch frame_watch;
-  stats_ = FrameStats{};
-  frame_ledger_ = EnergyLedger{};
-  stats_.solver.scheme = scene_.solver.scheme;
-  stats_.dt_min = std::numeric_limits<double>::infinity();
+  // a frame stopped at a step boundary goes on with the statistics gathered so far
+  if (!mid_frame_) {
+    stats_ = FrameStats{};
+    frame_ledger_ = EnergyLedger{};
+    stats_.solver.scheme = scene_.solver.scheme;
+    stats_.dt_min = std::numeric_limits<double>::infinity();
+  }
+  mid_frame_ = false;
   // substeps that land exactly on the frame time (frame + 1) / fps
   const double frame_end = (frame_ + 1) / scene_.time.fps;
   while (time_ < frame_end) {
@@ -732,6 +751,11 @@ FrameStats Simulation<Dim>::advance_frame() {
     ++stats_.steps;
     stats_.dt_min = std::min(stats_.dt_min, dt);
     stats_.dt_max = std::max(stats_.dt_max, dt);
+    if (stop_ && *stop_ && time_ < frame_end) {
+      mid_frame_ = true;
+      stats_.timing[FramePhase::total] += frame_watch.seconds();
+      return stats_;
+    }
   }
   ++frame_;
   export_sink_ = nullptr;  // a request covers one frame
@@ -744,8 +768,111 @@ FrameStats Simulation<Dim>::advance_frame() {
   liquid_weights_current_ = true;
   fill_state_stats(stats_);
   ledger_ = frame_ledger_;
-  stats_.timing[FramePhase::total] = frame_watch.seconds();
+  stats_.timing[FramePhase::total] += frame_watch.seconds();
   return stats_;
+}
+
+namespace {
+
+/// The statistics a frame gathers step by step (those of fill_state_stats are derived at the
+/// frame's end): part of the state when a run stops between two steps of a frame.
+template <class Archive>
+void step_stats_fields(Archive& a, FrameStats& s) {
+  a(s.steps);
+  a(s.dt_min);
+  a(s.dt_max);
+  a(s.contact_count);
+  a(s.max_penetration);
+  SolverStats& v = s.solver;
+  a(v.iterations);
+  a(v.staggered_iterations);
+  a(v.max_relative_residual);
+  a(v.converged);
+  std::uint64_t n = v.unconverged.size();
+  a(n);
+  if (n > (1u << 24)) throw InputError("checkpoint: implausible count of unconverged solves");
+  v.unconverged.resize(n);
+  for (auto& u : v.unconverged) {
+    a(u.solve);
+    a(u.time);
+    a(u.iterations);
+    a(u.relative_residual);
+  }
+  a(v.dofs_pressure);
+  a(v.dofs_stress);
+  a(v.dofs_contact);
+  a(v.dofs_friction);
+  a(v.fluid_iterations);
+  a(v.contact_iterations);
+  a(v.coupled_iterations);
+  a(v.fluid_seconds);
+  a(v.contact_seconds);
+  a(v.coupled_seconds);
+  a(v.viscosity_residuals);
+  a(v.max_viscosity_residual);
+  for (const FramePhase p : enum_values<FramePhase>()) a(s.timing[p]);
+}
+
+}  // namespace
+
+template <int Dim>
+template <class Archive>
+void Simulation<Dim>::state_fields(Archive& a) {
+  // layout check: a state of the other dimension is refused before anything is read into place
+  int dim = Dim;
+  a(dim);
+  if (dim != Dim) throw InputError("checkpoint: a state of a " + std::to_string(dim) + "D scene");
+  // time and step counters; a frame stopped between two steps and what it gathered so far
+  a(time_);
+  a(frame_);
+  a(mid_frame_);
+  step_stats_fields(a, stats_);
+  // the liquid: particles (APIC), grid velocity (the CFL step and the probes read it), the last
+  // solve's pressure and stress (warm-start data), the effective viscosity per cell and
+  // Algorithm 2's shear rate of the previous step (non-Newtonian liquids)
+  a(particles_.x);
+  a(particles_.v);
+  a(particles_.c);
+  a(particles_.mass);
+  a(particles_.density);
+  a(particles_.liquid);
+  a(u_);
+  a(pressure_);
+  a(stress_);
+  a(cell_eta_);
+  a(previous_shear_rate_);
+  a(liquid_weights_current_);
+  // the bodies: poses, velocities, the last contacts and forces (RigidWorld::state_fields)
+  bool bodies = rigid_ != nullptr;
+  a(bodies);
+  if (bodies != (rigid_ != nullptr)) throw InputError("checkpoint: bodies do not match the scene's");
+  if (rigid_) rigid_->state_fields(a);
+  // no random number generator runs after seeding (seed_particles draws once, in the constructor)
+}
+
+template <int Dim>
+std::vector<char> Simulation<Dim>::save_state() const {
+  StateWriter w;
+  const_cast<Simulation*>(this)->state_fields(w);
+  return w.take();
+}
+
+template <int Dim>
+void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
+  StateReader r(bytes, "checkpoint");
+  state_fields(r);
+  r.finish();
+  const std::size_t n = particles_.x.size();
+  if (particles_.v.size() != n || particles_.c.size() != n || particles_.mass.size() != n ||
+      particles_.density.size() != n || particles_.liquid.size() != n ||
+      u_.size() != grid_.num_faces() || pressure_.size() != grid_.num_cells() ||
+      stress_.size() != stress_grid_.num_dofs())
+    r.fail("sizes that do not match the scene's grid or particles");
+  // what is derived from the state: the solids at the bodies' pose and the liquid weights, as
+  // advance_frame leaves them at a frame's end (a step that needs them fresh recomputes them)
+  if (coupled_) update_moving_solids();
+  update_liquid_weights();
+  if (!mid_frame_) fill_state_stats(stats_);
 }
 
 template <int Dim>
@@ -813,6 +940,10 @@ double Simulation<Dim>::liquid_potential_energy() const {
   for (std::size_t p = 0; p < particles_.size(); ++p)
     energy -= particles_.mass[p] * gravity_.dot(particles_.x[p]);
   return energy;
+}
+
+void AnySimulation::load_state(const std::vector<char>&) {
+  throw InputError("checkpoint: this simulation cannot be restored from a checkpoint");
 }
 
 std::unique_ptr<AnySimulation> make_simulation(const SceneDesc& scene) {

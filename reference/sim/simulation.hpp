@@ -6,6 +6,7 @@
 /// pictures (reference/viz/render.hpp) draw it from outside the solver core.
 
 #include <array>
+#include <csignal>
 #include <functional>
 #include <memory>
 #include <vector>
@@ -92,6 +93,20 @@ class AnySimulation {
     (void)step;
     (void)sink;
   }
+
+  // Checkpoints and interruption (the application writes the bytes to files, docs/checkpoints.md)
+  /// The whole state needed to continue bit for bit, as plain bytes; empty for a simulation
+  /// that cannot be checkpointed.
+  virtual std::vector<char> save_state() const { return {}; }
+  /// Restores a state of save_state() into a simulation built from the same scene; throws
+  /// InputError on bytes that do not fit it.
+  virtual void load_state(const std::vector<char>& bytes);
+  /// While *flag is non-zero, advance_frame stops after the step it is in (a step boundary) and
+  /// returns with mid_frame() true; the next advance_frame finishes that frame. Null: never.
+  /// The flag may be set from a signal handler.
+  virtual void set_stop_flag(const volatile std::sig_atomic_t* flag) { (void)flag; }
+  /// True when the last advance_frame stopped at a step boundary before the frame's end.
+  virtual bool mid_frame() const { return false; }
 };
 
 /// Algorithm 1 for one scene: liquids (particles, eq. (8) with or without stress unknowns,
@@ -109,6 +124,10 @@ class Simulation : public AnySimulation {
     export_step_ = step;
     export_sink_ = std::move(sink);
   }
+  std::vector<char> save_state() const override;
+  void load_state(const std::vector<char>& bytes) override;
+  void set_stop_flag(const volatile std::sig_atomic_t* flag) override { stop_ = flag; }
+  bool mid_frame() const override { return mid_frame_; }
 
   // The current state, read-only (pictures: render_view in reference/viz/render.hpp).
   const SceneDesc& scene() const { return scene_; }
@@ -197,6 +216,11 @@ class Simulation : public AnySimulation {
   /// Velocity of the solid at a point x inside the solids: the point velocity of the moving
   /// body whose (unshrunk) SDF is smallest there when that is a moving body, zero otherwise.
   Vec<Dim> solid_velocity(const Vec<Dim>& x) const;
+  /// The state of a checkpoint, every field once, in order (reference/core/state_io.hpp): what
+  /// evolves during a run. Everything else is rebuilt from the scene (constructor) or derived
+  /// from these fields (load_state recomputes the weights). A new evolving member goes here.
+  template <class Archive>
+  void state_fields(Archive& a);
   /// Throws SimulationError if the state holds a non-finite value.
   void check_finite(const char* after) const;
   /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
@@ -215,6 +239,8 @@ class Simulation : public AnySimulation {
   /// Adds one solve's iterations, residual and DOF counts to stats_; throws SimulationError on a
   /// breakdown (`what` names the solve).
   void record_solve(const PcgResult& pcg, long pressure_dofs, long stress_dofs, const char* what);
+  /// Marks the frame unconverged and lists the solve `what` with its iterations and residual.
+  void note_unconverged(const std::string& what, long iterations, double residual);
 
   // the scene, the grid and its boundary
   SceneDesc scene_;
@@ -270,6 +296,8 @@ class Simulation : public AnySimulation {
   /// request_system_export: the step of the next frame whose system goes to the sink
   int export_step_ = 0;
   std::function<void(const SystemExport&)> export_sink_;
+  bool mid_frame_ = false;                         ///< advance_frame stopped before the frame's end
+  const volatile std::sig_atomic_t* stop_ = nullptr;  ///< set_stop_flag
 };
 
 

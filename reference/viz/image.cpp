@@ -36,11 +36,18 @@ void Image::blend(int x, int y, Rgb c, double a) {
     rgb[i + k] = static_cast<std::uint8_t>(std::lround((1.0 - a) * rgb[i + k] + a * c[k]));
 }
 
+std::string Image::ppm_bytes() const {
+  std::string bytes = "P6\n" + std::to_string(width) + " " + std::to_string(height) + "\n255\n";
+  bytes.append(reinterpret_cast<const char*>(rgb.data()), rgb.size());
+  return bytes;
+}
+
 void Image::write_ppm(const std::string& path) const {
   std::ofstream out(path, std::ios::binary);
   if (!out) throw std::runtime_error("cannot write " + path);
-  out << "P6\n" << width << " " << height << "\n255\n";
-  out.write(reinterpret_cast<const char*>(rgb.data()), static_cast<std::streamsize>(rgb.size()));
+  const std::string bytes = ppm_bytes();
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  out.close();
   if (!out) throw std::runtime_error("cannot write " + path);
 }
 

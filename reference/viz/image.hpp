@@ -24,6 +24,8 @@ struct Image {
   void blend(int x, int y, Rgb c, double a);
   /// Writes binary PPM (P6); throws std::runtime_error if the file cannot be written.
   void write_ppm(const std::string& path) const;
+  /// The bytes of the binary PPM (P6) that write_ppm writes.
+  std::string ppm_bytes() const;
   /// Writes an uncompressed PNG (deflate "stored" blocks, no compression library), for pictures
   /// that must display in a web page such as the README. Throws std::runtime_error on failure.
   void write_png(const std::string& path) const;

@@ -16,6 +16,7 @@
 #include "reference/app/runner.hpp"
 #include "reference/app/stats_json.hpp"
 #include "reference/core/errors.hpp"
+#include "tests/support/cli_helpers.hpp"
 #include "reference/sim/frame_stats.hpp"
 
 using namespace monolith;
@@ -54,17 +55,8 @@ std::string write_file(const std::string& name, const std::string& text) {
   return p.string();
 }
 
-struct Result {
-  int code;
-  std::string out, err;
-};
-
-/// The real CLI (simulations from make_simulation).
-Result cli(const std::vector<std::string>& args) {
-  std::ostringstream out, err;
-  const int code = run_cli(args, out, err);
-  return {code, out.str(), err.str()};
-}
+using Result = test::CliResult;
+using test::cli;
 
 /// A stand-in simulation: one step per frame, constant volume, fails at frame `fail_at`.
 class FakeSimulation : public AnySimulation {
@@ -122,7 +114,7 @@ TEST_CASE("--version, --help and list", "[unit]") {
   r = cli({"--help"});
   CHECK(r.code == 0);
   for (const char* s : {"run SCENE", "check SCENE", "list", "--frames", "--out", "--scheme", "--backend", "--threads",
-                        "--no-render", "--quiet", "--set"})
+                        "--no-render", "--quiet", "--set", "resume DIR", "--checkpoint-every"})
     CHECK(r.out.find(s) != std::string::npos);
   r = cli({"list"});
   CHECK(r.code == 0);
@@ -257,7 +249,7 @@ TEST_CASE("run writes frames, stats.jsonl and summary.json (2D and 3D)", "[unit]
     // summary.json
     std::ifstream in(out / "summary.json");
     const json s = json::parse(in);
-    CHECK(s["status"] == "ok");
+    CHECK(s["status"] == "completed");
     CHECK(s["failed_frame"].is_null());
     CHECK(s["version"] == MONOLITH_VERSION);
     CHECK(s["totals"]["frames"] == 4);

@@ -52,6 +52,7 @@ TEST_CASE("every option enum has one scene name per value, in the documented ord
   check_table<ViscosityPreset>({"newtonian", "shear-thinning", "shear-thickening", "bingham"});
   check_table<ColorBy>({"none", "speed", "pressure", "viscosity"});
   check_table<FramePhase>({"total", "solve", "particles", "weights", "extrapolation", "render", "output"});
+  check_table<NonconvergencePolicy>({"warn", "fail"});
 }
 
 TEST_CASE("the one default of each option is the member initialiser of its struct", "[unit]") {
@@ -59,6 +60,7 @@ TEST_CASE("the one default of each option is the member initialiser of its struc
   const SolverSpec solver;
   CHECK(solver.backend == Backend::matrix_free);
   CHECK(solver.scheme == CouplingScheme::pvc_unified);
+  CHECK(solver.on_nonconvergence == NonconvergencePolicy::warn);
   CHECK(BodySpec{}.motion == BodyMotion::dynamic);
   CHECK(ViscositySpec{}.model == ViscosityModel::newtonian);
   CHECK_FALSE(ViscositySpec{}.preset.has_value());
