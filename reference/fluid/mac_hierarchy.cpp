@@ -173,6 +173,17 @@ std::vector<int> active_prolongation(const std::vector<int>& fine, const Weights
   return coarse;
 }
 
+/// Restricted to the fine unknowns, two coarse columns of the prolongation can be parallel (a thin
+/// liquid region seen by one fine unknown), and P^T A P is then only semi-definite. Its diagonal
+/// is scaled by 1 + 1e-8: definite, and the V-cycle still satisfies Q <= A^-1 (the coarse
+/// correction only shrinks); a dependent combination z has P z = 0, so its large coarse values
+/// never reach the fine level.
+void stabilise_coarse(SparseMatrix& ac) {
+  for (int i = 0; i < ac.outerSize(); ++i)
+    for (SparseMatrix::InnerIterator it(ac, i); it; ++it)
+      if (it.col() == i) it.valueRef() *= 1.0 + 1e-8;
+}
+
 /// Position of global index g in the increasing list `list`, -1 if absent.
 int find_sorted(const std::vector<int>& list, int g) {
   const auto it = std::lower_bound(list.begin(), list.end(), g);
@@ -344,6 +355,7 @@ Multigrid face_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& face_
         faces, [&](int f, const auto& add) { face_weights<Dim>(g, gc, f, add, options.transverse_linear); },
         lv.prolongation);
     SparseMatrix ac = galerkin_product(lv.a, lv.prolongation);
+    stabilise_coarse(ac);
     levels.emplace_back();
     levels.back().a = std::move(ac);
     faces = std::move(coarse);
@@ -370,6 +382,7 @@ Multigrid cell_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& cell_
     std::vector<int> coarse = active_prolongation(
         cells, [&](int i, const auto& add) { cell_weights<Dim>(g, gc, i, add); }, lv.prolongation);
     SparseMatrix ac = galerkin_product(lv.a, lv.prolongation);
+    stabilise_coarse(ac);
     levels.emplace_back();
     levels.back().a = std::move(ac);
     cells = std::move(coarse);

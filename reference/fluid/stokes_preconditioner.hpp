@@ -32,10 +32,10 @@ struct StokesPreconditionerOptions {
   double min_fluid_fraction = 0.01;  ///< W_F^s floor in the preconditioner's K
   int velocity_cycles = 1;           ///< V-cycles per solve with V
   int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
-  int outer_sweeps = 1;              ///< SOR sweeps of A before and after (0: none)
+  int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
   double omega = 1.0;                ///< their relaxation
-  bool schur_correction = true;      ///< the second term (needed unless eta dt / (rho dx^2) >> 1)
-  bool additive_pressure = false;    ///< instead of the second term: + E A22^-1 E^T (one V solve less)
+  bool schur_correction = false;     ///< the second term (needed unless eta dt / (rho dx^2) >> 1)
+  bool additive_pressure = true;     ///< instead of the second term: + E A22^-1 E^T (one V solve less)
   int inner_cg = 0;                  ///< > 0: V^-1 by this many multigrid-preconditioned CG steps (nonlinear: flexible outer CG)
   double schur_viscous_factor = 0.5; ///< S ~ A22^-1 + Pi^-1 + factor eta / W_L^p
   bool element_patches = true;       ///< stress-element patches on the finest velocity level

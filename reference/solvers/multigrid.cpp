@@ -154,7 +154,7 @@ void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const 
     const std::vector<int>& list = ps.colours[backward ? num_colours - 1 - step : step];
     const int count = static_cast<int>(list.size());
     // groups of one colour are independent: any thread count gives the serial result
-#pragma omp parallel for schedule(static) if (count > 64)
+#pragma omp parallel for schedule(static) if (count > 1)
     for (int q = 0; q < count; ++q) {
       const int g = list[backward ? count - 1 - q : q];
       const int first = ps.group_start[g], last = ps.group_start[g + 1];

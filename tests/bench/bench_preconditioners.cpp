@@ -58,6 +58,7 @@ struct Config {
   int ssor_max = 20000;
   bool ssor = true;
   int repeats = 1;
+  double noise = 0.0;
   StokesPreconditionerOptions options;
 };
 
@@ -70,7 +71,7 @@ struct Case {
 };
 
 template <int Dim>
-Case<Dim> make_case(const std::string& scene, int n, double eta) {
+Case<Dim> make_case(const std::string& scene, int n, double eta, double noise) {
   Case<Dim> sc;
   sc.grid = MacGrid<Dim>(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), {});
   const MacGrid<Dim>& grid = sc.grid;
@@ -100,12 +101,13 @@ Case<Dim> make_case(const std::string& scene, int n, double eta) {
     sc.u_star[f] = std::sin(3 * x[(axis + 1) % Dim] + axis) * std::cos(2 * x[axis]) -
                    (axis == 1 ? 9.81 * sc.dt : 0.0);
   }
+  if (noise > 0.0) sc.u_star += noise * monolith::testing::random_vector(grid.num_faces(), 11);
   return sc;
 }
 
 template <int Dim>
 void run_case(const Config& cfg, int n, double eta) {
-  const Case<Dim> sc = make_case<Dim>(cfg.scene, n, eta);
+  const Case<Dim> sc = make_case<Dim>(cfg.scene, n, eta, cfg.noise);
   const StressLayout<Dim> layout(StressGrid<Dim>(sc.grid), StressForm::reduced);
   const StokesDofs dofs = select_stokes_dofs(sc.grid, layout, sc.w, sc.dt, StokesUnknowns::pressure_and_stress);
   std::unique_ptr<LinearOperator> op;
@@ -241,11 +243,13 @@ int main(int argc, char** argv) {
     else if (a == "--ssor-max") cfg.ssor_max = std::atoi(next());
     else if (a == "--no-ssor") cfg.ssor = false;
     else if (a == "--repeats") cfg.repeats = std::atoi(next());
+    else if (a == "--noise") cfg.noise = std::atof(next());
     else if (a == "--gamma") cfg.options.penalty_factor = std::atof(next());
     else if (a == "--cycles") cfg.options.velocity_cycles = std::atoi(next());
     else if (a == "--smoothing") cfg.options.smoothing = std::atoi(next());
     else if (a == "--sweeps") cfg.options.outer_sweeps = std::atoi(next());
-    else if (a == "--no-schur") cfg.options.schur_correction = false;
+    else if (a == "--no-schur") { cfg.options.schur_correction = false; cfg.options.additive_pressure = false; }
+    else if (a == "--two-term") { cfg.options.schur_correction = true; cfg.options.additive_pressure = false; }
     else if (a == "--no-elements") cfg.options.element_patches = false;
     else if (a == "--clamp") cfg.options.min_fluid_fraction = std::atof(next());
     else if (a == "--transverse-constant") cfg.options.transverse_linear = false;
