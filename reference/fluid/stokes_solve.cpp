@@ -1,13 +1,17 @@
-#include "reference/fluid/stokes_solve.hpp"
+/// \file stokes_solve.cpp
+/// solve_stokes (declared in stokes_system.hpp): lines 7-11 of Algorithm 1 for the unified
+/// pressure-viscosity system of eq. (8) / the stress-only system, on either back end, with the
+/// paper's SSOR or the block multigrid preconditioner (stokes_preconditioner.hpp) and an optional
+/// initial guess (warm start).
 
 #include <memory>
-#include <stdexcept>
+#include <optional>
+
+#include "reference/fluid/stokes_preconditioner.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/fluid/velocity_operator.hpp"
 
 namespace monolith {
-
-const char* preconditioner_name(PreconditionerKind kind) {
-  return kind == PreconditionerKind::ssor ? "ssor" : "multigrid";
-}
 
 template <int Dim>
 VectorX gather_stokes_unknowns(const StressLayout<Dim>& layout, const StokesDofs& dofs,
@@ -26,11 +30,9 @@ VectorX gather_stokes_unknowns(const StressLayout<Dim>& layout, const StokesDofs
 
 template <int Dim>
 StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
-                               StokesUnknowns unknowns, StressForm form,
-                               const std::string& backend, const PcgSettings& settings,
-                               const StokesSolveOptions& options, VectorX& u) {
-  if (backend != "explicit" && backend != "matrixfree")
-    throw std::invalid_argument("solve_stokes: unknown backend '" + backend + "' (explicit, matrixfree)");
+                               StokesUnknowns unknowns, StressForm form, Backend backend,
+                               const PcgSettings& settings, VectorX& u,
+                               const StokesSolveOptions& options) {
   StokesSolveResult result;
   const StressLayout<Dim> layout(StressGrid<Dim>(grid), form);
   // line 7: active DOFs
@@ -41,26 +43,31 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   VectorX x = gather_stokes_unknowns(layout, dofs, options.initial_stress ? *options.initial_stress : empty,
                                      options.initial_pressure ? *options.initial_pressure : empty);
   // lines 8-10: assemble (or set up the stencils), precondition, solve
-  std::unique_ptr<ExplicitStokesSystem> sys;
+  std::optional<ExplicitStokesSystem> sys;
   std::unique_ptr<LinearOperator> op;
   VectorX b;
-  if (backend == "explicit") {
-    sys = std::make_unique<ExplicitStokesSystem>(assemble_explicit_stokes(grid, layout, w, dofs, dt, u));
-    op = std::make_unique<SparseMatrixOperator>(sys->A, dofs.null_space);
-    b = sys->b;
-  } else {
-    auto mf = std::make_unique<MatrixFreeStokesOperator<Dim>>(grid, layout, w, dofs, dt);
-    b = mf->rhs(u);
-    op = std::move(mf);
+  switch (backend) {
+    case Backend::explicit_matrices:
+      sys = assemble_explicit_stokes(grid, layout, w, dofs, dt, u);
+      op = std::make_unique<SparseMatrixOperator>(sys->A, dofs.null_space);
+      b = sys->b;
+      break;
+    case Backend::matrix_free: {
+      auto mf = std::make_unique<MatrixFreeStokesOperator<Dim>>(grid, layout, w, dofs, dt);
+      b = mf->rhs(u);
+      op = std::move(mf);
+      break;
+    }
   }
   if (options.preconditioner == PreconditionerKind::ssor || dofs.size() == 0) {
     result.pcg = pcg_solve(*op, b, x, settings);
   } else {
-    const double floor = options.multigrid.min_fluid_fraction;
+    const StokesPreconditionerOptions mg = options.multigrid ? *options.multigrid : StokesPreconditionerOptions{};
+    const double floor = mg.min_fluid_fraction;
     StokesFactors f = sys ? stokes_factors(grid, layout, w, dofs, dt, *sys, floor)
                           : stokes_factors(grid, layout, w, dofs, dt,
                                            static_cast<const MatrixFreeStokesOperator<Dim>&>(*op), floor);
-    const StokesPreconditioner<Dim> m(grid, *op, std::move(f), options.multigrid);
+    const StokesPreconditioner<Dim> m(grid, *op, std::move(f), mg);
     result.pcg = pcg_solve(*op, b, x, settings, m);
   }
   // line 11: velocity update
@@ -74,9 +81,9 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   template VectorX gather_stokes_unknowns<D>(const StressLayout<D>&, const StokesDofs&,          \
                                              const VectorX&, const VectorX&);                   \
   template StokesSolveResult solve_stokes<D>(const MacGrid<D>&, const StokesWeights&, double,    \
-                                             StokesUnknowns, StressForm, const std::string&,     \
-                                             const PcgSettings&, const StokesSolveOptions&,      \
-                                             VectorX&);
+                                             StokesUnknowns, StressForm, Backend,                \
+                                             const PcgSettings&, VectorX&,                       \
+                                             const StokesSolveOptions&);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

@@ -493,6 +493,17 @@ void Simulation<Dim>::solve_coupled(double dt) {
 }
 
 template <int Dim>
+StokesSolveOptions Simulation<Dim>::stokes_options() const {
+  StokesSolveOptions o;
+  o.preconditioner = scene_.solver.preconditioner;
+  if (o.preconditioner != PreconditionerKind::ssor && scene_.solver.stokes_warm_start) {
+    o.initial_stress = &stress_;
+    o.initial_pressure = &pressure_;
+  }
+  return o;
+}
+
+template <int Dim>
 void Simulation<Dim>::solve_liquid(double dt) {
   // pressure only: eq. (8) without stress
   if (sequence_ == SolveSequence::pressure) {
@@ -515,7 +526,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     // PVC without bodies: eq. (8) in (tau, p) at once, reduced stress (section 4.4.2)
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                     scene_.solver.backend, pcg_settings_, u_);
+                     scene_.solver.backend, pcg_settings_, u_, stokes_options());
     pressure_ = solve.pressure;
     stress_ = solve.stress;
     record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
@@ -528,7 +539,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
   record_solve(first.pcg, first.dofs, 0, "first pressure");
   const StokesSolveResult viscous = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
                                                  StressForm::full, scene_.solver.backend,
-                                                 pcg_settings_, u_);
+                                                 pcg_settings_, u_, stokes_options());
   record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
   const PressureSolveResult second =
       solve_pressure(grid_, weights_, dt, scene_.solver.backend, pcg_settings_, u_);
@@ -561,7 +572,7 @@ void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
       u_ = u_star;
       const StokesSolveResult solve =
           solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                       scene_.solver.backend, pcg_settings_, u_);
+                       scene_.solver.backend, pcg_settings_, u_, stokes_options());
       record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
       pressure_ = solve.pressure;
       stress_ = solve.stress;
@@ -578,7 +589,7 @@ void Simulation<Dim>::solve_liquid_non_newtonian(double dt) {
       u_ = u_first;
       const StokesSolveResult viscous =
           solve_stokes(grid_, w, dt, StokesUnknowns::stress_only, StressForm::full,
-                       scene_.solver.backend, pcg_settings_, u_);
+                       scene_.solver.backend, pcg_settings_, u_, stokes_options());
       record_solve(viscous.pcg, 0, viscous.stress_dofs, "viscosity");
       stress_ = viscous.stress;
       return viscous.stress;

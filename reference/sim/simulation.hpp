@@ -14,6 +14,7 @@
 #include "reference/coupling/coupling_scheme.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
+#include "reference/fluid/stokes_system.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
@@ -169,6 +170,8 @@ class Simulation : public AnySimulation {
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   VectorX u_, face_mass_, face_density_, pressure_;
   PcgSettings pcg_settings_;
+  /// The preconditioner and initial guess of the solve_stokes calls (solver.preconditioner).
+  StokesSolveOptions stokes_options() const;
   // time and statistics
   int frame_ = 0;
   double time_ = 0.0;

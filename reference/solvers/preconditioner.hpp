@@ -9,9 +9,22 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/core/enum_names.hpp"
 #include "reference/solvers/linear_operator.hpp"
 
 namespace monolith {
+
+/// `solver.preconditioner` of a scene: the PCG preconditioner of the liquid's unified solves.
+/// "multigrid" (the default, SceneDesc's SolverSpec): the block preconditioner of eq. (8) built
+/// on the Woodbury identity and multigrid V-cycles (reference/fluid/stokes_preconditioner.hpp);
+/// "ssor": the paper's SSOR of section 4.3, which reproduces the paper's iteration counts.
+enum class PreconditionerKind { multigrid, ssor };
+
+template <>
+struct EnumNames<PreconditionerKind> {
+  static constexpr std::array<std::pair<PreconditionerKind, const char*>, 2> values{
+      {{PreconditionerKind::multigrid, "multigrid"}, {PreconditionerKind::ssor, "ssor"}}};
+};
 
 class Preconditioner {
  public:
