@@ -5,8 +5,8 @@
 /// docs/preconditioners.md. In short, with the factors of reference/fluid/velocity_operator.hpp
 /// (A = B^T C B + blkdiag(K, 0)) and a positive diagonal Pi on the pressure block:
 ///
-///   A' = A + blkdiag(0, Pi),   A'^-1 = D^-1 - D^-1 B^T V^-1 B D^-1   (Woodbury, D = blkdiag(K, Pi))
-///   A^-1 = A'^-1 + A'^-1 E Pi S Pi E^T A'^-1,   S = (Pi - E^T A'^-1 E... )^-1 = Sigma_pi^-1
+///   A' = A + blkdiag(0, Pi),   A'^-1 = D^-1 - D^-1 B^T V^-1 B D^-1   (Woodbury, D = blkdiag(K, Pi))   [(P2)]
+///   A^-1 = A'^-1 + A'^-1 E Pi S Pi E^T A'^-1,   S = (Pi - Pi E^T A'^-1 E Pi)^-1 = Sigma_pi^-1
 ///
 /// (E the pressure rows, Sigma_pi = B_p^T V^-1 B_p the pressure Schur complement of the velocity
 /// form, Sigma_pi^-1 = Sigma^-1 + Pi^-1). The preconditioner applies the right-hand sides with

@@ -1,6 +1,7 @@
 #pragma once
 /// \file velocity_operator.hpp
-/// The factors of the Stokes system of eq. (8) and the velocity-space operator built from them,
+/// The factors of the Stokes system of eq. (8) and the velocity-space operator built from them
+/// ((P1) and (P3) of docs/preconditioners.md),
 /// the pieces of the (tau, p) preconditioner (reference/fluid/stokes_preconditioner.hpp,
 /// docs/preconditioners.md).
 ///
