@@ -872,39 +872,6 @@ double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
 }
 
 template <int Dim>
-StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
-                               StokesUnknowns unknowns, StressForm form,
-                               Backend backend, const PcgSettings& settings,
-                               VectorX& u) {
-  StokesSolveResult result;
-  const StressLayout<Dim> layout(StressGrid<Dim>(grid), form);
-  // line 7: active DOFs
-  const StokesDofs dofs = select_stokes_dofs(grid, layout, w, dt, unknowns);
-  result.stress_dofs = dofs.num_stress();
-  result.pressure_dofs = dofs.num_pressure();
-  VectorX x = VectorX::Zero(dofs.size());
-  // lines 8-10: assemble (or set up the stencils) and solve
-  switch (backend) {
-    case Backend::explicit_matrices: {
-      const ExplicitStokesSystem sys = assemble_explicit_stokes(grid, layout, w, dofs, dt, u);
-      const SparseMatrixOperator op(sys.A, dofs.null_space);
-      result.pcg = pcg_solve(op, sys.b, x, settings);
-      break;
-    }
-    case Backend::matrix_free: {
-      const MatrixFreeStokesOperator<Dim> op(grid, layout, w, dofs, dt);
-      result.pcg = pcg_solve(op, op.rhs(u), x, settings);
-      break;
-    }
-  }
-  // line 11: velocity update
-  result.stress = scatter_stress(layout, dofs, x);
-  result.pressure = scatter_stokes_pressure(dofs, x, grid.num_cells());
-  apply_stokes_update(grid, layout, w, dt, result.pressure, result.stress, u);
-  return result;
-}
-
-template <int Dim>
 StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
                                      const VectorX& liquid_phi,
                                      const std::array<BoundaryType, 2 * Dim>& boundary,
@@ -941,10 +908,7 @@ StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& so
   template VectorX scatter_stress<D>(const StressLayout<D>&, const StokesDofs&, const VectorX&); \
   template double stokes_energy<D>(const MacGrid<D>&, const StressLayout<D>&,                    \
                                    const StokesWeights&, const StokesDofs&, double,              \
-                                   const VectorX&, const VectorX&);                              \
-  template StokesSolveResult solve_stokes<D>(const MacGrid<D>&, const StokesWeights&, double,    \
-                                             StokesUnknowns, StressForm, Backend,     \
-                                             const PcgSettings&, VectorX&);
+                                   const VectorX&, const VectorX&);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

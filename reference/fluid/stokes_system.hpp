@@ -258,12 +258,38 @@ struct StokesSolveResult {
   int pressure_dofs = 0, stress_dofs = 0;
 };
 
+struct StokesPreconditionerOptions;  // reference/fluid/stokes_preconditioner.hpp
+
+/// How solve_stokes preconditions and starts its PCG (the defaults: the paper's SSOR from zero).
+struct StokesSolveOptions {
+  /// `solver.preconditioner`: the paper's SSOR (section 4.3) or the block multigrid
+  /// preconditioner of reference/fluid/stokes_preconditioner.hpp (docs/preconditioners.md).
+  PreconditionerKind preconditioner = PreconditionerKind::ssor;
+  /// The multigrid preconditioner's parameters (nullptr: StokesPreconditionerOptions{}).
+  const StokesPreconditionerOptions* multigrid = nullptr;
+  /// Warm start: the initial (tau, p) read from these fields where the unknowns exist (a full
+  /// StressGrid stress field, a cell pressure field; nullptr or a field of another size: zero).
+  /// The solve still stops at settings.tolerance; only the starting residual changes.
+  const VectorX* initial_stress = nullptr;
+  const VectorX* initial_pressure = nullptr;
+};
+
 /// Lines 7-11 of Algorithm 1 for the Stokes problem: select DOFs, build (assembled matrices or
-/// stencils, by `backend`), SSOR-PCG, update u (which enters as u*).
+/// stencils, by `backend`), PCG with the preconditioner of `options` (SSOR by default) from the
+/// initial guess of `options` (zero by default), update u (which enters as u*). Defined in
+/// stokes_solve.cpp.
 template <int Dim>
 StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
                                StokesUnknowns unknowns, StressForm form,
                                Backend backend, const PcgSettings& settings,
-                               VectorX& u);
+                               VectorX& u, const StokesSolveOptions& options = {});
+
+/// The unknown vector x = (tau, p) of `dofs` read from a full stress field (StressGrid
+/// numbering; a layout unknown takes its DOF's value) and a cell pressure field; a field of
+/// another size gives zeros (the inverse of scatter_stress / scatter_stokes_pressure on the
+/// active unknowns).
+template <int Dim>
+VectorX gather_stokes_unknowns(const StressLayout<Dim>& layout, const StokesDofs& dofs,
+                               const VectorX& stress_full, const VectorX& pressure_cells);
 
 }  // namespace monolith

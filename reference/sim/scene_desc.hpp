@@ -18,6 +18,7 @@
 #include "reference/grid/boundary.hpp"
 #include "reference/rigid/body_spec.hpp"
 #include "reference/solvers/backend.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -63,6 +64,14 @@ struct SolverSpec {
   int max_iterations = 2000;
   int staggered_iterations = 2;
   Backend backend = Backend::matrix_free;
+  /// The preconditioner of the liquid's unified solves without bodies (eq. (8) in (tau, p), the
+  /// stress-only viscosity solve of PC-VC-PC): "multigrid" (default) or the paper's "ssor"
+  /// (docs/preconditioners.md). The pressure-only solves and the coupled systems (24)/(26) with
+  /// bodies keep SSOR.
+  PreconditionerKind preconditioner = PreconditionerKind::multigrid;
+  /// Start each unified / viscosity solve from the previous step's stress and pressure (with the
+  /// multigrid preconditioner only; SSOR keeps the paper's zero start). Not a scene key.
+  bool stokes_warm_start = false;
   double baumgarte = 0.2;
   double contact_margin = 0.1;  ///< epsilon of section 3.2.4, in units of dx
   double shrink = 0.01;         ///< zeta of section 4.4.6, in units of dx

@@ -587,6 +587,17 @@ void Simulation<Dim>::solve_coupled(double dt) {
 }
 
 template <int Dim>
+StokesSolveOptions Simulation<Dim>::stokes_options() const {
+  StokesSolveOptions o;
+  o.preconditioner = scene_.solver.preconditioner;
+  if (o.preconditioner != PreconditionerKind::ssor && scene_.solver.stokes_warm_start) {
+    o.initial_stress = &stress_;
+    o.initial_pressure = &pressure_;
+  }
+  return o;
+}
+
+template <int Dim>
 void Simulation<Dim>::solve_liquid(double dt) {
   // the state between the solves of the sequence (solve_stokes / solve_pressure update u)
   struct State {
@@ -612,7 +623,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     State out = from;
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                     backend, pcg_settings_, out.u);
+                     backend, pcg_settings_, out.u, stokes_options());
     record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
     out.pressure = solve.pressure;
     out.stress = solve.stress;
@@ -624,7 +635,8 @@ void Simulation<Dim>::solve_liquid(double dt) {
     w.viscosity = eta ? *eta : stress_eta_;
     State out = from;
     const StokesSolveResult solve = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
-                                                 StressForm::full, backend, pcg_settings_, out.u);
+                                                 StressForm::full, backend, pcg_settings_, out.u,
+                                                 stokes_options());
     record_solve(solve.pcg, 0, solve.stress_dofs, "viscosity");
     out.stress = solve.stress;
     return out;

@@ -18,6 +18,7 @@
 #include "reference/coupling/system_export.hpp"
 #include "reference/fluid/herschel_bulkley.hpp"
 #include "reference/fluid/pressure_projection.hpp"
+#include "reference/fluid/stokes_system.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
@@ -285,6 +286,8 @@ class Simulation : public AnySimulation {
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
   VectorX u_, face_mass_, face_density_, pressure_, stress_;
   PcgSettings pcg_settings_;
+  /// The preconditioner and initial guess of the solve_stokes calls (solver.preconditioner).
+  StokesSolveOptions stokes_options() const;
   // time and statistics
   int frame_ = 0;
   double time_ = 0.0;

@@ -21,8 +21,14 @@ void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, do
   a.backward_sweep(r, z, omega, active);
 }
 
-PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
+PcgResult pcg_solve(const LinearOperator& a, const VectorX& b, VectorX& x,
                     const PcgSettings& settings) {
+  if (!settings.precondition) return pcg_solve(a, b, x, settings, IdentityPreconditioner(a.size()));
+  return pcg_solve(a, b, x, settings, SsorPreconditioner(a, settings.omega));
+}
+
+PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
+                    const PcgSettings& settings, const Preconditioner& m) {
   PcgResult result;
   const int n = a.size();
   const auto& null_space = a.null_space();
@@ -50,10 +56,7 @@ PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
   r = b - ap;
   project_out(null_space, r);
   auto precondition = [&](const VectorX& res, VectorX& out) {
-    if (settings.precondition)
-      ssor_precondition(a, res, out, settings.omega);
-    else
-      out = res;
+    m.apply(res, out);
     project_out(null_space, out);
   };
   result.relative_residual = inf_norm(r) / b_norm;

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "reference/solvers/linear_operator.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -36,5 +37,9 @@ void ssor_precondition(const LinearOperator& a, const VectorX& r, VectorX& z, do
 /// so singular but consistent systems (enclosed liquid) converge to the minimum-norm solution.
 PcgResult pcg_solve(const LinearOperator& a, const VectorX& b, VectorX& x,
                     const PcgSettings& settings);
+
+/// The same with the preconditioner `m` (settings.omega and settings.precondition are not read).
+PcgResult pcg_solve(const LinearOperator& a, const VectorX& b, VectorX& x,
+                    const PcgSettings& settings, const Preconditioner& m);
 
 }  // namespace monolith

@@ -81,6 +81,7 @@ const BadCase kBadCases[] = {
     {2, R"({"solver": {"tolerence": 1e-6}})", "solver.tolerence"},
     {2, R"({"solver": {"scheme": "PVC"}})", "solver.scheme"},
     {2, R"({"solver": {"backend": "gpu"}})", "solver.backend"},
+    {2, R"({"solver": {"preconditioner": "amg"}})", "solver.preconditioner"},
     {2, R"({"solver": {"max_iterations": 0}})", "solver.max_iterations"},
     {2, R"({"solver": {"contact_margin": -0.1}})", "solver.contact_margin"},
     // particles and render
@@ -345,7 +346,7 @@ TEST_CASE("every key, shape type and enum value is accepted", "[unit]") {
     "gravity": [0, -9.81, 0],
     "time": {"fps": 30, "frames": 0, "cfl": 1.0, "max_dt": 0.01},
     "solver": {"scheme": "PC-unified", "backend": "explicit", "tolerance": 1e-8, "max_iterations": 10,
-      "staggered_iterations": 3, "baumgarte": 0.1, "contact_margin": 0.2, "shrink": 0.02, "diagonal_boost": 0},
+      "staggered_iterations": 3, "preconditioner": "ssor", "baumgarte": 0.1, "contact_margin": 0.2, "shrink": 0.02, "diagonal_boost": 0},
     "particles": {"per_cell": 27, "seed": 42, "position_correction": false},
     "liquids": [
       {"name": "hb", "shape": {"type": "bunny", "center": [0.5, 0.5, 0.5], "size": 0.3, "rotation": [0, 1, 0]},
@@ -398,6 +399,7 @@ TEST_CASE("every key, shape type and enum value is accepted", "[unit]") {
   CHECK(s.render.color_by == ColorBy::viscosity);
   CHECK(s.solver.scheme == CouplingScheme::pc_unified);
   CHECK(s.solver.backend == Backend::explicit_matrices);
+  CHECK(s.solver.preconditioner == PreconditionerKind::ssor);
 
   // every enum value, in 2D and 3D
   for (int dim : {2, 3}) {

@@ -1,0 +1,86 @@
+#pragma once
+/// \file stokes_preconditioner.hpp
+/// The block preconditioner of the unified pressure-viscosity system of eq. (8) (the (tau, p)
+/// blocks of eq. (24)); the derivation and the measured comparison with the alternatives are in
+/// docs/preconditioners.md. In short, with the factors of reference/fluid/velocity_operator.hpp
+/// (A = B^T C B + blkdiag(K, 0)) and a positive diagonal Pi on the pressure block:
+///
+///   A' = A + blkdiag(0, Pi),   A'^-1 = D^-1 - D^-1 B^T V^-1 B D^-1   (Woodbury, D = blkdiag(K, Pi))   [(P2)]
+///   A^-1 = A'^-1 + A'^-1 E Pi S Pi E^T A'^-1,   S = (Pi - Pi E^T A'^-1 E Pi)^-1 = Sigma_pi^-1
+///
+/// (E the pressure rows, Sigma_pi = B_p^T V^-1 B_p the pressure Schur complement of the velocity
+/// form, Sigma_pi^-1 = Sigma^-1 + Pi^-1). The preconditioner applies the right-hand sides with
+/// V^-1 replaced by multigrid V-cycles and S by a Cahouet-Chabard-type approximation
+/// (Poisson multigrid plus a viscosity-weighted diagonal), and wraps the result in SOR sweeps of
+/// A itself (a symmetric two-level composition): SPD for any choice of its parts.
+
+#include <memory>
+#include <string>
+
+#include "reference/core/common.hpp"
+#include "reference/fluid/mac_hierarchy.hpp"
+#include "reference/fluid/velocity_operator.hpp"
+#include "reference/solvers/linear_operator.hpp"
+#include "reference/grid/mac_grid.hpp"
+#include "reference/solvers/multigrid.hpp"
+#include "reference/solvers/preconditioner.hpp"
+
+namespace monolith {
+
+struct StokesPreconditionerOptions {
+  double penalty_factor = 3.0;       ///< gamma: Pi^-1 = gamma (eta / W_L^p + 1 / A22_ii)
+  double min_fluid_fraction = 0.01;  ///< W_F^s floor in the preconditioner's K
+  int velocity_cycles = 1;           ///< V-cycles per solve with V
+  int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
+  int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
+  double omega = 1.0;                ///< their relaxation
+  bool schur_correction = false;     ///< the second term (needed unless eta dt / (rho dx^2) >> 1)
+  bool additive_pressure = true;     ///< instead of the second term: + E A22^-1 E^T (one V solve less)
+  int inner_cg = 0;                  ///< > 0: V^-1 by this many multigrid-preconditioned CG steps (nonlinear: flexible outer CG)
+  double schur_viscous_factor = 0.5; ///< S ~ A22^-1 + Pi^-1 + factor eta / W_L^p
+  bool element_patches = true;       ///< stress-element patches on the finest velocity level
+  int max_coarse = 1500;             ///< multigrid coarsest-level size
+  bool transverse_linear = true;     ///< MacMultigridOptions::transverse_linear of the velocity levels
+  bool fine_cell_patches = true;     ///< MacMultigridOptions::fine_cell_patches
+};
+
+/// The preconditioner over the unknowns (tau, p) of StokesDofs. Holds a reference to `a` (the
+/// system operator, whose SOR sweeps it uses; explicit or matrix-free); everything else it owns.
+/// apply allocates nothing; one object must not run two applications at once.
+template <int Dim>
+class StokesPreconditioner : public Preconditioner {
+ public:
+  StokesPreconditioner(const MacGrid<Dim>& grid, const LinearOperator& a, StokesFactors factors,
+                       const StokesPreconditionerOptions& options = {});
+  int size() const override { return n_; }
+  void apply(const VectorX& r, VectorX& z) const override;
+  std::string name() const override { return "block"; }
+
+  const StokesFactors& factors() const { return f_; }
+  const Multigrid& velocity_multigrid() const { return velocity_; }
+  const Multigrid& pressure_multigrid() const { return pressure_; }
+  /// Pi per pressure unknown.
+  const VectorX& penalty() const { return penalty_; }
+  /// y = A'^-1 g with the V-cycles in place of V^-1 (the first term above).
+  void apply_penalised_inverse(const VectorX& g, VectorX& y) const;
+  /// Bytes held (factors, hierarchies, scratch).
+  std::size_t memory_bytes() const;
+
+ private:
+  void apply_two_term(const VectorX& r, VectorX& z) const;
+
+  const LinearOperator& a_;
+  StokesFactors f_;
+  StokesPreconditionerOptions options_;
+  int n_ = 0, ns_ = 0, np_ = 0, nf_ = 0;
+  SparseMatrix kinv_;       ///< K^-1 (stress unknowns)
+  VectorX penalty_;         ///< Pi
+  VectorX schur_diagonal_;  ///< Pi^-1 + factor eta / W_L^p
+  Multigrid velocity_, pressure_;
+  bool pressure_only_ = false;
+  // scratch
+  mutable VectorX ir_, iz_, ip_, iap_;
+  mutable VectorX h_, face_, v_, back_, y1_, y2_, e_, s_, w_, res_, d_, az_;
+};
+
+}  // namespace monolith

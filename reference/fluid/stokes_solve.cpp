@@ -1,0 +1,91 @@
+/// \file stokes_solve.cpp
+/// solve_stokes (declared in stokes_system.hpp): lines 7-11 of Algorithm 1 for the unified
+/// pressure-viscosity system of eq. (8) / the stress-only system, on either back end, with the
+/// paper's SSOR or the block multigrid preconditioner (stokes_preconditioner.hpp) and an optional
+/// initial guess (warm start).
+
+#include <memory>
+#include <optional>
+
+#include "reference/fluid/stokes_preconditioner.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/fluid/velocity_operator.hpp"
+
+namespace monolith {
+
+template <int Dim>
+VectorX gather_stokes_unknowns(const StressLayout<Dim>& layout, const StokesDofs& dofs,
+                               const VectorX& stress_full, const VectorX& pressure_cells) {
+  VectorX x = VectorX::Zero(dofs.size());
+  if (stress_full.size() == layout.grid().num_dofs())
+    for (int i = 0; i < dofs.num_stress(); ++i)
+      x[i] = stress_full[layout.dof_of_unknown(dofs.unknown_of_dof[i])];
+  if (pressure_cells.size() > 0)
+    for (int k = 0; k < dofs.num_pressure(); ++k) {
+      const int cell = dofs.pressure.cell_of_dof[k];
+      if (cell < pressure_cells.size()) x[dofs.num_stress() + k] = pressure_cells[cell];
+    }
+  return x;
+}
+
+template <int Dim>
+StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w, double dt,
+                               StokesUnknowns unknowns, StressForm form, Backend backend,
+                               const PcgSettings& settings, VectorX& u,
+                               const StokesSolveOptions& options) {
+  StokesSolveResult result;
+  const StressLayout<Dim> layout(StressGrid<Dim>(grid), form);
+  // line 7: active DOFs
+  const StokesDofs dofs = select_stokes_dofs(grid, layout, w, dt, unknowns);
+  result.stress_dofs = dofs.num_stress();
+  result.pressure_dofs = dofs.num_pressure();
+  const VectorX empty;
+  VectorX x = gather_stokes_unknowns(layout, dofs, options.initial_stress ? *options.initial_stress : empty,
+                                     options.initial_pressure ? *options.initial_pressure : empty);
+  // lines 8-10: assemble (or set up the stencils), precondition, solve
+  std::optional<ExplicitStokesSystem> sys;
+  std::unique_ptr<LinearOperator> op;
+  VectorX b;
+  switch (backend) {
+    case Backend::explicit_matrices:
+      sys = assemble_explicit_stokes(grid, layout, w, dofs, dt, u);
+      op = std::make_unique<SparseMatrixOperator>(sys->A, dofs.null_space);
+      b = sys->b;
+      break;
+    case Backend::matrix_free: {
+      auto mf = std::make_unique<MatrixFreeStokesOperator<Dim>>(grid, layout, w, dofs, dt);
+      b = mf->rhs(u);
+      op = std::move(mf);
+      break;
+    }
+  }
+  if (options.preconditioner == PreconditionerKind::ssor || dofs.size() == 0) {
+    result.pcg = pcg_solve(*op, b, x, settings);
+  } else {
+    const StokesPreconditionerOptions mg = options.multigrid ? *options.multigrid : StokesPreconditionerOptions{};
+    const double floor = mg.min_fluid_fraction;
+    StokesFactors f = sys ? stokes_factors(grid, layout, w, dofs, dt, *sys, floor)
+                          : stokes_factors(grid, layout, w, dofs, dt,
+                                           static_cast<const MatrixFreeStokesOperator<Dim>&>(*op), floor);
+    const StokesPreconditioner<Dim> m(grid, *op, std::move(f), mg);
+    result.pcg = pcg_solve(*op, b, x, settings, m);
+  }
+  // line 11: velocity update
+  result.stress = scatter_stress(layout, dofs, x);
+  result.pressure = scatter_stokes_pressure(dofs, x, grid.num_cells());
+  apply_stokes_update(grid, layout, w, dt, result.pressure, result.stress, u);
+  return result;
+}
+
+#define MONOLITH_INSTANTIATE(D)                                                                  \
+  template VectorX gather_stokes_unknowns<D>(const StressLayout<D>&, const StokesDofs&,          \
+                                             const VectorX&, const VectorX&);                   \
+  template StokesSolveResult solve_stokes<D>(const MacGrid<D>&, const StokesWeights&, double,    \
+                                             StokesUnknowns, StressForm, Backend,                \
+                                             const PcgSettings&, VectorX&,                       \
+                                             const StokesSolveOptions&);
+MONOLITH_INSTANTIATE(2)
+MONOLITH_INSTANTIATE(3)
+#undef MONOLITH_INSTANTIATE
+
+}  // namespace monolith

@@ -1,0 +1,301 @@
+#include "reference/fluid/velocity_operator.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <array>
+#include <stdexcept>
+
+namespace monolith {
+
+namespace {
+
+constexpr int kParallelRows = 4096;
+
+/// The StressGrid DOF of the eliminated component in the cell of diagonal DOF d of component k.
+template <int Dim>
+int eliminated_dof(const StressGrid<Dim>& stress, int k, int d) {
+  return stress.offset(Dim - 1) + (d - stress.offset(k));
+}
+
+/// Pressure data and stress elements shared by both builders.
+template <int Dim>
+void fill_common(const StressLayout<Dim>& layout, const StokesWeights& w, const StokesDofs& dofs,
+                 double min_fluid_fraction, StokesFactors& f) {
+  const StressGrid<Dim>& stress = layout.grid();
+  f.num_stress = dofs.num_stress();
+  f.num_pressure = dofs.num_pressure();
+  f.compliance = stress_compliance(layout, dofs, w, min_fluid_fraction);
+  f.pressure_cell = dofs.pressure.cell_of_dof;
+  f.pressure_liquid.resize(f.num_pressure);
+  f.pressure_viscosity.resize(f.num_pressure);
+  for (int k = 0; k < f.num_pressure; ++k) {
+    const int cell = f.pressure_cell[k];
+    f.pressure_liquid[k] = w.pressure.liquid_cell[cell];
+    f.pressure_viscosity[k] = w.viscosity.size() ? w.viscosity[stress.offset(0) + cell] : 0.0;
+  }
+  // elements: the diagonal unknowns of a cell together in the 3D reduced form, else one each
+  const bool pair = Dim == 3 && layout.form() == StressForm::reduced;
+  std::vector<int> element_of(f.num_stress, -1);
+  for (int i = 0; i < f.num_stress; ++i) {
+    if (element_of[i] >= 0) continue;
+    const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);
+    const auto [k, c] = stress.coord(d);
+    std::vector<int> members{i};
+    if (pair && k == 0) {
+      // the yy unknown of the same cell
+      const int yy = layout.unknown_of_dof(stress.offset(1) + (d - stress.offset(0)));
+      const int j = yy >= 0 ? dofs.dof_of_unknown[yy] : -1;
+      if (j >= 0) members.push_back(j);
+    } else if (pair && k == 1) {
+      const int xx = layout.unknown_of_dof(stress.offset(0) + (d - stress.offset(1)));
+      const int j = xx >= 0 ? dofs.dof_of_unknown[xx] : -1;
+      if (j >= 0) continue;  // grouped with its xx unknown
+    }
+    for (int m : members) element_of[m] = static_cast<int>(f.element_unknowns.size());
+    f.element_unknowns.push_back(members);
+    f.element_component.push_back(k);
+    VecI<3> coord = VecI<3>::Zero();
+    for (int a = 0; a < Dim; ++a) coord[a] = c[a];
+    f.element_coord.push_back(coord);
+  }
+}
+
+/// B^T from its columns and the active faces: b_transpose row i = column i of B restricted to
+/// the active faces (mapped through active_of_face), b its transpose.
+void finish_b(std::vector<Triplet>& columns, int n, StokesFactors& f) {
+  f.b_transpose.resize(n, static_cast<int>(f.face.size()));
+  f.b_transpose.setFromTriplets(columns.begin(), columns.end());
+  f.b_transpose.makeCompressed();
+  f.b = f.b_transpose.transpose();
+  f.b.makeCompressed();
+}
+
+}  // namespace
+
+template <int Dim>
+SparseMatrix stress_compliance(const StressLayout<Dim>& layout, const StokesDofs& dofs,
+                               const StokesWeights& w, double min_fluid_fraction) {
+  const StressGrid<Dim>& stress = layout.grid();
+  const int n = dofs.num_stress();
+  auto h = [&](int d) {
+    const double wf = w.fluid_stress[d] > 0.0 ? std::max(w.fluid_stress[d], min_fluid_fraction) : 0.0;
+    return 0.5 * StressGrid<Dim>::multiplicity(stress.coord(d).first) *
+           reciprocal_or_zero(w.viscosity[d]) * wf * w.liquid_stress[d];
+  };
+  std::vector<Triplet> t;
+  t.reserve(2 * n);
+  const bool reduced = layout.form() == StressForm::reduced;
+  for (int i = 0; i < n; ++i) {
+    const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);
+    const int k = stress.coord(d).first;
+    double self = h(d);
+    if (reduced && StressGrid<Dim>::is_diagonal(k)) {
+      const int e = eliminated_dof(stress, k, d);
+      self += h(e);
+      if constexpr (Dim == 3) {
+        // the other diagonal unknown of the cell couples through the eliminated DOF (E^T N^-1 E)
+        const int other = stress.offset(1 - k) + (d - stress.offset(k));
+        const int u = layout.unknown_of_dof(other);
+        const int j = u >= 0 ? dofs.dof_of_unknown[u] : -1;
+        if (j >= 0) t.emplace_back(i, j, h(e));
+      }
+    }
+    t.emplace_back(i, i, self);
+  }
+  SparseMatrix kmat(n, n);
+  kmat.setFromTriplets(t.begin(), t.end());
+  kmat.makeCompressed();
+  return kmat;
+}
+
+template <int Dim>
+StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                             const StokesWeights& w, const StokesDofs& dofs, double dt,
+                             const ExplicitStokesSystem& s, double min_fluid_fraction) {
+  (void)grid;
+  StokesFactors f;
+  fill_common(layout, w, dofs, min_fluid_fraction, f);
+  // C = dt W_F^u P^-1 (W_L^u)^-1 and its active faces
+  const VectorX c_all = dt * VectorX(s.W_F_u.diagonal().cwiseProduct(s.P_inv.diagonal())
+                                          .cwiseProduct(s.W_L_u_inv.diagonal()));
+  std::vector<int> active_of_face(c_all.size(), -1);
+  for (int face = 0; face < c_all.size(); ++face)
+    if (c_all[face] > 0.0) {
+      active_of_face[face] = static_cast<int>(f.face.size());
+      f.face.push_back(face);
+    }
+  f.c.resize(f.face.size());
+  for (std::size_t q = 0; q < f.face.size(); ++q) f.c[q] = c_all[f.face[q]];
+  // B = [D^T M W_L^s E S_tau^T, G W_L^p S_p^T] by their paper names, as B^T row by row
+  const SparseMatrix bt_stress =
+      SparseMatrix(s.S_tau * SparseMatrix(s.E.transpose())) * SparseMatrix(s.W_L_s * s.M * s.D);
+  const SparseMatrix bt_pressure = s.S_p.rows() > 0
+                                       ? SparseMatrix(SparseMatrix(s.S_p * s.W_L_p) * SparseMatrix(s.G.transpose()))
+                                       : SparseMatrix(0, c_all.size());
+  std::vector<Triplet> t;
+  for (int i = 0; i < bt_stress.outerSize(); ++i)
+    for (SparseMatrix::InnerIterator it(bt_stress, i); it; ++it)
+      if (active_of_face[it.col()] >= 0 && it.value() != 0.0) t.emplace_back(i, active_of_face[it.col()], it.value());
+  for (int i = 0; i < bt_pressure.outerSize(); ++i)
+    for (SparseMatrix::InnerIterator it(bt_pressure, i); it; ++it)
+      if (active_of_face[it.col()] >= 0 && it.value() != 0.0)
+        t.emplace_back(f.num_stress + i, active_of_face[it.col()], it.value());
+  finish_b(t, f.size(), f);
+  return f;
+}
+
+template <int Dim>
+StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                             const StokesWeights& w, const StokesDofs& dofs, double dt,
+                             const MatrixFreeStokesOperator<Dim>& op, double min_fluid_fraction) {
+  (void)dt;
+  StokesFactors f;
+  fill_common(layout, w, dofs, min_fluid_fraction, f);
+  const VectorX& c_all = op.face_coefficients();
+  std::vector<int> active_of_face(grid.num_faces(), -1);
+  for (int face = 0; face < c_all.size(); ++face)
+    if (c_all[face] > 0.0) {
+      active_of_face[face] = static_cast<int>(f.face.size());
+      f.face.push_back(face);
+    }
+  f.c.resize(f.face.size());
+  for (std::size_t q = 0; q < f.face.size(); ++q) f.c[q] = c_all[f.face[q]];
+  // the columns of B from the operator's stencils, per unknown (parallel, merged in order)
+  const int n = f.size();
+  std::vector<std::vector<std::pair<int, double>>> columns(n);
+#pragma omp parallel for schedule(static) if (n > kParallelRows)
+  for (int i = 0; i < n; ++i) columns[i] = op.stencil(i);
+  std::vector<Triplet> t;
+  t.reserve(static_cast<std::size_t>(n) * 2 * Dim);
+  for (int i = 0; i < n; ++i)
+    for (const auto& [face, coef] : columns[i])
+      if (active_of_face[face] >= 0 && coef != 0.0) t.emplace_back(i, active_of_face[face], coef);
+  finish_b(t, n, f);
+  return f;
+}
+
+SparseMatrix block_diagonal_inverse(const SparseMatrix& k) {
+  const int n = static_cast<int>(k.rows());
+  std::vector<Triplet> t;
+  t.reserve(k.nonZeros());
+  std::vector<char> done(n, 0);
+  for (int i = 0; i < n; ++i) {
+    if (done[i]) continue;
+    std::array<int, 3> member{};
+    int m = 0;
+    for (SparseMatrix::InnerIterator it(k, i); it; ++it) {
+      if (m == 3) throw std::invalid_argument("block_diagonal_inverse: a block larger than 3");
+      member[m++] = static_cast<int>(it.col());
+    }
+    if (m == 0) continue;
+    Eigen::Matrix3d block = Eigen::Matrix3d::Identity();
+    for (int a = 0; a < m; ++a)
+      for (int b = 0; b < m; ++b) block(a, b) = k.coeff(member[a], member[b]);
+    const Eigen::Matrix3d inv = block.inverse();
+    for (int a = 0; a < m; ++a) {
+      done[member[a]] = 1;
+      for (int b = 0; b < m; ++b) t.emplace_back(member[a], member[b], 0.5 * (inv(a, b) + inv(b, a)));
+    }
+  }
+  SparseMatrix r(n, n);
+  r.setFromTriplets(t.begin(), t.end());
+  r.makeCompressed();
+  return r;
+}
+
+SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
+  const int nf = static_cast<int>(f.face.size());
+  const int ns = f.num_stress;
+  if (penalty.size() != f.num_pressure)
+    throw std::invalid_argument("velocity_operator: one penalty per pressure unknown expected");
+  const SparseMatrix kinv = block_diagonal_inverse(f.compliance);
+  // D^-1 per unknown as (column, value) lists: K^-1 blocks, then 1/penalty
+  auto dinv_row = [&](int i, const auto& visit) {
+    if (i < ns) {
+      for (SparseMatrix::InnerIterator it(kinv, i); it; ++it) visit(static_cast<int>(it.col()), it.value());
+    } else {
+      visit(i, 1.0 / penalty[i - ns]);
+    }
+  };
+  // rows in parallel into per-row lists, then CSR
+  std::vector<std::vector<std::pair<int, double>>> rows(nf);
+  const int* b_outer = f.b.outerIndexPtr();
+  const int* b_inner = f.b.innerIndexPtr();
+  const double* b_value = f.b.valuePtr();
+  const int* t_outer = f.b_transpose.outerIndexPtr();
+  const int* t_inner = f.b_transpose.innerIndexPtr();
+  const double* t_value = f.b_transpose.valuePtr();
+#pragma omp parallel for schedule(static) if (nf > kParallelRows)
+  for (int r = 0; r < nf; ++r) {
+    std::vector<std::pair<int, double>>& row = rows[r];
+    row.clear();
+    row.emplace_back(r, 1.0 / f.c[r]);
+    for (int q = b_outer[r]; q < b_outer[r + 1]; ++q) {
+      const int i = b_inner[q];
+      const double bri = b_value[q];
+      dinv_row(i, [&](int j, double dij) {
+        const double s = bri * dij;
+        for (int p = t_outer[j]; p < t_outer[j + 1]; ++p) {
+          const int g = t_inner[p];
+          const double v = s * t_value[p];
+          auto it = std::find_if(row.begin(), row.end(), [g](const auto& e) { return e.first == g; });
+          if (it == row.end())
+            row.emplace_back(g, v);
+          else
+            it->second += v;
+        }
+      });
+    }
+    std::sort(row.begin(), row.end());
+  }
+  std::vector<Triplet> t;
+  std::size_t nnz = 0;
+  for (const auto& row : rows) nnz += row.size();
+  t.reserve(nnz);
+  for (int r = 0; r < nf; ++r)
+    for (const auto& [g, v] : rows[r]) t.emplace_back(r, g, v);
+  SparseMatrix v(nf, nf);
+  v.setFromTriplets(t.begin(), t.end());
+  v.makeCompressed();
+  return v;
+}
+
+template <int Dim>
+ExtraPatches<Dim> stress_element_patches(const StokesFactors& f) {
+  ExtraPatches<Dim> extra;
+  const std::size_t ne = f.element_unknowns.size();
+  extra.unknowns.reserve(ne);
+  std::vector<int> faces;
+  for (std::size_t e = 0; e < ne; ++e) {
+    // a diagonal element's faces are those of its cell, whose patch the hierarchy has already
+    if (f.element_component[e] < Dim) continue;
+    faces.clear();
+    for (int i : f.element_unknowns[e])
+      for (SparseMatrix::InnerIterator it(f.b_transpose, i); it; ++it) faces.push_back(static_cast<int>(it.col()));
+    std::sort(faces.begin(), faces.end());
+    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+    if (faces.empty() || static_cast<int>(faces.size()) > PatchSet::kMaxPatchSize) continue;
+    extra.unknowns.push_back(faces);
+    VecI<Dim> pos;
+    for (int a = 0; a < Dim; ++a) pos[a] = f.element_coord[e][a];
+    extra.position.push_back(pos);
+    extra.kind.push_back(f.element_component[e]);
+  }
+  return extra;
+}
+
+#define MONOLITH_INSTANTIATE(D)                                                                   \
+  template SparseMatrix stress_compliance<D>(const StressLayout<D>&, const StokesDofs&,            \
+                                             const StokesWeights&, double);                       \
+  template StokesFactors stokes_factors<D>(const MacGrid<D>&, const StressLayout<D>&,              \
+                                           const StokesWeights&, const StokesDofs&, double,        \
+                                           const ExplicitStokesSystem&, double);                  \
+  template StokesFactors stokes_factors<D>(const MacGrid<D>&, const StressLayout<D>&,              \
+                                           const StokesWeights&, const StokesDofs&, double,        \
+                                           const MatrixFreeStokesOperator<D>&, double);           \
+  template ExtraPatches<D> stress_element_patches<D>(const StokesFactors&);
+MONOLITH_INSTANTIATE(2)
+MONOLITH_INSTANTIATE(3)
+#undef MONOLITH_INSTANTIATE
+
+}  // namespace monolith

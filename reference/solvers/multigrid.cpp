@@ -1,0 +1,264 @@
+#include "reference/solvers/multigrid.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <array>
+#include <stdexcept>
+#include <string>
+
+#include "reference/solvers/linear_operator.hpp"
+
+namespace monolith {
+
+namespace {
+
+/// Below this many rows a loop runs on one thread (a parallel region costs more than it saves).
+constexpr int kParallelRows = 4096;
+
+/// y = A x, row-parallel (one writer per entry) on large matrices.
+void product(const SparseMatrix& a, const VectorX& x, VectorX& y) {
+  const int n = static_cast<int>(a.rows());
+  y.resize(n);
+  const int* outer = a.outerIndexPtr();
+  const int* inner = a.innerIndexPtr();
+  const double* value = a.valuePtr();
+#pragma omp parallel for schedule(static) if (n > kParallelRows)
+  for (int i = 0; i < n; ++i) {
+    double s = 0.0;
+    for (int k = outer[i]; k < outer[i + 1]; ++k) s += value[k] * x[inner[k]];
+    y[i] = s;
+  }
+}
+
+/// r = b - A x, row-parallel.
+void residual(const SparseMatrix& a, const VectorX& b, const VectorX& x, VectorX& r) {
+  const int n = static_cast<int>(a.rows());
+  r.resize(n);
+  const int* outer = a.outerIndexPtr();
+  const int* inner = a.innerIndexPtr();
+  const double* value = a.valuePtr();
+#pragma omp parallel for schedule(static) if (n > kParallelRows)
+  for (int i = 0; i < n; ++i) {
+    double s = b[i];
+    for (int k = outer[i]; k < outer[i + 1]; ++k) s -= value[k] * x[inner[k]];
+    r[i] = s;
+  }
+}
+
+}  // namespace
+
+int PatchSet::add(const std::vector<int>& unknowns) {
+  if (unknowns.empty() || static_cast<int>(unknowns.size()) > kMaxPatchSize)
+    throw std::invalid_argument("PatchSet::add: a patch needs 1.." + std::to_string(kMaxPatchSize) +
+                                " unknowns, got " + std::to_string(unknowns.size()));
+  index.insert(index.end(), unknowns.begin(), unknowns.end());
+  start.push_back(static_cast<int>(index.size()));
+  return size() - 1;
+}
+
+void PatchSet::close_group(int colour) {
+  if (size() == group_start.back()) return;
+  group_start.push_back(size());
+  if (static_cast<int>(colours.size()) <= colour) colours.resize(colour + 1);
+  colours[colour].push_back(num_groups() - 1);
+}
+
+Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing)
+    : levels_(std::move(levels)), smoothing_(std::max(1, smoothing)) {
+  if (levels_.empty()) throw std::invalid_argument("Multigrid: no levels");
+  const int num = static_cast<int>(levels_.size());
+  restriction_.resize(num);
+  inverse_start_.resize(num);
+  inverse_.resize(num);
+  residual_.resize(num);
+  coarse_rhs_.resize(num);
+  coarse_x_.resize(num);
+  work_.resize(num);
+  for (int l = 0; l < num; ++l) {
+    MultigridLevel& lv = levels_[l];
+    lv.a.makeCompressed();
+    const int n = static_cast<int>(lv.a.rows());
+    if (lv.a.cols() != n) throw std::invalid_argument("Multigrid: level operator not square");
+    residual_[l].setZero(n);
+    work_[l].setZero(n);
+    if (l + 1 == num) break;
+    const int nc = static_cast<int>(levels_[l + 1].a.rows());
+    if (lv.prolongation.rows() != n || lv.prolongation.cols() != nc)
+      throw std::invalid_argument("Multigrid: prolongation of level " + std::to_string(l) +
+                                  " has the wrong shape");
+    lv.prolongation.makeCompressed();
+    restriction_[l] = lv.prolongation.transpose();
+    restriction_[l].makeCompressed();
+    coarse_rhs_[l].setZero(nc);
+    coarse_x_[l].setZero(nc);
+    // dense inverses of the patch blocks A_PP
+    const PatchSet& ps = lv.patches;
+    std::vector<int>& offset = inverse_start_[l];
+    offset.assign(ps.size() + 1, 0);
+    for (int k = 0; k < ps.size(); ++k) {
+      const int m = ps.start[k + 1] - ps.start[k];
+      offset[k + 1] = offset[k] + m * m;
+    }
+    inverse_[l].assign(offset.back(), 0.0);
+#pragma omp parallel for schedule(static) if (ps.size() > 1024)
+    for (int k = 0; k < ps.size(); ++k) {
+      const int* idx = ps.index.data() + ps.start[k];
+      const int m = ps.start[k + 1] - ps.start[k];
+      Eigen::MatrixXd block(m, m);
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; j < m; ++j) block(i, j) = lv.a.coeff(idx[i], idx[j]);
+      Eigen::LDLT<Eigen::MatrixXd> ldlt(block);
+      Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(m, m));
+      inv = 0.5 * (inv + inv.transpose()).eval();  // exactly symmetric
+      double* out = inverse_[l].data() + offset[k];
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; j < m; ++j) out[i * m + j] = inv(i, j);
+    }
+    for (double v : inverse_[l])
+      if (!std::isfinite(v)) throw std::invalid_argument("Multigrid: singular patch block");
+  }
+  coarse_ = std::make_unique<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>>();
+  coarse_->compute(Eigen::SparseMatrix<double>(levels_.back().a));
+  if (coarse_->info() != Eigen::Success)
+    throw std::invalid_argument("Multigrid: the coarsest operator could not be factored");
+}
+
+void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const {
+  const MultigridLevel& lv = levels_[l];
+  const PatchSet& ps = lv.patches;
+  const int* outer = lv.a.outerIndexPtr();
+  const int* inner = lv.a.innerIndexPtr();
+  const double* value = lv.a.valuePtr();
+  const double* inverse = inverse_[l].data();
+  const int* offset = inverse_start_[l].data();
+  double* xs = x.data();
+  auto relax = [&](int k) {
+    const int* idx = ps.index.data() + ps.start[k];
+    const int m = ps.start[k + 1] - ps.start[k];
+    std::array<double, PatchSet::kMaxPatchSize> r;
+    for (int i = 0; i < m; ++i) {
+      const int row = idx[i];
+      double s = b[row];
+      for (int q = outer[row]; q < outer[row + 1]; ++q) s -= value[q] * xs[inner[q]];
+      r[i] = s;
+    }
+    const double* inv = inverse + offset[k];
+    for (int i = 0; i < m; ++i) {
+      double d = 0.0;
+      for (int j = 0; j < m; ++j) d += inv[i * m + j] * r[j];
+      xs[idx[i]] += d;
+    }
+  };
+  const int num_colours = static_cast<int>(ps.colours.size());
+  for (int step = 0; step < num_colours; ++step) {
+    const std::vector<int>& list = ps.colours[backward ? num_colours - 1 - step : step];
+    const int count = static_cast<int>(list.size());
+    // groups of one colour are independent: any thread count gives the serial result
+#pragma omp parallel for schedule(static) if (count > 1)
+    for (int q = 0; q < count; ++q) {
+      const int g = list[backward ? count - 1 - q : q];
+      const int first = ps.group_start[g], last = ps.group_start[g + 1];
+      if (!backward)
+        for (int k = first; k < last; ++k) relax(k);
+      else
+        for (int k = last - 1; k >= first; --k) relax(k);
+    }
+  }
+}
+
+void Multigrid::cycle(int l, const VectorX& b, VectorX& x) const {
+  const int num = static_cast<int>(levels_.size());
+  if (l + 1 == num) {
+    x = coarse_->solve(b);
+    return;
+  }
+  const MultigridLevel& lv = levels_[l];
+  x.setZero(lv.a.rows());
+  for (int s = 0; s < smoothing_; ++s) sweep(l, b, x, false);
+  residual(lv.a, b, x, residual_[l]);
+  product(restriction_[l], residual_[l], coarse_rhs_[l]);
+  cycle(l + 1, coarse_rhs_[l], coarse_x_[l]);
+  product(lv.prolongation, coarse_x_[l], work_[l]);
+  x += work_[l];
+  for (int s = 0; s < smoothing_; ++s) sweep(l, b, x, true);
+}
+
+void Multigrid::apply(const VectorX& b, VectorX& x, int cycles) const {
+  cycle(0, b, x);
+  if (cycles <= 1) return;
+  // further cycles of x <- x + Q (b - A x); level 0's scratch is free between cycles
+  VectorX r(b.size()), d(b.size());
+  for (int c = 1; c < cycles; ++c) {
+    residual(levels_[0].a, b, x, r);
+    cycle(0, r, d);
+    x += d;
+  }
+}
+
+std::size_t Multigrid::memory_bytes() const {
+  std::size_t bytes = 0;
+  if (levels_.empty()) return 0;
+  auto csr = [](const SparseMatrix& m) {
+    return static_cast<std::size_t>(m.nonZeros()) * (sizeof(double) + sizeof(int)) +
+           static_cast<std::size_t>(m.rows() + 1) * sizeof(int);
+  };
+  for (std::size_t l = 0; l < levels_.size(); ++l) {
+    bytes += csr(levels_[l].a) + csr(levels_[l].prolongation) + csr(restriction_[l]);
+    bytes += sizeof(int) * (levels_[l].patches.index.size() + levels_[l].patches.start.size());
+    bytes += sizeof(double) * inverse_[l].size() + sizeof(int) * inverse_start_[l].size();
+    bytes += sizeof(double) * (residual_[l].size() + coarse_rhs_[l].size() + coarse_x_[l].size() +
+                               work_[l].size());
+  }
+  // the coarse factor: at most the dense triangle of the coarsest level
+  const std::size_t nc = levels_.empty() ? 0 : static_cast<std::size_t>(levels_.back().a.rows());
+  bytes += sizeof(double) * std::min(nc * nc / 2, static_cast<std::size_t>(levels_.back().a.nonZeros()) * 8);
+  return bytes;
+}
+
+double Multigrid::operator_complexity() const {
+  if (levels_.empty() || levels_[0].a.nonZeros() == 0) return 0.0;
+  double total = 0.0;
+  for (const MultigridLevel& lv : levels_) total += static_cast<double>(lv.a.nonZeros());
+  return total / static_cast<double>(levels_[0].a.nonZeros());
+}
+
+SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p) {
+  const SparseMatrix pt = p.transpose();
+  SparseMatrix ap = a * p;
+  SparseMatrix c = pt * ap;
+  c.prune(0.0, 0.0);
+  c.makeCompressed();
+  return c;
+}
+
+bool patches_independent(const SparseMatrix& a, const PatchSet& patches) {
+  const int n = static_cast<int>(a.rows());
+  std::vector<int> owner(n, -1), seen(patches.num_groups(), 0);
+  auto unknowns = [&](int g, const auto& visit) {
+    for (int k = patches.group_start[g]; k < patches.group_start[g + 1]; ++k)
+      for (int q = patches.start[k]; q < patches.start[k + 1]; ++q) visit(patches.index[q]);
+  };
+  for (const std::vector<int>& colour : patches.colours) {
+    bool ok = true;
+    for (int g : colour) {
+      if (g < 0 || g >= patches.num_groups() || seen[g]++) return false;
+      unknowns(g, [&](int i) {
+        if (owner[i] >= 0 && owner[i] != g) ok = false;  // shared with another group
+        owner[i] = g;
+      });
+    }
+    // no row of one group reaches an unknown of another group of the colour
+    for (int g : colour)
+      unknowns(g, [&](int i) {
+        for (SparseMatrix::InnerIterator it(a, i); it; ++it)
+          if (it.value() != 0.0 && owner[it.col()] >= 0 && owner[it.col()] != g) ok = false;
+      });
+    for (int g : colour) unknowns(g, [&](int i) { owner[i] = -1; });
+    if (!ok) return false;
+  }
+  for (int g = 0; g < patches.num_groups(); ++g)
+    if (seen[g] != 1) return false;
+  return true;
+}
+
+}  // namespace monolith

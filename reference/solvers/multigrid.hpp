@@ -1,0 +1,109 @@
+#pragma once
+/// \file multigrid.hpp
+/// Generic multigrid machinery for symmetric positive definite operators stored as sparse
+/// matrices: a hierarchy of levels (operator, prolongation from the next coarser level), a
+/// multiplicative patch (block Gauss-Seidel, "Vanka") smoother whose patches are grouped into
+/// independent colours, and the symmetric V-cycle. Nothing here knows about grids: the levels,
+/// prolongations and patches come from the caller (reference/fluid/mac_hierarchy.hpp builds them
+/// for the MAC faces and cells).
+///
+/// The V-cycle used as a preconditioner is a fixed symmetric positive definite operator Q:
+/// pre-smoothing sweeps the colours forward, post-smoothing backward (the adjoint), the coarse
+/// operators are Galerkin products P^T A P, the coarsest level is solved exactly. Then the error
+/// propagation E = I - Q A is self-adjoint and positive semi-definite in the A inner product, so
+/// 0 < Q <= A^-1 (docs/preconditioners.md uses this). k cycles of the stationary iteration
+/// x <- x + Q (b - A x) from zero give the operator (I - E^k) A^-1, also SPD and <= A^-1.
+///
+/// Parallel and deterministic: patches of one colour share no unknown and no matrix entry couples
+/// an unknown of one to an unknown of another (checked by patches_independent), so each colour is
+/// relaxed in parallel with the same result as serially; every matrix-vector product is row
+/// parallel with one writer per entry. Scratch vectors are sized at construction: apply allocates
+/// nothing, and one object must not run two applications at once from different threads.
+
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+#include <Eigen/SparseCholesky>
+
+#include "reference/core/common.hpp"
+
+namespace monolith {
+
+/// The patches of one level's smoother: patch k owns the unknowns
+/// index[start[k]] .. index[start[k + 1] - 1] (each at most kMaxPatchSize, listed once). Patches
+/// are relaxed in groups: group g is the patches group_start[g] .. group_start[g + 1] - 1, relaxed
+/// one after the other in that order (a block of nearby patches, good for the caches); colours[c]
+/// lists the groups of colour c. Groups of one colour must be independent (no shared unknown, no
+/// matrix entry between their unknowns), so a colour is relaxed in parallel with the serial
+/// result. Every unknown should be in some patch (an unknown in none is never smoothed).
+struct PatchSet {
+  static constexpr int kMaxPatchSize = 32;
+  std::vector<int> start{0};
+  std::vector<int> index;
+  std::vector<int> group_start{0};
+  std::vector<std::vector<int>> colours;
+  int size() const { return static_cast<int>(start.size()) - 1; }
+  int num_groups() const { return static_cast<int>(group_start.size()) - 1; }
+  /// Appends a patch (its unknowns) to the current group and returns its number.
+  int add(const std::vector<int>& unknowns);
+  /// Closes the current group (the patches added since the last call) and puts it into colour
+  /// `colour` (colours grows as needed); an empty group is dropped.
+  void close_group(int colour);
+};
+
+/// One level of the hierarchy.
+struct MultigridLevel {
+  SparseMatrix a;             ///< the operator of this level (square, SPD)
+  SparseMatrix prolongation;  ///< from the next coarser level: rows = a.rows(); empty on the coarsest
+  PatchSet patches;           ///< the smoother's patches (ignored on the coarsest level)
+};
+
+/// A symmetric V-cycle over a hierarchy (levels[0] finest).
+class Multigrid {
+ public:
+  Multigrid() = default;
+  /// Takes the levels (each but the last with its prolongation and patches), computes the patch
+  /// inverses and factors the coarsest operator (sparse LDL^T). `smoothing` is the number of
+  /// sweeps before and after the coarse correction on every level. Throws std::invalid_argument
+  /// on inconsistent sizes, a patch larger than kMaxPatchSize, or a singular patch block.
+  Multigrid(std::vector<MultigridLevel> levels, int smoothing);
+
+  int size() const { return levels_.empty() ? 0 : static_cast<int>(levels_[0].a.rows()); }
+  int num_levels() const { return static_cast<int>(levels_.size()); }
+  const MultigridLevel& level(int l) const { return levels_[l]; }
+  int smoothing() const { return smoothing_; }
+
+  /// x = Q_k b: `cycles` V-cycles of the stationary iteration from x = 0 (cycles >= 1).
+  void apply(const VectorX& b, VectorX& x, int cycles = 1) const;
+  /// One V-cycle on level l from x = 0: x = Q_l b (b and x of that level's size).
+  void cycle(int level, const VectorX& b, VectorX& x) const;
+  /// One smoothing sweep on level l: all colours forward (backward = reverse colour order and
+  /// reverse order within a colour), every patch relaxed exactly: x_P += A_PP^-1 (b - A x)_P.
+  void sweep(int level, const VectorX& b, VectorX& x, bool backward) const;
+
+  /// Bytes held (matrices, prolongations, patch inverses, coarse factor estimate, scratch).
+  std::size_t memory_bytes() const;
+  /// Sum over levels of the stored non-zeros divided by those of the finest operator.
+  double operator_complexity() const;
+
+ private:
+  std::vector<MultigridLevel> levels_;
+  std::vector<SparseMatrix> restriction_;        ///< prolongation transposes, row-major
+  std::vector<std::vector<int>> inverse_start_;  ///< per level, per patch: offset into inverse_
+  std::vector<std::vector<double>> inverse_;     ///< per level: dense patch inverses, row-major
+  std::unique_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> coarse_;  ///< movable
+  int smoothing_ = 1;
+  // scratch per level
+  mutable std::vector<VectorX> residual_, coarse_rhs_, coarse_x_, work_;
+};
+
+/// The Galerkin coarse operator P^T A P (row-major, explicit zeros dropped).
+SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p);
+
+/// True when no two groups of one colour share an unknown or are coupled by an entry of `a`
+/// (so relaxing a colour in parallel gives the serial result) and every group is in exactly one
+/// colour.
+bool patches_independent(const SparseMatrix& a, const PatchSet& patches);
+
+}  // namespace monolith
