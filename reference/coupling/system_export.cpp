@@ -301,8 +301,16 @@ SolutionCheck check_solution(const SparseMatrix& a, const VectorX& b, int num_ta
   const VectorX rhs_friction = (b - a * mlcp_part).tail(num_z);
   const double scale_mlcp =
       std::max(nm ? s.head(nm).cwiseProduct(rhs_mlcp).lpNorm<Eigen::Infinity>() : 0.0, 1e-300);
+  // the friction rows as the friction MPRGP measures them (unscaled, relative to the
+  // right-hand side of (25)); the cone relative to the largest bound mu lambda (the staggered
+  // rounds stop on the relative change of lambda, so the bounds lag by that fraction)
   const double scale_friction =
       std::max(num_z ? rhs_friction.lpNorm<Eigen::Infinity>() : 0.0, 1e-300);
+  const int per = num_lambda > 0 ? num_z / num_lambda : 1;
+  double scale_cone = 0.0;
+  for (int k = 0; k < num_z; ++k)
+    scale_cone = std::max(scale_cone, mu[k / per] * std::max(x[num_tau + num_p + k / per], 0.0));
+  scale_cone = std::max(scale_cone, 1e-300);
   SolutionCheck c;
   const int nf = num_tau + num_p;
   for (int i = 0; i < nf; ++i) c.free_residual = std::max(c.free_residual, std::abs(g[i]));
@@ -310,10 +318,9 @@ SolutionCheck check_solution(const SparseMatrix& a, const VectorX& b, int num_ta
     c.complementarity = std::max(c.complementarity, std::abs(std::min(y[i], g[i])));
     c.bound_violation = std::max(c.bound_violation, -y[i]);
   }
-  const int per_contact = num_lambda > 0 ? num_z / num_lambda : 1;
   for (int k = 0; k < num_z; ++k) {
     const int i = nm + k;
-    const int contact = k / per_contact;
+    const int contact = k / per;
     const double bound = mu[contact] * std::max(x[nf + contact], 0.0);
     const double projected = std::clamp(x[i] - w[i], -bound, bound);
     c.friction = std::max(c.friction, std::abs(x[i] - projected));
@@ -323,7 +330,7 @@ SolutionCheck check_solution(const SparseMatrix& a, const VectorX& b, int num_ta
   c.complementarity /= scale_mlcp;
   c.bound_violation = std::max(c.bound_violation, 0.0) / scale_mlcp;
   c.friction /= scale_friction;
-  c.cone_violation = std::max(c.cone_violation, 0.0) / scale_friction;
+  c.cone_violation = std::max(c.cone_violation, 0.0) / scale_cone;
   const double ref = x_ref.size() ? x_ref.lpNorm<Eigen::Infinity>() : 0.0;
   c.difference = n ? (x - x_ref).lpNorm<Eigen::Infinity>() / std::max(ref, 1e-300) : 0.0;
   c.passed = c.free_residual <= tolerance && c.complementarity <= tolerance &&

@@ -28,18 +28,21 @@ class MonolithicSystem;
 /// The measures of `monolith verify` for a candidate x of the system A x = b under the
 /// convention above, relative to the right-hand sides as the solver measures them (section 4.2:
 /// the MLCP (26) over (tau, p, lambda) given z, the friction LCP (25) given the rest). With
-/// w = A x - b; on the MLCP rows S = diag(1 / sqrt(A_ii)) when jacobi_scaled (the solver's MPRGP
-/// runs on S A S; PCG without contacts does not: S = 1), y = S^-1 x, g = S w and
-/// scale = ||S (b - A_.4 z)||_inf over those rows; on the z rows scale_z = ||b4 - A41 tau - A42 p
-/// - A43 lambda||_inf:
+/// w = A x - b; on the MLCP rows S = diag(1 / sqrt(A_ii)) when jacobi_scaled (the solver's
+/// MPRGP runs on the Jacobi-scaled MLCP; without contacts PCG does not: S = I), y = S^-1 x,
+/// g = S w, scale = ||S (b - A_.4 z)||_inf over those rows; on the z rows (the friction MPRGP
+/// runs unscaled) u_k = mu_c max(lambda_c, 0) for contact c of row k,
+/// scale_z = ||b4 - A41 tau - A42 p - A43 lambda||_inf and scale_u = max_k u_k:
 ///   free_residual     = max over tau, p rows |g_i| / scale;
 ///   complementarity   = max over lambda rows |min(y_i, g_i)| / scale (zero iff lambda >= 0,
 ///                       w >= 0, lambda w = 0: the natural residual of the LCP);
 ///   bound_violation   = max over lambda rows max(-y_i, 0) / scale;
-///   friction          = max over z rows |z_k - clamp(z_k - w_k, -u_k, u_k)| / scale_z with
-///                       u_k = mu_c max(lambda_c, 0) (the natural residual of the box conditions:
-///                       zero iff z_k is inside and w_k = 0, or at a bound with w_k opposing it);
-///   cone_violation    = max over z rows max(|z_k| - u_k, 0) / scale_z;
+///   friction          = max over z rows |z_k - clamp(z_k - w_k, -u_k, u_k)| / scale_z (the
+///                       natural residual of the box conditions: zero iff z_k is inside and
+///                       w_k = 0, or at a bound with w_k opposing it);
+///   cone_violation    = max over z rows max(|z_k| - u_k, 0) / scale_u (the staggered rounds
+///                       stop on the relative change of lambda, so the bounds lag by that
+///                       fraction of the friction forces);
 ///   difference        = ||x - x_ref||_inf / ||x_ref||_inf (reported, not judged: with
 ///                       redundant contacts or enclosed liquid the solution is not unique).
 /// passed: the five conditions are <= tolerance.
