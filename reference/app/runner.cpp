@@ -146,6 +146,23 @@ void write_frame(const AnySimulation& sim, const FrameRenderer& render, const Sc
   write_file_atomic(dir / "frames" / frame_file(k), image.ppm_bytes());
 }
 
+/// The frame's picture (when the scene renders), then its stats line, so that the line holds the
+/// picture's `render` and `output` time. A picture that cannot be written still leaves the
+/// frame's stats line behind before the error goes on.
+void write_frame_and_stats(const AnySimulation& sim, const FrameRenderer& render,
+                           const SceneFile& scene, const fs::path& dir, int k, FrameStats& stats,
+                           LineFile& lines) {
+  if (scene.render.enabled) {
+    try {
+      write_frame(sim, render, scene, dir, k, stats);
+    } catch (const OutputError&) {
+      lines.append_line(frame_stats_json(stats).dump());
+      throw;
+    }
+  }
+  lines.append_line(frame_stats_json(stats).dump());
+}
+
 /// The scene JSON without its frame count (resume may change it).
 json without_frames(json j) {
   if (j.is_object() && j.contains("time") && j["time"].is_object()) j["time"].erase("frames");
@@ -171,7 +188,6 @@ int run_frames(const RunContext& c, AnySimulation& sim, RunTotals totals, std::o
   const RunOptions& o = c.options;
   const bool live = !o.quiet && &err == &std::cerr && isatty(STDERR_FILENO);
   const bool lines = !o.quiet && !live;
-  const bool render = scene.render.enabled;
   const int frames = scene.time.frames;
   const Stopwatch watch;
   const int first = totals.done;
@@ -208,8 +224,7 @@ int run_frames(const RunContext& c, AnySimulation& sim, RunTotals totals, std::o
       // frame 0: the initial state
       FrameStats st = sim.current_stats();
       totals.volume0 = totals.volume = st.liquid_volume;
-      if (render) write_frame(sim, renderer, scene, dir, 0, st);
-      stats.append_line(frame_stats_json(st).dump());
+      write_frame_and_stats(sim, renderer, scene, dir, 0, st, stats);
     }
     for (frame = totals.done + 1; frame <= frames && g_stop_signal == 0; ++frame) {
       FrameStats st = sim.advance_frame();
@@ -217,8 +232,7 @@ int run_frames(const RunContext& c, AnySimulation& sim, RunTotals totals, std::o
       st.frame = frame;
       totals.steps += st.steps;
       totals.volume = st.liquid_volume;
-      if (render) write_frame(sim, renderer, scene, dir, frame, st);
-      stats.append_line(frame_stats_json(st).dump());
+      write_frame_and_stats(sim, renderer, scene, dir, frame, st, stats);
       totals.done = frame;
       // a solve that stopped short of the tolerance is never silent, even with --quiet
       if (!st.solver.converged) {

@@ -881,9 +881,12 @@ void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
       stress_.size() != stress_grid_.num_dofs())
     r.fail("sizes that do not match the scene's grid or particles");
   // what is derived from the state: the solids at the bodies' pose and the liquid weights, as
-  // advance_frame leaves them at a frame's end (a step that needs them fresh recomputes them)
+  // advance_frame leaves them at a frame's end (a step that needs them fresh recomputes them);
+  // their wall time is not the restored frame's, so the frame's timing is kept as saved
+  const auto timing = stats_.timing;
   if (coupled_) update_moving_solids();
   update_liquid_weights();
+  stats_.timing = timing;
   if (!mid_frame_) fill_state_stats(stats_);
 }
 
