@@ -287,24 +287,26 @@ template <int Dim>
 void Simulation<Dim>::step(double dt) {
   // a scene of bodies without liquid: (3), (6), (8), (10), (12), (13) through RigidWorld
   if (rigid_ && scene_.liquids.empty()) {
+    if (!switches_.energy_ledger) {
+      step_bodies(dt);
+      return;
+    }
     const double kinetic = rigid_->kinetic_energy(), potential = body_potential_energy();
     step_bodies(dt);
     frame_ledger_.forces_and_solve += rigid_->kinetic_energy() - kinetic;
     frame_ledger_.advection += body_potential_energy() - potential;
     return;
   }
-  ledger_energy_ = particle_kinetic_energy();  // the energy ledger (energy_ledger())
+  restart_ledger([&] { return particle_kinetic_energy(); });  // the energy ledger (diagnosis)
   particles_to_grid_with_forces(dt);  // (1)-(3)
   update_step_weights();              // (4)-(5)
   extrapolate_into_air();             // u* on the faces the particles did not reach
   solve_step(dt);                     // (6)-(12)
   check_finite("the pressure/viscosity/contact solve");
-  account(frame_ledger_.forces_and_solve,
-          face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0));
+  account(frame_ledger_.forces_and_solve, [&] { return grid_and_body_kinetic_energy(); });
   extrapolate_from_trusted_faces();   // the solved velocity into air and solid
   apply_wall_and_solid_velocities();
-  account(frame_ledger_.velocity_extension,
-          face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0));
+  account(frame_ledger_.velocity_extension, [&] { return grid_and_body_kinetic_energy(); });
   move_bodies(dt);                    // (13)
   advect(dt);                         // (14)
   correct_volume(dt);                 // (15)
@@ -312,9 +314,8 @@ void Simulation<Dim>::step(double dt) {
 }
 
 template <int Dim>
-void Simulation<Dim>::account(double& stage, double now) {
-  stage += now - ledger_energy_;
-  ledger_energy_ = now;
+double Simulation<Dim>::grid_and_body_kinetic_energy() const {
+  return face_kinetic_energy() + (coupled_ ? rigid_->kinetic_energy() : 0.0);
 }
 
 template <int Dim>
@@ -324,8 +325,8 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
     particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
   }
-  account(frame_ledger_.to_grid, face_kinetic_energy());
-  if (coupled_) ledger_energy_ += rigid_->kinetic_energy();
+  account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });
+  restart_ledger([&] { return grid_and_body_kinetic_energy(); });
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   for (int f = 0; f < grid_.num_faces(); ++f)
     if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
@@ -426,10 +427,12 @@ template <int Dim>
 void Simulation<Dim>::move_bodies(double dt) {
   // (13) body positions; the particles then see the solids at the new pose
   if (!coupled_) return;
-  const double potential = body_potential_energy();
+  const double potential = switches_.energy_ledger ? body_potential_energy() : 0.0;
   rigid_->integrate(dt, time_, "the coupled solve");
-  frame_ledger_.advection += body_potential_energy() - potential;
-  ledger_energy_ -= rigid_->kinetic_energy();
+  if (switches_.energy_ledger) {
+    frame_ledger_.advection += body_potential_energy() - potential;
+    ledger_energy_ -= rigid_->kinetic_energy();
+  }
   rebuild_solid_field();
 }
 
@@ -450,10 +453,10 @@ void Simulation<Dim>::advect(double dt) {
   grid_to_particles(particles_, grid_, u_);
   if (!switches_.apic)
     for (auto& c : particles_.c) c.setZero();
-  account(frame_ledger_.to_particles, particle_kinetic_energy());
-  ledger_energy_ = liquid_potential_energy();
+  account(frame_ledger_.to_particles, [&] { return particle_kinetic_energy(); });
+  restart_ledger([&] { return liquid_potential_energy(); });
   advect_particles(particles_, grid_, u_, dt, solids_, boundary_);
-  account(frame_ledger_.advection, liquid_potential_energy());
+  account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
 }
 
 template <int Dim>
@@ -463,10 +466,10 @@ void Simulation<Dim>::correct_volume(double dt) {
   if (!scene_.particles.position_correction) return;
   ScopedTimer timer(stats_.timing[FramePhase::particles]);
   if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
-  account(frame_ledger_.position_correction, liquid_potential_energy());
+  account(frame_ledger_.position_correction, [&] { return liquid_potential_energy(); });
   if (switches_.density_projection)
     project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
-  account(frame_ledger_.density_projection, liquid_potential_energy());
+  account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
 }
 
 template <int Dim>

@@ -49,6 +49,9 @@ struct StageSwitches {
   /// The velocity is extrapolated from the trusted faces after the solve (false: every other
   /// face keeps what the solve, or the extrapolation before it, left there)
   bool extrapolate_after_solve = true;
+  /// Measure the energy change of every stage (energy_ledger()): several extra sweeps over the
+  /// faces and particles per step, so off unless a diagnosis asks for it.
+  bool energy_ledger = false;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
@@ -84,7 +87,8 @@ class AnySimulation {
   /// metre of depth), zero at the origin; with the kinetic energy of FrameStats it gives the
   /// total energy that a liquid in a static container must never gain.
   virtual double liquid_potential_energy() const { return 0.0; }
-  /// The energy ledger of the last frame (advance_frame), all zero before the first.
+  /// The energy ledger of the last frame (advance_frame): all zero before the first, and unless
+  /// the simulation was made with StageSwitches::energy_ledger.
   virtual EnergyLedger energy_ledger() const { return {}; }
   /// The oracle (reference/coupling/system_export.hpp): during the next advance_frame only, hand
   /// the coupled system of eq. (24) of that frame's step `step` (1 = its first step) to `sink`.
@@ -185,9 +189,23 @@ class Simulation : public AnySimulation {
   void advect(double dt);
   /// Line 15: position correction and the particle density projection (when enabled).
   void correct_volume(double dt);
-  /// The energy ledger: adds now - (the energy after the previous stage) to stage and makes now
-  /// the energy after this one.
-  void account(double& stage, double now);
+  /// The energy ledger (only with StageSwitches::energy_ledger; otherwise nothing is measured):
+  /// adds now() - (the energy after the previous stage) to stage and makes now() the energy
+  /// after this one.
+  template <class Energy>
+  void account(double& stage, Energy now) {
+    if (!switches_.energy_ledger) return;
+    const double e = now();
+    stage += e - ledger_energy_;
+    ledger_energy_ = e;
+  }
+  /// The energy ledger starts a new account from now() (a change of the energy measured).
+  template <class Energy>
+  void restart_ledger(Energy now) {
+    if (switches_.energy_ledger) ledger_energy_ = now();
+  }
+  /// Face kinetic energy plus, in coupled scenes, the moving bodies'.
+  double grid_and_body_kinetic_energy() const;
   /// Kinetic energy on the faces, sum 1/2 m_f u_f^2 (face masses of the last particles_to_grid).
   double face_kinetic_energy() const;
   /// Kinetic energy of the particles, sum 1/2 m_p |v_p|^2.

@@ -154,6 +154,7 @@ int main(int argc, char** argv) {
   for (const Variant& v : variants()) {
     if (!only.empty() && std::find(only.begin(), only.end(), v.name) == only.end()) continue;
     StageSwitches switches;
+    switches.energy_ledger = true;
     v.apply(switches);
     auto sim = make_simulation(scene, switches);
     FrameStats s = sim->current_stats();
