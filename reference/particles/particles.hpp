@@ -100,7 +100,9 @@ struct DensityProjectionStats {
 /// a Poisson problem with the face weights `fluid_face` (W_F^u: Neumann at walls and solids,
 /// Dirichlet 0 in air) for the error and moves every particle by the gradient of the solution,
 /// so over-full cells empty into under-full ones and the reconstructed volume follows the
-/// particle volume (a form of Algorithm 1, line 15). `iterations` repeats the whole (reconstruction, solve, move); the stats are
+/// particle volume (a form of Algorithm 1, line 15). On the air side of the reconstructed
+/// surface (hat-weighted liquid fraction below 1/2) only an excess of particle volume is
+/// corrected, so water at rest is a fixed point (docs/particles.md, "Still water"). `iterations` repeats the whole (reconstruction, solve, move); the stats are
 /// those of the first iteration (error_before) and the sums over all (iterations, max_move the
 /// largest). Respects solids, walls and periodicity; deterministic for any thread count.
 template <int Dim>

@@ -5,7 +5,9 @@
 // summed over the run. docs/particles.md ("Still water") shows its table.
 //
 //   bench_still_water [--dim 2|3] [--cells N] [--seconds T] [--backend NAME]
-//                     [--only NAME[,NAME...]] [--set KEY=VALUE]...
+//                     [--only NAME[,NAME...]] [--set KEY=VALUE]... [--progress]
+//
+// --progress prints the kinetic energy, the probes and the ledger every second (on stderr).
 //
 // A measurement program, not a test: it asserts nothing. Run it with OMP_NUM_THREADS=1.
 #include <algorithm>
@@ -101,6 +103,7 @@ int main(int argc, char** argv) {
   double seconds = 10.0;
   std::string backend = "matrixfree";
   std::vector<std::string> only, overrides;
+  bool progress = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -121,12 +124,14 @@ int main(int argc, char** argv) {
     } else if (a == "--only") {
       std::stringstream list(next());
       for (std::string item; std::getline(list, item, ',');) only.push_back(item);
+    } else if (a == "--progress") {
+      progress = true;
     } else if (a == "--set") {
       overrides.push_back(next());
     } else {
       std::cerr << "unknown argument " << a
                 << "\nusage: bench_still_water [--dim 2|3] [--cells N] [--seconds T] [--backend "
-                   "NAME] [--only NAME,...] [--set KEY=VALUE]...\n";
+                   "NAME] [--only NAME,...] [--set KEY=VALUE]... [--progress]\n";
       return 2;
     }
   }
@@ -177,6 +182,18 @@ int main(int argc, char** argv) {
         if (std::abs(s.time - 1.0) < 1e-9) ke1 = ke;
         if (std::abs(s.time - 5.0) < 1e-9) ke5 = ke;
         ke_max = std::max(ke_max, ke);
+        if (progress && f % 50 == 0) {
+          double frame_probe = 0.0;
+          for (const auto& p : s.probes) {
+            double v2 = 0.0;
+            for (double c : p.velocity) v2 += c * c;
+            frame_probe = std::max(frame_probe, std::sqrt(v2));
+          }
+          std::fprintf(stderr, "  %s t %.1f s: KE %.3e J, probe %.2e m/s, volume %+.3f%%, ledger project %+.4f correct %+.4f total %+.4f\n",
+                       v.name.c_str(), s.time, ke, frame_probe,
+                       100.0 * (s.liquid_volume / volume0 - 1.0), sum.density_projection,
+                       sum.position_correction, sum.total());
+        }
         drift = std::max(drift, std::abs(s.liquid_volume / volume0 - 1.0));
         // the largest probe speed over the second half of the run
         if (s.time > 0.5 * seconds + 1e-9)
