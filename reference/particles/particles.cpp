@@ -46,6 +46,8 @@ constexpr double kProjectionTolerance = 1e-4;
 /// level set; there the density projection corrects an excess of particle volume only
 /// (project_particle_density, docs/particles.md "Still water").
 constexpr double kProjectionAirSide = 0.5;
+/// ... except within this many cells of a solid (the reach of a cell's hat plus half a box).
+constexpr double kProjectionSolidReach = 1.5;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
 
@@ -911,8 +913,12 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // further: on water at rest, projection after projection roughened the surface (column
     // heights 0.034 -> 0.11 dx in 2D, 0.028 -> 0.059 dx in 3D over 100-200 calls) and fed waves.
     // An excess there (particles outside the level set: drops, thin sheets) is still spread.
+    // Next to a solid a low T_c comes from the solid filling part of the cell, not from a free
+    // surface, so there the error stays two-sided as before.
     double e = rho[c] - target[c];
-    if (target[c] < kProjectionAirSide) e = std::max(e, 0.0);
+    if (target[c] < kProjectionAirSide &&
+        (solids.empty() || solids.distance(grid.cell_center(ci)) > kProjectionSolidReach * dx))
+      e = std::max(e, 0.0);
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
   }
