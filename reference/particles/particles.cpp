@@ -300,73 +300,104 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 /// its face lattice):
 ///   m_f = sum_p w_fp m_p,  (m u)_f = sum_p w_fp m_p (v_pa + c_pa . (x_f - x_p)),
 ///   rho_f = sum_p w_fp m_p rho_p / m_f,
-/// with w_fp the multilinear weights of face lattice a. Deterministic for a fixed thread count:
-/// each thread accumulates a contiguous block of particles into its own buffers, which are then
-/// summed in thread order.
+/// with w_fp the multilinear weights of face lattice a. Parallel as a scatter over fixed spatial
+/// partitions: the faces are split into slabs of the last axis (one per thread, balanced by the
+/// particles' cell layers), each thread visits the particles that reach its slab in particle
+/// order and writes only its own faces. Every face therefore sums its contributions in particle
+/// order, as the serial loop does: the same bits for any thread count, and no per-thread copies
+/// of the grid.
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
                        VectorX& face_mass, VectorX& face_density) {
   constexpr int kCorners = 1 << Dim;
+  constexpr int kLast = Dim - 1;
   const int nf = grid.num_faces();
   const long np = static_cast<long>(particles.size());
-  const int max_threads = std::max(1, omp_get_max_threads());
-  std::vector<VectorX> buf_m(max_threads), buf_mu(max_threads), buf_mr(max_threads);
-  int used_threads = 1;
+  // the three accumulators live in the outputs (setZero keeps the storage of a same-size vector)
+  u.setZero(nf);
+  face_mass.setZero(nf);
+  face_density.setZero(nf);
+  const int layers = grid.cells()[kLast];
+  const bool wrap_last = grid.periodic(kLast);
+  // each particle's cell layer along the last axis (clamped): its stencils reach face layers
+  // layer - 1 .. layer + 1 of every component's lattice (wrapped on a periodic axis)
+  std::vector<int> layer_of(np);
+  std::vector<long> per_layer(layers + 1, 0);
+  for (long p = 0; p < np; ++p) {
+    const double s = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / grid.dx();
+    const int c = std::clamp(static_cast<int>(std::floor(s)), 0, layers - 1);
+    layer_of[p] = c;
+    ++per_layer[c + 1];
+  }
+  for (int c = 0; c < layers; ++c) per_layer[c + 1] += per_layer[c];
+  const int threads = std::max(1, std::min(omp_get_max_threads(), layers));
+  // slab t owns the face layers [first[t], first[t + 1]); the face lattices along the last axis
+  // have at most layers + 1 samples
+  std::vector<int> first(threads + 1, 0);
+  for (int t = 1; t < threads; ++t) {
+    const long target = np * t / threads;
+    int c = first[t - 1];
+    while (c < layers && per_layer[c] < target) ++c;
+    first[t] = c;
+  }
+  first[threads] = layers + 1;
 
-#pragma omp parallel num_threads(max_threads)
+#pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num();
     const int nt = omp_get_num_threads();
-#pragma omp single
-    used_threads = nt;
-    VectorX& m = buf_m[t];
-    VectorX& mu = buf_mu[t];
-    VectorX& mr = buf_mr[t];
-    m = VectorX::Zero(nf);
-    mu = VectorX::Zero(nf);
-    mr = VectorX::Zero(nf);
-    const long begin = np * t / nt, end = np * (t + 1) / nt;
-    std::array<int, kCorners> idx;
-    std::array<double, kCorners> w;
-    for (long p = begin; p < end; ++p) {
-      const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
-      const double mp = particles.mass[p];
-      for (int a = 0; a < Dim; ++a) {
-        const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
-        const VecI<Dim> dims = grid.face_dims(a);
-        const int offset = grid.face_offset(a);
-        grid.stencil(xp, shift, dims, idx, w);
-        for (int k = 0; k < kCorners; ++k) {
-          if (w[k] == 0.0) continue;
-          // affine velocity at the face sample (minimum image on periodic axes)
-          const Vec<Dim> xf = grid.face_center(a, lattice_coord<Dim>(idx[k], dims));
-          const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
-          const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
-          const int f = offset + idx[k];
-          m[f] += w[k] * mp;
-          mu[f] += w[k] * mp * vel;
-          mr[f] += w[k] * mp * particles.density[p];
+    // a team smaller than asked for: thread t covers the slabs t, t + nt, ...
+    for (int slab = t; slab < threads; slab += nt) {
+      const int lo = first[slab], hi = first[slab + 1];
+      if (lo >= hi) continue;
+      auto owned = [&](int k) { return k >= lo && k < hi; };
+      auto reaches = [&](int c) {
+        for (int d = -1; d <= 1; ++d) {
+          int k = c + d;
+          if (wrap_last) k = (k + layers) % layers;  // the periodic face lattice has `layers`
+          if (owned(k)) return true;
+        }
+        return false;
+      };
+      std::array<int, kCorners> idx;
+      std::array<double, kCorners> w;
+      for (long p = 0; p < np; ++p) {
+        if (!reaches(layer_of[p])) continue;
+        const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+        const double mp = particles.mass[p];
+        for (int a = 0; a < Dim; ++a) {
+          const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
+          const VecI<Dim> dims = grid.face_dims(a);
+          const int offset = grid.face_offset(a);
+          int stride = 1;  // of the last axis in face lattice a
+          for (int b = 0; b < kLast; ++b) stride *= dims[b];
+          grid.stencil(xp, shift, dims, idx, w);
+          for (int k = 0; k < kCorners; ++k) {
+            if (w[k] == 0.0 || !owned(idx[k] / stride)) continue;
+            // affine velocity at the face sample (minimum image on periodic axes)
+            const Vec<Dim> xf = grid.face_center(a, lattice_coord<Dim>(idx[k], dims));
+            const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
+            const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
+            const int f = offset + idx[k];
+            face_mass[f] += w[k] * mp;
+            u[f] += w[k] * mp * vel;
+            face_density[f] += w[k] * mp * particles.density[p];
+          }
         }
       }
     }
   }
 
-  // reduce the thread buffers in a fixed order
-  u.setZero(nf);
-  face_mass.setZero(nf);
-  face_density.setZero(nf);
+  // velocities and densities from the sums
 #pragma omp parallel for schedule(static)
   for (int f = 0; f < nf; ++f) {
-    double m = 0.0, mu = 0.0, mr = 0.0;
-    for (int t = 0; t < used_threads; ++t) {
-      m += buf_m[t][f];
-      mu += buf_mu[t][f];
-      mr += buf_mr[t][f];
-    }
-    face_mass[f] = m;
+    const double m = face_mass[f];
     if (m > 0.0) {
-      u[f] = mu / m;
-      face_density[f] = mr / m;
+      u[f] = (0.0 + u[f]) / m;
+      face_density[f] = (0.0 + face_density[f]) / m;
+    } else {
+      u[f] = 0.0;
+      face_density[f] = 0.0;
     }
   }
 }
