@@ -435,42 +435,86 @@ void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
 
 /// Breadth-first extrapolation: per layer, every invalid face with valid same-axis neighbours
 /// (+-1 along each axis, wrapped on periodic axes) of the previous layer takes their average.
+/// The first layer visits the invalid neighbours of the given valid faces; a later layer can fill only faces next to those the
+/// layer before it filled (any other invalid face has no valid neighbour, or would have been
+/// filled earlier), so it visits just those: work in proportion to the band, not the box.
 template <int Dim>
 void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
                           int layers) {
   const int nf = grid.num_faces();
   valid.resize(nf, 0);
-  for (int layer = 0; layer < layers; ++layer) {
-    const std::vector<char> old = valid;
-    int filled = 0;
-    // each invalid face takes the average of its valid same-axis neighbours of the last layer
-#pragma omp parallel for schedule(static) reduction(+ : filled)
-    for (int f = 0; f < nf; ++f) {
-      if (old[f]) continue;
-      const auto [axis, coord] = grid.face_coord(f);
-      const VecI<Dim> dims = grid.face_dims(axis);
-      double sum = 0.0;
-      int count = 0;
-      for (int b = 0; b < Dim; ++b)
-        for (int s = -1; s <= 1; s += 2) {
-          VecI<Dim> nb = coord;
-          nb[b] += s;
-          if (grid.periodic(b))
-            nb[b] = (nb[b] + dims[b]) % dims[b];
-          else if (nb[b] < 0 || nb[b] >= dims[b])
-            continue;
-          const int g = grid.face_index(axis, nb);
-          if (g == f || !old[g]) continue;
-          sum += u[g];
-          ++count;
+  // the same-axis neighbours of face f (each once, in a fixed order), -1 where there is none
+  auto neighbours = [&](int f, std::array<int, 2 * Dim>& nb) {
+    const auto [axis, coord] = grid.face_coord(f);
+    const VecI<Dim> dims = grid.face_dims(axis);
+    for (int b = 0; b < Dim; ++b)
+      for (int s = 0; s < 2; ++s) {
+        VecI<Dim> c = coord;
+        c[b] += s == 0 ? -1 : 1;
+        int g = -1;
+        if (grid.periodic(b)) {
+          c[b] = (c[b] + dims[b]) % dims[b];
+          g = grid.face_index(axis, c);
+        } else if (c[b] >= 0 && c[b] < dims[b]) {
+          g = grid.face_index(axis, c);
         }
-      if (count > 0) {
-        u[f] = sum / count;
-        valid[f] = 1;
-        ++filled;
+        nb[2 * b + s] = g == f ? -1 : g;
       }
+  };
+  // the average of the valid neighbours (as of the layer's start) of an invalid face
+  auto average = [&](int f, double& value) {
+    std::array<int, 2 * Dim> nb;
+    neighbours(f, nb);
+    double sum = 0.0;
+    int count = 0;
+    for (int g : nb) {
+      if (g < 0 || !valid[g]) continue;
+      sum += u[g];
+      ++count;
     }
-    if (filled == 0) break;
+    if (count == 0) return false;
+    value = sum / count;
+    return true;
+  };
+  // the invalid neighbours of `faces` (sorted, each once): the candidates of a layer
+  std::vector<int> candidates;
+  auto candidates_beside = [&](const std::vector<int>& faces) {
+    candidates.clear();
+    std::array<int, 2 * Dim> nb;
+    for (int f : faces) {
+      neighbours(f, nb);
+      for (int g : nb)
+        if (g >= 0 && !valid[g]) candidates.push_back(g);
+    }
+    std::sort(candidates.begin(), candidates.end());
+    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  };
+  // the first layer's: beside any valid face
+  {
+    std::vector<int> given;
+    for (int f = 0; f < nf; ++f)
+      if (valid[f]) given.push_back(f);
+    candidates_beside(given);
+  }
+  std::vector<double> value;
+  std::vector<char> filled;
+  for (int layer = 0; layer < layers && !candidates.empty(); ++layer) {
+    const int n = static_cast<int>(candidates.size());
+    value.assign(n, 0.0);
+    filled.assign(n, 0);
+#pragma omp parallel for schedule(static)
+    for (int i = 0; i < n; ++i) filled[i] = average(candidates[i], value[i]);
+    // apply after all averages are taken (they read the previous layer's validity)
+    std::vector<int> fresh;
+    for (int i = 0; i < n; ++i)
+      if (filled[i]) {
+        u[candidates[i]] = value[i];
+        valid[candidates[i]] = 1;
+        fresh.push_back(candidates[i]);
+      }
+    if (fresh.empty()) break;
+    // the next layer's: beside the faces just filled
+    candidates_beside(fresh);
   }
 }
 
