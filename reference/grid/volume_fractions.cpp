@@ -221,7 +221,13 @@ VectorX liquid_cell_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
 template <int Dim>
 VectorX liquid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& liquid_phi, const VectorX& liquid_cell_weights) {
-  VectorX w = face_negative_fractions(grid, lattice, liquid_phi);
+  return clamp_liquid_face_weights(grid, face_negative_fractions(grid, lattice, liquid_phi),
+                                   liquid_cell_weights);
+}
+
+template <int Dim>
+VectorX clamp_liquid_face_weights(const MacGrid<Dim>& grid, VectorX w,
+                                  const VectorX& liquid_cell_weights) {
   // clamp from below beside every cell with a liquid fraction, so (W_L^u)^-1 exists there
   for (int f = 0; f < grid.num_faces(); ++f) {
     const auto [axis, coord] = grid.face_coord(f);
@@ -262,6 +268,7 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
                                           const VectorX&);                                        \
   template VectorX liquid_face_weights<D>(const MacGrid<D>&, const SampleLattice<D>&,             \
                                           const VectorX&, const VectorX&);                        \
+  template VectorX clamp_liquid_face_weights<D>(const MacGrid<D>&, VectorX, const VectorX&);      \
   template VectorX extend_liquid_into_solids<D>(const MacGrid<D>&, const VectorX&,                \
                                                 const VectorX&, double);
 MONOLITH_INSTANTIATE(2)

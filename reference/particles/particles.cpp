@@ -835,15 +835,21 @@ VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
   int count = 1;
   for (int a = 0; a < Dim; ++a) count *= dims[a];
   VectorX cur(count);
+  // lattice index offsets of the 2^Dim corners from a half cell's lower corner
+  std::array<int, kCorners> corner_offset;
+  for (int b = 0; b < kCorners; ++b) {
+    int offset = 0, stride = 1;
+    for (int a = 0; a < Dim; ++a) {
+      offset += ((b >> a) & 1) * stride;
+      stride *= lattice.dims[a];
+    }
+    corner_offset[b] = offset;
+  }
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < count; ++k) {
-    const VecI<Dim> lower = lattice_coord<Dim>(k, dims);
+    const int base = lattice.index(lattice_coord<Dim>(k, dims));
     std::array<double, kCorners> corner;
-    for (int b = 0; b < kCorners; ++b) {
-      VecI<Dim> i = lower;
-      for (int a = 0; a < Dim; ++a) i[a] += (b >> a) & 1;
-      corner[b] = phi[lattice.index(i)];
-    }
+    for (int b = 0; b < kCorners; ++b) corner[b] = phi[base + corner_offset[b]];
     cur[k] = lattice_cell_negative_fraction<Dim>(corner);
   }
   // per axis, the 4-tap hat integrals from half cells to cells

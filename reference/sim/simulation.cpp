@@ -246,8 +246,8 @@ void Simulation<Dim>::update_liquid_weights() {
                           : extend_liquid_into_solids(grid_, liquid_phi_, solid_phi_,
                                                       kLiquidSolidReach * grid_.dx());
   weights_.liquid_cell = liquid_cell_weights(grid_, lattice_, phi);
-  weights_.liquid_face = liquid_face_weights(grid_, lattice_, phi, weights_.liquid_cell);
   raw_liquid_face_ = face_negative_fractions(grid_, lattice_, phi);
+  weights_.liquid_face = clamp_liquid_face_weights(grid_, raw_liquid_face_, weights_.liquid_cell);
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
     stress_liquid_ = stress_liquid_weights(stress_grid_, lattice_, phi);
