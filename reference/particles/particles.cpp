@@ -638,7 +638,11 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     for (long p = 0; p < np; ++p) order[fill[bucket[p]]++] = static_cast<int>(p);
   }
   for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
-  const int ring = std::max(1, static_cast<int>(std::ceil(max_support / dx)));
+  // cells to search around a particle's own: the support is one cell at the default 8 (4) particles
+  // per cell, but (m / rho)^(1/Dim) rounds to a hair above dx / 2, and a plain ceil then searched
+  // two rings (125 cells instead of 27 in 3D) for neighbours that cannot lie there: a pair in
+  // cells two apart is farther than dx, and the excess of the support over dx is a rounding error
+  const int ring = std::max(1, static_cast<int>(std::ceil(max_support / dx * (1.0 - 1e-12))));
   const int side = 2 * ring + 1;
   const int neighbour_cells = int_pow(side, Dim);
   // a periodic axis shorter than the stencil maps two offsets to one cell: deduplicate then
