@@ -43,12 +43,14 @@ std::shared_ptr<const MeshSdf> unit_bunny_sdf() {
 namespace {
 
 /// Mesh SDFs already built in this process, by file, modification time, scale and translate
-/// (the scene validator and the simulation both build the scene's shapes).
+/// (the scene validator and the simulation both build the scene's shapes). Held, not weakly
+/// referenced: the validator's shapes are gone before the simulation builds its own, so a weak
+/// reference had expired by then and the hierarchy and cache were built a second time.
 std::shared_ptr<const MeshSdf> memoized_mesh_sdf(const std::filesystem::path& file,
                                                  const Vec<3>& scale, const Vec<3>& translate,
                                                  const std::string& key_path) {
   static std::mutex mutex;
-  static std::map<std::string, std::weak_ptr<const MeshSdf>> built;
+  static std::map<std::string, std::shared_ptr<const MeshSdf>> built;
   std::error_code ec;
   const auto stamp = std::filesystem::last_write_time(file, ec);
   std::ostringstream key;
@@ -57,7 +59,7 @@ std::shared_ptr<const MeshSdf> memoized_mesh_sdf(const std::filesystem::path& fi
       << scale.transpose() << '|' << translate.transpose();
   {
     const std::lock_guard<std::mutex> lock(mutex);
-    if (auto found = built[key.str()].lock()) return found;
+    if (auto found = built[key.str()]) return found;
   }
   TriangleMesh mesh = load_obj(file, key_path);
   mesh.transform(scale, translate);

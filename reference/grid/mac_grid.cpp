@@ -35,38 +35,8 @@ double MacGrid<Dim>::cell_volume() const {
 }
 
 template <int Dim>
-int MacGrid<Dim>::cell_index(const VecI<Dim>& c) const {
-  return lattice_index<Dim>(c, cells_);
-}
-
-template <int Dim>
-VecI<Dim> MacGrid<Dim>::cell_coord(int index) const {
-  return lattice_coord<Dim>(index, cells_);
-}
-
-template <int Dim>
-bool MacGrid<Dim>::cell_in_range(const VecI<Dim>& c) const {
-  for (int a = 0; a < Dim; ++a)
-    if (c[a] < 0 || c[a] >= cells_[a]) return false;
-  return true;
-}
-
-template <int Dim>
 Vec<Dim> MacGrid<Dim>::cell_center(const VecI<Dim>& c) const {
   return origin_ + (c.template cast<double>().array() + 0.5).matrix() * dx_;
-}
-
-template <int Dim>
-VecI<Dim> MacGrid<Dim>::wrap_cell(VecI<Dim> c) const {
-  for (int a = 0; a < Dim; ++a)
-    if (periodic_[a]) c[a] = wrap(c[a], cells_[a]);
-  return c;
-}
-
-template <int Dim>
-int MacGrid<Dim>::cell_index_or_outside(const VecI<Dim>& c) const {
-  const VecI<Dim> w = wrap_cell(c);
-  return cell_in_range(w) ? cell_index(w) : -1;
 }
 
 template <int Dim>
@@ -80,40 +50,6 @@ VecI<Dim> MacGrid<Dim>::cell_containing(const Vec<Dim>& x) const {
 }
 
 template <int Dim>
-int MacGrid<Dim>::face_index(int axis, const VecI<Dim>& f) const {
-  return face_offset_[axis] + lattice_index<Dim>(f, face_dims_[axis]);
-}
-
-template <int Dim>
-std::pair<int, VecI<Dim>> MacGrid<Dim>::face_coord(int index) const {
-  int axis = 0;
-  while (index >= face_offset_[axis + 1]) ++axis;
-  return {axis, lattice_coord<Dim>(index - face_offset_[axis], face_dims_[axis])};
-}
-
-template <int Dim>
-Vec<Dim> MacGrid<Dim>::face_center(int axis, const VecI<Dim>& f) const {
-  return origin_ + (f.template cast<double>() + face_shift(axis)) * dx_;
-}
-
-template <int Dim>
-bool MacGrid<Dim>::is_boundary_face(int axis, const VecI<Dim>& f) const {
-  return !periodic_[axis] && (f[axis] == 0 || f[axis] == cells_[axis]);
-}
-
-template <int Dim>
-int MacGrid<Dim>::face_cell_minus(int axis, const VecI<Dim>& f) const {
-  VecI<Dim> c = f;
-  c[axis] -= 1;
-  return cell_index_or_outside(c);
-}
-
-template <int Dim>
-int MacGrid<Dim>::face_cell_plus(int /*axis*/, const VecI<Dim>& f) const {
-  return cell_index_or_outside(f);
-}
-
-template <int Dim>
 Vec<Dim> MacGrid<Dim>::wrap_position(Vec<Dim> x) const {
   for (int a = 0; a < Dim; ++a) {
     if (!periodic_[a]) continue;
@@ -122,13 +58,6 @@ Vec<Dim> MacGrid<Dim>::wrap_position(Vec<Dim> x) const {
     if (x[a] >= origin_[a] + length) x[a] = origin_[a];  // fmod round-off at the upper end
   }
   return x;
-}
-
-template <int Dim>
-Vec<Dim> MacGrid<Dim>::face_shift(int axis) {
-  Vec<Dim> s = Vec<Dim>::Constant(0.5);
-  s[axis] = 0.0;
-  return s;
 }
 
 template <int Dim>

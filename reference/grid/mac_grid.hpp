@@ -121,6 +121,80 @@ class MacGrid {
   std::array<int, Dim + 1> face_offset_{};
 };
 
+// --- index arithmetic, inline: the inner loops of the transfers and weights call these per
+// face and per particle
+
+template <int Dim>
+inline int MacGrid<Dim>::cell_index(const VecI<Dim>& c) const {
+  return lattice_index<Dim>(c, cells_);
+}
+
+template <int Dim>
+inline VecI<Dim> MacGrid<Dim>::cell_coord(int index) const {
+  return lattice_coord<Dim>(index, cells_);
+}
+
+template <int Dim>
+inline bool MacGrid<Dim>::cell_in_range(const VecI<Dim>& c) const {
+  for (int a = 0; a < Dim; ++a)
+    if (c[a] < 0 || c[a] >= cells_[a]) return false;
+  return true;
+}
+
+template <int Dim>
+inline VecI<Dim> MacGrid<Dim>::wrap_cell(VecI<Dim> c) const {
+  for (int a = 0; a < Dim; ++a)
+    if (periodic_[a]) c[a] = ((c[a] % cells_[a]) + cells_[a]) % cells_[a];
+  return c;
+}
+
+template <int Dim>
+inline int MacGrid<Dim>::cell_index_or_outside(const VecI<Dim>& c) const {
+  const VecI<Dim> w = wrap_cell(c);
+  return cell_in_range(w) ? cell_index(w) : -1;
+}
+
+template <int Dim>
+inline int MacGrid<Dim>::face_index(int axis, const VecI<Dim>& f) const {
+  return face_offset_[axis] + lattice_index<Dim>(f, face_dims_[axis]);
+}
+
+template <int Dim>
+inline std::pair<int, VecI<Dim>> MacGrid<Dim>::face_coord(int index) const {
+  int axis = 0;
+  while (index >= face_offset_[axis + 1]) ++axis;
+  return {axis, lattice_coord<Dim>(index - face_offset_[axis], face_dims_[axis])};
+}
+
+template <int Dim>
+inline Vec<Dim> MacGrid<Dim>::face_center(int axis, const VecI<Dim>& f) const {
+  return origin_ + (f.template cast<double>() + face_shift(axis)) * dx_;
+}
+
+template <int Dim>
+inline bool MacGrid<Dim>::is_boundary_face(int axis, const VecI<Dim>& f) const {
+  return !periodic_[axis] && (f[axis] == 0 || f[axis] == cells_[axis]);
+}
+
+template <int Dim>
+inline int MacGrid<Dim>::face_cell_minus(int axis, const VecI<Dim>& f) const {
+  VecI<Dim> c = f;
+  c[axis] -= 1;
+  return cell_index_or_outside(c);
+}
+
+template <int Dim>
+inline int MacGrid<Dim>::face_cell_plus(int /*axis*/, const VecI<Dim>& f) const {
+  return cell_index_or_outside(f);
+}
+
+template <int Dim>
+inline Vec<Dim> MacGrid<Dim>::face_shift(int axis) {
+  Vec<Dim> s = Vec<Dim>::Constant(0.5);
+  s[axis] = 0.0;
+  return s;
+}
+
 /// A regular lattice of sample points origin + index * spacing, index in [0, dims) (x fastest).
 /// The canonical one is the half lattice of a MacGrid (spacing dx/2, dims 2 cells + 1): it holds
 /// every cell centre, face centre, node and (3D) edge centre, so the corners of every control

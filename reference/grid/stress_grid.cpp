@@ -3,7 +3,6 @@
 namespace monolith {
 
 namespace {
-int wrap_index(int i, int n) { return ((i % n) + n) % n; }
 
 /// Tensor index pairs of the components, diagonal first (see stress_grid.hpp).
 template <int Dim>
@@ -58,39 +57,6 @@ Vec<Dim> StressGrid<Dim>::shift(int k) {
     s[b] = 0.0;
   }
   return s;
-}
-
-template <int Dim>
-int StressGrid<Dim>::index(int k, const VecI<Dim>& c) const {
-  return offset_[k] + lattice_index<Dim>(c, dims_[k]);
-}
-
-template <int Dim>
-std::pair<int, VecI<Dim>> StressGrid<Dim>::coord(int index) const {
-  int k = 0;
-  while (index >= offset_[k + 1]) ++k;
-  return {k, lattice_coord<Dim>(index - offset_[k], dims_[k])};
-}
-
-template <int Dim>
-bool StressGrid<Dim>::in_range(int k, const VecI<Dim>& c) const {
-  for (int a = 0; a < Dim; ++a)
-    if (c[a] < 0 || c[a] >= dims_[k][a]) return false;
-  return true;
-}
-
-template <int Dim>
-VecI<Dim> StressGrid<Dim>::wrap(int /*k*/, VecI<Dim> c) const {
-  // on a periodic axis dims == cells for every component
-  for (int a = 0; a < Dim; ++a)
-    if (grid_.periodic(a)) c[a] = wrap_index(c[a], grid_.cells()[a]);
-  return c;
-}
-
-template <int Dim>
-int StressGrid<Dim>::index_or_outside(int k, const VecI<Dim>& c) const {
-  const VecI<Dim> w = wrap(k, c);
-  return in_range(k, w) ? index(k, w) : -1;
 }
 
 template <int Dim>

@@ -93,4 +93,39 @@ class StressGrid {
   std::array<int, kComponents + 1> offset_{};
 };
 
+// --- index arithmetic, inline: the viscosity set-up and the shear rates call these per DOF
+
+template <int Dim>
+inline int StressGrid<Dim>::index(int k, const VecI<Dim>& c) const {
+  return offset_[k] + lattice_index<Dim>(c, dims_[k]);
+}
+
+template <int Dim>
+inline std::pair<int, VecI<Dim>> StressGrid<Dim>::coord(int index) const {
+  int k = 0;
+  while (index >= offset_[k + 1]) ++k;
+  return {k, lattice_coord<Dim>(index - offset_[k], dims_[k])};
+}
+
+template <int Dim>
+inline bool StressGrid<Dim>::in_range(int k, const VecI<Dim>& c) const {
+  for (int a = 0; a < Dim; ++a)
+    if (c[a] < 0 || c[a] >= dims_[k][a]) return false;
+  return true;
+}
+
+template <int Dim>
+inline VecI<Dim> StressGrid<Dim>::wrap(int /*k*/, VecI<Dim> c) const {
+  // on a periodic axis dims == cells for every component
+  for (int a = 0; a < Dim; ++a)
+    if (grid_.periodic(a)) c[a] = ((c[a] % grid_.cells()[a]) + grid_.cells()[a]) % grid_.cells()[a];
+  return c;
+}
+
+template <int Dim>
+inline int StressGrid<Dim>::index_or_outside(int k, const VecI<Dim>& c) const {
+  const VecI<Dim> w = wrap(k, c);
+  return in_range(k, w) ? index(k, w) : -1;
+}
+
 }  // namespace monolith

@@ -132,21 +132,36 @@ int map_lattice_cell(int l, int cells2, bool periodic) {
 template <int Dim>
 double lattice_cube_negative_fraction(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                       const VecI<Dim>& lower, const VectorX& phi) {
-  double sum = 0.0;
-  for (int sub = 0; sub < (1 << Dim); ++sub) {
-    // the lattice cell of this sub-cube, after wrapping or mirroring
-    VecI<Dim> l;
-    for (int a = 0; a < Dim; ++a)
-      l[a] = map_lattice_cell(lower[a] + ((sub >> a) & 1), 2 * grid.cells()[a], grid.periodic(a));
-    std::array<double, (1 << Dim)> corners;
-    for (int k = 0; k < (1 << Dim); ++k) {
-      VecI<Dim> point;
-      for (int a = 0; a < Dim; ++a) point[a] = l[a] + ((k >> a) & 1);
-      corners[k] = phi[lattice.index(point)];
+  constexpr int kCorners = 1 << Dim;
+  // per axis, the lattice coordinate of corner bit k of sub-cube bit s (after wrapping or
+  // mirroring the sub-cube) times the axis stride: 2 x 2 offsets, summed into point indices
+  std::array<std::array<std::array<int, 2>, 2>, Dim> offset;
+  int stride = 1;
+  for (int a = 0; a < Dim; ++a) {
+    for (int s = 0; s < 2; ++s) {
+      const int l = map_lattice_cell(lower[a] + s, 2 * grid.cells()[a], grid.periodic(a));
+      offset[a][s] = {l * stride, (l + 1) * stride};
     }
-    sum += lattice_cell_negative_fraction<Dim>(corners);
+    stride *= lattice.dims[a];
   }
-  return sum / (1 << Dim);
+  // the corner values of every sub-cube; all of one sign (the cube away from the surface, most
+  // of the domain) gives 0 or 1 without the Kuhn split (the same value as summing the 2^Dim
+  // sub-cubes' 0s or 1s)
+  std::array<std::array<double, kCorners>, kCorners> corners;
+  int negatives = 0;
+  for (int sub = 0; sub < kCorners; ++sub)
+    for (int k = 0; k < kCorners; ++k) {
+      int index = 0;
+      for (int a = 0; a < Dim; ++a) index += offset[a][(sub >> a) & 1][(k >> a) & 1];
+      const double v = phi[index];
+      corners[sub][k] = v;
+      negatives += v < 0.0;
+    }
+  if (negatives == 0) return 0.0;
+  if (negatives == kCorners * kCorners) return 1.0;
+  double sum = 0.0;
+  for (int sub = 0; sub < kCorners; ++sub) sum += lattice_cell_negative_fraction<Dim>(corners[sub]);
+  return sum / kCorners;
 }
 
 template <int Dim>
@@ -206,7 +221,13 @@ VectorX liquid_cell_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
 template <int Dim>
 VectorX liquid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& liquid_phi, const VectorX& liquid_cell_weights) {
-  VectorX w = face_negative_fractions(grid, lattice, liquid_phi);
+  return clamp_liquid_face_weights(grid, face_negative_fractions(grid, lattice, liquid_phi),
+                                   liquid_cell_weights);
+}
+
+template <int Dim>
+VectorX clamp_liquid_face_weights(const MacGrid<Dim>& grid, VectorX w,
+                                  const VectorX& liquid_cell_weights) {
   // clamp from below beside every cell with a liquid fraction, so (W_L^u)^-1 exists there
   for (int f = 0; f < grid.num_faces(); ++f) {
     const auto [axis, coord] = grid.face_coord(f);
@@ -247,6 +268,7 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
                                           const VectorX&);                                        \
   template VectorX liquid_face_weights<D>(const MacGrid<D>&, const SampleLattice<D>&,             \
                                           const VectorX&, const VectorX&);                        \
+  template VectorX clamp_liquid_face_weights<D>(const MacGrid<D>&, VectorX, const VectorX&);      \
   template VectorX extend_liquid_into_solids<D>(const MacGrid<D>&, const VectorX&,                \
                                                 const VectorX&, double);
 MONOLITH_INSTANTIATE(2)

@@ -100,6 +100,12 @@ template <int Dim>
 VectorX liquid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& liquid_phi, const VectorX& liquid_cell_weights);
 
+/// The same W_L^u from the faces' raw liquid fractions (face_negative_fractions of the level set),
+/// for a caller that keeps those too: the clamp alone, without sampling the fractions again.
+template <int Dim>
+VectorX clamp_liquid_face_weights(const MacGrid<Dim>& grid, VectorX raw_face_fractions,
+                                  const VectorX& liquid_cell_weights);
+
 /// Reach of the liquid level set into static solids, in units of dx (see extend_liquid_into_solids).
 inline constexpr double kLiquidSolidReach = 1.0;
 

@@ -306,73 +306,104 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 /// its face lattice):
 ///   m_f = sum_p w_fp m_p,  (m u)_f = sum_p w_fp m_p (v_pa + c_pa . (x_f - x_p)),
 ///   rho_f = sum_p w_fp m_p rho_p / m_f,
-/// with w_fp the multilinear weights of face lattice a. Deterministic for a fixed thread count:
-/// each thread accumulates a contiguous block of particles into its own buffers, which are then
-/// summed in thread order.
+/// with w_fp the multilinear weights of face lattice a. Parallel as a scatter over fixed spatial
+/// partitions: the faces are split into slabs of the last axis (one per thread, balanced by the
+/// particles' cell layers), each thread visits the particles that reach its slab in particle
+/// order and writes only its own faces. Every face therefore sums its contributions in particle
+/// order, as the serial loop does: the same bits for any thread count, and no per-thread copies
+/// of the grid.
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
                        VectorX& face_mass, VectorX& face_density) {
   constexpr int kCorners = 1 << Dim;
+  constexpr int kLast = Dim - 1;
   const int nf = grid.num_faces();
   const long np = static_cast<long>(particles.size());
-  const int max_threads = std::max(1, omp_get_max_threads());
-  std::vector<VectorX> buf_m(max_threads), buf_mu(max_threads), buf_mr(max_threads);
-  int used_threads = 1;
+  // the three accumulators live in the outputs (setZero keeps the storage of a same-size vector)
+  u.setZero(nf);
+  face_mass.setZero(nf);
+  face_density.setZero(nf);
+  const int layers = grid.cells()[kLast];
+  const bool wrap_last = grid.periodic(kLast);
+  // each particle's cell layer along the last axis (clamped): its stencils reach face layers
+  // layer - 1 .. layer + 1 of every component's lattice (wrapped on a periodic axis)
+  std::vector<int> layer_of(np);
+  std::vector<long> per_layer(layers + 1, 0);
+  for (long p = 0; p < np; ++p) {
+    const double s = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / grid.dx();
+    const int c = std::clamp(static_cast<int>(std::floor(s)), 0, layers - 1);
+    layer_of[p] = c;
+    ++per_layer[c + 1];
+  }
+  for (int c = 0; c < layers; ++c) per_layer[c + 1] += per_layer[c];
+  const int threads = std::max(1, std::min(omp_get_max_threads(), layers));
+  // slab t owns the face layers [first[t], first[t + 1]); the face lattices along the last axis
+  // have at most layers + 1 samples
+  std::vector<int> first(threads + 1, 0);
+  for (int t = 1; t < threads; ++t) {
+    const long target = np * t / threads;
+    int c = first[t - 1];
+    while (c < layers && per_layer[c] < target) ++c;
+    first[t] = c;
+  }
+  first[threads] = layers + 1;
 
-#pragma omp parallel num_threads(max_threads)
+#pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num();
     const int nt = omp_get_num_threads();
-#pragma omp single
-    used_threads = nt;
-    VectorX& m = buf_m[t];
-    VectorX& mu = buf_mu[t];
-    VectorX& mr = buf_mr[t];
-    m = VectorX::Zero(nf);
-    mu = VectorX::Zero(nf);
-    mr = VectorX::Zero(nf);
-    const long begin = np * t / nt, end = np * (t + 1) / nt;
-    std::array<int, kCorners> idx;
-    std::array<double, kCorners> w;
-    for (long p = begin; p < end; ++p) {
-      const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
-      const double mp = particles.mass[p];
-      for (int a = 0; a < Dim; ++a) {
-        const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
-        const VecI<Dim> dims = grid.face_dims(a);
-        const int offset = grid.face_offset(a);
-        grid.stencil(xp, shift, dims, idx, w);
-        for (int k = 0; k < kCorners; ++k) {
-          if (w[k] == 0.0) continue;
-          // affine velocity at the face sample (minimum image on periodic axes)
-          const Vec<Dim> xf = grid.face_center(a, lattice_coord<Dim>(idx[k], dims));
-          const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
-          const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
-          const int f = offset + idx[k];
-          m[f] += w[k] * mp;
-          mu[f] += w[k] * mp * vel;
-          mr[f] += w[k] * mp * particles.density[p];
+    // a team smaller than asked for: thread t covers the slabs t, t + nt, ...
+    for (int slab = t; slab < threads; slab += nt) {
+      const int lo = first[slab], hi = first[slab + 1];
+      if (lo >= hi) continue;
+      auto owned = [&](int k) { return k >= lo && k < hi; };
+      auto reaches = [&](int c) {
+        for (int d = -1; d <= 1; ++d) {
+          int k = c + d;
+          if (wrap_last) k = (k + layers) % layers;  // the periodic face lattice has `layers`
+          if (owned(k)) return true;
+        }
+        return false;
+      };
+      std::array<int, kCorners> idx;
+      std::array<double, kCorners> w;
+      for (long p = 0; p < np; ++p) {
+        if (!reaches(layer_of[p])) continue;
+        const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+        const double mp = particles.mass[p];
+        for (int a = 0; a < Dim; ++a) {
+          const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
+          const VecI<Dim> dims = grid.face_dims(a);
+          const int offset = grid.face_offset(a);
+          int stride = 1;  // of the last axis in face lattice a
+          for (int b = 0; b < kLast; ++b) stride *= dims[b];
+          grid.stencil(xp, shift, dims, idx, w);
+          for (int k = 0; k < kCorners; ++k) {
+            if (w[k] == 0.0 || !owned(idx[k] / stride)) continue;
+            // affine velocity at the face sample (minimum image on periodic axes)
+            const Vec<Dim> xf = grid.face_center(a, lattice_coord<Dim>(idx[k], dims));
+            const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
+            const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
+            const int f = offset + idx[k];
+            face_mass[f] += w[k] * mp;
+            u[f] += w[k] * mp * vel;
+            face_density[f] += w[k] * mp * particles.density[p];
+          }
         }
       }
     }
   }
 
-  // reduce the thread buffers in a fixed order
-  u.setZero(nf);
-  face_mass.setZero(nf);
-  face_density.setZero(nf);
+  // velocities and densities from the sums
 #pragma omp parallel for schedule(static)
   for (int f = 0; f < nf; ++f) {
-    double m = 0.0, mu = 0.0, mr = 0.0;
-    for (int t = 0; t < used_threads; ++t) {
-      m += buf_m[t][f];
-      mu += buf_mu[t][f];
-      mr += buf_mr[t][f];
-    }
-    face_mass[f] = m;
+    const double m = face_mass[f];
     if (m > 0.0) {
-      u[f] = mu / m;
-      face_density[f] = mr / m;
+      u[f] = (0.0 + u[f]) / m;
+      face_density[f] = (0.0 + face_density[f]) / m;
+    } else {
+      u[f] = 0.0;
+      face_density[f] = 0.0;
     }
   }
 }
@@ -410,42 +441,86 @@ void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
 
 /// Breadth-first extrapolation: per layer, every invalid face with valid same-axis neighbours
 /// (+-1 along each axis, wrapped on periodic axes) of the previous layer takes their average.
+/// The first layer visits the invalid neighbours of the given valid faces; a later layer can fill only faces next to those the
+/// layer before it filled (any other invalid face has no valid neighbour, or would have been
+/// filled earlier), so it visits just those: work in proportion to the band, not the box.
 template <int Dim>
 void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
                           int layers) {
   const int nf = grid.num_faces();
   valid.resize(nf, 0);
-  for (int layer = 0; layer < layers; ++layer) {
-    const std::vector<char> old = valid;
-    int filled = 0;
-    // each invalid face takes the average of its valid same-axis neighbours of the last layer
-#pragma omp parallel for schedule(static) reduction(+ : filled)
-    for (int f = 0; f < nf; ++f) {
-      if (old[f]) continue;
-      const auto [axis, coord] = grid.face_coord(f);
-      const VecI<Dim> dims = grid.face_dims(axis);
-      double sum = 0.0;
-      int count = 0;
-      for (int b = 0; b < Dim; ++b)
-        for (int s = -1; s <= 1; s += 2) {
-          VecI<Dim> nb = coord;
-          nb[b] += s;
-          if (grid.periodic(b))
-            nb[b] = (nb[b] + dims[b]) % dims[b];
-          else if (nb[b] < 0 || nb[b] >= dims[b])
-            continue;
-          const int g = grid.face_index(axis, nb);
-          if (g == f || !old[g]) continue;
-          sum += u[g];
-          ++count;
+  // the same-axis neighbours of face f (each once, in a fixed order), -1 where there is none
+  auto neighbours = [&](int f, std::array<int, 2 * Dim>& nb) {
+    const auto [axis, coord] = grid.face_coord(f);
+    const VecI<Dim> dims = grid.face_dims(axis);
+    for (int b = 0; b < Dim; ++b)
+      for (int s = 0; s < 2; ++s) {
+        VecI<Dim> c = coord;
+        c[b] += s == 0 ? -1 : 1;
+        int g = -1;
+        if (grid.periodic(b)) {
+          c[b] = (c[b] + dims[b]) % dims[b];
+          g = grid.face_index(axis, c);
+        } else if (c[b] >= 0 && c[b] < dims[b]) {
+          g = grid.face_index(axis, c);
         }
-      if (count > 0) {
-        u[f] = sum / count;
-        valid[f] = 1;
-        ++filled;
+        nb[2 * b + s] = g == f ? -1 : g;
       }
+  };
+  // the average of the valid neighbours (as of the layer's start) of an invalid face
+  auto average = [&](int f, double& value) {
+    std::array<int, 2 * Dim> nb;
+    neighbours(f, nb);
+    double sum = 0.0;
+    int count = 0;
+    for (int g : nb) {
+      if (g < 0 || !valid[g]) continue;
+      sum += u[g];
+      ++count;
     }
-    if (filled == 0) break;
+    if (count == 0) return false;
+    value = sum / count;
+    return true;
+  };
+  // the invalid neighbours of `faces` (sorted, each once): the candidates of a layer
+  std::vector<int> candidates;
+  auto candidates_beside = [&](const std::vector<int>& faces) {
+    candidates.clear();
+    std::array<int, 2 * Dim> nb;
+    for (int f : faces) {
+      neighbours(f, nb);
+      for (int g : nb)
+        if (g >= 0 && !valid[g]) candidates.push_back(g);
+    }
+    std::sort(candidates.begin(), candidates.end());
+    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  };
+  // the first layer's: beside any valid face
+  {
+    std::vector<int> given;
+    for (int f = 0; f < nf; ++f)
+      if (valid[f]) given.push_back(f);
+    candidates_beside(given);
+  }
+  std::vector<double> value;
+  std::vector<char> filled;
+  for (int layer = 0; layer < layers && !candidates.empty(); ++layer) {
+    const int n = static_cast<int>(candidates.size());
+    value.assign(n, 0.0);
+    filled.assign(n, 0);
+#pragma omp parallel for schedule(static)
+    for (int i = 0; i < n; ++i) filled[i] = average(candidates[i], value[i]);
+    // apply after all averages are taken (they read the previous layer's validity)
+    std::vector<int> fresh;
+    for (int i = 0; i < n; ++i)
+      if (filled[i]) {
+        u[candidates[i]] = value[i];
+        valid[candidates[i]] = 1;
+        fresh.push_back(candidates[i]);
+      }
+    if (fresh.empty()) break;
+    // the next layer's: beside the faces just filled
+    candidates_beside(fresh);
   }
 }
 
@@ -569,7 +644,11 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     for (long p = 0; p < np; ++p) order[fill[bucket[p]]++] = static_cast<int>(p);
   }
   for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
-  const int ring = std::max(1, static_cast<int>(std::ceil(max_support / dx)));
+  // cells to search around a particle's own: the support is one cell at the default 8 (4) particles
+  // per cell, but (m / rho)^(1/Dim) rounds to a hair above dx / 2, and a plain ceil then searched
+  // two rings (125 cells instead of 27 in 3D) for neighbours that cannot lie there: a pair in
+  // cells two apart is farther than dx, and the excess of the support over dx is a rounding error
+  const int ring = std::max(1, static_cast<int>(std::ceil(max_support / dx * (1.0 - 1e-12))));
   const int side = 2 * ring + 1;
   const int neighbour_cells = int_pow(side, Dim);
   // a periodic axis shorter than the stencil maps two offsets to one cell: deduplicate then
@@ -766,15 +845,21 @@ VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
   int count = 1;
   for (int a = 0; a < Dim; ++a) count *= dims[a];
   VectorX cur(count);
+  // lattice index offsets of the 2^Dim corners from a half cell's lower corner
+  std::array<int, kCorners> corner_offset;
+  for (int b = 0; b < kCorners; ++b) {
+    int offset = 0, stride = 1;
+    for (int a = 0; a < Dim; ++a) {
+      offset += ((b >> a) & 1) * stride;
+      stride *= lattice.dims[a];
+    }
+    corner_offset[b] = offset;
+  }
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < count; ++k) {
-    const VecI<Dim> lower = lattice_coord<Dim>(k, dims);
+    const int base = lattice.index(lattice_coord<Dim>(k, dims));
     std::array<double, kCorners> corner;
-    for (int b = 0; b < kCorners; ++b) {
-      VecI<Dim> i = lower;
-      for (int a = 0; a < Dim; ++a) i[a] += (b >> a) & 1;
-      corner[b] = phi[lattice.index(i)];
-    }
+    for (int b = 0; b < kCorners; ++b) corner[b] = phi[base + corner_offset[b]];
     cur[k] = lattice_cell_negative_fraction<Dim>(corner);
   }
   // per axis, the 4-tap hat integrals from half cells to cells
