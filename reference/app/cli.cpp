@@ -14,6 +14,7 @@
 #include "reference/app/oracle.hpp"
 #include "reference/app/scene_file.hpp"
 #include "reference/core/errors.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/sim/simulation.hpp"
 
 #ifndef MONOLITH_VERSION
@@ -29,9 +30,9 @@ using nlohmann::json;
 const char* kUsage =
     "usage:\n"
     "  monolith run SCENE [--frames N] [--out DIR] [--scheme NAME] [--backend matrixfree|explicit]\n"
-    "                     [--threads N] [--no-render] [--quiet] [--set KEY=VALUE]...\n"
+    "                     [--threads N|auto] [--no-render] [--quiet] [--set KEY=VALUE]...\n"
     "                     [--checkpoint-every N]\n"
-    "  monolith resume DIR [--frames N] [--threads N] [--quiet] [--checkpoint-every N]\n"
+    "  monolith resume DIR [--frames N] [--threads N|auto] [--quiet] [--checkpoint-every N]\n"
     "  monolith check SCENE [--set KEY=VALUE]...\n"
     "  monolith list\n"
     "  monolith convert IN.ppm OUT.png\n"
@@ -66,7 +67,12 @@ const char* kHelp =
     "                    PC-iterative, PC-unified, PC-VC-PC-unified, PV-C, C-PV, PVC-iterative,\n"
     "                    PVC-unified\n"
     "  --backend NAME    matrixfree or explicit (same as --set solver.backend=NAME)\n"
-    "  --threads N       number of OpenMP threads\n"
+    "  --threads N|auto  OpenMP threads: N in 1..1024, or auto = the cores of the affinity mask\n"
+    "                    that are idle at the start (sampled for 0.1 s; at least 1). Without the\n"
+    "                    flag: MONOLITH_THREADS (same values), else OMP_NUM_THREADS, else auto.\n"
+    "                    Results do not depend on the thread count. Idle threads spin briefly\n"
+    "                    then sleep (GOMP_SPINCOUNT=10000 unless OMP_WAIT_POLICY or\n"
+    "                    GOMP_SPINCOUNT is set; docs/cli.md, \"Threads\")\n"
     "  --no-render       write no pictures (same as --set render.enabled=false)\n"
     "  --quiet           no progress output\n"
     "  --set KEY=VALUE   override a scene key by its dotted path, e.g. solver.tolerance=1e-8,\n"
@@ -148,12 +154,13 @@ RunOptions parse_options(const std::string& command, const std::vector<std::stri
     } else if (run_flags && a == "--backend") {
       if (take_value(a)) o.overrides.push_back("solver.backend=" + json(value).dump());
     } else if (run_flags && a == "--threads") {
-      long long n = 0;
       if (take_value(a)) {
-        if (parse_nonneg_int(value, 1024, n) && n >= 1)
-          o.threads = static_cast<int>(n);
+        const ThreadSpec spec = parse_thread_spec(value);
+        if (spec.valid)
+          o.threads = spec.automatic ? RunOptions::kAutoThreads : spec.count;
         else
-          problems.push_back(command + ": --threads: bad value \"" + value.substr(0, 40) + "\" (an integer in 1..1024)");
+          problems.push_back(command + ": --threads: bad value \"" + value.substr(0, 40) +
+                             "\" (auto or an integer in 1..1024)");
       }
     } else if (run_flags && a == "--checkpoint-every") {
       long long n = 0;
@@ -177,6 +184,19 @@ RunOptions parse_options(const std::string& command, const std::vector<std::stri
     if (o.scene.empty()) problems.push_back(command + ": missing DIR (the output folder of a run with a checkpoint)");
   } else if (o.scene.empty()) {
     problems.push_back(command + ": missing SCENE (a scene file or a built-in scene name; see monolith list)");
+  }
+  if (run_flags && o.threads == 0) {
+    // no --threads: MONOLITH_THREADS, else OMP_NUM_THREADS (OpenMP's own), else auto
+    if (const char* env = std::getenv("MONOLITH_THREADS")) {
+      const ThreadSpec spec = parse_thread_spec(env);
+      if (spec.valid)
+        o.threads = spec.automatic ? RunOptions::kAutoThreads : spec.count;
+      else
+        problems.push_back(command + ": environment variable MONOLITH_THREADS: bad value \"" +
+                           std::string(env).substr(0, 40) + "\" (auto or an integer in 1..1024)");
+    } else if (!std::getenv("OMP_NUM_THREADS")) {
+      o.threads = RunOptions::kAutoThreads;
+    }
   }
   if (!problems.empty()) throw InputError(problems);
   return o;

@@ -19,6 +19,7 @@
 #include "reference/app/checkpoint.hpp"
 #include "reference/app/stats_json.hpp"
 #include "reference/core/errors.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/core/timer.hpp"
 
 #ifndef MONOLITH_VERSION
@@ -339,12 +340,17 @@ void make_output_folders(const fs::path& dir, bool render) {
 
 }  // namespace
 
+void apply_thread_option(int threads) {
+  if (threads == RunOptions::kAutoThreads) threads = automatic_thread_count();
+  if (threads > 0) omp_set_num_threads(threads);
+}
+
 int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& factory,
               const FrameRenderer& renderer) {
   // --no-render acts as a last --set render.enabled=false
   std::vector<std::string> overrides = o.overrides;
   if (o.no_render) overrides.push_back("render.enabled=false");
-  if (o.threads > 0) omp_set_num_threads(o.threads);
+  apply_thread_option(o.threads);
 
   // scene and simulation
   const SceneFile scene = load_scene(o.scene, overrides);
@@ -372,7 +378,7 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
 
 int resume_run(const RunOptions& o, std::ostream& err, const SimulationFactory& factory,
                const FrameRenderer& renderer) {
-  if (o.threads > 0) omp_set_num_threads(o.threads);
+  apply_thread_option(o.threads);
   const fs::path dir(o.resume_dir);
   const fs::path file = checkpoint_path(dir);
   // every check before anything in the folder changes

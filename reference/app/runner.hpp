@@ -23,7 +23,11 @@ struct RunOptions {
   std::string scene;                   ///< path or built-in name
   std::vector<std::string> overrides;  ///< KEY=VALUE, applied in order (the sugar flags included)
   std::string out_dir;                 ///< empty: out/<scene name>
-  int threads = 0;                     ///< 0: OpenMP's default
+  /// OpenMP threads: N > 0 as given; kAutoThreads: the free cores of the affinity mask
+  /// (automatic_thread_count, reference/core/parallel.hpp); 0: OpenMP's default (OMP_NUM_THREADS).
+  /// parse_options resolves --threads, then MONOLITH_THREADS, then OMP_NUM_THREADS, else auto.
+  int threads = 0;
+  static constexpr int kAutoThreads = -1;
   bool no_render = false;
   bool quiet = false;
   int checkpoint_every = 0;            ///< a checkpoint every N frames and at the end; 0: none
@@ -43,6 +47,10 @@ using FrameRenderer = std::function<Image(const AnySimulation&, const RenderSpec
 /// converge (summary.json then has status "failed", the frame and the reason); 130 / 143 after
 /// SIGINT / SIGTERM (stopped at a step boundary, checkpoint written, status "interrupted").
 /// Throws InputError for bad input.
+/// Sets the OpenMP thread count of RunOptions::threads (kAutoThreads: the free cores now; 0:
+/// leaves OpenMP's default).
+void apply_thread_option(int threads);
+
 int run_scene(const RunOptions& options, std::ostream& err, const SimulationFactory& factory,
               const FrameRenderer& render = render_simulation);
 

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <stdexcept>
 
+#include "reference/core/parallel.hpp"
 #include "reference/fluid/gradient.hpp"
 
 namespace monolith {
@@ -12,7 +13,7 @@ namespace {
 
 /// Below this many cells the matrix-free loops run on one thread: a parallel region costs more
 /// than it saves on small grids (and much more on an oversubscribed machine).
-constexpr Eigen::Index kParallelMin = 16384;
+constexpr Eigen::Index kParallelMin = kParallelMinWork;
 
 // (W_L^u)^-1 entries are reciprocal_or_zero: 0 where W_L^u = 0 (such faces have no liquid cell
 // beside them, so the matching row of G W_L^p is zero anyway).
@@ -256,8 +257,9 @@ void MatrixFreePressureOperator<Dim>::cell_stencil(const VecI<Dim>& c,
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::scatter(const VectorX& x) const {
+  // (orphaned omp for, a barrier at its end: called inside the caller's parallel region)
   const int num_cells = static_cast<int>(q_.size());
-#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
+#pragma omp for schedule(static)
   for (int c = 0; c < num_cells; ++c) {
     const int i = dof_of_cell_[c];
     q_[c] = i >= 0 ? liquid_[i] * x[i] : 0.0;
@@ -267,11 +269,14 @@ void MatrixFreePressureOperator<Dim>::scatter(const VectorX& x) const {
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
   y.resize(num_dofs_);
-  scatter(x);
-  // (A x)_i = W_i sum_f k_f (q_i - q_j), q = W x: the stencil of W G^T K G W, per grid row
+  // one parallel region: q = W x, a barrier, then
+  // (A x)_i = W_i sum_f k_f (q_i - q_j), the stencil of W G^T K G W, per grid row
   const int n0 = cells_[0];
   const int rows = static_cast<int>(q_.size()) / n0;
-#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
+#pragma omp parallel if (q_.size() > kParallelMin)
+  {
+  scatter(x);
+#pragma omp for schedule(dynamic, dynamic_chunk(rows)) nowait
   for (int r = 0; r < rows; ++r) {
     VecI<Dim> c = VecI<Dim>::Zero();
     int rest = r;
@@ -294,13 +299,12 @@ void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const 
       y[i] = liquid_[i] * sum;
     }
   }
+  }
 }
 
 template <int Dim>
 void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, VectorX& x,
                                             double omega, const std::vector<char>* active) const {
-  // q = W x of the starting x, kept current as DOFs change
-  scatter(x);
   const int n0 = cells_[0];
   const int rows = static_cast<int>(q_.size()) / n0;
   auto relax_row = [&](int r, int parity) {
@@ -333,16 +337,23 @@ void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Ve
       q_[cell] = liquid_[i] * x[i];
     }
   };
-  for (int step = 0; step < 2; ++step) {
-    const int parity = reverse ? 1 - step : step;
-    if (colouring_valid_) {
-      // cells of one colour only couple to the other colour: rows in parallel
-#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
-      for (int r = 0; r < rows; ++r) relax_row(r, parity);
-    } else if (!reverse) {
-      for (int r = 0; r < rows; ++r) relax_row(r, parity);
-    } else {
-      for (int r = rows - 1; r >= 0; --r) relax_row(r, parity);
+  // one parallel region per sweep (only with a valid colouring and enough cells): q = W x of
+  // the starting x (kept current as DOFs change), then the two colours, a barrier after each
+#pragma omp parallel if (colouring_valid_ && q_.size() > kParallelMin)
+  {
+    scatter(x);
+    for (int step = 0; step < 2; ++step) {
+      const int parity = reverse ? 1 - step : step;
+      if (colouring_valid_) {
+        // cells of one colour only couple to the other colour: rows in parallel, each row
+        // written by one thread (any split gives the same result)
+#pragma omp for schedule(dynamic, dynamic_chunk(rows))
+        for (int r = 0; r < rows; ++r) relax_row(r, parity);
+      } else if (!reverse) {
+        for (int r = 0; r < rows; ++r) relax_row(r, parity);
+      } else {
+        for (int r = rows - 1; r >= 0; --r) relax_row(r, parity);
+      }
     }
   }
 }

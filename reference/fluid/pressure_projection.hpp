@@ -108,7 +108,8 @@ class MatrixFreePressureOperator : public LinearOperator {
   /// outside; the cell itself across a periodic axis of one cell).
   void cell_stencil(const VecI<Dim>& c, std::array<int, 2 * Dim>& face,
                     std::array<int, 2 * Dim>& other) const;
-  /// q = W_L^p x on the cells (zero on inactive cells).
+  /// q = W_L^p x on the cells (zero on inactive cells): an orphaned omp for (barrier at the end),
+  /// called inside the parallel region of apply or sweep.
   void scatter(const VectorX& x) const;
   void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
              const std::vector<char>* active) const;

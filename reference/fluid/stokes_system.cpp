@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "reference/core/parallel.hpp"
 #include "reference/fluid/deformation_rate.hpp"
 #include "reference/fluid/gradient.hpp"
 #include "reference/grid/stress_weights.hpp"
@@ -166,7 +167,7 @@ namespace {
 
 /// Below this many grid entries the matrix-free loops run on one thread: a parallel region
 /// costs more than it saves on small grids (and much more on an oversubscribed machine).
-constexpr int kParallelMin = 16384;
+constexpr int kParallelMin = static_cast<int>(kParallelMinWork);
 
 /// out = sum over `terms` of coef * in_field(c + delta e_axis) for every entry c of the field
 /// `of` (zero where an input lies outside the domain, wrapped on periodic axes), then times
@@ -183,7 +184,7 @@ void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms
   for (int a = 1; a < Dim; ++a) rows *= of.dims[a];
   // every row, or only those of row_list
   const int count = row_list ? static_cast<int>(row_list->size()) : rows;
-#pragma omp for schedule(static) nowait
+#pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
   for (int m = 0; m < count; ++m) {
     const int r = row_list ? (*row_list)[m] : m;
     // the row's coordinates along axes 1..Dim-1
@@ -411,7 +412,7 @@ void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double*
     const Field& f = fields_[field];
     const std::vector<int>& rows = active_rows_[field];
     const int count = static_cast<int>(rows.size());
-#pragma omp for schedule(static) nowait
+#pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
     for (int m = 0; m < count; ++m) {
       const int start = f.offset + rows[m] * f.dims[0];
       for (int d = start; d < start + f.dims[0]; ++d) {
@@ -426,7 +427,7 @@ void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double*
     const std::vector<int>& rows = active_rows_[Dim + eliminated_];
     const int count = static_cast<int>(rows.size());
     const int n0 = fields_[Dim + eliminated_].dims[0];
-#pragma omp for schedule(static) nowait
+#pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
     for (int m = 0; m < count; ++m)
       for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
         double sum = 0.0;
@@ -442,7 +443,7 @@ void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double*
   const std::vector<int>& rows = active_rows_[kCellField];
   const int count = static_cast<int>(rows.size());
   const int n0 = fields_[kCellField].dims[0];
-#pragma omp for schedule(static) nowait
+#pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
   for (int m = 0; m < count; ++m)
     for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
       const int u = unknown_of_cell_[c];
@@ -491,7 +492,7 @@ void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, con
     const bool reduced_diagonal = eliminated_ >= 0 && field - Dim < Dim;
     const int eliminated_base = eliminated_ >= 0 ? fields_[Dim + eliminated_].offset : 0;
     // one writer per unknown: its weight times (D v) at its DOF, plus 1/2 N^-1 W^s x
-#pragma omp for schedule(static) nowait
+#pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
     for (int m = 0; m < count; ++m)
       for (int e = rows[m] * n0; e < (rows[m] + 1) * n0; ++e) {
         const int u = unknown_of_dof_[f.offset + e];
@@ -515,7 +516,7 @@ void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, con
   const std::vector<int>& rows = active_rows_[kCellField];
   const int n0 = fields_[kCellField].dims[0];
   const int count = static_cast<int>(rows.size());
-#pragma omp for schedule(static) nowait
+#pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
   for (int m = 0; m < count; ++m)
     for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
       const int u = unknown_of_cell_[c];
@@ -668,9 +669,12 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
   const std::vector<int>& row_list = active_rows_[field];
   const int count = static_cast<int>(row_list.size());
   if (colouring_valid_) {
-    // no two unknowns of one colour share a face: rows in parallel
+    // no two unknowns of one colour share a face: rows shared among the threads of the sweep's
+    // region (sweep), a barrier after each colour; each row has one writer, so any split of
+    // the rows gives the same result, and chunks taken on demand keep a thread whose core is
+    // busy from holding up the other
     for (int parity : {first_colour, second_colour}) {
-#pragma omp parallel for schedule(static) if (count * n0 > kParallelMin)
+#pragma omp for schedule(dynamic, dynamic_chunk(count))
       for (int m = 0; m < count; ++m) relax_row(row_list[m], parity);
     }
   } else if (!reverse) {
@@ -689,24 +693,26 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
   double* force = face_scratch_.data();
   bool zero = true;
   for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
-  if (zero) {
-    std::fill(force, force + num_faces_, 0.0);
-  } else {
-#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
-    {
+  if (zero) std::fill(force, force + num_faces_, 0.0);
+  // the whole sweep in one parallel region (one fork and join per sweep, a barrier per colour
+  // group), only with a valid colouring (otherwise the sweep is serial) and enough work
+  const int blocks = static_cast<int>(layout_field_.size()) + (has_pressure_ ? 1 : 0);
+#pragma omp parallel if (colouring_valid_ && num_stress_dofs_ + num_faces_ > kParallelMin)
+  {
+    if (!zero) {
       scatter(x, stress_scratch_.data(), cell_scratch_.data());
 #pragma omp barrier
       faces_from_grid(stress_scratch_.data(), cell_scratch_.data(), force, false, false);
+#pragma omp barrier
     }
-  }
-  // colour groups: stress components in layout order, then pressure; red then black (the
-  // reverse order backward)
-  const int blocks = static_cast<int>(layout_field_.size()) + (has_pressure_ ? 1 : 0);
-  for (int step = 0; step < blocks; ++step) {
-    const int block = reverse ? blocks - 1 - step : step;
-    const int field =
-        block < static_cast<int>(layout_field_.size()) ? layout_field_[block] : kCellField;
-    sweep_block(field, reverse, rhs, x, omega, active);
+    // colour groups: stress components in layout order, then pressure; red then black (the
+    // reverse order backward)
+    for (int step = 0; step < blocks; ++step) {
+      const int block = reverse ? blocks - 1 - step : step;
+      const int field =
+          block < static_cast<int>(layout_field_.size()) ? layout_field_[block] : kCellField;
+      sweep_block(field, reverse, rhs, x, omega, active);
+    }
   }
 }
 

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/core/parallel.hpp"
 
 namespace monolith {
 
@@ -49,6 +50,11 @@ class LinearOperator {
   std::vector<VectorX> no_null_space_;
 };
 
+/// Sweeps over fewer rows than this (all colour groups together) run on one thread: a sparse
+/// row relaxes in a few nanoseconds, so below this the barriers between the colours cost more
+/// than a second thread saves (bench_threads, docs/benchmarks.md "Threads on a busy machine").
+constexpr long kParallelMinColourRows = 4 * kParallelMinWork;
+
 /// One SOR sweep (section 4.3) over colour groups, shared by the matrix-free operators: `groups`
 /// (any indexable container of std::vector<int> row lists) in order, or last group first when
 /// `reverse`. Every row i with diagonal[i] != 0 (and active[i] != 0 when `active` is given) gets
@@ -66,13 +72,18 @@ void colour_sweep(const Groups& groups, bool independent, bool reverse, const Ve
     x[i] = (1.0 - omega) * x[i] + omega * (rhs[i] - off) / diagonal[i];
   };
   const int num_groups = static_cast<int>(groups.size());
+  long total = 0;
+  for (int g = 0; g < num_groups; ++g) total += static_cast<long>(groups[g].size());
+  // independent groups: one parallel region for the whole sweep (a barrier per group, no fork
+  // and join per group), only when there is enough work (kParallelMinColourRows)
+#pragma omp parallel if (independent && total >= kParallelMinColourRows)
   for (int step = 0; step < num_groups; ++step) {
     const std::vector<int>& list = groups[reverse ? num_groups - 1 - step : step];
     const int count = static_cast<int>(list.size());
     if (independent) {
-      // rows of one group share no coupling: independent updates in any order (threads only
-      // pay off on large groups; the result is the same either way)
-#pragma omp parallel for schedule(static) if (count > 512)
+      // rows of one group share no coupling: independent updates in any order and any split
+      // among the threads (each row has one writer), the same result either way
+#pragma omp for schedule(dynamic, dynamic_chunk(count))
       for (int m = 0; m < count; ++m) relax(list[m]);
     } else if (!reverse) {
       // the colouring is broken (e.g. an odd periodic axis): serial, in list order
@@ -87,7 +98,7 @@ void colour_sweep(const Groups& groups, bool independent, bool reverse, const Ve
 /// one thread, so the result does not depend on the thread count.
 inline void sparse_row_product(const SparseMatrix& a, const VectorX& x, VectorX& y) {
   y.resize(a.rows());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(dynamic, dynamic_chunk(a.rows())) if (a.nonZeros() >= 4 * kParallelMinWork)
   for (int i = 0; i < a.rows(); ++i) {
     double s = 0.0;
     for (SparseMatrix::InnerIterator it(a, i); it; ++it) s += it.value() * x[it.col()];

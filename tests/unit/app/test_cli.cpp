@@ -1,5 +1,7 @@
 // Tests of the command line (reference/app/cli.cpp, reference/app/runner.cpp, docs/cli.md): exit codes,
 // messages, outputs of `run` with a stand-in simulation, and robustness against garbage input.
+#include <omp.h>
+
 #include <catch2/catch.hpp>
 
 #include <unistd.h>
@@ -152,6 +154,8 @@ TEST_CASE("bad commands and flags exit with 2 and a message", "[unit]") {
       {"run", good, "--frames", "-1"},
       {"run", good, "--threads", "0"},
       {"run", good, "--threads"},
+      {"run", good, "--threads", "all"},
+      {"run", good, "--threads", "1025"},
       {"run", good, "--out"},
       {"run", good, "--set"},
       {"run", good, "--set", "noequals"},
@@ -173,6 +177,41 @@ TEST_CASE("bad commands and flags exit with 2 and a message", "[unit]") {
   // the message names the file and the key
   const Result r = cli({"check", good, "--set", "time.fps=-1"});
   CHECK(r.err.find(good + ": time.fps: out of range") == 0);
+}
+
+TEST_CASE("--threads auto and MONOLITH_THREADS: accepted values run, bad ones exit 2 naming the source",
+          "[unit]") {
+  const std::string good = write_file("good.json", kGood2);
+  const fs::path out = temp_dir() / "threads_out";
+  const int saved = omp_get_max_threads();
+  for (const char* value : {"auto", "1", "2"}) {
+    CAPTURE(value);
+    CHECK(fake_cli({"run", good, "--out", out.string(), "--frames", "1", "--quiet", "--no-render",
+                    "--threads", value})
+              .code == 0);
+  }
+  // --threads 1 is applied
+  CHECK(fake_cli({"run", good, "--out", out.string(), "--frames", "1", "--quiet", "--no-render",
+                  "--threads", "1"}).code == 0);
+  CHECK(omp_get_max_threads() == 1);
+  // the message of a bad --threads lists what is allowed
+  Result r = fake_cli({"run", good, "--threads", "many"});
+  CHECK(r.code == 2);
+  CHECK(r.err.find("--threads: bad value \"many\" (auto or an integer in 1..1024)") != std::string::npos);
+  // MONOLITH_THREADS: used without --threads, refused with exit 2 when bad, overridden by --threads
+  setenv("MONOLITH_THREADS", "1", 1);
+  omp_set_num_threads(2);
+  CHECK(fake_cli({"run", good, "--out", out.string(), "--frames", "1", "--quiet", "--no-render"}).code == 0);
+  CHECK(omp_get_max_threads() == 1);
+  setenv("MONOLITH_THREADS", "lots", 1);
+  r = fake_cli({"run", good, "--out", out.string(), "--frames", "1", "--quiet", "--no-render"});
+  CHECK(r.code == 2);
+  CHECK(r.err.find("MONOLITH_THREADS: bad value \"lots\" (auto or an integer in 1..1024)") != std::string::npos);
+  CHECK(fake_cli({"run", good, "--out", out.string(), "--frames", "1", "--quiet", "--no-render",
+                  "--threads", "2"}).code == 0);
+  CHECK(omp_get_max_threads() == 2);
+  unsetenv("MONOLITH_THREADS");
+  omp_set_num_threads(saved);
 }
 
 TEST_CASE("check accepts good scenes and lists every problem of bad ones", "[unit]") {

@@ -1,0 +1,356 @@
+// Benchmark (not a test) of the hot kernels at 1 and 2 threads, on an idle machine and with a
+// competing busy process pinned to one core, in one run (issue 19; docs/benchmarks.md, section
+// "Threads on a busy machine"). Prints, per kernel, the median time at 1 and 2 threads idle and
+// busy, and the ratios t(1 thread) / t(2 threads) (above 1: the second thread helps; the goals
+// ask >= 1.6 idle on the Stokes solve and the particle step, >= 0.95 busy everywhere).
+//
+//   build/bench/bench_threads [--n N] [--particles-n N] [--scene NAME] [--frames F] [--budget S]
+//                             [--only SUBSTRING] [--no-busy]
+//
+// Kernels: the 3D matrix-free Stokes operator of eq. (8)/(24) (apply, one SSOR application =
+// forward + backward red-black sweep, 30 SSOR-PCG iterations = "the solve"), the 3D matrix-free
+// pressure operator (apply, SSOR), an MPRGP sweep (ColouredSparseOperator's SSOR on a 3D
+// 7-point matrix coloured by Welsh-Powell), the particle transfers P2G and G2P and advection on
+// a 3D grid with 8 particles per liquid cell, and a whole 3D scene (`monolith run` in a child
+// process, wall time, --threads 1 / 2). The busy process is a fork of this program spinning
+// on the last CPU of the affinity mask (as `taskset -c 1 sh -c 'while :; do :; done'`).
+#include <omp.h>
+#include <sched.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "reference/core/parallel.hpp"
+#include "reference/fluid/pressure_projection.hpp"
+#include "reference/fluid/stokes_system.hpp"
+#include "reference/geometry/shape.hpp"
+#include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/solvers/colouring.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/solvers/pcg.hpp"
+
+using namespace monolith;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kRho = 1000.0, kDt = 0.01;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+/// Median time of f over at least 3 runs and about `budget` seconds (at most 100 runs).
+double median_time(const std::function<void()>& f, double budget) {
+  std::vector<double> t;
+  double total = 0.0;
+  while (t.size() < 3 || (total < budget && t.size() < 100)) {
+    const auto t0 = Clock::now();
+    f();
+    t.push_back(seconds_since(t0));
+    total += t.back();
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+double load_average() {
+  double l = -1.0;
+  if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+    if (std::fscanf(f, "%lf", &l) != 1) l = -1.0;
+    std::fclose(f);
+  }
+  return l;
+}
+
+// --- the competing busy process ----------------------------------------------------------------
+
+/// A child spinning on one CPU (the last of the affinity mask) until stop().
+class BusyCore {
+ public:
+  void start() {
+    const int cpu = affinity_cpus().back();
+    pid_ = fork();
+    if (pid_ == 0) {
+      cpu_set_t set;
+      CPU_ZERO(&set);
+      CPU_SET(cpu, &set);
+      sched_setaffinity(0, sizeof(set), &set);
+      volatile unsigned long spin = 0;
+      for (;;) spin = spin + 1;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));  // let it take the core
+  }
+  void stop() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+    pid_ = -1;
+  }
+  ~BusyCore() { stop(); }
+
+ private:
+  pid_t pid_ = -1;
+};
+
+// --- the kernels -------------------------------------------------------------------------------
+
+struct Kernel {
+  std::string name;
+  std::function<void()> run;
+};
+
+/// The viscous scene of bench_backends: liquid below y = 0.6 in a unit box (walls, open top), a
+/// fixed ball under the surface, eta = 1, the reduced stress form.
+struct StokesScene {
+  MacGrid<3> grid;
+  StokesWeights weights;
+  VectorX u_star;
+};
+
+StokesScene stokes_scene(int n) {
+  StokesScene s{MacGrid<3>(Vec<3>::Zero(), 1.0 / n, VecI<3>::Constant(n), {}), {}, {}};
+  const SampleLattice<3> lattice = half_lattice(s.grid);
+  std::array<BoundaryType, 6> boundary;
+  boundary.fill(BoundaryType::wall);
+  boundary[3] = BoundaryType::open;
+  ShapeSpec ball;
+  ball.type = ShapeType::sphere;
+  ball.center = {0.5, 0.3, 0.5};
+  ball.radius = 0.15;
+  const VectorX solid_phi =
+      solid_phi_on_lattice<3>(s.grid, lattice, {make_shape<3>(ball, "bench.ball")}, 0.0);
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - 0.6;
+  s.weights = uniform_stokes_weights<3>(s.grid, solid_phi, phi, boundary, kRho, 1.0);
+  s.u_star.resize(s.grid.num_faces());
+  for (int f = 0; f < s.grid.num_faces(); ++f) {
+    const auto [axis, c] = s.grid.face_coord(f);
+    const Vec<3> x = s.grid.face_center(axis, c);
+    s.u_star[f] = std::sin(3 * x[(axis + 1) % 3] + axis) * std::cos(2 * x[axis]) -
+                  (axis == 1 ? 9.81 * kDt : 0.0);
+  }
+  return s;
+}
+
+/// A 3D 7-point SPD matrix (Laplacian plus a diagonal shift) on m^3 nodes.
+SparseMatrix laplacian_3d(int m) {
+  std::vector<Eigen::Triplet<double>> t;
+  auto id = [m](int i, int j, int k) { return (k * m + j) * m + i; };
+  for (int k = 0; k < m; ++k)
+    for (int j = 0; j < m; ++j)
+      for (int i = 0; i < m; ++i) {
+        const int r = id(i, j, k);
+        t.emplace_back(r, r, 6.5);
+        if (i > 0) t.emplace_back(r, id(i - 1, j, k), -1.0);
+        if (i + 1 < m) t.emplace_back(r, id(i + 1, j, k), -1.0);
+        if (j > 0) t.emplace_back(r, id(i, j - 1, k), -1.0);
+        if (j + 1 < m) t.emplace_back(r, id(i, j + 1, k), -1.0);
+        if (k > 0) t.emplace_back(r, id(i, j, k - 1), -1.0);
+        if (k + 1 < m) t.emplace_back(r, id(i, j, k + 1), -1.0);
+      }
+  SparseMatrix a(m * m * m, m * m * m);
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
+std::string self_dir() {
+  char buf[4096];
+  const ssize_t len = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
+  if (len <= 0) return ".";
+  std::string p(buf, static_cast<std::size_t>(len));
+  return p.substr(0, p.rfind('/'));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  apply_default_wait_policy(argv);
+  int n = 64, particles_n = 64, frames = 1;
+  double budget = 1.0;
+  bool busy_runs = true;
+  std::string scene = "liquid-drop-newtonian-3d", only;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "bench_threads: %s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--n") n = std::atoi(next().c_str());
+    else if (a == "--particles-n") particles_n = std::atoi(next().c_str());
+    else if (a == "--scene") scene = next();
+    else if (a == "--frames") frames = std::atoi(next().c_str());
+    else if (a == "--budget") budget = std::atof(next().c_str());
+    else if (a == "--only") only = next();
+    else if (a == "--no-busy") busy_runs = false;
+    else {
+      std::fprintf(stderr, "bench_threads: unknown argument %s\n", a.c_str());
+      return 2;
+    }
+  }
+  std::printf("bench_threads: load %.2f at start; GOMP_SPINCOUNT=%s OMP_WAIT_POLICY=%s; CPUs %d\n",
+              load_average(), std::getenv("GOMP_SPINCOUNT") ? std::getenv("GOMP_SPINCOUNT") : "-",
+              std::getenv("OMP_WAIT_POLICY") ? std::getenv("OMP_WAIT_POLICY") : "-",
+              static_cast<int>(affinity_cpus().size()));
+  std::fflush(stdout);
+
+  std::vector<Kernel> kernels;
+  auto wanted_name = [&](const std::string& name) { return only.empty() || name.find(only) != std::string::npos; };
+  // a group is built when one of its kernels is wanted
+  auto wanted = [&](const std::string& tag) {
+    for (const char* k : {"", " apply", " SSOR", " solve (30 PCG it.)", " P2G", " G2P", " advect"})
+      if (wanted_name(tag + k)) return true;
+    return false;
+  };
+
+  // Stokes, 3D matrix-free
+  std::unique_ptr<StokesScene> ss;
+  std::unique_ptr<StressLayout<3>> layout;
+  std::unique_ptr<StokesDofs> sdofs;
+  std::unique_ptr<MatrixFreeStokesOperator<3>> stokes;
+  VectorX sb, sx, sy, sz;
+  const std::string stokes_tag = "stokes " + std::to_string(n) + "^3";
+  const std::string pressure_tag = "pressure " + std::to_string(n) + "^3";
+  if (wanted(stokes_tag) || wanted(pressure_tag)) {
+    ss = std::make_unique<StokesScene>(stokes_scene(n));
+  }
+  if (wanted(stokes_tag)) {
+    layout = std::make_unique<StressLayout<3>>(StressGrid<3>(ss->grid), StressForm::reduced);
+    sdofs = std::make_unique<StokesDofs>(select_stokes_dofs(ss->grid, *layout, ss->weights, kDt,
+                                                            StokesUnknowns::pressure_and_stress));
+    stokes = std::make_unique<MatrixFreeStokesOperator<3>>(ss->grid, *layout, ss->weights, *sdofs, kDt);
+    sb = stokes->rhs(ss->u_star);
+    sx = VectorX::Zero(sb.size());
+    std::printf("%s: %d unknowns\n", stokes_tag.c_str(), static_cast<int>(sb.size()));
+    kernels.push_back({stokes_tag + " apply", [&] { stokes->apply(sb, sy); }});
+    kernels.push_back({stokes_tag + " SSOR", [&] { ssor_precondition(*stokes, sb, sz, 1.0); }});
+    kernels.push_back({stokes_tag + " solve (30 PCG it.)", [&] {
+                         PcgSettings settings;
+                         settings.tolerance = 1e-12;
+                         settings.max_iterations = 30;
+                         VectorX x = VectorX::Zero(sb.size());
+                         pcg_solve(*stokes, sb, x, settings);
+                       }});
+  }
+  // pressure, 3D matrix-free (the same scene's weights)
+  std::unique_ptr<PressureDofs> pdofs;
+  std::unique_ptr<MatrixFreePressureOperator<3>> pressure;
+  VectorX pb, py, pz;
+  if (wanted(pressure_tag)) {
+    pdofs = std::make_unique<PressureDofs>(select_pressure_dofs<3>(ss->grid, ss->weights.pressure, kDt));
+    pressure = std::make_unique<MatrixFreePressureOperator<3>>(ss->grid, ss->weights.pressure, *pdofs, kDt);
+    pb = pressure->rhs(ss->u_star);
+    std::printf("%s: %d unknowns\n", pressure_tag.c_str(), static_cast<int>(pb.size()));
+    kernels.push_back({pressure_tag + " apply", [&] { pressure->apply(pb, py); }});
+    kernels.push_back({pressure_tag + " SSOR", [&] { ssor_precondition(*pressure, pb, pz, 1.0); }});
+  }
+  // MPRGP's coloured sweep
+  std::unique_ptr<ColouredSparseOperator> coloured;
+  VectorX cb, cz;
+  const int cm = 40;
+  const std::string mprgp_tag = "MPRGP sweep " + std::to_string(cm) + "^3";
+  if (wanted(mprgp_tag)) {
+    SparseMatrix a = laplacian_3d(cm);
+    Colouring colours = welsh_powell(matrix_adjacency(a));
+    coloured = std::make_unique<ColouredSparseOperator>(std::move(a), std::move(colours));
+    cb = VectorX::Ones(coloured->size());
+    kernels.push_back({mprgp_tag + " SSOR", [&] { ssor_precondition(*coloured, cb, cz, 1.0); }});
+  }
+  // particles: 8 per cell in the lower 60 % of a particles_n^3 grid, a swirl velocity
+  const MacGrid<3> pgrid(Vec<3>::Zero(), 1.0 / particles_n, VecI<3>::Constant(particles_n), {});
+  Particles<3> particles, moved;
+  VectorX pu, mass, density, pu_field;
+  std::array<BoundaryType, 6> walls;
+  walls.fill(BoundaryType::wall);
+  const SolidField<3> no_solids;
+  const std::string particle_tag = "particles " + std::to_string(particles_n) + "^3";
+  if (wanted(particle_tag)) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    const double h = pgrid.dx();
+    const int top = static_cast<int>(0.6 * particles_n);
+    for (int k = 0; k < particles_n; ++k)
+      for (int j = 0; j < top; ++j)
+        for (int i = 0; i < particles_n; ++i)
+          for (int p = 0; p < 8; ++p) {
+            particles.x.push_back(Vec<3>((i + u01(rng)) * h, (j + u01(rng)) * h, (k + u01(rng)) * h));
+            particles.v.push_back(Vec<3>(u01(rng) - 0.5, u01(rng) - 0.5, u01(rng) - 0.5));
+            particles.c.push_back(Mat<3>::Zero());
+            particles.mass.push_back(kRho * h * h * h / 8);
+            particles.density.push_back(kRho);
+            particles.liquid.push_back(0);
+          }
+    pu_field.resize(pgrid.num_faces());
+    for (int f = 0; f < pgrid.num_faces(); ++f) {
+      const auto [axis, c] = pgrid.face_coord(f);
+      const Vec<3> x = pgrid.face_center(axis, c);
+      pu_field[f] = 0.5 * std::sin(3 * x[(axis + 1) % 3] + axis);
+    }
+    std::printf("%s: %zu particles\n", particle_tag.c_str(), particles.size());
+    kernels.push_back({particle_tag + " P2G", [&] { particles_to_grid(particles, pgrid, pu, mass, density); }});
+    kernels.push_back({particle_tag + " G2P", [&] { grid_to_particles(particles, pgrid, pu_field); }});
+    kernels.push_back({particle_tag + " advect", [&] {
+                         moved = particles;
+                         advect_particles(moved, pgrid, pu_field, 0.01, no_solids, walls);
+                       }});
+  }
+  // a whole 3D scene through the CLI
+  const std::string exe = self_dir() + "/../bin/monolith";
+  const std::string scene_tag = "scene " + scene + " (" + std::to_string(frames) + " frame)";
+  auto run_scene = [&]() {
+    const int threads = omp_get_max_threads();
+    const std::string out = "/tmp/bench_threads_scene_" + std::to_string(getpid());
+    const std::string cmd = exe + " run " + scene + " --frames " + std::to_string(frames) +
+                            " --threads " + std::to_string(threads) +
+                            " --no-render --quiet --out " + out + " >/dev/null 2>&1; rm -rf " + out;
+    if (std::system(cmd.c_str()) != 0) std::fprintf(stderr, "bench_threads: %s failed\n", cmd.c_str());
+  };
+  if (wanted_name(scene_tag)) kernels.push_back({scene_tag, run_scene});
+
+  // measure: every kernel idle then busy, 1 then 2 threads
+  std::printf("\n%-40s %10s %10s %7s %10s %10s %7s\n", "kernel", "idle 1t", "idle 2t", "ratio",
+              "busy 1t", "busy 2t", "ratio");
+  for (const Kernel& k : kernels) {
+    if (!wanted_name(k.name)) continue;
+    double t[2][2] = {{0, 0}, {0, 0}};
+    for (int busy = 0; busy < (busy_runs ? 2 : 1); ++busy) {
+      BusyCore spinner;
+      if (busy) spinner.start();
+      for (int threads = 1; threads <= 2; ++threads) {
+        omp_set_num_threads(threads);
+        k.run();  // warm up
+        const bool whole = k.name.rfind("scene", 0) == 0;
+        t[busy][threads - 1] = median_time(k.run, whole ? 0.0 : budget);
+      }
+    }
+    auto ms = [](double s) { return s * 1e3; };
+    std::printf("%-40s %8.2fms %8.2fms %7.2f", k.name.c_str(), ms(t[0][0]), ms(t[0][1]),
+                t[0][0] / t[0][1]);
+    if (busy_runs)
+      std::printf(" %8.2fms %8.2fms %7.2f", ms(t[1][0]), ms(t[1][1]), t[1][0] / t[1][1]);
+    std::printf("\n");
+    std::fflush(stdout);
+  }
+  std::printf("\nload %.2f at the end (ratios = t(1 thread) / t(2 threads); goals: idle >= 1.6 on "
+              "the Stokes solve and the particle step, busy >= 0.95 everywhere)\n",
+              load_average());
+  return 0;
+}
