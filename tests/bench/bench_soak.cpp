@@ -4,8 +4,10 @@
 // energy that grows without a source, liquid volume that drifts.
 //
 //   bench_soak [--bin PATH] [--backend matrixfree|explicit|both] [--only SUBSTRING[,SUBSTRING...]]
-//              [--dim 2|3] [--length X] [--threads N] [--out DIR]
+//              [--dim 2|3] [--length X] [--threads N] [--out DIR] [--no-run]
 //
+// --no-run only evaluates the run folders an earlier soak left in DIR (exit codes and seconds
+// are then not known: printed as 0 and the time of the evaluation).
 // --length X runs each scene for X times its own frame count (issue 16 asks for 3). The table is
 // printed as Markdown on stdout, one row per run as soon as it ends; the runs' folders stay in DIR
 // (default soak-out) for a closer look. A measurement program: it asserts nothing, its exit code
@@ -48,12 +50,13 @@ struct Options {
   double length = 1.0;
   int threads = 0;
   fs::path out = "soak-out";
+  bool no_run = false;  ///< only evaluate the folders an earlier soak left in `out`
 };
 
 [[noreturn]] void usage(const std::string& why) {
   std::cerr << "bench_soak: " << why
             << "\nusage: bench_soak [--bin PATH] [--backend matrixfree|explicit|both] [--only S[,S...]] [--dim 2|3]"
-               " [--length X] [--threads N] [--out DIR]\n";
+               " [--length X] [--threads N] [--out DIR] [--no-run]\n";
   std::exit(2);
 }
 
@@ -101,6 +104,7 @@ double value(const json& j) { return j.is_number() ? j.get<double>() : std::nan(
 struct Row {
   int frames = 0, unconverged = 0, code = 0;
   bool non_finite = false, driven = false;
+  long particles0 = -1, particles = -1;  ///< particle counts of frames 0 and last (open faces remove)
   double seconds = 0, rise = 0, drift = 0, worst_residual = 0;
 };
 
@@ -109,6 +113,15 @@ Row evaluate(const fs::path& dir, const json& scene) {
   if (scene.contains("bodies"))
     for (const auto& b : scene["bodies"])
       if (b.value("motion", "dynamic") == "kinematic") r.driven = true;
+  // gravity along a periodic axis drives the liquid for ever (an inclined channel)
+  if (scene.contains("domain") && scene["domain"].contains("boundary") && scene.contains("gravity")) {
+    const char* axes[] = {"x", "y", "z"};
+    const json& g = scene["gravity"];
+    for (std::size_t a = 0; a < g.size() && a < 3; ++a)
+      if (g[a].is_number() && g[a].get<double>() != 0.0 &&
+          scene["domain"]["boundary"].value(std::string(axes[a]) + "-", "") == "periodic")
+        r.driven = true;
+  }
   std::ifstream in(dir / "stats.jsonl");
   std::string line;
   std::vector<double> energy;
@@ -129,6 +142,9 @@ Row evaluate(const fs::path& dir, const json& scene) {
       r.worst_residual = std::max(r.worst_residual, value(j["solver"]["max_relative_residual"]));
     }
     r.frames = j.value("frame", r.frames);
+    const long np = j.value("particles", -1L);
+    if (j["frame"] == 0) r.particles0 = np;
+    r.particles = np;
   }
   if (!energy.empty() && !r.non_finite) {
     double lowest = energy[0], rise = 0;
@@ -165,6 +181,7 @@ int main(int argc, char** argv) {
     else if (a == "--length") o.length = std::atof(next().c_str());
     else if (a == "--threads") o.threads = std::atoi(next().c_str());
     else if (a == "--out") o.out = next();
+    else if (a == "--no-run") o.no_run = true;
     else usage("unknown argument " + a);
   }
   if (!(o.length > 0)) usage("--length: a number > 0");
@@ -173,7 +190,8 @@ int main(int argc, char** argv) {
   fs::create_directories(o.out);
 
   std::cout << "| scene | back end | frames | exit | seconds | non-finite | unconverged frames (worst residual) | "
-               "energy rise (% of available) | volume drift (%) |\n|---|---|---|---|---|---|---|---|---|\n"
+               "energy rise (% of available) | volume drift (%) | particles left through open faces (%) |\n"
+               "|---|---|---|---|---|---|---|---|---|---|\n"
             << std::flush;
   for (const auto& line : split(capture("'" + o.bin + "' list"), '\n')) {
     std::istringstream ls(line);
@@ -198,14 +216,14 @@ int main(int argc, char** argv) {
     }
     for (const auto& backend : o.backends) {
       const fs::path dir = o.out / (name + "-" + backend);
-      fs::remove_all(dir);
+      if (!o.no_run) fs::remove_all(dir);
       std::vector<std::string> args{"run", name, "--no-render", "--quiet", "--backend", backend, "--out", dir.string()};
       if (o.threads > 0) args.insert(args.end(), {"--threads", std::to_string(o.threads)});
       if (o.length != 1.0 && frames > 0)
         args.insert(args.end(), {"--frames", std::to_string(static_cast<int>(std::ceil(frames * o.length)))});
       const auto start = std::chrono::steady_clock::now();
       Row r;
-      r.code = run(o.bin, args, dir.string() + ".log");
+      r.code = o.no_run ? 0 : run(o.bin, args, dir.string() + ".log");
       r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
       json scene;  // the scene as run (its bodies tell whether something drives the liquid)
       {
@@ -226,7 +244,9 @@ int main(int argc, char** argv) {
       rise << std::fixed << std::setprecision(2) << r.rise << (r.driven ? " (driven)" : "");
       std::cout << "| " << name << " | " << backend << " | " << r.frames << " | " << r.code << " | " << std::fixed
                 << std::setprecision(1) << r.seconds << " | " << (r.non_finite ? "yes" : "no") << " | " << unc.str()
-                << " | " << rise.str() << " | " << std::setprecision(3) << r.drift << " |\n"
+                << " | " << rise.str() << " | " << std::setprecision(3) << r.drift << " | " << std::setprecision(1)
+                << (r.particles0 > 0 ? 100.0 * static_cast<double>(r.particles0 - r.particles) / static_cast<double>(r.particles0) : 0.0)
+                << " |\n"
                 << std::flush;
     }
   }
