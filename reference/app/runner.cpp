@@ -379,15 +379,11 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
 
 int resume_run(const RunOptions& o, std::ostream& err, const SimulationFactory& factory,
                const FrameRenderer& renderer) {
+  if (o.threads > 0) omp_set_num_threads(o.threads);
   const fs::path dir(o.resume_dir);
   const fs::path file = checkpoint_path(dir);
   // every check before anything in the folder changes
   const CheckpointRecord r = read_checkpoint(file);
-  // the run's own thread count unless --threads says otherwise
-  if (o.threads > 0)
-    omp_set_num_threads(o.threads);
-  else if (r.threads > 0)
-    omp_set_num_threads(r.threads);
   const std::string label = file.string() + ": ";
   json as_run = json::parse(r.scene_json, nullptr, false);
   if (as_run.is_discarded() || !as_run.is_object()) throw InputError(label + "the scene it holds is not valid JSON");
