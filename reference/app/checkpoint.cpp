@@ -27,7 +27,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[8] = {'M', 'O', 'N', 'O', 'C', 'K', 'P', 'T'};
-constexpr std::uint32_t kFormatVersion = 1;
+constexpr std::uint32_t kFormatVersion = 2;  // 2: thread count and input-file digests
 /// magic, version, reserved, payload length
 constexpr std::size_t kHeaderBytes = 8 + 4 + 4 + 8;
 constexpr std::size_t kChecksumBytes = 8;
@@ -106,6 +106,18 @@ void LineFile::append_line(const std::string& text) {
 }
 
 fs::path checkpoint_path(const fs::path& dir) { return dir / "checkpoint.mckpt"; }
+
+std::uint64_t file_digest(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return 0;
+  std::uint64_t h = 1469598103934665603ULL;
+  char buf[1 << 16];
+  while (in) {
+    in.read(buf, sizeof buf);
+    h = fnv1a(buf, static_cast<std::size_t>(in.gcount()), h);
+  }
+  return h;
+}
 
 const std::string& build_id() {
   static const std::string id = [] {

@@ -43,6 +43,10 @@ class LineFile {
   int fd_ = -1;
 };
 
+/// A 64-bit FNV-1a digest of a file's bytes (0 for a file that cannot be read): a checkpoint
+/// keeps one per input file so that `resume` refuses a scene whose meshes were edited.
+std::uint64_t file_digest(const std::filesystem::path& path);
+
 /// What a checkpoint records besides the simulation state.
 struct CheckpointRecord {
   std::string build_id;        ///< build_id() of the writer
@@ -57,6 +61,9 @@ struct CheckpointRecord {
   double initial_volume = 0.0, volume = 0.0;
   double wall_time = 0.0;      ///< seconds of the run so far
   std::int32_t checkpoint_every = 0;  ///< the run's --checkpoint-every (resume keeps it)
+  std::int32_t threads = 0;    ///< OpenMP threads of the run (resume keeps them unless --threads)
+  std::vector<std::string> input_files;     ///< SceneFile::input_files (the meshes), resolved
+  std::vector<std::uint64_t> input_digests; ///< file_digest of each, when the checkpoint was written
   std::vector<char> state;     ///< AnySimulation::save_state
 
   template <class Archive>
@@ -74,6 +81,9 @@ struct CheckpointRecord {
     a(volume);
     a(wall_time);
     a(checkpoint_every);
+    a(threads);
+    a(input_files);
+    a(input_digests);
     a(state);
   }
 };

@@ -210,11 +210,17 @@ int run_frames(const RunContext& c, AnySimulation& sim, RunTotals totals, std::o
     r.volume = totals.volume;
     r.wall_time = totals.earlier_wall_time + elapsed();
     r.checkpoint_every = c.checkpoint_every;
+    r.threads = omp_get_max_threads();
+    for (const auto& f : scene.input_files) {
+      r.input_files.push_back(f.string());
+      r.input_digests.push_back(file_digest(f));
+    }
     write_checkpoint(checkpoint_path(dir), r);
     return true;
   };
 
-  StopSignals signals;
+  // the handler is installed by the caller before the simulation is built (a signal during a
+  // long set-up, a mesh's distance field, stops the run before frame 1 with the same outputs)
   sim.set_stop_flag(&g_stop_signal);
   int frame = totals.done;
   RunEnd end{"completed", -1, ""};
@@ -365,6 +371,7 @@ int run_scene(const RunOptions& o, std::ostream& err, const SimulationFactory& f
   RunContext c{scene, dir, o, "", overrides, o.checkpoint_every};
   // a scene file (not a built-in) is remembered so that resume can tell if it changed
   if (fs::is_regular_file(o.scene, ec)) c.source_path = fs::absolute(o.scene, ec).string();
+  StopSignals signals;
   std::unique_ptr<AnySimulation> sim;
   try {
     sim = factory(scene);
@@ -428,6 +435,12 @@ int resume_run(const RunOptions& o, std::ostream& err, const SimulationFactory& 
       throw InputError((dir / "stats.jsonl").string() + ": holds " + std::to_string(rows.size()) +
                        " whole rows from frame 0, the checkpoint needs rows 0.." + std::to_string(r.frame));
   }
+  // the meshes the scene reads must be the ones it was run with
+  for (std::size_t i = 0; i < r.input_files.size() && i < r.input_digests.size(); ++i)
+    if (file_digest(r.input_files[i]) != r.input_digests[i])
+      throw InputError(label + "the mesh file " + r.input_files[i] +
+                       " changed (or went missing) since the checkpoint (a checkpoint continues only the scene it was taken of)");
+  StopSignals signals;
   std::unique_ptr<AnySimulation> sim = factory(scene);
   sim->load_state(r.state);
   // now the folder: stats rows and frames after the checkpoint belong to the stopped run

@@ -426,8 +426,10 @@ class SceneParser {
           // the path as written, resolved against the scene's folder
           if (file.empty())
             add(key_at(path, "file"), "empty file name", "a Wavefront OBJ path relative to the scene file");
-          else
+          else {
             s.file = std::filesystem::path(file).is_absolute() ? std::filesystem::path(file) : base_dir_ / file;
+            input_files.push_back(s.file);
+          }
         }
       }
       if (const json* sc = member(v, "scale", path, false, "")) {
@@ -462,6 +464,9 @@ class SceneParser {
  private:
   std::string label_;
   std::filesystem::path base_dir_;
+
+ public:
+  std::vector<std::filesystem::path> input_files;  ///< mesh files met while parsing, in order
 };
 
 /// Nesting depth of a JSON value, computed without recursion (hostile input may be deep).
@@ -966,6 +971,7 @@ SceneFile parse_scene(const json& j, const std::string& label, const std::filesy
   parse_render(p, j, s);
   if (domain_ok) check_domain_contents(p, s, placed);
   if (!p.problems.empty()) throw InputError(p.problems);
+  s.input_files = p.input_files;
   return s;
 }
 

@@ -23,6 +23,9 @@ struct SceneFile : SceneDesc {
   std::string source_label;        ///< file path, or "builtin:NAME", used in messages
   std::filesystem::path base_dir;  ///< folder that relative mesh paths resolve against
   nlohmann::json as_run;           ///< the scene JSON after --set overrides
+  /// The files the scene reads besides itself (the mesh shapes' OBJ files, resolved), in the
+  /// order they appear; a checkpoint records their contents so that resume notices an edit.
+  std::vector<std::filesystem::path> input_files;
 };
 
 /// Parses and validates a scene. Collects every problem it finds and throws one InputError that

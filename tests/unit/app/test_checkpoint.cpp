@@ -277,6 +277,38 @@ TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2
     CHECK(r.err.find("changed since the checkpoint") != std::string::npos);
     CHECK(folder_bytes(run) == files);
   }
+  SECTION("a mesh file the scene reads changed since the checkpoint") {
+    const fs::path scene = temp_dir() / "mesh-scene.json";
+    const fs::path mesh = temp_dir() / "block.obj";
+    const fs::path run = temp_dir() / "mesh-run";
+    fs::remove_all(run);
+    const std::string cube =
+        "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n"
+        "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+    std::ofstream(mesh) << cube;
+    const json j = json::parse(R"({"format": "monolith-scene/1", "name": "mesh-scene", "dim": 3,
+      "domain": {"lower": [0, 0, 0], "upper": [1, 1, 1], "cells": [8, 8, 8]}, "time": {"fps": 20},
+      "liquids": [{"shape": {"type": "box", "center": [0.5, 0.7, 0.5], "half_size": [0.2, 0.1, 0.2]}, "density": 1000}],
+      "bodies": [{"name": "block", "motion": "static",
+                  "shape": {"type": "mesh", "file": "block.obj", "scale": 0.15, "translate": [0.5, 0.2, 0.5]}}],
+      "render": {"enabled": false}})");
+    std::ofstream(scene) << j.dump();
+    REQUIRE(cli({"run", scene.string(), "--frames", "1", "--out", run.string(), "--checkpoint-every", "1", "--quiet"}).code == 0);
+    // the scene file itself is unchanged; its mesh grows
+    std::string bigger = cube;
+    bigger.replace(bigger.find("v 1 1 1"), 7, "v 1 2 1");
+    std::ofstream(mesh, std::ios::trunc) << bigger;
+    const auto files = folder_bytes(run);
+    const Result r = cli({"resume", run.string(), "--frames", "2"});
+    INFO(r.err);
+    CHECK(r.code == 2);
+    CHECK(r.err.find("block.obj") != std::string::npos);
+    CHECK(r.err.find("changed") != std::string::npos);
+    CHECK(folder_bytes(run) == files);
+    // put back, the run continues
+    std::ofstream(mesh, std::ios::trunc) << cube;
+    CHECK(cli({"resume", run.string(), "--frames", "2", "--quiet"}).code == 0);
+  }
 }
 
 TEST_CASE("SIGINT and SIGTERM stop a run with a checkpoint; resume finishes it like a straight run", "[unit]") {
