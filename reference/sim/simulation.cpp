@@ -14,10 +14,6 @@
 #include <sstream>
 #include <utility>
 
-#if defined(__GLIBC__)
-#include <malloc.h>
-#endif
-
 #include "reference/core/errors.hpp"
 #include "reference/core/state_io.hpp"
 #include "reference/core/timer.hpp"
@@ -125,29 +121,11 @@ constexpr double kBodyCellFraction = 0.5;
 /// divergence one face.
 constexpr int kAirVelocityLayers = 2;
 
-/// Grid-sized vectors (weights, level sets, right-hand sides) are built and released every
-/// step. glibc serves blocks above its mmap threshold (at most 32 MB, about a 128^3 grid's face
-/// vector) with fresh mappings and returns them on free, so every step paid for the kernel
-/// faulting in and zeroing those pages again: 12% of a 128^3 Fig. 2 profile (docs/benchmarks.md).
-/// Served from the heap and kept there (no trimming), a released block is reused by the next
-/// step's allocation of the same size. Process-wide and set once; results are unaffected.
-void keep_freed_memory_for_reuse() {
-#if defined(__GLIBC__)
-  static const bool once = [] {
-    mallopt(M_MMAP_MAX, 0);
-    mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max());
-    return true;
-  }();
-  (void)once;
-#endif
-}
-
 }  // namespace
 
 template <int Dim>
 Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switches)
     : scene_(scene), switches_(switches) {
-  keep_freed_memory_for_reuse();
   const Stopwatch setup_watch;  // frame 0's timing: the set-up (solids, seeding, first weights)
   // grid and boundary
   Vec<Dim> lower, upper;
