@@ -401,3 +401,45 @@ TEMPLATE_TEST_CASE_SIG("at eta = 5000 the block preconditioner needs at most 60 
   CHECK(rm.iterations <= 60);
   CHECK(rs.iterations > 60);
 }
+
+TEMPLATE_TEST_CASE_SIG("the lazy block preconditioner: no set-up when PCG stops at once, else the eager result",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  CaseOptions o;
+  o.n = Dim == 2 ? 24 : 10;
+  o.eta = 500.0;
+  const auto sc = make_case<Dim>(o);
+  const auto s = make_system(sc);
+  const StokesPreconditionerOptions small = small_options();
+  int builds = 0;
+  const LazyPreconditioner lazy(s.mf->size(), "block", [&]() -> std::unique_ptr<Preconditioner> {
+    ++builds;
+    return std::make_unique<StokesPreconditioner<Dim>>(
+        sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), small);
+  });
+  PcgSettings settings;
+  settings.max_iterations = 10000;
+  // a zero right-hand side: converged before the first iteration, nothing built
+  VectorX x0;
+  const PcgResult r0 = pcg_solve(*s.mf, VectorX::Zero(s.mf->size()), x0, settings, lazy);
+  CHECK(r0.converged);
+  CHECK(r0.iterations == 0);
+  CHECK(builds == 0);
+  CHECK(lazy.built() == nullptr);
+  // a real solve builds it once and gives the eager preconditioner's iterates bit for bit
+  const VectorX b = s.mf->rhs(sc.u_star);
+  VectorX xl, xe;
+  const PcgResult rl = pcg_solve(*s.mf, b, xl, settings, lazy);
+  const StokesPreconditioner<Dim> eager(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf),
+                                        small);
+  const PcgResult re = pcg_solve(*s.mf, b, xe, settings, eager);
+  CHECK(builds == 1);
+  REQUIRE(lazy.built() != nullptr);
+  CHECK(rl.converged);
+  CHECK(rl.iterations == re.iterations);
+  CHECK((xl - xe).lpNorm<Eigen::Infinity>() == 0.0);
+  // reused for a second solve without a second set-up
+  VectorX x2;
+  pcg_solve(*s.mf, b, x2, settings, lazy);
+  CHECK(builds == 1);
+  CHECK((x2 - xe).lpNorm<Eigen::Infinity>() == 0.0);
+}
