@@ -66,8 +66,8 @@ struct SolverSpec {
   Backend backend = Backend::matrix_free;
   /// The preconditioner of the liquid's unified solves without bodies (eq. (8) in (tau, p), the
   /// stress-only viscosity solve of PC-VC-PC): "multigrid" (default) or the paper's "ssor"
-  /// (docs/preconditioners.md). The pressure-only solves and the coupled systems (24)/(26) with
-  /// bodies keep SSOR.
+  /// (docs/preconditioners.md). The coupled systems (24)/(26) with bodies keep SSOR; the
+  /// pressure-only solves follow pressure_preconditioner.
   PreconditionerKind preconditioner = PreconditionerKind::multigrid;
   /// `solver.pressure_preconditioner`: the preconditioner of the liquid's pressure-only solves
   /// beside static solids (eq. (8) without stress: PC-unified, the P solves of PC-VC-PC):
