@@ -2,10 +2,13 @@
 
 #include <cmath>
 #include <cstddef>
+#include <memory>
+#include <optional>
 #include <stdexcept>
 
 #include "reference/core/parallel.hpp"
 #include "reference/fluid/gradient.hpp"
+#include "reference/fluid/mac_hierarchy.hpp"
 
 namespace monolith {
 
@@ -267,6 +270,28 @@ void MatrixFreePressureOperator<Dim>::scatter(const VectorX& x) const {
 }
 
 template <int Dim>
+SparseMatrix MatrixFreePressureOperator<Dim>::matrix(const PressureDofs& dofs) const {
+  // row i: A_ii = diagonal_[i], A_ij = -W_i k_f W_j for each face f to an active cell j != i
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(static_cast<std::size_t>(num_dofs_) * (2 * Dim + 1));
+  for (int i = 0; i < num_dofs_; ++i) {
+    const int cell = dofs.cell_of_dof[i];
+    std::array<int, 2 * Dim> face, other;
+    cell_stencil(lattice_coord<Dim>(cell, cells_), face, other);
+    entries.emplace_back(i, i, diagonal_[i]);
+    for (int j = 0; j < 2 * Dim; ++j) {
+      if (other[j] < 0 || other[j] == cell) continue;
+      const int k = dof_of_cell_[other[j]];
+      if (k >= 0) entries.emplace_back(i, k, -liquid_[i] * coefficient_[face[j]] * liquid_[k]);
+    }
+  }
+  SparseMatrix a(num_dofs_, num_dofs_);
+  a.setFromTriplets(entries.begin(), entries.end());
+  a.makeCompressed();
+  return a;
+}
+
+template <int Dim>
 void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
   y.resize(num_dofs_);
   // one parallel region: q = W x, a barrier, then
@@ -432,27 +457,72 @@ VectorX scatter_pressure(const PressureDofs& dofs, const VectorX& p_dofs, int nu
   return p;
 }
 
+namespace {
+
+/// MGPCG (McAdams et al. 2010): PCG on the pressure system of either back end, preconditioned by
+/// one symmetric V-cycle of the cell multigrid on the assembled matrix A (the matrix-free back end
+/// assembles A for the hierarchy only; its own stencils still apply A). Built lazily, so a
+/// solve that stops before its first iteration pays nothing. Enclosed liquid makes A singular
+/// on constants: the hierarchy inverts A + 1e-10 diag(A), and PCG projects the null space out of
+/// every preconditioned residual as for SSOR.
+template <int Dim>
+PcgResult mgpcg_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, const PressureDofs& dofs,
+                         double dt, Backend backend, const PcgSettings& settings, const VectorX& u,
+                         VectorX& p) {
+  std::optional<ExplicitPressureSystem> sys;
+  std::optional<MatrixFreePressureOperator<Dim>> mf;
+  std::optional<SparseMatrixOperator> explicit_op;
+  const LinearOperator* op = nullptr;
+  VectorX b;
+  if (backend == Backend::explicit_matrices) {
+    sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
+    explicit_op.emplace(sys->A, dofs.null_space);
+    op = &*explicit_op;
+    b = sys->b;
+  } else {
+    mf.emplace(grid, w, dofs, dt);
+    op = &*mf;
+    b = mf->rhs(u);
+  }
+  const LazyPreconditioner m(dofs.size(), "multigrid", [&]() -> std::unique_ptr<Preconditioner> {
+    SparseMatrix a = sys ? sys->A : mf->matrix(dofs);
+    if (!dofs.null_space.empty())
+      for (int k = 0; k < a.outerSize(); ++k)
+        for (SparseMatrix::InnerIterator it(a, k); it; ++it)
+          if (it.col() == it.row()) it.valueRef() *= 1.0 + 1e-10;
+    return std::make_unique<MultigridPreconditioner>(
+        cell_multigrid<Dim>(grid, dofs.cell_of_dof, std::move(a), MacMultigridOptions{}));
+  });
+  return pcg_solve(*op, b, p, settings, m);
+}
+
+}  // namespace
+
 template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
                                    Backend backend, const PcgSettings& settings,
-                                   VectorX& u) {
+                                   VectorX& u, PreconditionerKind preconditioner) {
   PressureSolveResult result;
   // line 7: active DOFs
   const PressureDofs dofs = select_pressure_dofs(grid, w, dt);
   result.dofs = dofs.size();
   VectorX p = VectorX::Zero(dofs.size());
   // lines 8-10: assemble (or set up the stencil) and solve
-  switch (backend) {
-    case Backend::explicit_matrices: {
-      const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
-      const SparseMatrixOperator op(sys.A, dofs.null_space);
-      result.pcg = pcg_solve(op, sys.b, p, settings);
-      break;
-    }
-    case Backend::matrix_free: {
-      const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
-      result.pcg = pcg_solve(op, op.rhs(u), p, settings);
-      break;
+  if (preconditioner == PreconditionerKind::multigrid && dofs.size() > 0) {
+    result.pcg = mgpcg_pressure(grid, w, dofs, dt, backend, settings, u, p);
+  } else {
+    switch (backend) {
+      case Backend::explicit_matrices: {
+        const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
+        const SparseMatrixOperator op(sys.A, dofs.null_space);
+        result.pcg = pcg_solve(op, sys.b, p, settings);
+        break;
+      }
+      case Backend::matrix_free: {
+        const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
+        result.pcg = pcg_solve(op, op.rhs(u), p, settings);
+        break;
+      }
     }
   }
   // line 11: velocity update
@@ -472,7 +542,7 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
                                          const VectorX&, VectorX&);                              \
   template PressureSolveResult solve_pressure<D>(const MacGrid<D>&, const PressureWeights&,      \
                                                  double, Backend, const PcgSettings&, \
-                                                 VectorX&);
+                                                 VectorX&, PreconditionerKind);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

@@ -21,6 +21,7 @@
 #include "reference/solvers/backend.hpp"
 #include "reference/solvers/linear_operator.hpp"
 #include "reference/solvers/pcg.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -96,6 +97,10 @@ class MatrixFreePressureOperator : public LinearOperator {
   const std::vector<VectorX>& null_space() const override { return null_space_; }
   /// b = W_L^p G^T W_F^u u* restricted to the DOFs, by a stencil loop.
   VectorX rhs(const VectorX& u_star) const;
+  /// The operator as an explicit matrix (row-major, the entries of its stencils: equal to
+  /// ExplicitPressureSystem::A without the sparse products), for the multigrid hierarchy of
+  /// MGPCG. `dofs` must be the DOFs the operator was built with.
+  SparseMatrix matrix(const PressureDofs& dofs) const;
 
   /// Bytes the operator holds (coefficients, map, scratch), for the benchmark harness.
   std::size_t memory_bytes() const override;
@@ -145,11 +150,14 @@ struct PressureSolveResult {
 };
 
 /// Lines 7-11 of Algorithm 1 for the pressure alone: selects DOFs, builds the system with the
-/// back end `backend` (assembled matrices or stencils), solves it with SSOR-PCG and updates u
-/// (which enters as u*).
+/// back end `backend` (assembled matrices or stencils), solves it with PCG and updates u
+/// (which enters as u*). `preconditioner`: the paper's SSOR (default) or MGPCG, a V-cycle of the
+/// cell multigrid of reference/fluid/mac_hierarchy.hpp on the assembled matrix (built on the
+/// first iteration; docs/preconditioners.md section 8).
 template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
                                    Backend backend, const PcgSettings& settings,
-                                   VectorX& u);
+                                   VectorX& u,
+                                   PreconditionerKind preconditioner = PreconditionerKind::ssor);
 
 }  // namespace monolith

@@ -62,12 +62,17 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   if (options.preconditioner == PreconditionerKind::ssor || dofs.size() == 0) {
     result.pcg = pcg_solve(*op, b, x, settings);
   } else {
+    // built on the first PCG iteration only: a step whose right-hand side vanishes (a liquid at
+    // rest under uniform gravity) or whose warm start already converges skips the set-up
     const StokesPreconditionerOptions mg = options.multigrid ? *options.multigrid : StokesPreconditionerOptions{};
-    const double floor = mg.min_fluid_fraction;
-    StokesFactors f = sys ? stokes_factors(grid, layout, w, dofs, dt, *sys, floor)
-                          : stokes_factors(grid, layout, w, dofs, dt,
-                                           static_cast<const MatrixFreeStokesOperator<Dim>&>(*op), floor);
-    const StokesPreconditioner<Dim> m(grid, *op, std::move(f), mg);
+    const LinearOperator& a = *op;
+    const LazyPreconditioner m(dofs.size(), "block", [&]() -> std::unique_ptr<Preconditioner> {
+      const double floor = mg.min_fluid_fraction;
+      StokesFactors f = sys ? stokes_factors(grid, layout, w, dofs, dt, *sys, floor)
+                            : stokes_factors(grid, layout, w, dofs, dt,
+                                             static_cast<const MatrixFreeStokesOperator<Dim>&>(a), floor);
+      return std::make_unique<StokesPreconditioner<Dim>>(grid, a, std::move(f), mg);
+    });
     result.pcg = pcg_solve(*op, b, x, settings, m);
   }
   // line 11: velocity update

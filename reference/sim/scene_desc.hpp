@@ -66,9 +66,13 @@ struct SolverSpec {
   Backend backend = Backend::matrix_free;
   /// The preconditioner of the liquid's unified solves without bodies (eq. (8) in (tau, p), the
   /// stress-only viscosity solve of PC-VC-PC): "multigrid" (default) or the paper's "ssor"
-  /// (docs/preconditioners.md). The pressure-only solves and the coupled systems (24)/(26) with
-  /// bodies keep SSOR.
+  /// (docs/preconditioners.md). The coupled systems (24)/(26) with bodies keep SSOR; the
+  /// pressure-only solves follow pressure_preconditioner.
   PreconditionerKind preconditioner = PreconditionerKind::multigrid;
+  /// `solver.pressure_preconditioner`: the preconditioner of the liquid's pressure-only solves
+  /// beside static solids (eq. (8) without stress: PC-unified, the P solves of PC-VC-PC):
+  /// "ssor" (default, the paper's) or "multigrid" (MGPCG, a cell V-cycle; docs/preconditioners.md).
+  PreconditionerKind pressure_preconditioner = PreconditionerKind::ssor;
   /// Start each unified / viscosity solve from the previous step's stress and pressure (with the
   /// multigrid preconditioner only; SSOR keeps the paper's zero start). Not a scene key.
   bool stokes_warm_start = false;

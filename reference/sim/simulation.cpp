@@ -611,7 +611,8 @@ void Simulation<Dim>::solve_liquid(double dt) {
   auto pressure = [&](const State& from, SolveStage stage) {
     State out = from;
     const PressureSolveResult solve =
-        solve_pressure(grid_, weights_, dt, backend, pcg_settings_, out.u);
+        solve_pressure(grid_, weights_, dt, backend, pcg_settings_, out.u,
+                       scene_.solver.pressure_preconditioner);
     record_solve(solve.pcg, solve.dofs, 0, solve_stage_name(stage));
     out.pressure = solve.pressure;
     return out;

@@ -27,6 +27,7 @@
 #include <Eigen/SparseCholesky>
 
 #include "reference/core/common.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -96,6 +97,22 @@ class Multigrid {
   int smoothing_ = 1;
   // scratch per level
   mutable std::vector<VectorX> residual_, coarse_rhs_, coarse_x_, work_;
+};
+
+/// A multigrid hierarchy used as a PCG preconditioner: z = Q_k r, `cycles` symmetric V-cycles
+/// from zero (SPD, see the file comment). With a cell hierarchy of the pressure Poisson matrix
+/// this is MGPCG (McAdams, Sifakis and Teran 2010) for the pressure-only solves.
+class MultigridPreconditioner : public Preconditioner {
+ public:
+  MultigridPreconditioner(Multigrid mg, int cycles = 1) : mg_(std::move(mg)), cycles_(cycles) {}
+  int size() const override { return mg_.size(); }
+  void apply(const VectorX& r, VectorX& z) const override { mg_.apply(r, z, cycles_); }
+  std::string name() const override { return "multigrid"; }
+  const Multigrid& multigrid() const { return mg_; }
+
+ private:
+  Multigrid mg_;
+  int cycles_;
 };
 
 /// The Galerkin coarse operator P^T A P (row-major, explicit zeros dropped).

@@ -5,7 +5,10 @@
 /// one implementation; reference/fluid/stokes_preconditioner.hpp is the project's block
 /// preconditioner of eq. (8) (docs/preconditioners.md).
 
+#include <functional>
+#include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "reference/core/common.hpp"
@@ -53,6 +56,32 @@ class SsorPreconditioner : public Preconditioner {
  private:
   const LinearOperator& a_;
   double omega_;
+};
+
+/// A preconditioner built on its first application: `make` runs (once) only when a solver
+/// actually needs M^-1, so a solve that stops before its first iteration (zero right-hand side,
+/// or a warm start that already meets the tolerance) pays nothing for an expensive set-up
+/// (the multigrid hierarchy of reference/fluid/stokes_preconditioner.hpp costs seconds at 64^3).
+/// Not thread-safe on the first call (the solvers apply it from one thread).
+class LazyPreconditioner : public Preconditioner {
+ public:
+  using Factory = std::function<std::unique_ptr<Preconditioner>()>;
+  LazyPreconditioner(int n, std::string name, Factory make)
+      : n_(n), name_(std::move(name)), make_(std::move(make)) {}
+  int size() const override { return n_; }
+  void apply(const VectorX& r, VectorX& z) const override {
+    if (!built_) built_ = make_();
+    built_->apply(r, z);
+  }
+  std::string name() const override { return name_; }
+  /// The preconditioner once built (nullptr before the first apply).
+  const Preconditioner* built() const { return built_.get(); }
+
+ private:
+  int n_;
+  std::string name_;
+  Factory make_;
+  mutable std::unique_ptr<Preconditioner> built_;
 };
 
 /// No preconditioning: z = r.
