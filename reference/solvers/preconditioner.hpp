@@ -44,8 +44,8 @@ struct EnumNames<PreconditionerChoice> {
 
 /// The stiffness eta_max dt / (rho dx^2) of a unified / viscosity solve at and above which
 /// "auto" takes multigrid in 3D. Measured on the 3D "tank" (docs/preconditioners.md sections 6
-/// and 8, 1 thread, set-up included): multigrid 0.3-0.6x of SSOR's speed at stiffness 0.01,
-/// 0.9x at 0.1, 1.5x at 1, 2.3-3.5x at 10 and above; 0.3 is the geometric middle of the
+/// and 8, 1 thread, set-up included): multigrid 0.3-0.6x of SSOR's speed at stiffness 0.01 and
+/// below, 0.9x at 0.1, 1.5x at 1, 2.3-4.2x at 10-51; 0.3 is the geometric middle of the
 /// bracketing 0.1 and 1. In 2D multigrid was never slower (1.0x at 0.004, 1.4-7.5x above), so
 /// "auto" takes it at every stiffness there.
 constexpr double kAutoMultigridStiffness3d = 0.3;
