@@ -77,6 +77,12 @@ json frame_stats_json(const FrameStats& s) {
   if (!s.solver.viscosity_residuals.empty())
     j["solver"]["viscosity"] = {{"residuals", vector(s.solver.viscosity_residuals)},
                                 {"max_final_residual", number(s.solver.max_viscosity_residual)}};
+  // liquids with viscosity only: which preconditioner the unified / viscosity solves used
+  // (solver.preconditioner "auto" picks per solve by the stiffness) and the largest stiffness
+  if (s.solver.stokes_solves_multigrid + s.solver.stokes_solves_ssor > 0)
+    j["solver"]["preconditioner"] = {{"multigrid", s.solver.stokes_solves_multigrid},
+                                     {"ssor", s.solver.stokes_solves_ssor},
+                                     {"max_stiffness", number(s.solver.max_stokes_stiffness)}};
   // timing
   j["timing"] = json::object();
   for (const FramePhase phase : enum_values<FramePhase>())

@@ -11,6 +11,7 @@
 
 #include "reference/core/timer.hpp"
 #include "reference/coupling/coupling_scheme.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -83,6 +84,11 @@ struct SolverStats {
   /// JSON) for Newtonian liquids.
   std::vector<double> viscosity_residuals;
   double max_viscosity_residual = 0.0;
+  /// The liquid's unified / viscosity solves of the frame (solve_stokes) by the preconditioner
+  /// they used (solver.preconditioner; "auto" picks per solve), and the largest stiffness
+  /// eta_max dt / (rho dx^2) among them. All 0 (and left out of the JSON) without such solves.
+  long stokes_solves_multigrid = 0, stokes_solves_ssor = 0;
+  double max_stokes_stiffness = 0.0;
 
   /// Books one solve (or one step's solves): iterations and staggered rounds summed, the
   /// largest relative residual, convergence of all.
@@ -91,6 +97,11 @@ struct SolverStats {
     staggered_iterations += staggered;
     max_relative_residual = std::max(max_relative_residual, relative_residual);
     converged = converged && solve_converged;
+  }
+  /// Books the preconditioner of one unified / viscosity solve and its stiffness.
+  void add_stokes_preconditioner(PreconditionerKind kind, double stiffness) {
+    (kind == PreconditionerKind::multigrid ? stokes_solves_multigrid : stokes_solves_ssor) += 1;
+    max_stokes_stiffness = std::max(max_stokes_stiffness, stiffness);
   }
   /// The unknowns of a solve: each count the largest over the frame's solves.
   void add_dofs(long pressure, long stress, long contact, long friction) {

@@ -65,10 +65,11 @@ struct SolverSpec {
   int staggered_iterations = 2;
   Backend backend = Backend::matrix_free;
   /// The preconditioner of the liquid's unified solves without bodies (eq. (8) in (tau, p), the
-  /// stress-only viscosity solve of PC-VC-PC): "multigrid" (default) or the paper's "ssor"
-  /// (docs/preconditioners.md). The coupled systems (24)/(26) with bodies keep SSOR; the
-  /// pressure-only solves follow pressure_preconditioner.
-  PreconditionerKind preconditioner = PreconditionerKind::multigrid;
+  /// stress-only viscosity solve of PC-VC-PC): "auto" (default: per solve, multigrid in 2D and
+  /// in 3D at a stiffness eta_max dt / (rho dx^2) >= 0.3, else SSOR; choose_preconditioner),
+  /// "multigrid", or the paper's "ssor" (docs/preconditioners.md). The coupled systems (24)/(26)
+  /// with bodies keep SSOR; the pressure-only solves follow pressure_preconditioner.
+  PreconditionerChoice preconditioner = PreconditionerChoice::automatic;
   /// `solver.pressure_preconditioner`: the preconditioner of the liquid's pressure-only solves
   /// beside static solids (eq. (8) without stress: PC-unified, the P solves of PC-VC-PC):
   /// "ssor" (default, the paper's) or "multigrid" (MGPCG, a cell V-cycle; docs/preconditioners.md).

@@ -590,9 +590,16 @@ void Simulation<Dim>::solve_coupled(double dt) {
 }
 
 template <int Dim>
-StokesSolveOptions Simulation<Dim>::stokes_options() const {
+StokesSolveOptions Simulation<Dim>::stokes_options(const VectorX& eta, double dt) {
+  // the stiffness with the smallest liquid density (the largest stiffness of the scene's liquids)
+  double rho = std::numeric_limits<double>::infinity();
+  for (const LiquidSpec& l : scene_.liquids) rho = std::min(rho, l.density);
+  const double eta_max = eta.size() > 0 ? std::max(0.0, eta.maxCoeff()) : 0.0;
+  const double stiffness =
+      std::isfinite(rho) && rho > 0.0 ? solve_stiffness(eta_max, dt, rho, grid_.dx()) : 0.0;
   StokesSolveOptions o;
-  o.preconditioner = scene_.solver.preconditioner;
+  o.preconditioner = choose_preconditioner(scene_.solver.preconditioner, Dim, stiffness);
+  stats_.solver.add_stokes_preconditioner(o.preconditioner, stiffness);
   if (o.preconditioner != PreconditionerKind::ssor && scene_.solver.stokes_warm_start) {
     o.initial_stress = &stress_;
     o.initial_pressure = &pressure_;
@@ -627,7 +634,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     State out = from;
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                     backend, pcg_settings_, out.u, stokes_options());
+                     backend, pcg_settings_, out.u, stokes_options(w.viscosity, dt));
     record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
     out.pressure = solve.pressure;
     out.stress = solve.stress;
@@ -640,7 +647,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     State out = from;
     const StokesSolveResult solve = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
                                                  StressForm::full, backend, pcg_settings_, out.u,
-                                                 stokes_options());
+                                                 stokes_options(w.viscosity, dt));
     record_solve(solve.pcg, 0, solve.stress_dofs, "viscosity");
     out.stress = solve.stress;
     return out;

@@ -304,8 +304,11 @@ class Simulation : public AnySimulation {
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
   VectorX u_, face_mass_, face_density_, pressure_, stress_;
   PcgSettings pcg_settings_;
-  /// The preconditioner and initial guess of the solve_stokes calls (solver.preconditioner).
-  StokesSolveOptions stokes_options() const;
+  /// The preconditioner and initial guess of a solve_stokes call with viscosities eta and time
+  /// step dt: solver.preconditioner, "auto" resolved by the solve's stiffness
+  /// eta_max dt / (rho dx^2) (choose_preconditioner); the choice and the stiffness are booked in
+  /// the frame's solver stats.
+  StokesSolveOptions stokes_options(const VectorX& eta, double dt);
   // time and statistics
   int frame_ = 0;
   double time_ = 0.0;

@@ -17,10 +17,10 @@
 
 namespace monolith {
 
-/// `solver.preconditioner` of a scene: the PCG preconditioner of the liquid's unified solves.
-/// "multigrid" (the default, SceneDesc's SolverSpec): the block preconditioner of eq. (8) built
-/// on the Woodbury identity and multigrid V-cycles (reference/fluid/stokes_preconditioner.hpp);
-/// "ssor": the paper's SSOR of section 4.3, which reproduces the paper's iteration counts.
+/// The PCG preconditioner of one of the liquid's unified solves, as the solve takes it:
+/// "multigrid": the block preconditioner of eq. (8) built on the Woodbury identity and multigrid
+/// V-cycles (reference/fluid/stokes_preconditioner.hpp); "ssor": the paper's SSOR of section 4.3,
+/// which reproduces the paper's iteration counts. Also `solver.pressure_preconditioner`.
 enum class PreconditionerKind { multigrid, ssor };
 
 template <>
@@ -28,6 +28,48 @@ struct EnumNames<PreconditionerKind> {
   static constexpr std::array<std::pair<PreconditionerKind, const char*>, 2> values{
       {{PreconditionerKind::multigrid, "multigrid"}, {PreconditionerKind::ssor, "ssor"}}};
 };
+
+/// `solver.preconditioner` of a scene: "auto" (the default, SceneDesc's SolverSpec) picks one
+/// PreconditionerKind per solve by the solve's stiffness (choose_preconditioner); "multigrid" and
+/// "ssor" fix it (docs/preconditioners.md section 7).
+enum class PreconditionerChoice { automatic, multigrid, ssor };
+
+template <>
+struct EnumNames<PreconditionerChoice> {
+  static constexpr std::array<std::pair<PreconditionerChoice, const char*>, 3> values{
+      {{PreconditionerChoice::automatic, "auto"},
+       {PreconditionerChoice::multigrid, "multigrid"},
+       {PreconditionerChoice::ssor, "ssor"}}};
+};
+
+/// The stiffness eta_max dt / (rho dx^2) of a unified / viscosity solve at and above which
+/// "auto" takes multigrid in 3D. Measured on the 3D "tank" (docs/preconditioners.md sections 6
+/// and 8, 1 thread, set-up included): multigrid 0.3-0.6x of SSOR's speed at stiffness 0.01 and
+/// below, 0.9x at 0.1, 1.5x at 1, 2.3-4.2x at 10-51; 0.3 is the geometric middle of the
+/// bracketing 0.1 and 1. In 2D multigrid was never slower (1.0x at 0.004, 1.4-7.5x above), so
+/// "auto" takes it at every stiffness there.
+constexpr double kAutoMultigridStiffness3d = 0.3;
+
+/// The stiffness eta_max dt / (rho dx^2) of a solve: the ratio of the viscous to the inertial
+/// term of the velocity operator M + dt D^T eta D at the grid scale (section 2 of
+/// docs/preconditioners.md: SSOR's iteration count grows with it). eta_max the largest viscosity
+/// of the solve, rho the liquid's density (the smallest one with several liquids).
+inline double solve_stiffness(double eta_max, double dt, double rho, double dx) {
+  return eta_max * dt / (rho * dx * dx);
+}
+
+/// The preconditioner a solve uses under `solver.preconditioner` = choice: fixed for "multigrid"
+/// and "ssor"; for "auto" multigrid in 2D, and in 3D multigrid iff the stiffness is at least
+/// kAutoMultigridStiffness3d (SSOR below: cheaper than multigrid's set-up there).
+inline PreconditionerKind choose_preconditioner(PreconditionerChoice choice, int dim, double stiffness) {
+  switch (choice) {
+    case PreconditionerChoice::multigrid: return PreconditionerKind::multigrid;
+    case PreconditionerChoice::ssor: return PreconditionerKind::ssor;
+    case PreconditionerChoice::automatic: break;
+  }
+  if (dim == 2 || stiffness >= kAutoMultigridStiffness3d) return PreconditionerKind::multigrid;
+  return PreconditionerKind::ssor;
+}
 
 class Preconditioner {
  public:

@@ -164,6 +164,8 @@ TEST_CASE("bad commands and flags exit with 2 and a message", "[unit]") {
       {"run", good, "other.json"},
       {"check", good, "--frames", "3"},
       {"check", good, "--set", "time.fps=-1"},
+      {"run", good, "--set", "solver.preconditioner=fastest"},
+      {"check", good, "--set", "solver.preconditioner=amg"},
       {"check", (temp_dir() / "missing.json").string()},
       {"run", (temp_dir() / "missing.json").string()},
       {"check", temp_dir().string()},

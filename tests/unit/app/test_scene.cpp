@@ -399,7 +399,7 @@ TEST_CASE("every key, shape type and enum value is accepted", "[unit]") {
   CHECK(s.render.color_by == ColorBy::viscosity);
   CHECK(s.solver.scheme == CouplingScheme::pc_unified);
   CHECK(s.solver.backend == Backend::explicit_matrices);
-  CHECK(s.solver.preconditioner == PreconditionerKind::ssor);
+  CHECK(s.solver.preconditioner == PreconditionerChoice::ssor);
 
   // every enum value, in 2D and 3D
   for (int dim : {2, 3}) {
@@ -573,6 +573,27 @@ TEST_CASE("herschel-bulkley presets give the section 6.4.1 sets; explicit keys o
   CHECK_FALSE(plain.preset.has_value());
   CHECK(plain.gamma0 == 1e-3);
   CHECK(plain.tau0 == 0.0);
+}
+
+TEST_CASE("solver.preconditioner: auto (the default), multigrid, ssor; anything else is refused",
+          "[unit][validation]") {
+  json j = base_scene(3);
+  CHECK(parse_scene(j, "test.json", ".").solver.preconditioner == PreconditionerChoice::automatic);
+  const std::pair<const char*, PreconditionerChoice> good[] = {{"auto", PreconditionerChoice::automatic},
+                                                               {"multigrid", PreconditionerChoice::multigrid},
+                                                               {"ssor", PreconditionerChoice::ssor}};
+  for (const auto& [name, value] : good) {
+    j["solver"] = {{"preconditioner", name}};
+    CHECK(parse_scene(j, "test.json", ".").solver.preconditioner == value);
+  }
+  j["solver"] = {{"preconditioner", "automatic"}};
+  const auto lines = problems_of(j);
+  REQUIRE(lines.size() == 1);
+  CHECK(lines[0].rfind("test.json: solver.preconditioner:", 0) == 0);
+  for (const char* name : {"\"auto\"", "\"multigrid\"", "\"ssor\""}) CHECK(mentions(lines, name));
+  // "auto" is a choice of the unified solves only, not of the pressure-only ones
+  j["solver"] = {{"pressure_preconditioner", "auto"}};
+  CHECK(mentions(problems_of(j), "solver.pressure_preconditioner"));
 }
 
 TEST_CASE("an unknown viscosity preset names the file, the key path and the allowed names",

@@ -42,6 +42,7 @@ void check_table(const std::vector<std::string>& expected) {
 TEST_CASE("every option enum has one scene name per value, in the documented order", "[unit]") {
   check_table<Backend>({"matrixfree", "explicit"});
   check_table<PreconditionerKind>({"multigrid", "ssor"});
+  check_table<PreconditionerChoice>({"auto", "multigrid", "ssor"});
   check_table<CouplingScheme>({"P-C", "C-P", "PC-iterative", "PC-unified", "PC-VC-PC-unified", "PV-C",
                                "C-PV", "PVC-iterative", "PVC-unified"});
   check_table<BodyMotion>({"dynamic", "static", "kinematic"});
@@ -60,7 +61,8 @@ TEST_CASE("the one default of each option is the member initialiser of its struc
   // the values docs/scene-format.md documents as defaults
   const SolverSpec solver;
   CHECK(solver.backend == Backend::matrix_free);
-  CHECK(solver.preconditioner == PreconditionerKind::multigrid);
+  CHECK(solver.preconditioner == PreconditionerChoice::automatic);
+  CHECK(solver.pressure_preconditioner == PreconditionerKind::ssor);
   CHECK(solver.scheme == CouplingScheme::pvc_unified);
   CHECK(solver.on_nonconvergence == NonconvergencePolicy::warn);
   CHECK(BodySpec{}.motion == BodyMotion::dynamic);

@@ -300,6 +300,73 @@ TEST_CASE("the scheme decides the solves: unified, decoupled or pressure only", 
   }
 }
 
+TEST_CASE("solver.preconditioner auto: SSOR for a low-viscosity 3D step, multigrid for a high one "
+          "and in 2D; the choice is booked per solve",
+          "[unit]") {
+  // source: docs/preconditioners.md section 7 (the 3D crossover between stiffness 0.1 and 1,
+  // threshold 0.3; multigrid never slower in 2D)
+  CHECK(choose_preconditioner(PreconditionerChoice::automatic, 3, 0.29) == PreconditionerKind::ssor);
+  CHECK(choose_preconditioner(PreconditionerChoice::automatic, 3, kAutoMultigridStiffness3d) ==
+        PreconditionerKind::multigrid);
+  CHECK(choose_preconditioner(PreconditionerChoice::automatic, 2, 0.0) == PreconditionerKind::multigrid);
+  CHECK(choose_preconditioner(PreconditionerChoice::ssor, 3, 1e6) == PreconditionerKind::ssor);
+  CHECK(choose_preconditioner(PreconditionerChoice::multigrid, 3, 0.0) == PreconditionerKind::multigrid);
+
+  struct Case {
+    int dim;
+    double eta;
+    const char* preconditioner;  // nullptr: the default
+    const char* scheme;
+    PreconditionerKind expected;
+  };
+  const Case cases[] = {
+      {3, 0.1, nullptr, "PVC-unified", PreconditionerKind::ssor},
+      {3, 5000.0, nullptr, "PVC-unified", PreconditionerKind::multigrid},
+      {3, 5000.0, "auto", "PC-VC-PC-unified", PreconditionerKind::multigrid},
+      {3, 0.1, "auto", "PC-VC-PC-unified", PreconditionerKind::ssor},
+      {2, 0.1, nullptr, "PVC-unified", PreconditionerKind::multigrid},
+      {3, 5000.0, "ssor", "PVC-unified", PreconditionerKind::ssor},
+      {3, 0.1, "multigrid", "PVC-unified", PreconditionerKind::multigrid},
+  };
+  for (const Case& c : cases) {
+    CAPTURE(c.dim, c.eta, c.preconditioner ? c.preconditioner : "(default)", c.scheme);
+    const int n = c.dim == 2 ? 16 : 8;
+    nlohmann::json j = base_scene(c.dim, std::vector<double>(c.dim, 1.0), std::vector<int>(c.dim, n));
+    j["domain"]["boundary"] = {{"y+", "open"}};
+    j["time"] = {{"fps", 50}, {"frames", 2}, {"cfl", 3.0}, {"max_dt", 0.02}};
+    std::vector<double> centre(c.dim, 0.5), half(c.dim, 0.25);
+    centre[1] = 0.25;
+    j["liquids"] = {{{"name", "a"},
+                     {"shape", {{"type", "box"}, {"center", centre}, {"half_size", half}}},
+                     {"density", 1000.0},
+                     {"viscosity", {{"eta", c.eta}}}}};
+    j["solver"]["scheme"] = c.scheme;
+    if (c.preconditioner) j["solver"]["preconditioner"] = c.preconditioner;
+    auto sim = build(j);
+    for (int f = 0; f < 2; ++f) {
+      const FrameStats s = sim->advance_frame();
+      REQUIRE(s.solver.converged);
+      // one unified (PVC) or viscosity (PC-VC-PC) solve per step, all with the expected choice
+      const long mg = s.solver.stokes_solves_multigrid, ssor = s.solver.stokes_solves_ssor;
+      CHECK(mg + ssor == s.steps);
+      CHECK((c.expected == PreconditionerKind::multigrid ? mg : ssor) == s.steps);
+      // the booked stiffness is eta dt / (rho dx^2) of the step with the largest dt
+      const double dx = 1.0 / n;
+      CHECK(s.solver.max_stokes_stiffness == Approx(c.eta * s.dt_max / (1000.0 * dx * dx)).epsilon(1e-12));
+    }
+  }
+  // pressure-only solves book no Stokes preconditioner
+  nlohmann::json j = base_scene(3, {1.0, 1.0, 1.0}, {8, 8, 8});
+  j["time"] = {{"fps", 50}, {"frames", 1}, {"cfl", 3.0}, {"max_dt", 0.02}};
+  j["liquids"] = {{{"shape", {{"type", "box"}, {"center", {0.5, 0.25, 0.5}}, {"half_size", {0.25, 0.25, 0.25}}}},
+                   {"density", 1000.0},
+                   {"viscosity", {{"eta", 5000.0}}}}};
+  j["solver"]["scheme"] = "PC-unified";
+  const FrameStats s = build(j)->advance_frame();
+  CHECK(s.solver.stokes_solves_multigrid + s.solver.stokes_solves_ssor == 0);
+  CHECK(s.solver.max_stokes_stiffness == 0.0);
+}
+
 TEMPLATE_TEST_CASE_SIG("eta per stress DOF from the particles: exact for one liquid, split between two",
                        "[unit]", ((int Dim), Dim), 2, 3) {
   // particles filling the lower half of a periodic-in-x box: liquid 0 (eta 2) at x < 0.5,
