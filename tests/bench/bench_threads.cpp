@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "reference/core/parallel.hpp"
+#include "tests/support/sparse_helpers.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/fluid/stokes_system.hpp"
 #include "reference/geometry/shape.hpp"
@@ -148,27 +149,6 @@ StokesScene stokes_scene(int n) {
   return s;
 }
 
-/// A 3D 7-point SPD matrix (Laplacian plus a diagonal shift) on m^3 nodes.
-SparseMatrix laplacian_3d(int m) {
-  std::vector<Eigen::Triplet<double>> t;
-  auto id = [m](int i, int j, int k) { return (k * m + j) * m + i; };
-  for (int k = 0; k < m; ++k)
-    for (int j = 0; j < m; ++j)
-      for (int i = 0; i < m; ++i) {
-        const int r = id(i, j, k);
-        t.emplace_back(r, r, 6.5);
-        if (i > 0) t.emplace_back(r, id(i - 1, j, k), -1.0);
-        if (i + 1 < m) t.emplace_back(r, id(i + 1, j, k), -1.0);
-        if (j > 0) t.emplace_back(r, id(i, j - 1, k), -1.0);
-        if (j + 1 < m) t.emplace_back(r, id(i, j + 1, k), -1.0);
-        if (k > 0) t.emplace_back(r, id(i, j, k - 1), -1.0);
-        if (k + 1 < m) t.emplace_back(r, id(i, j, k + 1), -1.0);
-      }
-  SparseMatrix a(m * m * m, m * m * m);
-  a.setFromTriplets(t.begin(), t.end());
-  return a;
-}
-
 std::string self_dir() {
   char buf[4096];
   const ssize_t len = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
@@ -268,7 +248,7 @@ int main(int argc, char** argv) {
   const int cm = 40;
   const std::string mprgp_tag = "MPRGP sweep " + std::to_string(cm) + "^3";
   if (wanted(mprgp_tag)) {
-    SparseMatrix a = laplacian_3d(cm);
+    SparseMatrix a = monolith::testing::seven_point_matrix(cm);
     Colouring colours = welsh_powell(matrix_adjacency(a));
     coloured = std::make_unique<ColouredSparseOperator>(std::move(a), std::move(colours));
     cb = VectorX::Ones(coloured->size());

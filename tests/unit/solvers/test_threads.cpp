@@ -7,6 +7,7 @@
 
 #include <catch2/catch.hpp>
 
+#include "tests/support/sparse_helpers.hpp"
 #include "reference/core/parallel.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/fluid/stokes_system.hpp"
@@ -108,19 +109,7 @@ TEST_CASE("coloured sparse sweep (MPRGP) in parallel: bitwise equal on 1, 2, 3 t
   // a 7-point matrix on m^3 nodes, m^3 above the sweep's serial threshold
   const int m = 42;
   REQUIRE(m * m * m >= kParallelMinColourRows);
-  std::vector<Eigen::Triplet<double>> t;
-  auto id = [m](int i, int j, int k) { return (k * m + j) * m + i; };
-  for (int k = 0; k < m; ++k)
-    for (int j = 0; j < m; ++j)
-      for (int i = 0; i < m; ++i) {
-        const int r = id(i, j, k);
-        t.emplace_back(r, r, 6.5 + 0.001 * (r % 7));
-        if (i > 0) t.emplace_back(r, id(i - 1, j, k), -1.0), t.emplace_back(id(i - 1, j, k), r, -1.0);
-        if (j > 0) t.emplace_back(r, id(i, j - 1, k), -1.0), t.emplace_back(id(i, j - 1, k), r, -1.0);
-        if (k > 0) t.emplace_back(r, id(i, j, k - 1), -1.0), t.emplace_back(id(i, j, k - 1), r, -1.0);
-      }
-  SparseMatrix a(m * m * m, m * m * m);
-  a.setFromTriplets(t.begin(), t.end());
+  const SparseMatrix a = monolith::testing::seven_point_matrix(m, 6.5, 0.001);
   Colouring colours = welsh_powell(matrix_adjacency(a));
   const ColouredSparseOperator op(a, std::move(colours));
   check_same_on_any_thread_count(op, 31);

@@ -1,0 +1,33 @@
+#pragma once
+/// \file sparse_helpers.hpp
+/// Small sparse test matrices shared by tests and benchmarks.
+
+#include <vector>
+
+#include <Eigen/SparseCore>
+
+#include "reference/core/common.hpp"
+
+namespace monolith::testing {
+
+/// The 7-point matrix on m^3 nodes: -1 between grid neighbours, diagonal
+/// `diagonal + ramp * (r % 7)` in row r (6.5 and 0: a shifted Laplacian, symmetric positive
+/// definite; a small ramp makes rows differ so that a wrong ordering shows in the last bits).
+inline SparseMatrix seven_point_matrix(int m, double diagonal = 6.5, double ramp = 0.0) {
+  std::vector<Eigen::Triplet<double>> t;
+  auto id = [m](int i, int j, int k) { return (k * m + j) * m + i; };
+  for (int k = 0; k < m; ++k)
+    for (int j = 0; j < m; ++j)
+      for (int i = 0; i < m; ++i) {
+        const int r = id(i, j, k);
+        t.emplace_back(r, r, diagonal + ramp * (r % 7));
+        if (i > 0) t.emplace_back(r, id(i - 1, j, k), -1.0), t.emplace_back(id(i - 1, j, k), r, -1.0);
+        if (j > 0) t.emplace_back(r, id(i, j - 1, k), -1.0), t.emplace_back(id(i, j - 1, k), r, -1.0);
+        if (k > 0) t.emplace_back(r, id(i, j, k - 1), -1.0), t.emplace_back(id(i, j, k - 1), r, -1.0);
+      }
+  SparseMatrix a(m * m * m, m * m * m);
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
+}  // namespace monolith::testing
