@@ -6,8 +6,8 @@
 //   bench_soak [--bin PATH] [--backend matrixfree|explicit|both] [--only SUBSTRING[,SUBSTRING...]]
 //              [--dim 2|3] [--length X] [--threads N] [--out DIR] [--no-run]
 //
-// --no-run only evaluates the run folders an earlier soak left in DIR (exit codes and seconds
-// are then not known: printed as 0 and the time of the evaluation).
+// --no-run only evaluates the run folders an earlier soak left in DIR (exit codes are then not
+// known and printed as 0; seconds are the wall time each run's summary.json booked).
 // --length X runs each scene for X times its own frame count (issue 16 asks for 3). The table is
 // printed as Markdown on stdout, one row per run as soon as it ends; the runs' folders stay in DIR
 // (default soak-out) for a closer look. A measurement program: it asserts nothing, its exit code
@@ -230,6 +230,10 @@ int main(int argc, char** argv) {
         std::ifstream sin(dir / "summary.json");
         const json s = json::parse(sin, nullptr, false);
         if (!s.is_discarded() && s.contains("scene")) scene = s["scene"];
+        // --no-run: the run's own wall time, as its summary booked it
+        if (o.no_run && !s.is_discarded() && s.contains("totals") && s["totals"].contains("wall_time") &&
+            s["totals"]["wall_time"].is_number())
+          r.seconds = s["totals"]["wall_time"].get<double>();
       }
       const Row e = evaluate(dir, scene);
       const int code = r.code;
