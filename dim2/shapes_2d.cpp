@@ -73,11 +73,51 @@ void PolygonShape::build_sign_lattice() {
   nx_ = static_cast<int>(std::ceil(bounds_.sizes()[0] / h_)) + 5;
   ny_ = static_cast<int>(std::ceil(bounds_.sizes()[1] / h_)) + 5;
   lattice_.resize(static_cast<std::size_t>(nx_) * ny_);
+  const std::size_t n = points_.size();
+  // Winding numbers row by row: each edge crossing the row's line adds +-1 to the run of nodes
+  // left of the crossing (O(n + nx) per row instead of O(n) per node), and distances through the
+  // edge hierarchy (the same minimum as nearest_all, which tests every edge). The lattice is the
+  // same as evaluating winding_number and nearest_all at every node, at a fraction of the cost:
+  // a 2D bunny body used to spend ~30 ms here, and scenes with ten bunnies build ten lattices.
+  std::vector<int> delta(static_cast<std::size_t>(nx_) + 1);
   for (int j = 0; j < ny_; ++j) {
+    std::fill(delta.begin(), delta.end(), 0);
+    const double y = (origin_ + h_ * Vec<2>(0, j))[1];
+    for (std::size_t e = 0; e < n; ++e) {
+      const Vec<2>& a = points_[e];
+      const Vec<2>& b = points_[(e + 1) % n];
+      // Sunday's rule (winding_number): an upward edge counts +1 for the nodes on its left, a
+      // downward edge -1 for the nodes on its right; on this row both are the nodes with x left
+      // of the crossing
+      int sign = 0;
+      if (a[1] <= y) {
+        if (b[1] > y) sign = 1;
+      } else if (b[1] <= y) {
+        sign = -1;
+      }
+      if (sign == 0) continue;
+      const double xc = a[0] + (b[0] - a[0]) * ((y - a[1]) / (b[1] - a[1]));
+      const double sc = std::clamp((xc - origin_[0]) / h_, -4.0, static_cast<double>(nx_) + 4.0);
+      // nodes [0, lo) lie left of the crossing, [hi, nx_) right of it; [lo, hi) are tested with
+      // winding_number's own expression, so the result is the same as calling it at every node
+      const int lo = std::clamp(static_cast<int>(std::floor(sc)) - 2, 0, nx_);
+      const int hi = std::clamp(static_cast<int>(std::floor(sc)) + 3, 0, nx_);
+      delta[0] += sign;
+      delta[static_cast<std::size_t>(lo)] -= sign;
+      for (int i = lo; i < hi; ++i) {
+        const double side = cross(b - a, Vec<2>(origin_ + h_ * Vec<2>(i, j)) - a);
+        if (sign > 0 ? side > 0.0 : side < 0.0) {
+          delta[static_cast<std::size_t>(i)] += sign;
+          delta[static_cast<std::size_t>(i) + 1] -= sign;
+        }
+      }
+    }
+    int w = 0;
     for (int i = 0; i < nx_; ++i) {
+      w += delta[static_cast<std::size_t>(i)];
       const Vec<2> x = origin_ + h_ * Vec<2>(i, j);
-      const double d = nearest_all(x, nullptr);
-      lattice_[static_cast<std::size_t>(j) * nx_ + i] = winding_number(x) != 0 ? -d : d;
+      const double d = nearest(x, nullptr);
+      lattice_[static_cast<std::size_t>(j) * nx_ + i] = w != 0 ? -d : d;
     }
   }
 }

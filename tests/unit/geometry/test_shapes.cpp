@@ -393,6 +393,27 @@ TEST_CASE("polygon acceleration (edge hierarchy, sign lattice) is exact", "[dens
   }
 }
 
+TEST_CASE("polygon sign lattice: non-zero winding numbers of a doubly wound outline", "[unit]") {
+  // a 48-gon traversed twice (96 vertices: accelerated): winding number 2 inside, so nonzero
+  // winding counts it as inside where an even-odd rule would call it outside
+  std::vector<Vec<2>> pts;
+  const double pi = std::acos(-1.0);
+  for (int turn = 0; turn < 2; ++turn)
+    for (int k = 0; k < 48; ++k) pts.emplace_back(0.3 + 0.2 * std::cos(2 * pi * k / 48), 0.6 + 0.2 * std::sin(2 * pi * k / 48));
+  const PolygonShape poly(pts);
+  std::mt19937 rng(5);
+  int inside = 0;
+  for (int k = 0; k < 4000; ++k) {
+    const Vec<2> x = Vec<2>(0.3, 0.6) + 0.3 * random_point<2>(rng, -1, 1);
+    const double r = (x - Vec<2>(0.3, 0.6)).norm();
+    // away from the polygon's chords (within 0.2 (1 - cos(pi / 48)) of the circle), the circle decides
+    if (std::abs(r - 0.2) < 0.2 * (1.0 - std::cos(pi / 48)) + 1e-9) continue;
+    CHECK((poly.distance(x) < 0.0) == (r < 0.2));
+    inside += r < 0.2;
+  }
+  CHECK(inside > 1000);
+}
+
 TEMPLATE_TEST_CASE_SIG("rotation centres: union about its first child's bounds, halfspace about the origin",
                        "[unit]", ((int Dim), Dim), 2, 3) {
   std::mt19937 rng(17);
