@@ -30,7 +30,18 @@
 #include "tests/support/body_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
-#if defined(__GLIBC__)
+// AddressSanitizer replaces malloc itself; a second definition here would take the sanitizer's
+// place (it then fails at start-up), so under MONOLITH_SANITIZE / MONOLITH_FUZZ the counting
+// and the test that needs it are left out.
+#if defined(__SANITIZE_ADDRESS__)
+#define MONOLITH_UNDER_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define MONOLITH_UNDER_ASAN 1
+#endif
+#endif
+
+#if defined(__GLIBC__) && !defined(MONOLITH_UNDER_ASAN)
 // Every malloc of this executable is counted (glibc's allocator underneath), so a test can
 // assert that an operator's apply allocates nothing beyond what its fluid part does (Eigen
 // allocates through malloc, not operator new).
