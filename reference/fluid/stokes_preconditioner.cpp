@@ -127,7 +127,7 @@ void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, Vector
 template <int Dim>
 void StokesPreconditioner<Dim>::apply_two_term(const VectorX& r, VectorX& z) const {
   if (pressure_only_) {
-    pressure_.apply(r, z, options_.velocity_cycles);
+    pressure_.apply(r, z, 1);  // MGPCG: one cell V-cycle (velocity_cycles concerns V)
     return;
   }
   apply_penalised_inverse(r, y1_);

@@ -30,7 +30,12 @@ namespace monolith {
 struct StokesPreconditionerOptions {
   double penalty_factor = 3.0;       ///< gamma: Pi^-1 = gamma (eta / W_L^p + 1 / A22_ii)
   double min_fluid_fraction = 0.01;  ///< W_F^s floor in the preconditioner's K
-  int velocity_cycles = 1;           ///< V-cycles per solve with V
+  /// V-cycles per solve with V. 2: on `viscous-bunny-into-sphere-3d` (stiffness 205) one cycle
+  /// needed 118-171 PCG iterations in the air and 313 on the curved wall, two 38-55 and 118, at
+  /// 1.3-1.5x less solve time; smoothing 2 or 3 cycles cost about the same, transverse-constant
+  /// transfers or sparsified coarse levels doubled the iterations (docs/preconditioners.md,
+  /// section 10).
+  int velocity_cycles = 2;
   int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
   int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
   double omega = 1.0;                ///< their relaxation

@@ -117,6 +117,8 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing)
     for (double v : inverse_[l])
       if (!std::isfinite(v)) throw std::invalid_argument("Multigrid: singular patch block");
   }
+  apply_residual_.setZero(levels_[0].a.rows());
+  apply_correction_.setZero(levels_[0].a.rows());
   coarse_ = std::make_unique<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>>();
   coarse_->compute(Eigen::SparseMatrix<double>(levels_.back().a));
   if (coarse_->info() != Eigen::Success)
@@ -186,8 +188,9 @@ void Multigrid::cycle(int l, const VectorX& b, VectorX& x) const {
 void Multigrid::apply(const VectorX& b, VectorX& x, int cycles) const {
   cycle(0, b, x);
   if (cycles <= 1) return;
-  // further cycles of x <- x + Q (b - A x); level 0's scratch is free between cycles
-  VectorX r(b.size()), d(b.size());
+  // further cycles of x <- x + Q (b - A x), in scratch sized at construction (no allocation)
+  VectorX& r = apply_residual_;
+  VectorX& d = apply_correction_;
   for (int c = 1; c < cycles; ++c) {
     residual(levels_[0].a, b, x, r);
     cycle(0, r, d);
@@ -209,6 +212,7 @@ std::size_t Multigrid::memory_bytes() const {
     bytes += sizeof(double) * (residual_[l].size() + coarse_rhs_[l].size() + coarse_x_[l].size() +
                                work_[l].size());
   }
+  bytes += sizeof(double) * (apply_residual_.size() + apply_correction_.size());
   // the coarse factor: at most the dense triangle of the coarsest level
   const std::size_t nc = levels_.empty() ? 0 : static_cast<std::size_t>(levels_.back().a.rows());
   bytes += sizeof(double) * std::min(nc * nc / 2, static_cast<std::size_t>(levels_.back().a.nonZeros()) * 8);

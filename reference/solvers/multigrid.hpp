@@ -97,6 +97,7 @@ class Multigrid {
   int smoothing_ = 1;
   // scratch per level
   mutable std::vector<VectorX> residual_, coarse_rhs_, coarse_x_, work_;
+  mutable VectorX apply_residual_, apply_correction_;  ///< cycles >= 2 of apply (finest size)
 };
 
 /// A multigrid hierarchy used as a PCG preconditioner: z = Q_k r, `cycles` symmetric V-cycles
