@@ -218,17 +218,20 @@ void Simulation<Dim>::update_liquid_weights() {
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
+  // (buffers kept across steps; the fractions visit only the band where phi changes sign)
   const bool solids = !solid_shapes_.empty() || coupled_;
-  const VectorX phi = !solids
-                          ? liquid_phi_
-                          : extend_liquid_into_solids(grid_, liquid_phi_, solid_phi_,
-                                                      kLiquidSolidReach * grid_.dx());
-  weights_.liquid_cell = liquid_cell_weights(grid_, lattice_, phi);
-  raw_liquid_face_ = face_negative_fractions(grid_, lattice_, phi);
-  weights_.liquid_face = clamp_liquid_face_weights(grid_, raw_liquid_face_, weights_.liquid_cell);
+  if (solids)
+    extend_liquid_into_solids(grid_, liquid_phi_, solid_phi_, kLiquidSolidReach * grid_.dx(),
+                              extended_phi_);
+  const VectorX& phi = solids ? extended_phi_ : liquid_phi_;
+  classify_lattice_cells(grid_, lattice_, phi, liquid_signs_);
+  cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
+  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, raw_liquid_face_);
+  weights_.liquid_face = raw_liquid_face_;
+  clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
-    stress_liquid_ = stress_liquid_weights(stress_grid_, lattice_, phi);
+    stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
     stress_eta_ = stress_viscosity(stress_grid_, particles_, liquid_eta_);
     if (non_newtonian_) {
       mixture_.fractions = liquid_stress_fractions(stress_grid_, particles_,
@@ -250,10 +253,11 @@ void Simulation<Dim>::update_liquid_weights() {
     cell_eta_ = cell_viscosity(grid_, particles_, eta0);
   }
   // the reported volume is that of the particles' own level set (the extension lies in solids)
-  liquid_volume_ = (!solids ? weights_.liquid_cell
-                                          : liquid_cell_weights(grid_, lattice_, liquid_phi_))
-                       .sum() *
-                   grid_.cell_volume();
+  if (solids) {
+    classify_lattice_cells(grid_, lattice_, liquid_phi_, liquid_signs_);
+    cell_negative_fractions(grid_, lattice_, liquid_phi_, liquid_signs_, volume_cells_);
+  }
+  liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
 }
 
 template <int Dim>

@@ -23,6 +23,7 @@
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "reference/particles/particles.hpp"
 #include "reference/rigid/rigid_world.hpp"
 #include "reference/sim/frame_stats.hpp"
@@ -281,6 +282,11 @@ class Simulation : public AnySimulation {
   // the weights of eq. (8): W_F^u, W_L^p, W_L^u, P (weights_), W_F^s, W_L^s
   PressureWeights weights_;
   VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
+  // buffers of update_liquid_weights kept across steps (no grid-sized allocation per step): the
+  // liquid level set extended into the solids, its lattice-cell sign classes, the cell fractions
+  // of the unextended level set (the reported volume)
+  VectorX extended_phi_, volume_cells_;
+  LatticeSigns<Dim> liquid_signs_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF
