@@ -89,7 +89,8 @@ VectorX body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>&
 
 /// face_negative_fractions of a body's lattice phi, evaluated only on faces whose control
 /// volume (the face centre +- dx along every axis) can reach the body's bounds; the others are
-/// zero (their whole control volume lies where phi > 0). Same values, O(faces near the body).
+/// zero (their whole control volume lies where phi > 0). Same values, O(faces near the body):
+/// only the faces in the index range of the bounds (plus a margin) are visited.
 template <int Dim>
 VectorX body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& phi, const Box<Dim>& box) {
@@ -97,12 +98,22 @@ VectorX body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
   if (!bounded) return face_negative_fractions(grid, lattice, phi);
   VectorX w = VectorX::Zero(grid.num_faces());
   const double reach = 1.5 * grid.dx();
+  std::vector<int> near;
+  for (int axis = 0; axis < Dim; ++axis) {
+    const auto [lo, hi] = lattice_range<Dim>(grid, box, MacGrid<Dim>::face_shift(axis),
+                                             grid.face_dims(axis), reach + grid.dx());
+    for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
+      const Vec<Dim> x = grid.face_center(axis, coord);
+      if ((x.array() < box.min().array() - reach).any() ||
+          (x.array() > box.max().array() + reach).any())
+        return;
+      near.push_back(grid.face_index(axis, coord));
+    });
+  }
 #pragma omp parallel for schedule(static)
-  for (int f = 0; f < grid.num_faces(); ++f) {
+  for (int n = 0; n < static_cast<int>(near.size()); ++n) {
+    const int f = near[n];
     const auto [axis, coord] = grid.face_coord(f);
-    const Vec<Dim> x = grid.face_center(axis, coord);
-    if ((x.array() < box.min().array() - reach).any() || (x.array() > box.max().array() + reach).any())
-      continue;
     // the face control volume starts half a cell before the face along its normal
     VecI<Dim> lower = 2 * coord;
     lower[axis] -= 1;
@@ -134,7 +145,9 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
 
   // raw fractions: every body on its own, the static solids as one union (section 4.4.6 shrink)
   VectorX union_phi = solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres);
-  w.static_face = face_negative_fractions(grid, lattice, union_phi);
+  // without static solids phi is +infinity everywhere: no fraction anywhere
+  w.static_face = static_solids.empty() ? VectorX::Zero(nf)
+                                        : face_negative_fractions(grid, lattice, union_phi);
   VectorX sum = w.static_face;
   for (const CouplingBody<Dim>& body : bodies) {
     const VectorX phi =
@@ -152,14 +165,19 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
     for (VectorX& body : w.body_face) body[f] *= scale;
   }
 
-  // wall faces belong to the wall
-  for (int f = 0; f < nf; ++f) {
-    const auto [axis, coord] = grid.face_coord(f);
-    if (!grid.is_boundary_face(axis, coord)) continue;
-    const int side = coord[axis] == 0 ? 0 : 1;
-    if (boundary[2 * axis + side] != BoundaryType::wall) continue;
-    w.static_face[f] = 1.0;
-    for (VectorX& body : w.body_face) body[f] = 0.0;
+  // wall faces belong to the wall (the two boundary layers of faces normal to each wall axis)
+  for (int axis = 0; axis < Dim; ++axis) {
+    if (grid.periodic(axis)) continue;
+    for (int side = 0; side < 2; ++side) {
+      if (boundary[2 * axis + side] != BoundaryType::wall) continue;
+      VecI<Dim> lo = VecI<Dim>::Zero(), hi = grid.face_dims(axis) - VecI<Dim>::Ones();
+      lo[axis] = hi[axis] = side == 0 ? 0 : grid.cells()[axis];
+      for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
+        const int f = grid.face_index(axis, coord);
+        w.static_face[f] = 1.0;
+        for (VectorX& body : w.body_face) body[f] = 0.0;
+      });
+    }
   }
 
   // W_S^u as the sum of its parts, W_F^u = 1 - W_S^u
