@@ -108,9 +108,10 @@ double lattice_cell_negative_fraction(const std::array<double, (1 << Dim)>& corn
 }
 
 template <int Dim>
-VectorX solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<Dim>& lattice,
-                             const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres) {
-  VectorX phi(lattice.size());
+void solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<Dim>& lattice,
+                          const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres,
+                          VectorX& phi) {
+  if (phi.size() != lattice.size()) phi.resize(lattice.size());
   // min over solids of the signed distance, then shifted inward by zeta (section 4.4.6)
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < lattice.size(); ++k) {
@@ -119,6 +120,13 @@ VectorX solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<D
     for (const auto& s : solids) d = std::min(d, s->distance(x));
     phi[k] = d + shrink_in_metres;
   }
+}
+
+template <int Dim>
+VectorX solid_phi_on_lattice(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres) {
+  VectorX phi;
+  solid_phi_on_lattice(grid, lattice, solids, shrink_in_metres, phi);
   return phi;
 }
 
@@ -445,6 +453,8 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
                                                     const VecI<D>&, const VectorX&);              \
   template VectorX solid_phi_on_lattice<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
                                            const std::vector<ShapePtr<D>>&, double);              \
+  template void solid_phi_on_lattice<D>(const MacGrid<D>&, const SampleLattice<D>&,               \
+                                        const std::vector<ShapePtr<D>>&, double, VectorX&);       \
   template VectorX cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,         \
                                               const VectorX&);                                    \
   template VectorX face_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,         \

@@ -100,6 +100,11 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
 template <int Dim>
 VectorX solid_phi_on_lattice(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                              const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres);
+/// The same into `out` (reused when it has the lattice's size).
+template <int Dim>
+void solid_phi_on_lattice(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                          const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres,
+                          VectorX& out);
 
 /// Fraction of every cell control volume where phi < 0 (phi on the half lattice). Size num_cells.
 template <int Dim>
