@@ -198,43 +198,62 @@ void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
                             const VectorX& phi, LatticeSigns<Dim>& signs) {
   using Signs = LatticeSigns<Dim>;
   constexpr int kCorners = 1 << Dim;
+  constexpr int kRows = 1 << (Dim - 1);  // point rows along x that hold a row of cells' corners
   signs.cells = 2 * grid.cells();
   const std::size_t n = static_cast<std::size_t>(signs.cells.prod());
   if (signs.cls.size() != n) signs.cls.assign(n, Signs::kPositive);
-  // corner k of a lattice cell: point offset sum over axes of bit a of k times the point stride
-  std::array<int, kCorners> corner{};
   VecI<Dim> pstride, cstride;
   pstride[0] = cstride[0] = 1;
   for (int a = 1; a < Dim; ++a) {
     pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
     cstride[a] = cstride[a - 1] * signs.cells[a - 1];
   }
-  for (int k = 0; k < kCorners; ++k)
-    for (int a = 0; a < Dim; ++a)
-      if ((k >> a) & 1) corner[k] += pstride[a];
+  // row r of a cell row: point offset of bit b of r along axis b + 1
+  std::array<int, kRows> row{};
+  for (int r = 0; r < kRows; ++r)
+    for (int b = 0; b + 1 < Dim; ++b)
+      if ((r >> b) & 1) row[r] += pstride[b + 1];
+  const int nx = signs.cells[0];
+  // cell rows: every cell coordinate but x, x = 0
+  VecI<Dim> row_dims = signs.cells;
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
   VecI<Dim> lo = signs.cells, hi = -VecI<Dim>::Ones();
-  const VecI<Dim> first = VecI<Dim>::Zero(), last = signs.cells - VecI<Dim>::Ones();
-  const int slabs = signs.cells[Dim - 1];
 #pragma omp parallel
   {
     VecI<Dim> tlo = signs.cells, thi = -VecI<Dim>::Ones();
+    std::vector<int> column(nx + 1);
 #pragma omp for schedule(static)
-    for (int t = 0; t < slabs; ++t) {
-      VecI<Dim> start = VecI<Dim>::Zero();
-      start[Dim - 1] = t;
-      for_slab<Dim>(start, first, last, [&](const VecI<Dim>& c) {
-        const int base = c.dot(pstride);
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c0 = lattice_coord<Dim>(q, row_dims);
+      const int base = c0.dot(pstride);
+      // negative corners per point column (the 2^(Dim-1) rows at one x), then per cell the sum
+      // of its two columns: the count of its 2^Dim corners where phi < 0
+      for (int x = 0; x <= nx; ++x) {
         int negatives = 0;
-        for (int k = 0; k < kCorners; ++k) negatives += phi[base + corner[k]] < 0.0;
+        for (int r = 0; r < kRows; ++r) negatives += phi[base + row[r] + x] < 0.0;
+        column[x] = negatives;
+      }
+      std::uint8_t* out = signs.cls.data() + c0.dot(cstride);
+      int first = -1, last = -1;
+      for (int x = 0; x < nx; ++x) {
+        const int negatives = column[x] + column[x + 1];
         const std::uint8_t cl = negatives == 0          ? Signs::kPositive
                                 : negatives == kCorners ? Signs::kNegative
                                                         : Signs::kMixed;
-        signs.cls[c.dot(cstride)] = cl;
+        out[x] = cl;
         if (cl != Signs::kPositive) {
-          tlo = tlo.cwiseMin(c);
-          thi = thi.cwiseMax(c);
+          if (first < 0) first = x;
+          last = x;
         }
-      });
+      }
+      if (first >= 0) {
+        VecI<Dim> a = c0, b = c0;
+        a[0] = first;
+        b[0] = last;
+        tlo = tlo.cwiseMin(a);
+        thi = thi.cwiseMax(b);
+      }
     }
     // min / max: the same box for any thread count
 #pragma omp critical(monolith_lattice_signs)
