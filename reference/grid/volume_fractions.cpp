@@ -112,6 +112,11 @@ void solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<Dim>
                           const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres,
                           VectorX& phi) {
   if (phi.size() != lattice.size()) phi.resize(lattice.size());
+  if (solids.empty()) {
+    // the min over no solid: +infinity (+ zeta) everywhere, without visiting the positions
+    phi.setConstant(std::numeric_limits<double>::infinity() + shrink_in_metres);
+    return;
+  }
   // min over solids of the signed distance, then shifted inward by zeta (section 4.4.6)
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < lattice.size(); ++k) {
