@@ -157,14 +157,29 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   VectorX& sum = scratch.sum;
   sum = w.static_face;
   w.body_face.resize(bodies.size());
+  scratch.fixed_phi.resize(bodies.size());
+  scratch.fixed_face.resize(bodies.size());
   for (std::size_t i = 0; i < bodies.size(); ++i) {
     const CouplingBody<Dim>& body = bodies[i];
+    const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+    if (fixed && scratch.fixed_phi[i].size() == lattice.size() &&
+        scratch.fixed_face[i].size() == nf) {
+      // a body that never moves: its values of the first call
+      w.body_face[i] = scratch.fixed_face[i];
+      sum += w.body_face[i];
+      union_phi = union_phi.cwiseMin(scratch.fixed_phi[i]);
+      continue;
+    }
     body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, 2.0 * grid.dx(),
                              scratch.body_phi);
     body_face_fractions<Dim>(grid, lattice, scratch.body_phi, body.shape->bounds(),
                              w.body_face[i]);
     sum += w.body_face[i];
     union_phi = union_phi.cwiseMin(scratch.body_phi);
+    if (fixed) {
+      scratch.fixed_phi[i] = scratch.body_phi;
+      scratch.fixed_face[i] = w.body_face[i];
+    }
   }
 
   // overlap rule: scale every contribution by 1/sum where the sum exceeds 1

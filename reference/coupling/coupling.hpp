@@ -91,6 +91,11 @@ struct SolidWeightsScratch {
   VectorX body_phi;         ///< one body's lattice phi
   VectorX sum;              ///< sum of the raw face fractions (overlap rule)
   LatticeSigns<Dim> signs;  ///< lattice-cell classes of the static solids', then the union's phi
+  /// Set by the caller, one entry per body (missing entries count as false): the body never
+  /// moves (a fixed body in the body list), so its lattice phi and raw face fractions are
+  /// computed once and kept below. Costs one lattice-sized vector per such body.
+  std::vector<char> fixed;
+  std::vector<VectorX> fixed_phi, fixed_face;  ///< the kept values, per body (empty: not yet)
 };
 
 /// The same into `w`, whose vectors (and the scratch buffers) are reused when they have the

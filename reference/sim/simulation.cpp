@@ -481,8 +481,11 @@ void Simulation<Dim>::update_moving_solids() {
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // every body is a coupling body (fixed ones one-way at zero velocity), so the weights are
   // indexed like the bodies of the contact system; the static shapes are those fixed bodies
-  // into the coupled solve's input, whose buffers live across steps
+  // into the coupled solve's input, whose buffers live across steps; fixed bodies (static
+  // solids) are sampled once and kept
   SolidWeights<Dim>& solids = coupled_in_.solids;
+  if (solid_scratch_.fixed.empty())
+    for (const auto& b : rigid_->bodies()) solid_scratch_.fixed.push_back(!b.moves());
   solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
                      scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
   // the union's level set moves to solid_phi_; the swap hands the old buffer back for the next
