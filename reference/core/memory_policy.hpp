@@ -7,7 +7,6 @@
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
-#include <limits>
 
 namespace monolith {
 
@@ -20,7 +19,10 @@ namespace monolith {
 inline void keep_freed_memory_for_reuse() {
 #if defined(__GLIBC__)
   mallopt(M_MMAP_MAX, 0);
-  mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max());
+  // -1: never trim (mallopt(3)). The largest int, 2 GB, was not enough: at 128^3 a coupled
+  // step releases more than 2 GB at its end, glibc returned it to the kernel and the next step
+  // faulted it in again (clear_page_erms 13% of the samples of a 128^3 Fig. 2 frame, issue 20).
+  mallopt(M_TRIM_THRESHOLD, -1);
 #endif
 }
 

@@ -67,11 +67,11 @@ void for_range(const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
 /// and the values next to sign changes, are the same; a 3D mesh body costs its own box of
 /// samples instead of the whole lattice in every step.
 template <int Dim>
-VectorX body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
-                            double shrink_in_metres, double far) {
+void body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
+                         double shrink_in_metres, double far, VectorX& phi) {
   const Box<Dim> box = shape.bounds();
   const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
-  VectorX phi(lattice.size());
+  if (phi.size() != lattice.size()) phi.resize(lattice.size());
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < lattice.size(); ++k) {
     const Vec<Dim> x = lattice.position(lattice.coord(k));
@@ -84,31 +84,44 @@ VectorX body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>&
     }
     phi[k] = shape.distance(x) + shrink_in_metres;
   }
-  return phi;
 }
 
 /// face_negative_fractions of a body's lattice phi, evaluated only on faces whose control
 /// volume (the face centre +- dx along every axis) can reach the body's bounds; the others are
-/// zero (their whole control volume lies where phi > 0). Same values, O(faces near the body).
+/// zero (their whole control volume lies where phi > 0). Same values, O(faces near the body):
+/// only the faces in the index range of the bounds (plus a margin) are visited.
 template <int Dim>
-VectorX body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                            const VectorX& phi, const Box<Dim>& box) {
+void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                         const VectorX& phi, const Box<Dim>& box, VectorX& w) {
   const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
-  if (!bounded) return face_negative_fractions(grid, lattice, phi);
-  VectorX w = VectorX::Zero(grid.num_faces());
+  if (!bounded) {
+    w = face_negative_fractions(grid, lattice, phi);
+    return;
+  }
+  if (w.size() != grid.num_faces()) w.resize(grid.num_faces());
+  w.setZero();
   const double reach = 1.5 * grid.dx();
+  std::vector<int> near;
+  for (int axis = 0; axis < Dim; ++axis) {
+    const auto [lo, hi] = lattice_range<Dim>(grid, box, MacGrid<Dim>::face_shift(axis),
+                                             grid.face_dims(axis), reach + grid.dx());
+    for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
+      const Vec<Dim> x = grid.face_center(axis, coord);
+      if ((x.array() < box.min().array() - reach).any() ||
+          (x.array() > box.max().array() + reach).any())
+        return;
+      near.push_back(grid.face_index(axis, coord));
+    });
+  }
 #pragma omp parallel for schedule(static)
-  for (int f = 0; f < grid.num_faces(); ++f) {
+  for (int n = 0; n < static_cast<int>(near.size()); ++n) {
+    const int f = near[n];
     const auto [axis, coord] = grid.face_coord(f);
-    const Vec<Dim> x = grid.face_center(axis, coord);
-    if ((x.array() < box.min().array() - reach).any() || (x.array() > box.max().array() + reach).any())
-      continue;
     // the face control volume starts half a cell before the face along its normal
     VecI<Dim> lower = 2 * coord;
     lower[axis] -= 1;
     w[f] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
   }
-  return w;
 }
 
 }  // namespace
@@ -123,25 +136,50 @@ std::vector<CouplingBody<Dim>> coupling_bodies(const std::vector<RigidBody<Dim>>
 }
 
 template <int Dim>
-SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
-                                const std::vector<CouplingBody<Dim>>& bodies,
-                                const std::vector<ShapePtr<Dim>>& static_solids,
-                                const std::array<BoundaryType, 2 * Dim>& boundary,
-                                double shrink_in_metres) {
+void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
+                   const std::vector<ShapePtr<Dim>>& static_solids,
+                   const std::array<BoundaryType, 2 * Dim>& boundary, double shrink_in_metres,
+                   SolidWeights<Dim>& w, SolidWeightsScratch<Dim>& scratch) {
   const SampleLattice<Dim> lattice = half_lattice(grid);
   const int nf = grid.num_faces();
-  SolidWeights<Dim> w;
 
-  // raw fractions: every body on its own, the static solids as one union (section 4.4.6 shrink)
-  VectorX union_phi = solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres);
-  w.static_face = face_negative_fractions(grid, lattice, union_phi);
-  VectorX sum = w.static_face;
-  for (const CouplingBody<Dim>& body : bodies) {
-    const VectorX phi =
-        body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, 2.0 * grid.dx());
-    w.body_face.push_back(body_face_fractions<Dim>(grid, lattice, phi, body.shape->bounds()));
-    sum += w.body_face.back();
-    union_phi = union_phi.cwiseMin(phi);
+  // raw fractions: every body on its own, the static solids as one union (section 4.4.6 shrink);
+  // w.lattice_phi becomes the union of all solids
+  VectorX& union_phi = w.lattice_phi;
+  solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres, union_phi);
+  if (static_solids.empty()) {
+    // phi is +infinity everywhere: no fraction anywhere
+    w.static_face.setZero(nf);
+  } else {
+    classify_lattice_cells(grid, lattice, union_phi, scratch.signs);
+    face_negative_fractions(grid, lattice, union_phi, scratch.signs, w.static_face);
+  }
+  VectorX& sum = scratch.sum;
+  sum = w.static_face;
+  w.body_face.resize(bodies.size());
+  scratch.fixed_phi.resize(bodies.size());
+  scratch.fixed_face.resize(bodies.size());
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    const CouplingBody<Dim>& body = bodies[i];
+    const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+    if (fixed && scratch.fixed_phi[i].size() == lattice.size() &&
+        scratch.fixed_face[i].size() == nf) {
+      // a body that never moves: its values of the first call
+      w.body_face[i] = scratch.fixed_face[i];
+      sum += w.body_face[i];
+      union_phi = union_phi.cwiseMin(scratch.fixed_phi[i]);
+      continue;
+    }
+    body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, 2.0 * grid.dx(),
+                             scratch.body_phi);
+    body_face_fractions<Dim>(grid, lattice, scratch.body_phi, body.shape->bounds(),
+                             w.body_face[i]);
+    sum += w.body_face[i];
+    union_phi = union_phi.cwiseMin(scratch.body_phi);
+    if (fixed) {
+      scratch.fixed_phi[i] = scratch.body_phi;
+      scratch.fixed_face[i] = w.body_face[i];
+    }
   }
 
   // overlap rule: scale every contribution by 1/sum where the sum exceeds 1
@@ -152,14 +190,19 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
     for (VectorX& body : w.body_face) body[f] *= scale;
   }
 
-  // wall faces belong to the wall
-  for (int f = 0; f < nf; ++f) {
-    const auto [axis, coord] = grid.face_coord(f);
-    if (!grid.is_boundary_face(axis, coord)) continue;
-    const int side = coord[axis] == 0 ? 0 : 1;
-    if (boundary[2 * axis + side] != BoundaryType::wall) continue;
-    w.static_face[f] = 1.0;
-    for (VectorX& body : w.body_face) body[f] = 0.0;
+  // wall faces belong to the wall (the two boundary layers of faces normal to each wall axis)
+  for (int axis = 0; axis < Dim; ++axis) {
+    if (grid.periodic(axis)) continue;
+    for (int side = 0; side < 2; ++side) {
+      if (boundary[2 * axis + side] != BoundaryType::wall) continue;
+      VecI<Dim> lo = VecI<Dim>::Zero(), hi = grid.face_dims(axis) - VecI<Dim>::Ones();
+      lo[axis] = hi[axis] = side == 0 ? 0 : grid.cells()[axis];
+      for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
+        const int f = grid.face_index(axis, coord);
+        w.static_face[f] = 1.0;
+        for (VectorX& body : w.body_face) body[f] = 0.0;
+      });
+    }
   }
 
   // W_S^u as the sum of its parts, W_F^u = 1 - W_S^u
@@ -169,8 +212,20 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
   w.fluid_face = VectorX::Ones(nf) - w.solid_face;
 
   // W_F^s from the union of all solids
-  w.fluid_stress = stress_fluid_weights(StressGrid<Dim>(grid), lattice, union_phi, boundary);
-  w.lattice_phi = std::move(union_phi);
+  classify_lattice_cells(grid, lattice, union_phi, scratch.signs);
+  stress_fluid_weights(StressGrid<Dim>(grid), lattice, union_phi, scratch.signs, boundary,
+                       w.fluid_stress);
+}
+
+template <int Dim>
+SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
+                                const std::vector<CouplingBody<Dim>>& bodies,
+                                const std::vector<ShapePtr<Dim>>& static_solids,
+                                const std::array<BoundaryType, 2 * Dim>& boundary,
+                                double shrink_in_metres) {
+  SolidWeights<Dim> w;
+  SolidWeightsScratch<Dim> scratch;
+  solid_weights(grid, bodies, static_solids, boundary, shrink_in_metres, w, scratch);
   return w;
 }
 
@@ -490,6 +545,10 @@ VectorX group_velocities(const std::vector<RigidBody<Dim>>& bodies, BodyGroup gr
                                             const std::vector<CouplingBody<D>>&,                  \
                                             const std::vector<ShapePtr<D>>&,                      \
                                             const std::array<BoundaryType, 2 * D>&, double);      \
+  template void solid_weights<D>(const MacGrid<D>&, const std::vector<CouplingBody<D>>&,          \
+                                 const std::vector<ShapePtr<D>>&,                                 \
+                                 const std::array<BoundaryType, 2 * D>&, double, SolidWeights<D>&, \
+                                 SolidWeightsScratch<D>&);                                        \
   template std::vector<int> body_rows<D>(const std::vector<CouplingBody<D>>&, BodyGroup, int*);   \
   template SparseMatrix aggregation_matrix<D>(const MacGrid<D>&,                                  \
                                               const std::vector<CouplingBody<D>>&,                \

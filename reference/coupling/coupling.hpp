@@ -24,6 +24,7 @@
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "reference/rigid/mass_properties.hpp"
 #include "reference/rigid/rigid_body.hpp"
 
@@ -83,6 +84,27 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
                                 const std::vector<ShapePtr<Dim>>& static_solids,
                                 const std::array<BoundaryType, 2 * Dim>& boundary,
                                 double shrink_in_metres);
+
+/// Working buffers of solid_weights kept by a caller that computes the weights every step.
+template <int Dim>
+struct SolidWeightsScratch {
+  VectorX body_phi;         ///< one body's lattice phi
+  VectorX sum;              ///< sum of the raw face fractions (overlap rule)
+  LatticeSigns<Dim> signs;  ///< lattice-cell classes of the static solids', then the union's phi
+  /// Set by the caller, one entry per body (missing entries count as false): the body never
+  /// moves (a fixed body in the body list), so its lattice phi and raw face fractions are
+  /// computed once and kept below. Costs one lattice-sized vector per such body.
+  std::vector<char> fixed;
+  std::vector<VectorX> fixed_phi, fixed_face;  ///< the kept values, per body (empty: not yet)
+};
+
+/// The same into `w`, whose vectors (and the scratch buffers) are reused when they have the
+/// right sizes: no grid-sized allocation from the second call on. Same values bit for bit.
+template <int Dim>
+void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
+                   const std::vector<ShapePtr<Dim>>& static_solids,
+                   const std::array<BoundaryType, 2 * Dim>& boundary, double shrink_in_metres,
+                   SolidWeights<Dim>& w, SolidWeightsScratch<Dim>& scratch);
 
 /// Index of the first row of every body in its group's J blocks, -1 for bodies of the other
 /// group; `count` receives the number of rows (kBodyDofs<Dim> x bodies of the group).

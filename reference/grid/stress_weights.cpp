@@ -15,42 +15,68 @@ VecI<Dim> stress_control_volume_lower(const StressGrid<Dim>& stress, int index) 
 }
 
 template <int Dim>
+void stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
+                               const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out) {
+  if (out.size() != stress.num_dofs()) out.resize(stress.num_dofs());
+  // component k's control volumes start at lattice point 2 c + 2 shift(k) - 1: offset -1 on its
+  // node-aligned axes, 0 on the cell-centred ones
+  for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
+    const Vec<Dim> shift = StressGrid<Dim>::shift(k);
+    VecI<Dim> offset;
+    for (int a = 0; a < Dim; ++a) offset[a] = static_cast<int>(2.0 * shift[a]) - 1;
+    control_volume_negative_fractions<Dim>(stress.grid(), lattice, phi, signs, stress.dims(k),
+                                           offset, out.data() + stress.offset(k));
+  }
+}
+
+template <int Dim>
 VectorX stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
                                   const VectorX& phi) {
-  const MacGrid<Dim>& grid = stress.grid();
-  VectorX w(stress.num_dofs());
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < stress.num_dofs(); ++i)
-    w[i] = lattice_cube_negative_fraction<Dim>(grid, lattice, stress_control_volume_lower(stress, i),
-                                              phi);
+  LatticeSigns<Dim> signs;
+  classify_lattice_cells(stress.grid(), lattice, phi, signs);
+  VectorX w;
+  stress_negative_fractions(stress, lattice, phi, signs, w);
   return w;
+}
+
+template <int Dim>
+void stress_fluid_weights(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
+                          const VectorX& solid_phi, const LatticeSigns<Dim>& signs,
+                          const std::array<BoundaryType, 2 * Dim>& boundary, VectorX& w) {
+  const MacGrid<Dim>& grid = stress.grid();
+  // fluid = not solid (mirrored / wrapped outside the domain)
+  stress_negative_fractions(stress, lattice, solid_phi, signs, w);
+  w = VectorX::Ones(stress.num_dofs()) - w;  // element-wise into the same storage
+  // boundary DOFs: beyond a wall is solid (keep the inside half), an open side has no shear DOF
+  for (int k = Dim; k < StressGrid<Dim>::num_components(); ++k) {
+    const auto [a, b] = StressGrid<Dim>::component_axes(k);
+    const VecI<Dim> dims = stress.dims(k);
+    for (int j = 0; j < stress.num_dofs(k); ++j) {
+      const VecI<Dim> c = lattice_coord<Dim>(j, dims);
+      const int i = stress.offset(k) + j;
+      for (int axis : {a, b}) {
+        if (grid.periodic(axis)) continue;
+        int side = -1;
+        if (c[axis] == 0) side = 0;
+        if (c[axis] == grid.cells()[axis]) side = 1;
+        if (side < 0) continue;
+        if (boundary[2 * axis + side] == BoundaryType::wall)
+          w[i] *= 0.5;
+        else
+          w[i] = 0.0;
+      }
+    }
+  }
 }
 
 template <int Dim>
 VectorX stress_fluid_weights(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
                              const VectorX& solid_phi,
                              const std::array<BoundaryType, 2 * Dim>& boundary) {
-  const MacGrid<Dim>& grid = stress.grid();
-  // fluid = not solid (mirrored / wrapped outside the domain)
-  VectorX w =
-      VectorX::Ones(stress.num_dofs()) - stress_negative_fractions(stress, lattice, solid_phi);
-  // boundary DOFs: beyond a wall is solid (keep the inside half), an open side has no shear DOF
-  for (int i = 0; i < stress.num_dofs(); ++i) {
-    const auto [k, c] = stress.coord(i);
-    if (!stress.is_boundary(k, c)) continue;
-    const auto [a, b] = StressGrid<Dim>::component_axes(k);
-    for (int axis : {a, b}) {
-      if (grid.periodic(axis)) continue;
-      int side = -1;
-      if (c[axis] == 0) side = 0;
-      if (c[axis] == grid.cells()[axis]) side = 1;
-      if (side < 0) continue;
-      if (boundary[2 * axis + side] == BoundaryType::wall)
-        w[i] *= 0.5;
-      else
-        w[i] = 0.0;
-    }
-  }
+  LatticeSigns<Dim> signs;
+  classify_lattice_cells(stress.grid(), lattice, solid_phi, signs);
+  VectorX w;
+  stress_fluid_weights(stress, lattice, solid_phi, signs, boundary, w);
   return w;
 }
 
@@ -68,7 +94,12 @@ VectorX stress_liquid_weights(const StressGrid<Dim>& stress, const SampleLattice
                                            const VectorX&,                                     \
                                            const std::array<BoundaryType, 2 * D>&);            \
   template VectorX stress_liquid_weights<D>(const StressGrid<D>&, const SampleLattice<D>&,     \
-                                            const VectorX&);
+                                            const VectorX&);                                   \
+  template void stress_negative_fractions<D>(const StressGrid<D>&, const SampleLattice<D>&,    \
+                                             const VectorX&, const LatticeSigns<D>&, VectorX&); \
+  template void stress_fluid_weights<D>(const StressGrid<D>&, const SampleLattice<D>&,         \
+                                        const VectorX&, const LatticeSigns<D>&,                \
+                                        const std::array<BoundaryType, 2 * D>&, VectorX&);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

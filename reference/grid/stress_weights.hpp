@@ -32,6 +32,7 @@
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 
 namespace monolith {
 
@@ -47,6 +48,13 @@ template <int Dim>
 VectorX stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
                                   const VectorX& phi);
 
+/// The same with phi's lattice-cell classes computed by the caller (classify_lattice_cells), into
+/// `out` (resized when needed): only the stress control volumes in the band where phi changes
+/// sign are visited.
+template <int Dim>
+void stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
+                               const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out);
+
 /// W_F^s (section 3.1.2): diagonal, num_stress_dofs x num_stress_dofs, stored as its diagonal:
 /// the fluid (non-solid) fraction of each stress control volume, in [0, 1], with the wall and
 /// open rules of the file comment. `solid_phi` is solid_phi_on_lattice (positive outside solids).
@@ -54,6 +62,11 @@ template <int Dim>
 VectorX stress_fluid_weights(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
                              const VectorX& solid_phi,
                              const std::array<BoundaryType, 2 * Dim>& boundary);
+/// The same from solid_phi's classes, into `out`.
+template <int Dim>
+void stress_fluid_weights(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
+                          const VectorX& solid_phi, const LatticeSigns<Dim>& signs,
+                          const std::array<BoundaryType, 2 * Dim>& boundary, VectorX& out);
 
 /// W_L^s (section 3.1.2): diagonal, num_stress_dofs x num_stress_dofs, stored as its diagonal:
 /// the liquid fraction of each stress control volume (mirrored/wrapped outside the domain, no

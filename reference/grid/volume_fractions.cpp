@@ -108,9 +108,15 @@ double lattice_cell_negative_fraction(const std::array<double, (1 << Dim)>& corn
 }
 
 template <int Dim>
-VectorX solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<Dim>& lattice,
-                             const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres) {
-  VectorX phi(lattice.size());
+void solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<Dim>& lattice,
+                          const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres,
+                          VectorX& phi) {
+  if (phi.size() != lattice.size()) phi.resize(lattice.size());
+  if (solids.empty()) {
+    // the min over no solid: +infinity (+ zeta) everywhere, without visiting the positions
+    phi.setConstant(std::numeric_limits<double>::infinity() + shrink_in_metres);
+    return;
+  }
   // min over solids of the signed distance, then shifted inward by zeta (section 4.4.6)
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < lattice.size(); ++k) {
@@ -119,6 +125,13 @@ VectorX solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<D
     for (const auto& s : solids) d = std::min(d, s->distance(x));
     phi[k] = d + shrink_in_metres;
   }
+}
+
+template <int Dim>
+VectorX solid_phi_on_lattice(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres) {
+  VectorX phi;
+  solid_phi_on_lattice(grid, lattice, solids, shrink_in_metres, phi);
   return phi;
 }
 
@@ -164,31 +177,217 @@ double lattice_cube_negative_fraction(const MacGrid<Dim>& grid, const SampleLatt
   return sum / kCorners;
 }
 
+namespace {
+
+/// floor(a / 2) for any sign of a.
+inline int floor_half(int a) { return a >= 0 ? a / 2 : -((1 - a) / 2); }
+
+/// Calls fn(c) for every c in [lo, hi] (inclusive) of the axes below the last, last axis fixed
+/// at c[Dim - 1] (x fastest).
+template <int Dim, class Fn>
+inline void for_slab(VecI<Dim> c, const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
+  for (int a = 0; a + 1 < Dim; ++a) c[a] = lo[a];
+  while (true) {
+    fn(c);
+    int a = 0;
+    while (a + 1 < Dim && c[a] == hi[a]) c[a] = lo[a], ++a;
+    if (a + 1 >= Dim) return;
+    ++c[a];
+  }
+}
+
+}  // namespace
+
+template <int Dim>
+void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                            const VectorX& phi, LatticeSigns<Dim>& signs) {
+  using Signs = LatticeSigns<Dim>;
+  constexpr int kCorners = 1 << Dim;
+  constexpr int kRows = 1 << (Dim - 1);  // point rows along x that hold a row of cells' corners
+  signs.cells = 2 * grid.cells();
+  const std::size_t n = static_cast<std::size_t>(signs.cells.prod());
+  if (signs.cls.size() != n) signs.cls.assign(n, Signs::kPositive);
+  VecI<Dim> pstride, cstride;
+  pstride[0] = cstride[0] = 1;
+  for (int a = 1; a < Dim; ++a) {
+    pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
+    cstride[a] = cstride[a - 1] * signs.cells[a - 1];
+  }
+  // row r of a cell row: point offset of bit b of r along axis b + 1
+  std::array<int, kRows> row{};
+  for (int r = 0; r < kRows; ++r)
+    for (int b = 0; b + 1 < Dim; ++b)
+      if ((r >> b) & 1) row[r] += pstride[b + 1];
+  const int nx = signs.cells[0];
+  // cell rows: every cell coordinate but x, x = 0
+  VecI<Dim> row_dims = signs.cells;
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+  VecI<Dim> lo = signs.cells, hi = -VecI<Dim>::Ones();
+#pragma omp parallel
+  {
+    VecI<Dim> tlo = signs.cells, thi = -VecI<Dim>::Ones();
+    std::vector<int> column(nx + 1);
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c0 = lattice_coord<Dim>(q, row_dims);
+      const int base = c0.dot(pstride);
+      // negative corners per point column (the 2^(Dim-1) rows at one x), then per cell the sum
+      // of its two columns: the count of its 2^Dim corners where phi < 0
+      for (int x = 0; x <= nx; ++x) {
+        int negatives = 0;
+        for (int r = 0; r < kRows; ++r) negatives += phi[base + row[r] + x] < 0.0;
+        column[x] = negatives;
+      }
+      std::uint8_t* out = signs.cls.data() + c0.dot(cstride);
+      int first = -1, last = -1;
+      for (int x = 0; x < nx; ++x) {
+        const int negatives = column[x] + column[x + 1];
+        const std::uint8_t cl = negatives == 0          ? Signs::kPositive
+                                : negatives == kCorners ? Signs::kNegative
+                                                        : Signs::kMixed;
+        out[x] = cl;
+        if (cl != Signs::kPositive) {
+          if (first < 0) first = x;
+          last = x;
+        }
+      }
+      if (first >= 0) {
+        VecI<Dim> a = c0, b = c0;
+        a[0] = first;
+        b[0] = last;
+        tlo = tlo.cwiseMin(a);
+        thi = thi.cwiseMax(b);
+      }
+    }
+    // min / max: the same box for any thread count
+#pragma omp critical(monolith_lattice_signs)
+    {
+      lo = lo.cwiseMin(tlo);
+      hi = hi.cwiseMax(thi);
+    }
+  }
+  signs.lo = lo;
+  signs.hi = hi;
+}
+
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
+                                       double* out) {
+  using Signs = LatticeSigns<Dim>;
+  constexpr int kCorners = 1 << Dim;
+  std::fill(out, out + dims.prod(), 0.0);
+  if (!signs.any_negative()) return;
+  // control volumes c whose lattice cells 2 c + off + {0, 1} (mirrored at walls: at most one
+  // lattice cell inwards) can reach the box [lo, hi]; every c on a periodic axis
+  VecI<Dim> from, to;
+  for (int a = 0; a < Dim; ++a) {
+    from[a] = 0;
+    to[a] = dims[a] - 1;
+    if (grid.periodic(a)) continue;
+    from[a] = std::max(from[a], floor_half(signs.lo[a] - lower_offset[a] - 1));
+    to[a] = std::min(to[a], floor_half(signs.hi[a] - lower_offset[a] + 1));
+    if (from[a] > to[a]) return;
+  }
+  VecI<Dim> pstride, cstride, ostride;
+  pstride[0] = cstride[0] = ostride[0] = 1;
+  for (int a = 1; a < Dim; ++a) {
+    pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
+    cstride[a] = cstride[a - 1] * signs.cells[a - 1];
+    ostride[a] = ostride[a - 1] * dims[a - 1];
+  }
+#pragma omp parallel for schedule(static)
+  for (int t = from[Dim - 1]; t <= to[Dim - 1]; ++t) {
+    VecI<Dim> start = from;
+    start[Dim - 1] = t;
+    for_slab<Dim>(start, from, to, [&](const VecI<Dim>& c) {
+      // the mapped lattice cells of the cube along every axis (wrapped or mirrored)
+      std::array<std::array<int, 2>, Dim> l;
+      for (int a = 0; a < Dim; ++a)
+        for (int s = 0; s < 2; ++s)
+          l[a][s] = map_lattice_cell(2 * c[a] + lower_offset[a] + s, signs.cells[a],
+                                     grid.periodic(a));
+      std::array<int, kCorners> sub_cell;
+      int negative = 0, positive = 0;
+      for (int sub = 0; sub < kCorners; ++sub) {
+        int index = 0;
+        for (int a = 0; a < Dim; ++a) index += l[a][(sub >> a) & 1] * cstride[a];
+        sub_cell[sub] = index;
+        const std::uint8_t cl = signs.cls[index];
+        negative += cl == Signs::kNegative;
+        positive += cl == Signs::kPositive;
+      }
+      if (positive == kCorners) return;
+      double& w = out[c.dot(ostride)];
+      if (negative == kCorners) {
+        w = 1.0;
+        return;
+      }
+      // as lattice_cube_negative_fraction: the sub-cubes' fractions in order, over 2^Dim
+      double sum = 0.0;
+      for (int sub = 0; sub < kCorners; ++sub) {
+        const std::uint8_t cl = signs.cls[sub_cell[sub]];
+        if (cl == Signs::kPositive) {
+          sum += 0.0;
+        } else if (cl == Signs::kNegative) {
+          sum += 1.0;
+        } else {
+          std::array<double, kCorners> corners;
+          for (int k = 0; k < kCorners; ++k) {
+            int index = 0;
+            for (int a = 0; a < Dim; ++a)
+              index += (l[a][(sub >> a) & 1] + ((k >> a) & 1)) * pstride[a];
+            corners[k] = phi[index];
+          }
+          sum += lattice_cell_negative_fraction<Dim>(corners);
+        }
+      }
+      w = sum / kCorners;
+    });
+  }
+}
+
+template <int Dim>
+void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out) {
+  if (out.size() != grid.num_cells()) out.resize(grid.num_cells());
+  // the cell control volume is the 2^Dim lattice cells starting at lattice point 2c
+  control_volume_negative_fractions<Dim>(grid, lattice, phi, signs, grid.cells(),
+                                         VecI<Dim>::Zero(), out.data());
+}
+
+template <int Dim>
+void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out) {
+  if (out.size() != grid.num_faces()) out.resize(grid.num_faces());
+  // the face control volume starts half a cell before the face along its normal
+  for (int axis = 0; axis < Dim; ++axis) {
+    VecI<Dim> offset = VecI<Dim>::Zero();
+    offset[axis] = -1;
+    control_volume_negative_fractions<Dim>(grid, lattice, phi, signs, grid.face_dims(axis), offset,
+                                           out.data() + grid.face_offset(axis));
+  }
+}
+
 template <int Dim>
 VectorX cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                 const VectorX& phi) {
-  VectorX w(grid.num_cells());
-  // the cell control volume is the 2^Dim lattice cells starting at lattice point 2c
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < grid.num_cells(); ++i) {
-    const VecI<Dim> lower = 2 * grid.cell_coord(i);
-    w[i] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
-  }
+  LatticeSigns<Dim> signs;
+  classify_lattice_cells(grid, lattice, phi, signs);
+  VectorX w;
+  cell_negative_fractions(grid, lattice, phi, signs, w);
   return w;
 }
 
 template <int Dim>
 VectorX face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                 const VectorX& phi) {
-  VectorX w(grid.num_faces());
-  // the face control volume starts half a cell before the face along its normal
-#pragma omp parallel for schedule(static)
-  for (int f = 0; f < grid.num_faces(); ++f) {
-    const auto [axis, coord] = grid.face_coord(f);
-    VecI<Dim> lower = 2 * coord;
-    lower[axis] -= 1;
-    w[f] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
-  }
+  LatticeSigns<Dim> signs;
+  classify_lattice_cells(grid, lattice, phi, signs);
+  VectorX w;
+  face_negative_fractions(grid, lattice, phi, signs, w);
   return w;
 }
 
@@ -226,29 +425,49 @@ VectorX liquid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
 }
 
 template <int Dim>
+void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
+                                        const VectorX& liquid_cell_weights) {
+  // clamp from below beside every cell with a liquid fraction, so (W_L^u)^-1 exists there: the
+  // faces of the cells with W_L^p > 0 (a face's minus cell is f - e_axis, its plus cell f)
+  for (int i = 0; i < grid.num_cells(); ++i) {
+    if (!(liquid_cell_weights[i] > 0.0)) continue;
+    const VecI<Dim> c = grid.cell_coord(i);
+    for (int axis = 0; axis < Dim; ++axis) {
+      VecI<Dim> f = c;
+      for (int s = 0; s < 2; ++s) {
+        f[axis] = c[axis] + s;
+        if (grid.periodic(axis) && f[axis] == grid.cells()[axis]) f[axis] = 0;  // the seam face
+        double& v = w[grid.face_index(axis, f)];
+        v = std::max(v, kMinLiquidFaceFraction);
+      }
+    }
+  }
+}
+
+template <int Dim>
 VectorX clamp_liquid_face_weights(const MacGrid<Dim>& grid, VectorX w,
                                   const VectorX& liquid_cell_weights) {
-  // clamp from below beside every cell with a liquid fraction, so (W_L^u)^-1 exists there
-  for (int f = 0; f < grid.num_faces(); ++f) {
-    const auto [axis, coord] = grid.face_coord(f);
-    const int minus = grid.face_cell_minus(axis, coord);
-    const int plus = grid.face_cell_plus(axis, coord);
-    const bool beside_liquid = (minus >= 0 && liquid_cell_weights[minus] > 0.0) ||
-                               (plus >= 0 && liquid_cell_weights[plus] > 0.0);
-    if (beside_liquid) w[f] = std::max(w[f], kMinLiquidFaceFraction);
-  }
+  clamp_liquid_face_weights_in_place(grid, w, liquid_cell_weights);
   return w;
+}
+
+template <int Dim>
+void extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
+                               const VectorX& solid_phi, double reach, VectorX& phi) {
+  phi = liquid_phi;  // no allocation when phi already has the size
+  if (solid_phi.size() != liquid_phi.size()) return;
+  const double inside = -0.5 * grid.dx();
+  // lattice points inside a solid with liquid within reach count as liquid
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < static_cast<int>(phi.size()); ++k)
+    if (solid_phi[k] < 0.0 && liquid_phi[k] < reach) phi[k] = std::min(phi[k], inside);
 }
 
 template <int Dim>
 VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
                                   const VectorX& solid_phi, double reach) {
-  VectorX phi = liquid_phi;
-  if (solid_phi.size() != liquid_phi.size()) return phi;
-  const double inside = -0.5 * grid.dx();
-  // lattice points inside a solid with liquid within reach count as liquid
-  for (int k = 0; k < phi.size(); ++k)
-    if (solid_phi[k] < 0.0 && liquid_phi[k] < reach) phi[k] = std::min(phi[k], inside);
+  VectorX phi;
+  extend_liquid_into_solids(grid, liquid_phi, solid_phi, reach, phi);
   return phi;
 }
 
@@ -258,6 +477,8 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
                                                     const VecI<D>&, const VectorX&);              \
   template VectorX solid_phi_on_lattice<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
                                            const std::vector<ShapePtr<D>>&, double);              \
+  template void solid_phi_on_lattice<D>(const MacGrid<D>&, const SampleLattice<D>&,               \
+                                        const std::vector<ShapePtr<D>>&, double, VectorX&);       \
   template VectorX cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,         \
                                               const VectorX&);                                    \
   template VectorX face_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,         \
@@ -270,7 +491,20 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
                                           const VectorX&, const VectorX&);                        \
   template VectorX clamp_liquid_face_weights<D>(const MacGrid<D>&, VectorX, const VectorX&);      \
   template VectorX extend_liquid_into_solids<D>(const MacGrid<D>&, const VectorX&,                \
-                                                const VectorX&, double);
+                                                const VectorX&, double);                          \
+  template void extend_liquid_into_solids<D>(const MacGrid<D>&, const VectorX&, const VectorX&,   \
+                                             double, VectorX&);                                   \
+  template void classify_lattice_cells<D>(const MacGrid<D>&, const SampleLattice<D>&,             \
+                                          const VectorX&, LatticeSigns<D>&);                      \
+  template void control_volume_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,  \
+                                                     const VectorX&, const LatticeSigns<D>&,      \
+                                                     const VecI<D>&, const VecI<D>&, double*);    \
+  template void cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
+                                           const VectorX&, const LatticeSigns<D>&, VectorX&);     \
+  template void face_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
+                                           const VectorX&, const LatticeSigns<D>&, VectorX&);     \
+  template void clamp_liquid_face_weights_in_place<D>(const MacGrid<D>&, VectorX&,                \
+                                                      const VectorX&);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

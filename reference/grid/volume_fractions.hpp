@@ -14,6 +14,7 @@
 /// a boundary face's control volume that lies outside the domain mirrors the inside half.
 
 #include <array>
+#include <cstdint>
 #include <vector>
 
 #include "reference/core/common.hpp"
@@ -60,12 +61,50 @@ template <int Dim>
 double lattice_cube_negative_fraction(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                       const VecI<Dim>& lower, const VectorX& phi);
 
+/// Sign classes of the lattice cells of a level set on the half lattice (2 lattice cells per grid
+/// cell along every axis, lattice cell l spanning lattice points l and l + 1): what the fraction
+/// functions below need to visit only the band where the sign changes. A lattice cell whose
+/// 2^Dim corners are all >= 0 (or NaN) has fraction 0, all < 0 fraction 1, and only the mixed
+/// ones need the Kuhn split; a control volume of 2^Dim lattice cells all of class 0 (or all 1)
+/// is 0 (1) without reading phi. Same values as lattice_cube_negative_fraction, bit for bit.
+template <int Dim>
+struct LatticeSigns {
+  static constexpr std::uint8_t kPositive = 0, kNegative = 1, kMixed = 2;
+  VecI<Dim> cells = VecI<Dim>::Zero();  ///< lattice cells per axis (2 x grid cells)
+  std::vector<std::uint8_t> cls;        ///< class per lattice cell, x fastest
+  /// Inclusive bounding box of the lattice cells of class != kPositive (lo > hi: none).
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones();
+  bool any_negative() const { return (lo.array() <= hi.array()).all(); }
+};
+
+/// Fills `signs` from phi on the half lattice of grid (one pass over the lattice cells; the
+/// class buffer is reused when it has the right size).
+template <int Dim>
+void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                            const VectorX& phi, LatticeSigns<Dim>& signs);
+
+/// The fraction where phi < 0 of the control volumes c in [0, dims) (x fastest) whose cube of
+/// 2^Dim lattice cells has lower corner 2 c + lower_offset (lower_offset 0 on cell-centred axes,
+/// -1 on node-aligned ones), i.e. lattice_cube_negative_fraction of each, written to
+/// out[0 .. prod(dims)). Only the control volumes that reach the box of `signs` (plus one
+/// lattice cell for the mirror at walls; whole periodic axes) are visited; the others are 0.
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
+                                       double* out);
+
 /// Signed distance to the union of the solids, shifted inward by the shrinkage zeta of section
 /// 4.4.6: returns min_k d_k(x) + shrink_in_metres at every lattice point (positive outside the
 /// solids; +infinity everywhere when there is no solid).
 template <int Dim>
 VectorX solid_phi_on_lattice(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                              const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres);
+/// The same into `out` (reused when it has the lattice's size).
+template <int Dim>
+void solid_phi_on_lattice(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                          const std::vector<ShapePtr<Dim>>& solids, double shrink_in_metres,
+                          VectorX& out);
 
 /// Fraction of every cell control volume where phi < 0 (phi on the half lattice). Size num_cells.
 template <int Dim>
@@ -76,6 +115,16 @@ VectorX cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Di
 template <int Dim>
 VectorX face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                 const VectorX& phi);
+
+/// cell_negative_fractions / face_negative_fractions with phi's classes computed by the caller
+/// (shared by several fraction sets of one level set) into `out` (resized when needed, so a
+/// buffer kept across steps is not allocated again).
+template <int Dim>
+void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out);
+template <int Dim>
+void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out);
 
 /// W_F^u (section 3.1.2): diagonal, num_faces x num_faces, stored as its diagonal. The fluid
 /// (non-solid) fraction of each face control volume, in [0, 1]; 0 on `wall` boundary faces, the
@@ -106,6 +155,11 @@ template <int Dim>
 VectorX clamp_liquid_face_weights(const MacGrid<Dim>& grid, VectorX raw_face_fractions,
                                   const VectorX& liquid_cell_weights);
 
+/// clamp_liquid_face_weights in place: w holds the raw fractions on entry and W_L^u on return.
+template <int Dim>
+void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
+                                        const VectorX& liquid_cell_weights);
+
 /// Reach of the liquid level set into static solids, in units of dx (see extend_liquid_into_solids).
 inline constexpr double kLiquidSolidReach = 1.0;
 
@@ -125,5 +179,9 @@ inline constexpr double kLiquidSolidReach = 1.0;
 template <int Dim>
 VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
                                   const VectorX& solid_phi, double reach);
+/// The same into `out` (reused across steps when it has the lattice's size).
+template <int Dim>
+void extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
+                               const VectorX& solid_phi, double reach, VectorX& out);
 
 }  // namespace monolith

@@ -218,17 +218,20 @@ void Simulation<Dim>::update_liquid_weights() {
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
+  // (buffers kept across steps; the fractions visit only the band where phi changes sign)
   const bool solids = !solid_shapes_.empty() || coupled_;
-  const VectorX phi = !solids
-                          ? liquid_phi_
-                          : extend_liquid_into_solids(grid_, liquid_phi_, solid_phi_,
-                                                      kLiquidSolidReach * grid_.dx());
-  weights_.liquid_cell = liquid_cell_weights(grid_, lattice_, phi);
-  raw_liquid_face_ = face_negative_fractions(grid_, lattice_, phi);
-  weights_.liquid_face = clamp_liquid_face_weights(grid_, raw_liquid_face_, weights_.liquid_cell);
+  if (solids)
+    extend_liquid_into_solids(grid_, liquid_phi_, solid_phi_, kLiquidSolidReach * grid_.dx(),
+                              extended_phi_);
+  const VectorX& phi = solids ? extended_phi_ : liquid_phi_;
+  classify_lattice_cells(grid_, lattice_, phi, liquid_signs_);
+  cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
+  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, raw_liquid_face_);
+  weights_.liquid_face = raw_liquid_face_;
+  clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
-    stress_liquid_ = stress_liquid_weights(stress_grid_, lattice_, phi);
+    stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
     stress_eta_ = stress_viscosity(stress_grid_, particles_, liquid_eta_);
     if (non_newtonian_) {
       mixture_.fractions = liquid_stress_fractions(stress_grid_, particles_,
@@ -250,10 +253,11 @@ void Simulation<Dim>::update_liquid_weights() {
     cell_eta_ = cell_viscosity(grid_, particles_, eta0);
   }
   // the reported volume is that of the particles' own level set (the extension lies in solids)
-  liquid_volume_ = (!solids ? weights_.liquid_cell
-                                          : liquid_cell_weights(grid_, lattice_, liquid_phi_))
-                       .sum() *
-                   grid_.cell_volume();
+  if (solids) {
+    classify_lattice_cells(grid_, lattice_, liquid_phi_, liquid_signs_);
+    cell_negative_fractions(grid_, lattice_, liquid_phi_, liquid_signs_, volume_cells_);
+  }
+  liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
 }
 
 template <int Dim>
@@ -361,7 +365,8 @@ void Simulation<Dim>::extrapolate_into_air() {
   // extrapolate before their viscosity solve
   if (!switches_.air_velocity) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
-  std::vector<char> carried(grid_.num_faces(), 0);
+  std::vector<char>& carried = face_flags_;
+  carried.assign(grid_.num_faces(), 0);
   for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
   extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
 }
@@ -381,11 +386,11 @@ void Simulation<Dim>::solve_step(double dt) {
 }
 
 template <int Dim>
-std::vector<char> Simulation<Dim>::trusted_faces() const {
+void Simulation<Dim>::trusted_faces(std::vector<char>& trusted) const {
   // faces with fluid whose weight W_F^u W_L^u (W_L^u before the clamp) reaches
   // kTrustedLiquidFaceFraction, and faces that carry mass outside the liquid's weights (the
   // stage switches, for diagnosis only, can drop the second kind or trust every liquid face)
-  std::vector<char> trusted(grid_.num_faces(), 0);
+  trusted.assign(grid_.num_faces(), 0);
   for (int f = 0; f < grid_.num_faces(); ++f)
     trusted[f] =
         weights_.fluid_face[f] > 0.0 &&
@@ -393,7 +398,6 @@ std::vector<char> Simulation<Dim>::trusted_faces() const {
          (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
           face_mass_[f] > 0.0) ||
          (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
-  return trusted;
 }
 
 template <int Dim>
@@ -402,8 +406,8 @@ void Simulation<Dim>::extrapolate_from_trusted_faces() {
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   // as far as the particles travel in a step (cfl cells) and two more for the stencils
   const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
-  std::vector<char> trusted = trusted_faces();
-  extrapolate_velocity(grid_, u_, trusted, layers);
+  trusted_faces(face_flags_);
+  extrapolate_velocity(grid_, u_, face_flags_, layers);
 }
 
 template <int Dim>
@@ -477,11 +481,18 @@ void Simulation<Dim>::update_moving_solids() {
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // every body is a coupling body (fixed ones one-way at zero velocity), so the weights are
   // indexed like the bodies of the contact system; the static shapes are those fixed bodies
-  solid_weights_ = solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
-                                      scene_.solver.shrink * grid_.dx());
-  solid_phi_ = solid_weights_.lattice_phi;
-  weights_.fluid_face = solid_weights_.fluid_face;
-  if (sequence_ != SolveSequence::pressure) stress_fluid_ = solid_weights_.fluid_stress;
+  // into the coupled solve's input, whose buffers live across steps; fixed bodies (static
+  // solids) are sampled once and kept
+  SolidWeights<Dim>& solids = coupled_in_.solids;
+  if (solid_scratch_.fixed.empty())
+    for (const auto& b : rigid_->bodies()) solid_scratch_.fixed.push_back(!b.moves());
+  solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
+                     scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
+  // the union's level set moves to solid_phi_; the swap hands the old buffer back for the next
+  // call (nothing reads solids.lattice_phi after this)
+  solid_phi_.swap(solids.lattice_phi);
+  weights_.fluid_face = solids.fluid_face;
+  if (sequence_ != SolveSequence::pressure) stress_fluid_ = solids.fluid_stress;
   rebuild_solid_field();
 }
 
@@ -511,12 +522,13 @@ Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x) const {
 
 template <int Dim>
 void Simulation<Dim>::solve_coupled(double dt) {
-  CoupledStepInput<Dim> in;
+  // the input lives across steps (its vectors are overwritten, not allocated); in.solids is
+  // the last update_moving_solids'
+  CoupledStepInput<Dim>& in = coupled_in_;
   in.grid = grid_;
   in.dt = dt;
   in.u_star = u_;
   in.bodies = rigid_->bodies();
-  in.solids = solid_weights_;
   // (6) contacts at the step's start pose, with the pair's friction and restitution
   RigidStepStats contact_stats;
   in.contacts = rigid_->find_contacts(dt, contact_stats);
@@ -526,7 +538,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // the weights of eq. (24): W_F from the bodies' pose, W_L from the liquid; the P.. C schemes
   // and inviscid liquids have no stress unknowns (eta = 0 leaves every stress DOF inactive)
   in.weights.pressure = weights_;
-  in.weights.fluid_stress = solid_weights_.fluid_stress;
+  in.weights.fluid_stress = in.solids.fluid_stress;
   const bool stress = sequence_ != SolveSequence::pressure;
   in.weights.liquid_stress = stress ? stress_liquid_ : VectorX::Zero(stress_grid_.num_dofs());
   in.weights.viscosity = stress ? stress_eta_ : VectorX::Zero(stress_grid_.num_dofs());
@@ -543,9 +555,9 @@ void Simulation<Dim>::solve_coupled(double dt) {
   VectorX eta;
   if (non_newtonian_ && stress) {
     model = std::make_unique<NonNewtonianViscosity<Dim>>(
-        stress_grid_, deformation_rate_, solid_weights_.fluid_stress, stress_liquid_, mixture_);
+        stress_grid_, deformation_rate_, in.solids.fluid_stress, stress_liquid_, mixture_);
     options.initial_viscosity = [&](const VectorX& u_star) {
-      eta = model->initial_viscosity(solid_weights_.fluid_face, u_star, previous_shear_rate_);
+      eta = model->initial_viscosity(in.solids.fluid_face, u_star, previous_shear_rate_);
       return eta;
     };
     options.update_viscosity = [&](const VectorX& tau, const VectorX& used) {
@@ -555,7 +567,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   }
   // the oracle: this step's system to the requested sink (request_system_export)
   if (export_sink_ && stats_.steps + 1 == export_step_) options.export_sink = export_sink_;
-  const CoupledSolveResult r =
+  CoupledSolveResult r =
       solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options);
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
@@ -563,9 +575,9 @@ void Simulation<Dim>::solve_coupled(double dt) {
     record_viscosity_rounds(model->residuals());
     if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
   }
-  u_ = r.u;
-  pressure_ = r.pressure;
-  stress_ = r.stress;
+  u_.swap(r.u);
+  pressure_.swap(r.pressure);
+  stress_.swap(r.stress);
   // (12) the bodies' velocities (eq. (21))
   rigid_->set_velocities(r.body_velocity, r.body_dof);
   StaggeredResult kept;
@@ -717,7 +729,8 @@ void Simulation<Dim>::note_unconverged(const std::string& what, long iterations,
 template <int Dim>
 void Simulation<Dim>::constrain_velocity_in_solids() {
   if (solids_.empty()) return;
-  const VectorX u_old = u_;
+  u_scratch_ = u_;  // (a buffer kept across steps)
+  const VectorX& u_old = u_scratch_;
 #pragma omp parallel for schedule(static)
   for (int f = 0; f < grid_.num_faces(); ++f) {
     const auto [axis, coord] = grid_.face_coord(f);

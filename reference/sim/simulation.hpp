@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/coupling/coupling_scheme.hpp"
 #include "reference/coupling/solve_sequence.hpp"
@@ -23,6 +24,7 @@
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "reference/particles/particles.hpp"
 #include "reference/rigid/rigid_world.hpp"
 #include "reference/sim/frame_stats.hpp"
@@ -175,7 +177,7 @@ class Simulation : public AnySimulation {
   void solve_step(double dt);
   /// The faces whose solved velocity is fed back to the particles: W_F^u > 0 and W_F^u W_L^u
   /// (unclamped) >= kTrustedLiquidFaceFraction, or mass outside the liquid weights.
-  std::vector<char> trusted_faces() const;
+  void trusted_faces(std::vector<char>& trusted) const;
   /// The solved velocity extrapolated from the trusted faces, ceil(cfl) + 2 layers.
   void extrapolate_from_trusted_faces();
   /// Walls: zero normal velocity; fully solid faces: the solid's velocity; then
@@ -277,10 +279,23 @@ class Simulation : public AnySimulation {
   std::unique_ptr<RigidWorld<Dim>> rigid_;
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
   bool coupled_ = false;
-  SolidWeights<Dim> solid_weights_;  ///< of the last update_moving_solids
+  /// The coupled step's input, kept across steps so that its grid-sized vectors are reused:
+  /// its `solids` are the weights of the last update_moving_solids (whose lattice_phi has moved
+  /// to solid_phi_), the rest is filled by solve_coupled.
+  CoupledStepInput<Dim> coupled_in_;
+  SolidWeightsScratch<Dim> solid_scratch_;  ///< solid_weights' buffers
   // the weights of eq. (8): W_F^u, W_L^p, W_L^u, P (weights_), W_F^s, W_L^s
   PressureWeights weights_;
   VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
+  // buffers of update_liquid_weights kept across steps (no grid-sized allocation per step): the
+  // liquid level set extended into the solids, its lattice-cell sign classes, the cell fractions
+  // of the unextended level set (the reported volume)
+  VectorX extended_phi_, volume_cells_;
+  LatticeSigns<Dim> liquid_signs_;
+  // per-step buffers of the velocity stages: face flags (faces that carry mass, trusted faces)
+  // and the velocity before constrain_velocity_in_solids
+  std::vector<char> face_flags_;
+  VectorX u_scratch_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF

@@ -10,6 +10,9 @@
 #include <string>
 #include <vector>
 
+#include <map>
+#include <nlohmann/json.hpp>
+
 #include "reference/app/embedded_scenes.hpp"
 #include "reference/app/scene_file.hpp"
 #include "reference/sim/simulation.hpp"
@@ -45,6 +48,35 @@ bool is_builtin(const std::string& name) {
     if (f.name == name) return true;
   return false;
 }
+
+/// The text of a built-in scene (empty if there is none).
+std::string builtin_text(const std::string& name) {
+  for (const auto& f : embedded_scenes())
+    if (f.name == name) return std::string(f.data);
+  return {};
+}
+
+/// The paper-resolution variants NAME-3d-paper of the 3D paper scenes and the grid each figure
+/// used in the paper (Tables 1-3, sections 6.4.1, 6.4.2, 6.5). Figs. 15 (240x96x96) and 16
+/// (225x150x150) have no variant: their built-in boxes have other proportions.
+const std::map<std::string, std::array<int, 3>> kPaperGrids = {
+    {"liquid-bunny-into-bowl-3d", {256, 128, 256}},
+    {"bunny-onto-floating-bowl-3d", {128, 128, 128}},
+    {"viscous-sphere-bunny-wall-3d", {128, 128, 128}},
+    {"bunny-on-viscous-hemisphere-3d", {128, 128, 128}},
+    {"viscous-blob-into-bowl-3d", {128, 128, 128}},
+    {"bunnies-into-floating-bowl-viscous-3d", {64, 64, 64}},
+    {"liquid-drop-newtonian-3d", {128, 128, 128}},
+    {"liquid-drop-shear-thinning-3d", {128, 128, 128}},
+    {"liquid-drop-shear-thickening-3d", {128, 128, 128}},
+    {"liquid-drop-bingham-3d", {128, 128, 128}},
+    {"bunny-into-block-newtonian-3d", {64, 64, 64}},
+    {"bunny-into-block-shear-thinning-3d", {64, 64, 64}},
+    {"bunny-into-block-shear-thickening-3d", {64, 64, 64}},
+    {"bunny-into-block-bingham-3d", {64, 64, 64}},
+    {"hollow-spheres-inviscid-3d", {256, 256, 256}},
+    {"hollow-spheres-viscous-3d", {128, 128, 128}},
+};
 
 bool all_finite(const std::vector<double>& v) {
   return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
@@ -190,4 +222,54 @@ TEST_CASE("2D non-Newtonian scenes run their first frame through Algorithm 2", "
     CHECK(f.max_penetration < 0.5 * s.dx());
     for (const auto& b : f.bodies) CHECK(all_finite(b.position));
   }
+}
+
+TEST_CASE("paper-resolution variants are their scenes at the paper's grid", "[unit]") {
+  // Only parsed and compared here: one frame of the largest takes minutes and gigabytes
+  // (docs/benchmarks.md). Every built-in NAME-paper is listed, and differs from NAME only in its
+  // name, description and grid (for Fig. 2 also the box, widened at the same cell width).
+  int variants = 0;
+  for (const auto& f : embedded_scenes()) {
+    const std::string name(f.name);
+    if (name.size() < 6 || name.compare(name.size() - 6, 6, "-paper") != 0) continue;
+    ++variants;
+    const std::string base = name.substr(0, name.size() - 6);
+    INFO(name);
+    REQUIRE(kPaperGrids.count(base) == 1);
+    REQUIRE(is_builtin(base));
+    const SceneFile paper = load_scene(name, {});
+    const SceneFile own = load_scene(base, {});
+    CHECK(paper.name == name);
+    const std::array<int, 3> grid = kPaperGrids.at(base);
+    for (int a = 0; a < 3; ++a) CHECK(paper.domain.cells[a] == grid[a]);
+    // cubic cells, and the description names the figure as the base scene's does
+    for (int a = 0; a < 3; ++a)
+      CHECK((paper.domain.upper[a] - paper.domain.lower[a]) / paper.domain.cells[a] ==
+            Approx(paper.dx()).epsilon(1e-12));
+    const std::string figure = own.description.substr(0, own.description.find(" in 3D"));
+    CHECK(paper.description.rfind(figure + " in 3D", 0) == 0);
+    CHECK(paper.description.find("paper's grid") != std::string::npos);
+    // everything else as in the base scene
+    nlohmann::json a = nlohmann::json::parse(builtin_text(name));
+    nlohmann::json b = nlohmann::json::parse(builtin_text(base));
+    for (nlohmann::json* j : {&a, &b}) {
+      j->erase("name");
+      j->erase("description");
+      (*j)["domain"].erase("cells");
+    }
+    if (base == "liquid-bunny-into-bowl-3d") {
+      // the paper's 2:1:2 box at the base scene's cell width, its liquid and bowl unmoved
+      CHECK(paper.dx() == Approx(1.0 / 128.0).epsilon(1e-12));
+      for (int ax : {0, 2}) {
+        CHECK(paper.domain.lower[ax] == -0.5);
+        CHECK(paper.domain.upper[ax] == 1.5);
+      }
+      for (nlohmann::json* j : {&a, &b}) {
+        (*j)["domain"].erase("lower");
+        (*j)["domain"].erase("upper");
+      }
+    }
+    CHECK(a == b);
+  }
+  CHECK(variants == static_cast<int>(kPaperGrids.size()));
 }
