@@ -911,43 +911,70 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   const double cell_volume = grid.cell_volume();
 
   // particle volume fractions: each particle's volume spread as a box of its rest spacing and
-  // then by the hat of the cell centres, splatted serially in particle order (deterministic)
+  // then by the hat of the cell centres. In parallel without races: the cells are split into
+  // slabs of layers of the last axis, one per thread; each thread walks all particles in index
+  // order, skips those whose five layers miss its slab and adds only into its own cells, so every
+  // cell sums its contributions in the order of the serial loop (the same bits for any number of
+  // threads, and as before)
   VectorX rho = VectorX::Zero(nc);
-  for (long p = 0; p < np; ++p) {
-    const double volume =
-        particles.density[p] > 0.0 ? particles.mass[p] / particles.density[p] : 0.0;
-    const double width = particle_spacing(particles, p, dx) / dx;
-    const Vec<Dim> xr = (grid.wrap_position(particles.x[p]) - grid.origin()) / dx;
-    // per axis: five candidate cells around the particle and their weights
-    std::array<std::array<int, 5>, Dim> cell;
-    std::array<std::array<double, 5>, Dim> weight;
-    for (int a = 0; a < Dim; ++a) {
-      const int base = static_cast<int>(std::floor(xr[a])) - 2;
-      for (int k = 0; k < 5; ++k) {
-        int c = base + k;
-        weight[a][k] = box_hat_weight(c + 0.5 - xr[a], width);
-        if (grid.periodic(a))
-          c = ((c % grid.cells()[a]) + grid.cells()[a]) % grid.cells()[a];
-        else
-          c = std::clamp(c, 0, grid.cells()[a] - 1);
-        cell[a][k] = c;
+  constexpr int kLast = Dim - 1;
+  const int layers = grid.cells()[kLast];
+  const int slabs = std::max(1, std::min(omp_get_max_threads(), layers));
+#pragma omp parallel for schedule(static, 1)
+  for (int slab = 0; slab < slabs; ++slab) {
+    const int first = static_cast<int>(static_cast<long>(slab) * layers / slabs);
+    const int end = static_cast<int>(static_cast<long>(slab + 1) * layers / slabs);
+    for (long p = 0; p < np; ++p) {
+      // the five layers of the last axis this particle reaches: skip it if none is in the slab
+      {
+        const double xl = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / dx;
+        const int base = static_cast<int>(std::floor(xl)) - 2;
+        bool reaches = false;
+        for (int k = 0; k < 5 && !reaches; ++k) {
+          int c = base + k;
+          if (grid.periodic(kLast))
+            c = ((c % layers) + layers) % layers;
+          else
+            c = std::clamp(c, 0, layers - 1);
+          reaches = c >= first && c < end;
+        }
+        if (!reaches) continue;
       }
-    }
-    std::array<int, Dim> k{};
-    while (true) {
-      double w = volume / cell_volume;
-      VecI<Dim> ci;
+      const double volume =
+          particles.density[p] > 0.0 ? particles.mass[p] / particles.density[p] : 0.0;
+      const double width = particle_spacing(particles, p, dx) / dx;
+      const Vec<Dim> xr = (grid.wrap_position(particles.x[p]) - grid.origin()) / dx;
+      // per axis: five candidate cells around the particle and their weights
+      std::array<std::array<int, 5>, Dim> cell;
+      std::array<std::array<double, 5>, Dim> weight;
       for (int a = 0; a < Dim; ++a) {
-        w *= weight[a][k[a]];
-        ci[a] = cell[a][k[a]];
+        const int base = static_cast<int>(std::floor(xr[a])) - 2;
+        for (int k = 0; k < 5; ++k) {
+          int c = base + k;
+          weight[a][k] = box_hat_weight(c + 0.5 - xr[a], width);
+          if (grid.periodic(a))
+            c = ((c % grid.cells()[a]) + grid.cells()[a]) % grid.cells()[a];
+          else
+            c = std::clamp(c, 0, grid.cells()[a] - 1);
+          cell[a][k] = c;
+        }
       }
-      if (w != 0.0) rho[grid.cell_index(ci)] += w;
-      int a = 0;
-      for (; a < Dim; ++a) {
-        if (++k[a] < 5) break;
-        k[a] = 0;
+      std::array<int, Dim> k{};
+      while (true) {
+        double w = volume / cell_volume;
+        VecI<Dim> ci;
+        for (int a = 0; a < Dim; ++a) {
+          w *= weight[a][k[a]];
+          ci[a] = cell[a][k[a]];
+        }
+        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) rho[grid.cell_index(ci)] += w;
+        int a = 0;
+        for (; a < Dim; ++a) {
+          if (++k[a] < 5) break;
+          k[a] = 0;
+        }
+        if (a == Dim) break;
       }
-      if (a == Dim) break;
     }
   }
   // liquid fractions of the particle level set, smoothed by the same hat
