@@ -67,12 +67,14 @@ int main(int argc, char** argv) {
   const auto sim = make_simulation(parse_scene(scene, "sloshing.json", "."), switches);
   const FrameStats s0 = sim->current_stats();
   const double e0 = total_energy(s0);
-  const double available = e0 - 0.5 * kRho * kG * s0.liquid_volume * s0.liquid_volume;
+  const double seeded = e0 - 0.5 * kRho * kG * s0.liquid_volume * s0.liquid_volume;
+  const double available = kRho * kG * slope * slope / 24.0;
   // the available energy of the continuum: a surface tilted by slope over a unit width holds
   // rho g slope^2 / 24 more potential energy than a flat one (per unit depth in 3D)
   std::printf("sloshing %dD, %d cells, slope %.3f, max_dt %.4f, %s: E0 %.4f J, available %.4f J "
-              "(from the seeded volume; the continuum's rho g slope^2 / 24 = %.4f J)\n", dim, cells,
-              slope, max_dt, backend.c_str(), e0, available, kRho * kG * slope * slope / 24.0);
+              "(the continuum's rho g slope^2 / 24; E0 - rho g V0^2 / 2 from the seeded volume: "
+              "%.4f J)\n",
+              dim, cells, slope, max_dt, backend.c_str(), e0, available, seeded);
   std::printf("%8s %12s %12s %12s %14s %10s | ledger since the last line: %8s %8s %8s %8s %8s %8s %8s\n",
               "t", "KE (J)", "PE - PE0", "E - E0", "(E-E0)/avail", "volume", "to_grid", "solve",
               "extend", "to_part", "advect", "correct", "project");
