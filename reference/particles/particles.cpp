@@ -50,6 +50,9 @@ constexpr double kProjectionAirSide = 0.5;
 constexpr double kProjectionSolidReach = 1.5;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
+/// Lattice points per axis of one particle's splat box held in a stack table (liquid_phi_on_lattice;
+/// wider boxes, from particles far larger than a cell, compute their offsets point by point).
+constexpr int kMaxSplatPoints = 16;
 
 /// What differs between 2D and 3D for the particles: the rigid rotation of a seeded liquid, and
 /// the calibrated particle radius of the surface reconstruction.
@@ -1166,9 +1169,10 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
     for (int side = 0; side < 2; ++side)
       mirror[2 * a + side] = !grid.periodic(a) && boundary[2 * a + side] == BoundaryType::wall;
 
-  VectorX wsum = VectorX::Zero(nl), rsum = VectorX::Zero(nl);
-  Eigen::Matrix<double, Dim, Eigen::Dynamic> xsum =
-      Eigen::Matrix<double, Dim, Eigen::Dynamic>::Zero(Dim, nl);
+  // the sums of each lattice point side by side (weight, radius, position): one cache line per
+  // point touched instead of three arrays' worth
+  constexpr int kStride = Dim + 2;
+  std::vector<double> acc(static_cast<std::size_t>(nl) * kStride, 0.0);
 
   // splat one particle (with its periodic and wall images) onto the lattice
   auto splat = [&](int p) {
@@ -1213,17 +1217,33 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
         i0[a] = lo[a][seg[a]];
         i1[a] = hi[a][seg[a]];
       }
+      // the offsets lattice.position(i) - xi per axis (a lattice position's component depends
+      // on its own index only), computed once per segment with the same arithmetic
+      std::array<std::array<double, kMaxSplatPoints>, Dim> offset;
+      bool fits = true;
+      for (int a = 0; a < Dim; ++a) fits = fits && i1[a] - i0[a] < kMaxSplatPoints;
+      if (fits) {
+        for (int a = 0; a < Dim; ++a)
+          for (int j = i0[a]; j <= i1[a]; ++j)
+            offset[a][j - i0[a]] = (lattice.origin[a] + static_cast<double>(j) * h) - xi[a];
+      }
+      const double rp = radius[p];
       VecI<Dim> i = i0;
       while (true) {
-        const Vec<Dim> d = lattice.position(i) - xi;
+        Vec<Dim> d;
+        if (fits) {
+          for (int a = 0; a < Dim; ++a) d[a] = offset[a][i[a] - i0[a]];
+        } else {
+          d = lattice.position(i) - xi;
+        }
         const double q2 = d.squaredNorm() * inv_r2;
         if (q2 < 1.0) {
           const double t = 1.0 - q2;
           const double k = t * t * t;
-          const int li = lattice.index(i);
-          wsum[li] += k;
-          rsum[li] += k * radius[p];
-          xsum.col(li) += k * xi;
+          double* sum = acc.data() + static_cast<std::size_t>(lattice.index(i)) * kStride;
+          sum[0] += k;
+          sum[1] += k * rp;
+          for (int a = 0; a < Dim; ++a) sum[2 + a] += k * xi[a];
         }
         int a = 0;
         for (; a < Dim; ++a) {
@@ -1268,9 +1288,11 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
   VectorX phi(nl);
 #pragma omp parallel for schedule(static)
   for (int li = 0; li < nl; ++li) {
-    if (wsum[li] > 0.0) {
-      const Vec<Dim> xbar = xsum.col(li) / wsum[li];
-      phi[li] = (lattice.position(lattice.coord(li)) - xbar).norm() - rsum[li] / wsum[li];
+    const double* sum = acc.data() + static_cast<std::size_t>(li) * kStride;
+    if (sum[0] > 0.0) {
+      Vec<Dim> xbar;
+      for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
+      phi[li] = (lattice.position(lattice.coord(li)) - xbar).norm() - sum[1] / sum[0];
     } else {
       phi[li] = max_support;
     }
