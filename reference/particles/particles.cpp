@@ -726,16 +726,25 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         const double min_distance = kCorrectionMinDistance * h / kCorrectionSupport;
         const double min_distance2 = min_distance * min_distance;
         const Vec<Dim> xp = xw[p];
-        // number density from squared distances only (no square roots)
+        // number density from squared distances only (no square roots), without branches: a
+        // candidate outside the support (or p itself, at its own slot) adds +0.0, which leaves
+        // the sum (at least 1) bit for bit as skipping it would
         double n = 1.0;  // the particle itself
-        for (int q : cand) {
-          Vec<Dim> d = xp - xs[q];
-          if (any_periodic) d = periodic_difference(grid, d);
+        const double h2 = h * h;
+        bool close = false;
+        const auto density_term = [&](int q, const Vec<Dim>& d) {
           const double r2 = d.squaredNorm();
-          if (r2 >= h * h || order[q] == p) continue;
-          if (r2 < min_distance2) close_pair[p] = 1;
-          n += correction_kernel(r2 * inv_h2);
+          const bool inside = r2 < h2 && q != slot;
+          close = close || (inside && r2 < min_distance2);
+          const double t = 1.0 - r2 * inv_h2;
+          return inside && t > 0.0 ? t * t * t : 0.0;
+        };
+        if (any_periodic) {
+          for (int q : cand) n += density_term(q, periodic_difference(grid, Vec<Dim>(xp - xs[q])));
+        } else {
+          for (int q : cand) n += density_term(q, Vec<Dim>(xp - xs[q]));
         }
+        if (close) close_pair[p] = 1;
         const double c = n / n0 - 1.0 - kCorrectionSlack;
         if (c <= 0.0) continue;
         // constraint gradients, only for the compressed particles
