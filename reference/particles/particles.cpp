@@ -787,9 +787,22 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         const int p = order[slot];
         Vec<Dim> push = Vec<Dim>::Zero();
         const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
-        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
+        // a neighbour with l = 0 whose squared distance is clearly beyond the minimum distance
+        // contributes nothing: skip its square root (the margin keeps the skip conservative)
+        const double skip_r2 = min_distance * min_distance * (1.0 + 1e-9);
+        const double h = support[p];
+        const double h2 = h * h;
+        const Vec<Dim> xp = xw[p];
+        for (int q : cand) {
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
+          const double r2 = d.squaredNorm();
+          if (r2 >= h2 || q == slot) continue;
+          const int j = order[q];
           // density constraints
           const double l = lambda[p] + lambda[j];
+          if (l == 0.0 && r2 > skip_r2) continue;
+          const double r = std::sqrt(r2);
           if (l != 0.0) push += l * spiky_gradient(p, j, d, r, h) / n0;
           // minimum distance: each particle of a close pair takes half of the overlap
           if (r < min_distance) {
@@ -800,7 +813,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
               dir[0] = p < j ? 1.0 : -1.0;  // as in spiky_gradient
             push += 0.5 * (min_distance - r) * dir;
           }
-        });
+        }
         push *= alpha;
         // never more than kCorrectionMaxStep spacings per step
         const double cap = kCorrectionMaxStep * support[p] / kCorrectionSupport;
