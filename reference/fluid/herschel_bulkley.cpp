@@ -40,45 +40,74 @@ bool has_non_newtonian(const std::vector<LiquidSpec>& liquids) {
   });
 }
 
+namespace {
+
+/// Calls visit(m, index) for every DOF of component m within half a cell of DOF i that exists:
+/// along an axis where the two lattices agree the same coordinate, where they differ the two
+/// neighbours (in component order, corners in bit order). The relation is symmetric: j is
+/// visited from i exactly when i is visited from j.
+template <int Dim, typename Visit>
+void for_stress_stencil(const StressGrid<Dim>& stress, int i, Visit&& visit) {
+  constexpr int kComponents = StressGrid<Dim>::kComponents;
+  const auto [k, c] = stress.coord(i);
+  const Vec<Dim> shift_k = StressGrid<Dim>::shift(k);
+  for (int m = 0; m < kComponents; ++m) {
+    const Vec<Dim> shift_m = StressGrid<Dim>::shift(m);
+    int differ[Dim];
+    int num_differ = 0;
+    for (int a = 0; a < Dim; ++a)
+      if (shift_k[a] != shift_m[a]) differ[num_differ++] = a;
+    for (int corner = 0; corner < (1 << num_differ); ++corner) {
+      VecI<Dim> cm = c;
+      for (int j = 0; j < num_differ; ++j) {
+        const int a = differ[j];
+        const int bit = (corner >> j) & 1;
+        // node-aligned target (shift 0) reads cell-centred c - 1, c; cell-centred target
+        // (shift 1/2) reads node-aligned c, c + 1
+        cm[a] += shift_k[a] == 0.0 ? bit - 1 : bit;
+      }
+      visit(m, stress.index_or_outside(m, cm));
+    }
+    visit(m, -2);  // end of component m
+  }
+}
+
+}  // namespace
+
 template <int Dim>
 VectorX shear_rate_norm(const StressGrid<Dim>& stress, const VectorX& rate,
                         const std::vector<char>& active) {
-  constexpr int kComponents = StressGrid<Dim>::kComponents;
-  VectorX s = VectorX::Zero(stress.num_dofs());
+  const int n = stress.num_dofs();
+  VectorX s = VectorX::Zero(n);
+  // only DOFs with an active DOF in their stencil can be nonzero (elsewhere every mean is empty
+  // and s = sqrt(0) = 0, the zero already stored): mark them from the active DOFs, which the
+  // liquid confines to a band, instead of visiting every stencil of the grid
+  std::vector<char> reach(n, 0);
+  for (int j = 0; j < n; ++j) {
+    if (!active[j]) continue;
+    for_stress_stencil(stress, j, [&](int, int index) {
+      if (index >= 0) reach[index] = 1;
+    });
+  }
 #pragma omp parallel for schedule(static)
-  for (int i = 0; i < stress.num_dofs(); ++i) {
-    const auto [k, c] = stress.coord(i);
-    const Vec<Dim> shift_k = StressGrid<Dim>::shift(k);
-    double sum = 0.0;
-    for (int m = 0; m < kComponents; ++m) {
-      // the DOFs of component m within half a cell of DOF i: along an axis where the two
-      // lattices agree the same coordinate, where they differ the two neighbours
-      const Vec<Dim> shift_m = StressGrid<Dim>::shift(m);
-      int differ[Dim];
-      int num_differ = 0;
-      for (int a = 0; a < Dim; ++a)
-        if (shift_k[a] != shift_m[a]) differ[num_differ++] = a;
-      double value = 0.0;
-      int count = 0;
-      for (int corner = 0; corner < (1 << num_differ); ++corner) {
-        VecI<Dim> cm = c;
-        for (int j = 0; j < num_differ; ++j) {
-          const int a = differ[j];
-          const int bit = (corner >> j) & 1;
-          // node-aligned target (shift 0) reads cell-centred c - 1, c; cell-centred target
-          // (shift 1/2) reads node-aligned c, c + 1
-          cm[a] += shift_k[a] == 0.0 ? bit - 1 : bit;
+  for (int i = 0; i < n; ++i) {
+    if (!reach[i]) continue;
+    double sum = 0.0, value = 0.0;
+    int count = 0;
+    for_stress_stencil(stress, i, [&](int m, int index) {
+      if (index == -2) {
+        if (count > 0) {
+          const double mean = value / count;
+          sum += StressGrid<Dim>::multiplicity(m) * mean * mean;
         }
-        const int index = stress.index_or_outside(m, cm);
-        if (index < 0 || !active[index]) continue;
-        value += rate[index];
-        ++count;
+        value = 0.0;
+        count = 0;
+        return;
       }
-      if (count > 0) {
-        const double mean = value / count;
-        sum += StressGrid<Dim>::multiplicity(m) * mean * mean;
-      }
-    }
+      if (index < 0 || !active[index]) return;
+      value += rate[index];
+      ++count;
+    });
     s[i] = std::sqrt(2.0 * sum);
   }
   return s;

@@ -50,6 +50,9 @@ constexpr double kProjectionAirSide = 0.5;
 constexpr double kProjectionSolidReach = 1.5;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
+/// Lattice points per axis of one particle's splat box held in a stack table (liquid_phi_on_lattice;
+/// wider boxes, from particles far larger than a cell, compute their offsets point by point).
+constexpr int kMaxSplatPoints = 16;
 
 /// What differs between 2D and 3D for the particles: the rigid rotation of a seeded liquid, and
 /// the calibrated particle radius of the surface reconstruction.
@@ -723,16 +726,25 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         const double min_distance = kCorrectionMinDistance * h / kCorrectionSupport;
         const double min_distance2 = min_distance * min_distance;
         const Vec<Dim> xp = xw[p];
-        // number density from squared distances only (no square roots)
+        // number density from squared distances only (no square roots), without branches: a
+        // candidate outside the support (or p itself, at its own slot) adds +0.0, which leaves
+        // the sum (at least 1) bit for bit as skipping it would
         double n = 1.0;  // the particle itself
-        for (int q : cand) {
-          Vec<Dim> d = xp - xs[q];
-          if (any_periodic) d = periodic_difference(grid, d);
+        const double h2 = h * h;
+        bool close = false;
+        const auto density_term = [&](int q, const Vec<Dim>& d) {
           const double r2 = d.squaredNorm();
-          if (r2 >= h * h || order[q] == p) continue;
-          if (r2 < min_distance2) close_pair[p] = 1;
-          n += correction_kernel(r2 * inv_h2);
+          const bool inside = r2 < h2 && q != slot;
+          close = close || (inside && r2 < min_distance2);
+          const double t = 1.0 - r2 * inv_h2;
+          return inside && t > 0.0 ? t * t * t : 0.0;
+        };
+        if (any_periodic) {
+          for (int q : cand) n += density_term(q, periodic_difference(grid, Vec<Dim>(xp - xs[q])));
+        } else {
+          for (int q : cand) n += density_term(q, Vec<Dim>(xp - xs[q]));
         }
+        if (close) close_pair[p] = 1;
         const double c = n / n0 - 1.0 - kCorrectionSlack;
         if (c <= 0.0) continue;
         // constraint gradients, only for the compressed particles
@@ -775,9 +787,22 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         const int p = order[slot];
         Vec<Dim> push = Vec<Dim>::Zero();
         const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
-        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double h) {
+        // a neighbour with l = 0 whose squared distance is clearly beyond the minimum distance
+        // contributes nothing: skip its square root (the margin keeps the skip conservative)
+        const double skip_r2 = min_distance * min_distance * (1.0 + 1e-9);
+        const double h = support[p];
+        const double h2 = h * h;
+        const Vec<Dim> xp = xw[p];
+        for (int q : cand) {
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
+          const double r2 = d.squaredNorm();
+          if (r2 >= h2 || q == slot) continue;
+          const int j = order[q];
           // density constraints
           const double l = lambda[p] + lambda[j];
+          if (l == 0.0 && r2 > skip_r2) continue;
+          const double r = std::sqrt(r2);
           if (l != 0.0) push += l * spiky_gradient(p, j, d, r, h) / n0;
           // minimum distance: each particle of a close pair takes half of the overlap
           if (r < min_distance) {
@@ -788,7 +813,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
               dir[0] = p < j ? 1.0 : -1.0;  // as in spiky_gradient
             push += 0.5 * (min_distance - r) * dir;
           }
-        });
+        }
         push *= alpha;
         // never more than kCorrectionMaxStep spacings per step
         const double cap = kCorrectionMaxStep * support[p] / kCorrectionSupport;
@@ -911,43 +936,70 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   const double cell_volume = grid.cell_volume();
 
   // particle volume fractions: each particle's volume spread as a box of its rest spacing and
-  // then by the hat of the cell centres, splatted serially in particle order (deterministic)
+  // then by the hat of the cell centres. In parallel without races: the cells are split into
+  // slabs of layers of the last axis, one per thread; each thread walks all particles in index
+  // order, skips those whose five layers miss its slab and adds only into its own cells, so every
+  // cell sums its contributions in the order of the serial loop (the same bits for any number of
+  // threads, and as before)
   VectorX rho = VectorX::Zero(nc);
-  for (long p = 0; p < np; ++p) {
-    const double volume =
-        particles.density[p] > 0.0 ? particles.mass[p] / particles.density[p] : 0.0;
-    const double width = particle_spacing(particles, p, dx) / dx;
-    const Vec<Dim> xr = (grid.wrap_position(particles.x[p]) - grid.origin()) / dx;
-    // per axis: five candidate cells around the particle and their weights
-    std::array<std::array<int, 5>, Dim> cell;
-    std::array<std::array<double, 5>, Dim> weight;
-    for (int a = 0; a < Dim; ++a) {
-      const int base = static_cast<int>(std::floor(xr[a])) - 2;
-      for (int k = 0; k < 5; ++k) {
-        int c = base + k;
-        weight[a][k] = box_hat_weight(c + 0.5 - xr[a], width);
-        if (grid.periodic(a))
-          c = ((c % grid.cells()[a]) + grid.cells()[a]) % grid.cells()[a];
-        else
-          c = std::clamp(c, 0, grid.cells()[a] - 1);
-        cell[a][k] = c;
+  constexpr int kLast = Dim - 1;
+  const int layers = grid.cells()[kLast];
+  const int slabs = std::max(1, std::min(omp_get_max_threads(), layers));
+#pragma omp parallel for schedule(static, 1)
+  for (int slab = 0; slab < slabs; ++slab) {
+    const int first = static_cast<int>(static_cast<long>(slab) * layers / slabs);
+    const int end = static_cast<int>(static_cast<long>(slab + 1) * layers / slabs);
+    for (long p = 0; p < np; ++p) {
+      // the five layers of the last axis this particle reaches: skip it if none is in the slab
+      {
+        const double xl = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / dx;
+        const int base = static_cast<int>(std::floor(xl)) - 2;
+        bool reaches = false;
+        for (int k = 0; k < 5 && !reaches; ++k) {
+          int c = base + k;
+          if (grid.periodic(kLast))
+            c = ((c % layers) + layers) % layers;
+          else
+            c = std::clamp(c, 0, layers - 1);
+          reaches = c >= first && c < end;
+        }
+        if (!reaches) continue;
       }
-    }
-    std::array<int, Dim> k{};
-    while (true) {
-      double w = volume / cell_volume;
-      VecI<Dim> ci;
+      const double volume =
+          particles.density[p] > 0.0 ? particles.mass[p] / particles.density[p] : 0.0;
+      const double width = particle_spacing(particles, p, dx) / dx;
+      const Vec<Dim> xr = (grid.wrap_position(particles.x[p]) - grid.origin()) / dx;
+      // per axis: five candidate cells around the particle and their weights
+      std::array<std::array<int, 5>, Dim> cell;
+      std::array<std::array<double, 5>, Dim> weight;
       for (int a = 0; a < Dim; ++a) {
-        w *= weight[a][k[a]];
-        ci[a] = cell[a][k[a]];
+        const int base = static_cast<int>(std::floor(xr[a])) - 2;
+        for (int k = 0; k < 5; ++k) {
+          int c = base + k;
+          weight[a][k] = box_hat_weight(c + 0.5 - xr[a], width);
+          if (grid.periodic(a))
+            c = ((c % grid.cells()[a]) + grid.cells()[a]) % grid.cells()[a];
+          else
+            c = std::clamp(c, 0, grid.cells()[a] - 1);
+          cell[a][k] = c;
+        }
       }
-      if (w != 0.0) rho[grid.cell_index(ci)] += w;
-      int a = 0;
-      for (; a < Dim; ++a) {
-        if (++k[a] < 5) break;
-        k[a] = 0;
+      std::array<int, Dim> k{};
+      while (true) {
+        double w = volume / cell_volume;
+        VecI<Dim> ci;
+        for (int a = 0; a < Dim; ++a) {
+          w *= weight[a][k[a]];
+          ci[a] = cell[a][k[a]];
+        }
+        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) rho[grid.cell_index(ci)] += w;
+        int a = 0;
+        for (; a < Dim; ++a) {
+          if (++k[a] < 5) break;
+          k[a] = 0;
+        }
+        if (a == Dim) break;
       }
-      if (a == Dim) break;
     }
   }
   // liquid fractions of the particle level set, smoothed by the same hat
@@ -1139,9 +1191,10 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
     for (int side = 0; side < 2; ++side)
       mirror[2 * a + side] = !grid.periodic(a) && boundary[2 * a + side] == BoundaryType::wall;
 
-  VectorX wsum = VectorX::Zero(nl), rsum = VectorX::Zero(nl);
-  Eigen::Matrix<double, Dim, Eigen::Dynamic> xsum =
-      Eigen::Matrix<double, Dim, Eigen::Dynamic>::Zero(Dim, nl);
+  // the sums of each lattice point side by side (weight, radius, position): one cache line per
+  // point touched instead of three arrays' worth
+  constexpr int kStride = Dim + 2;
+  std::vector<double> acc(static_cast<std::size_t>(nl) * kStride, 0.0);
 
   // splat one particle (with its periodic and wall images) onto the lattice
   auto splat = [&](int p) {
@@ -1186,17 +1239,33 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
         i0[a] = lo[a][seg[a]];
         i1[a] = hi[a][seg[a]];
       }
+      // the offsets lattice.position(i) - xi per axis (a lattice position's component depends
+      // on its own index only), computed once per segment with the same arithmetic
+      std::array<std::array<double, kMaxSplatPoints>, Dim> offset;
+      bool fits = true;
+      for (int a = 0; a < Dim; ++a) fits = fits && i1[a] - i0[a] < kMaxSplatPoints;
+      if (fits) {
+        for (int a = 0; a < Dim; ++a)
+          for (int j = i0[a]; j <= i1[a]; ++j)
+            offset[a][j - i0[a]] = (lattice.origin[a] + static_cast<double>(j) * h) - xi[a];
+      }
+      const double rp = radius[p];
       VecI<Dim> i = i0;
       while (true) {
-        const Vec<Dim> d = lattice.position(i) - xi;
+        Vec<Dim> d;
+        if (fits) {
+          for (int a = 0; a < Dim; ++a) d[a] = offset[a][i[a] - i0[a]];
+        } else {
+          d = lattice.position(i) - xi;
+        }
         const double q2 = d.squaredNorm() * inv_r2;
         if (q2 < 1.0) {
           const double t = 1.0 - q2;
           const double k = t * t * t;
-          const int li = lattice.index(i);
-          wsum[li] += k;
-          rsum[li] += k * radius[p];
-          xsum.col(li) += k * xi;
+          double* sum = acc.data() + static_cast<std::size_t>(lattice.index(i)) * kStride;
+          sum[0] += k;
+          sum[1] += k * rp;
+          for (int a = 0; a < Dim; ++a) sum[2 + a] += k * xi[a];
         }
         int a = 0;
         for (; a < Dim; ++a) {
@@ -1241,9 +1310,11 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
   VectorX phi(nl);
 #pragma omp parallel for schedule(static)
   for (int li = 0; li < nl; ++li) {
-    if (wsum[li] > 0.0) {
-      const Vec<Dim> xbar = xsum.col(li) / wsum[li];
-      phi[li] = (lattice.position(lattice.coord(li)) - xbar).norm() - rsum[li] / wsum[li];
+    const double* sum = acc.data() + static_cast<std::size_t>(li) * kStride;
+    if (sum[0] > 0.0) {
+      Vec<Dim> xbar;
+      for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
+      phi[li] = (lattice.position(lattice.coord(li)) - xbar).norm() - sum[1] / sum[0];
     } else {
       phi[li] = max_support;
     }

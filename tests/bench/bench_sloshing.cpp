@@ -1,0 +1,110 @@
+// The sloshing tank of slow_still_water.cpp (tests/support/still_water.hpp: unit tank, walls, open
+// top, inviscid, PVC-unified, water 0.5 m deep whose surface starts tilted by `slope`), printing
+// kinetic, potential and total energy of the liquid every `every` frames, relative to the start
+// and to the available energy E(0) - E(rest). The bound: E never rises by more than 2 %
+// of the available energy and ends below its start.
+//
+//   bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] [--every K] [--backend NAME]
+//                  [--no-projection] [--no-correction] [--max-dt DT]
+//
+// Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
+// line before: which stage of the step changed the energy.
+//
+// A measurement program, not a test: it asserts nothing. Run it with OMP_NUM_THREADS=1.
+// docs/particles.md ("Sloshing").
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <string>
+
+#include "tests/support/still_water.hpp"
+
+using namespace monolith;
+using namespace monolith::still_water;
+
+int main(int argc, char** argv) {
+  int dim = 2, cells = 0, every = 25;
+  double seconds = 10.0, slope = 0.1;
+  std::string backend = "matrixfree";
+  bool no_projection = false, no_correction = false;
+  double max_dt = 0.02;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::cerr << a << " needs a value\n";
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--dim") dim = std::atoi(next().c_str());
+    else if (a == "--cells") cells = std::atoi(next().c_str());
+    else if (a == "--seconds") seconds = std::atof(next().c_str());
+    else if (a == "--slope") slope = std::atof(next().c_str());
+    else if (a == "--every") every = std::max(1, std::atoi(next().c_str()));
+    else if (a == "--backend") backend = next();
+    else if (a == "--no-projection") no_projection = true;
+    else if (a == "--max-dt") max_dt = std::atof(next().c_str());
+    else if (a == "--no-correction") no_correction = true;
+    else {
+      std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
+                   "[--every K] [--backend NAME]\n";
+      return 2;
+    }
+  }
+  if (dim != 2 && dim != 3) {
+    std::cerr << "--dim must be 2 or 3\n";
+    return 2;
+  }
+  if (cells <= 0) cells = dim == 2 ? 64 : 24;
+  StageSwitches switches;
+  switches.energy_ledger = true;
+  if (no_projection) switches.density_projection = false;
+  if (no_correction) switches.position_correction = false;
+  nlohmann::json scene = tank(dim, cells, seconds, backend, slope);
+  scene["time"]["max_dt"] = max_dt;
+  const auto sim = make_simulation(parse_scene(scene, "sloshing.json", "."), switches);
+  const FrameStats s0 = sim->current_stats();
+  const double e0 = total_energy(s0);
+  const double seeded = e0 - 0.5 * kRho * kG * s0.liquid_volume * s0.liquid_volume;
+  const double available = kRho * kG * slope * slope / 24.0;
+  // the available energy of the continuum: a surface tilted by slope over a unit width holds
+  // rho g slope^2 / 24 more potential energy than a flat one (per unit depth in 3D)
+  std::printf("sloshing %dD, %d cells, slope %.3f, max_dt %.4f, %s: E0 %.4f J, available %.4f J "
+              "(the continuum's rho g slope^2 / 24; E0 - rho g V0^2 / 2 from the seeded volume: "
+              "%.4f J)\n",
+              dim, cells, slope, max_dt, backend.c_str(), e0, available, seeded);
+  std::printf("%8s %12s %12s %12s %14s %10s | ledger since the last line: %8s %8s %8s %8s %8s %8s %8s\n",
+              "t", "KE (J)", "PE - PE0", "E - E0", "(E-E0)/avail", "volume", "to_grid", "solve",
+              "extend", "to_part", "advect", "correct", "project");
+  EnergyLedger sum;
+  const int frames = static_cast<int>(std::lround(50 * seconds));
+  double max_rise = 0.0, e = e0;
+  for (int f = 1; f <= frames; ++f) {
+    const FrameStats s = sim->advance_frame();
+    e = total_energy(s);
+    const EnergyLedger l = sim->energy_ledger();
+    sum.to_grid += l.to_grid;
+    sum.forces_and_solve += l.forces_and_solve;
+    sum.velocity_extension += l.velocity_extension;
+    sum.to_particles += l.to_particles;
+    sum.advection += l.advection;
+    sum.position_correction += l.position_correction;
+    sum.density_projection += l.density_projection;
+    max_rise = std::max(max_rise, e - e0);
+    if (f % every == 0) {
+      std::printf("%8.2f %12.5f %12.5f %12.5f %14.5f %+9.3f%% | %+8.4f %+8.4f %+8.4f %+8.4f %+8.4f %+8.4f %+8.4f\n",
+                  s.time, s.kinetic_energy_liquid,
+                  s.potential_energy_liquid - s0.potential_energy_liquid, e - e0,
+                  (e - e0) / available, 100.0 * (s.liquid_volume / s0.liquid_volume - 1.0),
+                  sum.to_grid, sum.forces_and_solve, sum.velocity_extension, sum.to_particles,
+                  sum.advection, sum.position_correction, sum.density_projection);
+      sum = EnergyLedger{};
+    }
+    std::fflush(stdout);
+  }
+  std::printf("largest rise %.5f J = %.4f of the available energy; end %.5f J = %.4f\n", max_rise,
+              max_rise / available, e - e0, (e - e0) / available);
+  return 0;
+}
