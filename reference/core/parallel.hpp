@@ -11,8 +11,9 @@
 /// spinning up to ~300k iterations in a barrier, which burns the very core the late thread needs.
 /// The remedies here: few regions (the sweeps run their colours inside one region), a serial
 /// fall-back below kParallelMinWork, a short spin before sleeping (GOMP_SPINCOUNT, applied by
-/// re-executing the program once: libgomp reads it only when it loads), and `auto` threads =
-/// the cores of the affinity mask that are currently idle.
+/// re-executing the program once: libgomp reads it only when it loads), `auto` threads = the
+/// cores of the affinity mask that are currently idle, and a team size per kernel chosen by
+/// measurement (AdaptiveTeam: fewer threads while another process holds a core).
 
 #include <omp.h>
 #include <sched.h>
