@@ -11,19 +11,22 @@
 /// spinning up to ~300k iterations in a barrier, which burns the very core the late thread needs.
 /// The remedies here: few regions (the sweeps run their colours inside one region), a serial
 /// fall-back below kParallelMinWork, a short spin before sleeping (GOMP_SPINCOUNT, applied by
-/// re-executing the program once: libgomp reads it only when it loads), and `auto` threads =
-/// the cores of the affinity mask that are currently idle.
+/// re-executing the program once: libgomp reads it only when it loads), `auto` threads = the
+/// cores of the affinity mask that are currently idle, and a team size per kernel chosen by
+/// measurement (AdaptiveTeam: fewer threads while another process holds a core).
 
 #include <omp.h>
 #include <sched.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -47,6 +50,176 @@ inline int dynamic_chunk(long count) {
   const int threads = omp_in_parallel() ? omp_get_num_threads() : omp_get_max_threads();
   return static_cast<int>(std::max(1L, count / (8L * std::max(1, threads))));
 }
+
+/// Whether parallel kernels choose their team size by measurement (AdaptiveTeam, the default)
+/// or always take the whole team of omp_get_max_threads(). Set once from the environment
+/// (MONOLITH_ADAPTIVE_THREADS=0 switches it off) unless set_adaptive_teams was called first;
+/// benchmarks switch it to time a fixed team.
+inline std::atomic<int>& adaptive_teams_flag() {
+  static std::atomic<int> flag{-1};  // -1: not decided yet
+  return flag;
+}
+inline bool adaptive_teams() {
+  int f = adaptive_teams_flag().load(std::memory_order_relaxed);
+  if (f < 0) {
+    const char* env = std::getenv("MONOLITH_ADAPTIVE_THREADS");
+    f = env && std::strcmp(env, "0") == 0 ? 0 : 1;
+    adaptive_teams_flag().store(f, std::memory_order_relaxed);
+  }
+  return f != 0;
+}
+inline void set_adaptive_teams(bool on) { adaptive_teams_flag().store(on ? 1 : 0); }
+
+/// The team size of one parallel kernel (a "site": the Stokes apply, a pressure sweep, ...),
+/// chosen by measuring it (issue 19). Every kernel of the library gives bitwise the same result
+/// for any team size, so the team may change from one call to the next without changing a
+/// result; only the time changes. The cap is omp_get_max_threads() (`--threads N` = at most N).
+///
+/// Policy: the site runs with its current team size t (at first the cap) and keeps the seconds
+/// per unit of work of its last 3 calls at t; their median is t's current estimate. Now and then
+/// one call runs with a neighbouring size (t - 1 or t + 1, alternately, within 1..cap), a probe:
+/// after 4 calls, then after twice as many calls each time a probe loses, at most every
+/// kMaxProbeInterval calls, and at once when t's estimate rose above kAlarmAbove times its
+/// long-run average (another process took a core). A probe wins when its time per unit of work
+/// is below kSwitchBelow times t's estimate; a winning probe is repeated once, and the site moves
+/// to that size only when the repeat wins too (one lucky time slice does not move it). On an
+/// idle machine the probes of a smaller team lose and become rare (at most one call at the
+/// slower size every kMaxProbeInterval calls); when another process takes a core, the barriers
+/// of a full team wait for a thread that is not running, a smaller team wins and the site runs
+/// with it until a probe of the larger team wins again (the other process ended).
+///
+/// Calls below kParallelMinWork, calls inside a parallel region and calls with a cap of 1 run on
+/// one thread and are not measured. Thread-safe (a mutex around the bookkeeping).
+class AdaptiveTeam {
+ public:
+  static constexpr int kFirstProbeInterval = 4;
+  static constexpr int kMaxProbeInterval = 64;
+  /// A probe wins when its time per unit of work is below this fraction of the current estimate.
+  static constexpr double kSwitchBelow = 0.97;
+  /// The current size's estimate above this many times its long-run average: probe now.
+  static constexpr double kAlarmAbove = 1.5;
+  /// Weight of a new call in the long-run average.
+  static constexpr double kAverageWeight = 0.125;
+
+  /// The team size for the next call over `work` entries; 0 means "one thread, do not record".
+  int choose(long work) {
+    if (work < kParallelMinWork || omp_in_parallel()) return 0;
+    const int cap = omp_get_max_threads();
+    if (cap <= 1) return 0;
+    if (!adaptive_teams()) return cap;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (current_ < 1 || current_ > cap) reset(cap);
+    if (confirm_ >= 1 && confirm_ <= cap) return confirm_;  // repeat a winning probe
+    confirm_ = 0;
+    if (++calls_ < interval_) return current_;
+    calls_ = 0;
+    // the neighbour on the side of the last direction, else the other side
+    int probe = current_ + direction_;
+    if (probe < 1 || probe > cap) {
+      direction_ = -direction_;
+      probe = current_ + direction_;
+    }
+    direction_ = -direction_;  // the other side next time
+    if (probe < 1 || probe > cap) return current_;
+    return probe;
+  }
+
+  /// Records that a call over `work` entries took `seconds` with `team` threads (team from
+  /// choose, > 0).
+  void record(int team, long work, double seconds) {
+    if (!adaptive_teams() || work <= 0) return;
+    const double rate = seconds / static_cast<double>(work);
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (current_ < 1) reset(team);
+    if (team == current_) {
+      recent_[count_++ % 3] = rate;
+      average_ = average_ > 0.0 ? (1.0 - kAverageWeight) * average_ + kAverageWeight * rate : rate;
+      if (count_ >= 3 && estimate() > kAlarmAbove * average_) {
+        calls_ = interval_;  // probe on the next call
+        average_ = estimate();
+      }
+      return;
+    }
+    // a probe (or its repeat)
+    const bool wins = rate < kSwitchBelow * estimate();
+    if (wins && confirm_ != team) {
+      confirm_ = team;  // repeat it once
+      return;
+    }
+    confirm_ = 0;
+    if (wins) {
+      direction_ = team > current_ ? 1 : -1;  // keep going that way
+      current_ = team;
+      count_ = 0;
+      recent_[count_++] = rate;
+      average_ = rate;
+      interval_ = kFirstProbeInterval;
+      calls_ = 0;
+    } else {
+      interval_ = std::min(2 * interval_, kMaxProbeInterval);
+    }
+  }
+
+  /// The team size the site runs with now (0 before its first measured call).
+  int current() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return current_;
+  }
+
+ private:
+  void reset(int team) {
+    current_ = team;
+    count_ = 0;
+    average_ = 0.0;
+    confirm_ = 0;
+    calls_ = 0;
+    interval_ = kFirstProbeInterval;
+  }
+  /// The median of the last 3 calls at the current size (fewer: the latest).
+  double estimate() const {
+    if (count_ < 3) return recent_[(count_ + 2) % 3];
+    return std::max(std::min(recent_[0], recent_[1]),
+                    std::min(std::max(recent_[0], recent_[1]), recent_[2]));
+  }
+
+  mutable std::mutex mutex_;
+  double recent_[3] = {0.0, 0.0, 0.0};  // seconds per unit of work of the last calls at current_
+  int count_ = 0;                       // calls recorded at current_
+  double average_ = 0.0;                // long-run average at current_
+  int current_ = 0;
+  int confirm_ = 0;                     // a probe size to repeat on the next call, 0 none
+  int calls_ = 0;
+  int interval_ = kFirstProbeInterval;
+  int direction_ = -1;
+};
+
+/// One call of an AdaptiveTeam site: picks the team size at construction and records the
+/// elapsed time at destruction. Use as
+///   static AdaptiveTeam site;
+///   TeamScope team(site, work);
+///   #pragma omp parallel num_threads(team.threads()) if (team.parallel())
+class TeamScope {
+ public:
+  TeamScope(AdaptiveTeam& site, long work)
+      : site_(site), work_(work), team_(site.choose(work)), start_(std::chrono::steady_clock::now()) {}
+  ~TeamScope() {
+    if (team_ > 0)
+      site_.record(team_, work_,
+                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count());
+  }
+  TeamScope(const TeamScope&) = delete;
+  TeamScope& operator=(const TeamScope&) = delete;
+  /// The team size of this call (at least 1).
+  int threads() const { return std::max(1, team_); }
+  /// Whether to open a parallel region (team size above 1).
+  bool parallel() const { return team_ > 1; }
+
+ private:
+  AdaptiveTeam& site_;
+  long work_;
+  int team_;
+  std::chrono::steady_clock::time_point start_;
+};
 
 /// The spin count GNU OpenMP gets when the user set neither OMP_WAIT_POLICY nor GOMP_SPINCOUNT:
 /// about 10-30 us of spinning in a barrier before the thread sleeps on a futex (the default,

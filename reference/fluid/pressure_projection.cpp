@@ -298,7 +298,10 @@ void MatrixFreePressureOperator<Dim>::apply(const VectorX& x, VectorX& y) const 
   // (A x)_i = W_i sum_f k_f (q_i - q_j), the stencil of W G^T K G W, per grid row
   const int n0 = cells_[0];
   const int rows = static_cast<int>(q_.size()) / n0;
-#pragma omp parallel if (q_.size() > kParallelMin)
+  // the team size measured per call (AdaptiveTeam), one thread below kParallelMinWork cells
+  static AdaptiveTeam site;
+  TeamScope team(site, static_cast<long>(q_.size()));
+#pragma omp parallel num_threads(team.threads()) if (team.parallel())
   {
   scatter(x);
 #pragma omp for schedule(dynamic, dynamic_chunk(rows)) nowait
@@ -364,7 +367,9 @@ void MatrixFreePressureOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Ve
   };
   // one parallel region per sweep (only with a valid colouring and enough cells): q = W x of
   // the starting x (kept current as DOFs change), then the two colours, a barrier after each
-#pragma omp parallel if (colouring_valid_ && q_.size() > kParallelMin)
+  static AdaptiveTeam site;  // the team size measured per call (parallel.hpp)
+  TeamScope team(site, colouring_valid_ ? static_cast<long>(q_.size()) : 0);
+#pragma omp parallel num_threads(team.threads()) if (team.parallel())
   {
     scatter(x);
     for (int step = 0; step < 2; ++step) {

@@ -367,6 +367,8 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       if (used) active_rows_[field].push_back(r);
     }
   }
+  for (int field = 0; field < kFields; ++field)
+    active_work_ += static_cast<long>(active_rows_[field].size()) * fields_[field].dims[0];
   stress_scratch_.setZero(num_stress_dofs_);
   cell_scratch_.setZero(num_cells_);
   face_scratch_.setZero(num_faces_);
@@ -531,8 +533,11 @@ void MatrixFreeStokesOperator<Dim>::apply(const VectorX& x, VectorX& y) const {
   double* v = face_scratch_.data();
   y.resize(size_);
   // x to the grid, v = C B x per face, B^T v per grid DOF, gathered per unknown: one parallel
-  // region, a barrier between the passes
-#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+  // region, a barrier between the passes; the team size measured (AdaptiveTeam), one thread
+  // below kParallelMinWork entries visited
+  static AdaptiveTeam site;
+  TeamScope team(site, active_work_);
+#pragma omp parallel num_threads(team.threads()) if (team.parallel())
   {
     scatter(x, s, q);
 #pragma omp barrier
@@ -695,9 +700,13 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
   for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
   if (zero) std::fill(force, force + num_faces_, 0.0);
   // the whole sweep in one parallel region (one fork and join per sweep, a barrier per colour
-  // group), only with a valid colouring (otherwise the sweep is serial) and enough work
+  // group), only with a valid colouring (otherwise the sweep is serial) and enough work; the
+  // team size measured per call (AdaptiveTeam; separate sites for a start from zero, as in
+  // SSOR's forward sweep, and from a given x, which costs an extra pass)
   const int blocks = static_cast<int>(layout_field_.size()) + (has_pressure_ ? 1 : 0);
-#pragma omp parallel if (colouring_valid_ && num_stress_dofs_ + num_faces_ > kParallelMin)
+  static AdaptiveTeam site_from_zero, site_from_x;
+  TeamScope team(zero ? site_from_zero : site_from_x, colouring_valid_ ? active_work_ : 0);
+#pragma omp parallel num_threads(team.threads()) if (team.parallel())
   {
     if (!zero) {
       scatter(x, stress_scratch_.data(), cell_scratch_.data());
@@ -731,7 +740,7 @@ void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& 
 template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
   VectorX s = VectorX::Zero(num_stress_dofs_), q = VectorX::Zero(num_cells_), force(num_faces_);
-#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+#pragma omp parallel if (active_work_ > kParallelMin)
   {
     scatter(x, s.data(), q.data());
 #pragma omp barrier
@@ -780,7 +789,7 @@ VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
   // b = B^T W_F^u u*: the gather of apply without C and the N part
   const VectorX v = fluid_face_.cwiseProduct(u_star);
   VectorX s(num_stress_dofs_), q(num_cells_), b(size_);
-#pragma omp parallel if (num_stress_dofs_ + num_faces_ > kParallelMin)
+#pragma omp parallel if (active_work_ > kParallelMin)
   {
     grid_from_faces(v.data(), s.data(), q.data());
 #pragma omp barrier

@@ -202,6 +202,9 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// unknown). The other rows of the scratch vectors stay zero, so a liquid filling a small part
   /// of the grid costs in proportion to its rows, not to the grid.
   std::array<std::vector<int>, kFields> active_rows_;
+  /// Entries the loops visit: the sum over fields of active rows times the row length (the work
+  /// an apply or sweep does, for the serial threshold and the adaptive team of parallel.hpp).
+  long active_work_ = 0;
   std::vector<int> layout_field_;                 ///< per layout component: its field
   int eliminated_ = -1;                           ///< eliminated StressGrid component, -1 full
   int size_ = 0;

@@ -76,7 +76,12 @@ void colour_sweep(const Groups& groups, bool independent, bool reverse, const Ve
   for (int g = 0; g < num_groups; ++g) total += static_cast<long>(groups[g].size());
   // independent groups: one parallel region for the whole sweep (a barrier per group, no fork
   // and join per group), only when there is enough work (kParallelMinColourRows)
-#pragma omp parallel if (independent && total >= kParallelMinColourRows)
+  // (the team size measured per call, AdaptiveTeam of parallel.hpp; the work counted in rows
+  // over kParallelMinColourRows / kParallelMinWork, so the threshold stays the measured one)
+  static AdaptiveTeam site;
+  TeamScope team(site, independent && total >= kParallelMinColourRows
+                           ? total * kParallelMinWork / kParallelMinColourRows : 0);
+#pragma omp parallel num_threads(team.threads()) if (team.parallel())
   for (int step = 0; step < num_groups; ++step) {
     const std::vector<int>& list = groups[reverse ? num_groups - 1 - step : step];
     const int count = static_cast<int>(list.size());
@@ -98,7 +103,10 @@ void colour_sweep(const Groups& groups, bool independent, bool reverse, const Ve
 /// one thread, so the result does not depend on the thread count.
 inline void sparse_row_product(const SparseMatrix& a, const VectorX& x, VectorX& y) {
   y.resize(a.rows());
-#pragma omp parallel for schedule(dynamic, dynamic_chunk(a.rows())) if (a.nonZeros() >= 4 * kParallelMinWork)
+  // the team size measured per call (AdaptiveTeam); one thread below 4 kParallelMinWork non-zeros
+  static AdaptiveTeam site;
+  TeamScope team(site, a.nonZeros() >= 4 * kParallelMinWork ? static_cast<long>(a.nonZeros()) : 0);
+#pragma omp parallel for schedule(dynamic, dynamic_chunk(a.rows())) num_threads(team.threads()) if (team.parallel())
   for (int i = 0; i < a.rows(); ++i) {
     double s = 0.0;
     for (SparseMatrix::InnerIterator it(a, i); it; ++it) s += it.value() * x[it.col()];

@@ -1,6 +1,9 @@
 #include "reference/solvers/pcg.hpp"
 
 #include <cmath>
+#include <limits>
+
+#include "reference/core/parallel.hpp"
 
 namespace monolith {
 
@@ -11,6 +14,45 @@ void project_out(const std::vector<VectorX>& basis, VectorX& v) {
 }
 double inf_norm(const VectorX& v) {
   return v.size() ? v.lpNorm<Eigen::Infinity>() : 0.0;
+}
+
+/// x += alpha p and r -= alpha ap in one pass, returning ||r||_inf (NaN when r has a non-finite
+/// entry). Entrywise, each entry written by one thread, the same arithmetic as the Eigen
+/// expressions (x_i + alpha p_i, r_i - alpha ap_i), and the maximum is exact in any order: the
+/// same bits for any team size. Team size measured (AdaptiveTeam), serial below kParallelMinWork.
+double update_solution_and_residual(double alpha, const VectorX& p, const VectorX& ap, VectorX& x,
+                                    VectorX& r) {
+  const int n = static_cast<int>(x.size());
+  static AdaptiveTeam site;
+  TeamScope team(site, n);
+  double largest = 0.0;
+  bool finite = true;
+  double* xs = x.data();
+  double* rs = r.data();
+  const double* ps = p.data();
+  const double* aps = ap.data();
+#pragma omp parallel for schedule(static) num_threads(team.threads()) if (team.parallel()) \
+    reduction(max : largest) reduction(&& : finite)
+  for (int i = 0; i < n; ++i) {
+    xs[i] = xs[i] + alpha * ps[i];
+    const double ri = rs[i] - alpha * aps[i];
+    rs[i] = ri;
+    const double a = std::abs(ri);
+    finite = finite && std::isfinite(ri);
+    largest = a > largest ? a : largest;
+  }
+  return finite ? largest : std::numeric_limits<double>::quiet_NaN();
+}
+
+/// p = z + beta p, entrywise (each entry one writer: the same bits for any team size).
+void update_direction(const VectorX& z, double beta, VectorX& p) {
+  const int n = static_cast<int>(p.size());
+  static AdaptiveTeam site;
+  TeamScope team(site, n);
+  double* ps = p.data();
+  const double* zs = z.data();
+#pragma omp parallel for schedule(static) num_threads(team.threads()) if (team.parallel())
+  for (int i = 0; i < n; ++i) ps[i] = zs[i] + beta * ps[i];
 }
 }  // namespace
 
@@ -79,11 +121,16 @@ PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
       return result;
     }
     const double alpha = rz / pap;
-    x += alpha * p;
-    r -= alpha * ap;
-    project_out(null_space, r);
     result.iterations = k + 1;
-    result.relative_residual = inf_norm(r) / b_norm;
+    if (null_space.empty()) {
+      // x and r in one parallel pass with the residual norm
+      result.relative_residual = update_solution_and_residual(alpha, p, ap, x, r) / b_norm;
+    } else {
+      x += alpha * p;
+      r -= alpha * ap;
+      project_out(null_space, r);
+      result.relative_residual = inf_norm(r) / b_norm;
+    }
     if (!std::isfinite(result.relative_residual)) {
       result.breakdown = true;
       result.message = "non-finite residual";
@@ -96,7 +143,7 @@ PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
     // new conjugate direction
     precondition(r, z);
     const double rz_new = r.dot(z);
-    p = z + (rz_new / rz) * p;
+    update_direction(z, rz_new / rz, p);
     rz = rz_new;
   }
   project_out(null_space, x);

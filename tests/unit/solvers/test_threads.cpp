@@ -2,7 +2,9 @@
 // pressure applies and SSOR sweeps (one parallel region per sweep, rows taken in dynamic chunks)
 // and the coloured sparse sweep of MPRGP give bitwise the same result on 1, 2 and 3 threads,
 // from a zero and from a non-zero start (the sweep's own scatter of x). The existing
-// determinism tests run below kParallelMinWork, where everything is serial.
+// determinism tests run below kParallelMinWork, where everything is serial. Also the policy of
+// AdaptiveTeam (parallel.hpp) on made-up timings, and a PCG solve whose team sizes are chosen
+// by measurement, bitwise equal to the one-thread solve.
 #include <omp.h>
 
 #include <catch2/catch.hpp>
@@ -31,6 +33,9 @@ struct Outputs {
 Outputs run_kernels(const LinearOperator& op, const VectorX& x, const VectorX& b, int threads) {
   const int saved = omp_get_max_threads();
   omp_set_num_threads(threads);
+  // the whole team on every call (no measured choice of a smaller one), so "3 threads" is 3
+  const bool adaptive = adaptive_teams();
+  set_adaptive_teams(false);
   Outputs o;
   op.apply(x, o.y);
   ssor_precondition(op, b, o.z, 1.0);
@@ -39,6 +44,7 @@ Outputs run_kernels(const LinearOperator& op, const VectorX& x, const VectorX& b
   o.backward = x;
   op.backward_sweep(b, o.backward, 0.8);
   omp_set_num_threads(saved);
+  set_adaptive_teams(adaptive);
   return o;
 }
 
@@ -113,4 +119,142 @@ TEST_CASE("coloured sparse sweep (MPRGP) in parallel: bitwise equal on 1, 2, 3 t
   Colouring colours = welsh_powell(matrix_adjacency(a));
   const ColouredSparseOperator op(a, std::move(colours));
   check_same_on_any_thread_count(op, 31);
+}
+
+namespace {
+
+/// Drives `site` for `calls` calls whose time per call is cost[team] (made-up timings, so the
+/// policy is tested without a clock); returns how many calls ran with each team size.
+std::vector<int> drive(AdaptiveTeam& site, const std::vector<double>& cost, int calls) {
+  std::vector<int> used(cost.size(), 0);
+  const long work = 4 * kParallelMinWork;
+  for (int c = 0; c < calls; ++c) {
+    const int team = site.choose(work);
+    REQUIRE(team >= 1);
+    REQUIRE(team < static_cast<int>(cost.size()));
+    ++used[team];
+    site.record(team, work, cost[team]);
+  }
+  return used;
+}
+
+/// Sets the OpenMP cap and switches the measured choice on for the scope.
+struct TeamCap {
+  explicit TeamCap(int threads) : saved(omp_get_max_threads()), adaptive(adaptive_teams()) {
+    omp_set_num_threads(threads);
+    set_adaptive_teams(true);
+  }
+  ~TeamCap() {
+    omp_set_num_threads(saved);
+    set_adaptive_teams(adaptive);
+  }
+  int saved;
+  bool adaptive;
+};
+
+}  // namespace
+
+TEST_CASE("AdaptiveTeam: a faster smaller team wins its probe, the full team wins back", "[unit]") {
+  const TeamCap cap(2);
+  AdaptiveTeam site;
+  // a core taken: 2 threads take twice as long as 1; the first probe (4th call) and its repeat
+  // move to 1
+  std::vector<int> used = drive(site, {0.0, 1.0e-3, 2.0e-3}, 8);
+  CHECK(site.current() == 1);
+  CHECK(used[2] <= AdaptiveTeam::kFirstProbeInterval);
+  // it stays there: probes of 2 lose and become rare (at most one per kMaxProbeInterval calls
+  // once the interval has doubled up to it: 4 + 8 + 16 + 32 + 64 calls for the first 5)
+  used = drive(site, {0.0, 1.0e-3, 2.0e-3}, 1000);
+  CHECK(site.current() == 1);
+  CHECK(used[2] <= 5 + 1000 / AdaptiveTeam::kMaxProbeInterval);
+  CHECK(used[2] >= 1000 / (2 * AdaptiveTeam::kMaxProbeInterval));  // it keeps probing
+  // the other process ended: 2 threads twice as fast; the next probe (within the interval)
+  // and its repeat move back to 2
+  used = drive(site, {0.0, 1.0e-3, 0.5e-3}, AdaptiveTeam::kMaxProbeInterval + 2);
+  CHECK(site.current() == 2);
+  // idle: probes of 1 thread lose, rare again
+  used = drive(site, {0.0, 1.0e-3, 0.5e-3}, 1000);
+  CHECK(site.current() == 2);
+  CHECK(used[1] <= 5 + 1000 / AdaptiveTeam::kMaxProbeInterval);
+  // a core taken again: two slow calls (4x the average, the median of the last 3) make the
+  // next call a probe, without waiting for the probe interval; it and its repeat win
+  drive(site, {0.0, 1.0e-3, 2.0e-3}, 6);  // (the first may be a scheduled probe)
+  CHECK(site.current() == 1);
+  // one lucky probe does not move a site: every other call at 2 threads is fast (so every
+  // probe wins and every repeat loses)
+  AdaptiveTeam lucky;
+  drive(lucky, {0.0, 1.0e-3, 2.0e-3}, 8);
+  REQUIRE(lucky.current() == 1);
+  int at_two = 0;
+  for (int c = 0; c < 2000; ++c) {
+    const int team = lucky.choose(4 * kParallelMinWork);
+    const double seconds = team == 2 ? (at_two++ % 2 == 0 ? 0.5e-3 : 2.0e-3) : 1.0e-3;
+    lucky.record(team, 4 * kParallelMinWork, seconds);
+  }
+  CHECK(at_two >= 10);  // it did probe
+  CHECK(lucky.current() == 1);
+}
+
+TEST_CASE("AdaptiveTeam: climbs to the fastest team size between 1 and the cap", "[unit]") {
+  const TeamCap cap(4);
+  AdaptiveTeam site;
+  // 2 threads fastest (e.g. 4 threads on a machine with 2 free cores)
+  drive(site, {0.0, 1.0e-3, 0.55e-3, 0.7e-3, 0.9e-3}, 300);
+  CHECK(site.current() == 2);
+  // a probe only 1 % faster (timing noise) does not move the site
+  AdaptiveTeam steady;
+  drive(steady, {0.0, 1.0e-3, 1.0e-3, 0.99e-3, 1.0e-3}, 300);
+  CHECK(steady.current() == 4);
+}
+
+TEST_CASE("AdaptiveTeam: one thread below the threshold, inside a parallel region, with a cap of 1",
+          "[unit]") {
+  AdaptiveTeam site;
+  {
+    const TeamCap cap(2);
+    CHECK(site.choose(kParallelMinWork - 1) == 0);  // serial, not measured
+    CHECK(site.choose(kParallelMinWork) == 2);
+    int nested = -1;
+#pragma omp parallel num_threads(2)
+    {
+#pragma omp single
+      nested = site.choose(10 * kParallelMinWork);
+    }
+    CHECK(nested == 0);
+    set_adaptive_teams(false);
+    drive(site, {0.0, 1.0e-3, 2.0e-3}, 20);  // records ignored, the full team every time
+    CHECK(site.choose(kParallelMinWork) == 2);
+  }
+  const TeamCap cap(1);
+  CHECK(site.choose(10 * kParallelMinWork) == 0);
+}
+
+TEST_CASE("PCG with measured team sizes: bitwise equal to the one-thread solve", "[unit]") {
+  const int n = 20;
+  const MacGrid<3> grid = box_grid(n);
+  const SampleLattice<3> lattice = half_lattice(grid);
+  const VectorX solid_phi = solid_phi_on_lattice<3>(grid, lattice, {}, 0.0);
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - 0.6;
+  const StokesWeights w = uniform_stokes_weights<3>(grid, solid_phi, phi, open_top(), 1000.0, 1.0);
+  const StressLayout<3> layout(StressGrid<3>(grid), StressForm::reduced);
+  const StokesDofs dofs = select_stokes_dofs(grid, layout, w, 0.01, StokesUnknowns::pressure_and_stress);
+  const MatrixFreeStokesOperator<3> op(grid, layout, w, dofs, 0.01);
+  const VectorX b = random_vector(op.size(), 41);
+  PcgSettings settings;
+  settings.tolerance = 1e-10;
+  settings.max_iterations = 40;  // enough calls of each kernel for several probes
+  auto solve = [&](int threads) {
+    const TeamCap cap(threads);
+    VectorX x;
+    const PcgResult r = pcg_solve(op, b, x, settings);
+    CHECK(r.iterations > 10);
+    return x;
+  };
+  const VectorX one = solve(1);
+  CHECK(one.norm() > 0.0);
+  for (int repeat = 0; repeat < 2; ++repeat) {
+    const VectorX two = solve(2);
+    CHECK((one - two).cwiseAbs().maxCoeff() == 0.0);
+  }
 }
