@@ -91,8 +91,11 @@ class StateReader {
  public:
   static constexpr bool loading = true;
 
+  /// Reads from `bytes`, which must outlive the reader (it keeps pointers into them).
   StateReader(const std::vector<char>& bytes, std::string what)
       : data_(bytes.data()), end_(bytes.data() + bytes.size()), what_(std::move(what)) {}
+  /// A temporary would be gone before the first read (the ASan suite found a test doing it).
+  StateReader(std::vector<char>&& bytes, std::string what) = delete;
 
   template <class T>
   std::enable_if_t<std::is_arithmetic_v<T>> operator()(T& v) {

@@ -93,7 +93,8 @@ TEST_CASE("StateWriter and StateReader round-trip every kind of field exactly", 
   // every shorter prefix is refused, never read past its end
   for (std::size_t n = 0; n < bytes.size(); ++n) {
     Sample c;
-    StateReader cut(std::vector<char>(bytes.begin(), bytes.begin() + static_cast<long>(n)), "test");
+    const std::vector<char> prefix(bytes.begin(), bytes.begin() + static_cast<long>(n));
+    StateReader cut(prefix, "test");
     CHECK_THROWS_AS(cut(c), InputError);
   }
   // left-over bytes are refused
