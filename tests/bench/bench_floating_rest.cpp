@@ -21,6 +21,7 @@
 
 #include "reference/core/errors.hpp"
 #include "tests/support/coupled_validation.hpp"
+#include "tests/support/still_water.hpp"
 
 using namespace monolith;
 using namespace monolith::validation;
@@ -110,13 +111,7 @@ int main(int argc, char** argv) {
       for (int f = 1; f <= frames; ++f) {
         const FrameStats s = sim->advance_frame();
         const EnergyLedger l = sim->energy_ledger();
-        ledger.to_grid += l.to_grid;
-        ledger.forces_and_solve += l.forces_and_solve;
-        ledger.velocity_extension += l.velocity_extension;
-        ledger.to_particles += l.to_particles;
-        ledger.advection += l.advection;
-        ledger.position_correction += l.position_correction;
-        ledger.density_projection += l.density_projection;
+        still_water::accumulate(ledger, l);
         const double predicted = body.centre_at(s.liquid_volume + body.s * body.volume());
         const double offset = (s.bodies[0].position[1] - predicted) / dx;
         double v2 = 0.0;

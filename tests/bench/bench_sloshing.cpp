@@ -85,13 +85,7 @@ int main(int argc, char** argv) {
     const FrameStats s = sim->advance_frame();
     e = total_energy(s);
     const EnergyLedger l = sim->energy_ledger();
-    sum.to_grid += l.to_grid;
-    sum.forces_and_solve += l.forces_and_solve;
-    sum.velocity_extension += l.velocity_extension;
-    sum.to_particles += l.to_particles;
-    sum.advection += l.advection;
-    sum.position_correction += l.position_correction;
-    sum.density_projection += l.density_projection;
+    still_water::accumulate(sum, l);
     max_rise = std::max(max_rise, e - e0);
     if (f % every == 0) {
       std::printf("%8.2f %12.5f %12.5f %12.5f %14.5f %+9.3f%% | %+8.4f %+8.4f %+8.4f %+8.4f %+8.4f %+8.4f %+8.4f\n",

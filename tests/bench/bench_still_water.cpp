@@ -25,6 +25,7 @@
 #include "reference/app/scene_file.hpp"
 #include "reference/core/errors.hpp"
 #include "reference/sim/simulation.hpp"
+#include "tests/support/still_water.hpp"
 
 using namespace monolith;
 
@@ -171,13 +172,7 @@ int main(int argc, char** argv) {
       for (int f = 1; f <= frames; ++f) {
         s = sim->advance_frame();
         const EnergyLedger l = sim->energy_ledger();
-        sum.to_grid += l.to_grid;
-        sum.forces_and_solve += l.forces_and_solve;
-        sum.velocity_extension += l.velocity_extension;
-        sum.to_particles += l.to_particles;
-        sum.advection += l.advection;
-        sum.position_correction += l.position_correction;
-        sum.density_projection += l.density_projection;
+        still_water::accumulate(sum, l);
         const double ke = s.kinetic_energy_liquid;
         if (std::abs(s.time - 1.0) < 1e-9) ke1 = ke;
         if (std::abs(s.time - 5.0) < 1e-9) ke5 = ke;

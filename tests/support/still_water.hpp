@@ -73,6 +73,17 @@ inline double total_energy(const FrameStats& s) {
          s.potential_energy_bodies;
 }
 
+/// Adds one frame's energy ledger (Simulation::energy_ledger) to a running sum, stage by stage.
+inline void accumulate(EnergyLedger& sum, const EnergyLedger& l) {
+  sum.to_grid += l.to_grid;
+  sum.forces_and_solve += l.forces_and_solve;
+  sum.velocity_extension += l.velocity_extension;
+  sum.to_particles += l.to_particles;
+  sum.advection += l.advection;
+  sum.position_correction += l.position_correction;
+  sum.density_projection += l.density_projection;
+}
+
 /// M g H of the water at rest (J; 2D: J per metre of depth): the scale of the rest criterion.
 inline double mgh() { return kRho * kDepth * kG * kDepth; }
 
