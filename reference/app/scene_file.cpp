@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <limits>
 #include <optional>
@@ -535,9 +536,21 @@ double check_shapes_in_domain(const SceneFile& s, const std::vector<PlacedShape>
   return liquid_cells;
 }
 
-/// Bytes of memory this build may use (min of 16 GiB and MemAvailable of /proc/meminfo).
-double memory_limit_bytes() {
-  double limit = 16.0 * 1024.0 * 1024.0 * 1024.0;
+/// Bytes of memory a scene may use: MONOLITH_MEMORY_LIMIT_GIB when set (a number > 0, in GiB),
+/// else min(16 GiB, MemAvailable of /proc/meminfo). `source` names where the limit came from.
+double memory_limit_bytes(std::string& source) {
+  constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
+  if (const char* env = std::getenv("MONOLITH_MEMORY_LIMIT_GIB")) {
+    char* end = nullptr;
+    const double g = std::strtod(env, &end);
+    if (end == env || *end != '\0' || !(g > 0.0) || !std::isfinite(g))
+      throw InputError({std::string("environment variable MONOLITH_MEMORY_LIMIT_GIB: expected a number > 0 (GiB), got '") +
+                        env + "'"});
+    source = "set by MONOLITH_MEMORY_LIMIT_GIB";
+    return g * kGiB;
+  }
+  double limit = 16.0 * kGiB;
+  source = "on this machine (min of 16 GiB and MemAvailable; MONOLITH_MEMORY_LIMIT_GIB overrides it)";
   std::ifstream in("/proc/meminfo");
   std::string key;
   double kb = 0.0;
@@ -915,11 +928,12 @@ void check_domain_contents(SceneParser& p, SceneFile& s, const std::vector<Place
   if (total_cells <= kMaxCells) {
     const double particles = per_cell * std::min(liquid_cells, total_cells);
     const double bytes = estimate_memory_bytes(dim, s.domain.cells, particles);
-    const double limit = memory_limit_bytes();
+    std::string source;
+    const double limit = memory_limit_bytes(source);
     if (bytes > limit)
       p.add("domain.cells", "the scene would need about " + gib(bytes) + " of memory (grid of " + num(total_cells) +
                                 " cells, about " + num(particles) + " particles)",
-            "at most " + gib(limit) + " on this machine: use fewer cells or particles.per_cell");
+            "at most " + gib(limit) + " " + source + ": use fewer cells or particles.per_cell");
   }
 }
 

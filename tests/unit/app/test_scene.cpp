@@ -1,6 +1,7 @@
 // Tests of scene parsing and validation (reference/app/scene.cpp, docs/scene-format.md).
 #include <catch2/catch.hpp>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -531,6 +532,53 @@ TEST_CASE("the memory estimate grows with cells and particles", "[unit][property
   CHECK(b > 3.9 * a);
   CHECK(c > b);
   CHECK(estimate_memory_bytes(3, {64, 64, 64}, 0) > estimate_memory_bytes(2, {64, 64}, 0) * 60);
+}
+
+TEST_CASE("a scene over the memory limit is refused with its estimate; MONOLITH_MEMORY_LIMIT_GIB sets the limit",
+          "[unit]") {
+  // restores the test environment's value (CMakeLists.txt sets it for every test) on every exit
+  struct Restore {
+    std::string old;
+    bool had;
+    Restore() : had(std::getenv("MONOLITH_MEMORY_LIMIT_GIB") != nullptr) {
+      if (had) old = std::getenv("MONOLITH_MEMORY_LIMIT_GIB");
+    }
+    ~Restore() {
+      if (had)
+        setenv("MONOLITH_MEMORY_LIMIT_GIB", old.c_str(), 1);
+      else
+        unsetenv("MONOLITH_MEMORY_LIMIT_GIB");
+    }
+  } restore;
+  const std::vector<int> cells{64, 32, 32};
+  const double need = estimate_memory_bytes(3, cells, 0) / (1024.0 * 1024.0 * 1024.0);  // GiB, without particles
+  // a limit below the grid alone: refused at domain.cells with the estimate and the limit's source
+  setenv("MONOLITH_MEMORY_LIMIT_GIB", std::to_string(0.5 * need).c_str(), 1);
+  try {
+    load_scene("dam-break-3d", {});
+    FAIL("dam-break-3d was accepted under a limit of half its grid's estimate");
+  } catch (const InputError& e) {
+    REQUIRE(e.problems().size() == 1);
+    const std::string& m = e.problems()[0];
+    CHECK(m.find("domain.cells") != std::string::npos);
+    CHECK(m.find("would need about") != std::string::npos);
+    CHECK(m.find("set by MONOLITH_MEMORY_LIMIT_GIB") != std::string::npos);
+  }
+  // a generous limit: the same scene and the paper-size Fig. 2 parse
+  setenv("MONOLITH_MEMORY_LIMIT_GIB", "1000", 1);
+  CHECK(load_scene("dam-break-3d", {}).domain.cells == cells);
+  CHECK(load_scene("liquid-bunny-into-bowl-3d-paper", {}).domain.cells == std::vector<int>{256, 128, 256});
+  // not a positive number: refused with the variable's name
+  for (const char* bad : {"", "abc", "0", "-2", "4GiB", "nan", "inf"}) {
+    setenv("MONOLITH_MEMORY_LIMIT_GIB", bad, 1);
+    INFO("MONOLITH_MEMORY_LIMIT_GIB='" << bad << "'");
+    try {
+      load_scene("dam-break-3d", {});
+      FAIL("accepted");
+    } catch (const InputError& e) {
+      CHECK(std::string(e.what()).find("MONOLITH_MEMORY_LIMIT_GIB") != std::string::npos);
+    }
+  }
 }
 
 TEST_CASE("herschel-bulkley presets give the section 6.4.1 sets; explicit keys override them",
