@@ -126,11 +126,15 @@ inline constexpr int kSeedProjectionIterations = 2;
 /// two walls at a corner), so liquid against a wall reads as liquid up to and beyond the wall:
 /// without the images a lattice point near a wall averages particles on one side only, the
 /// level set bulges inward there and the cells along the wall get liquid fractions below one,
-/// which drives a flow in liquid at rest (docs/particles.md, "Still water").
+/// which drives a flow in liquid at rest (docs/particles.md, "Still water"). Particles within
+/// the support of a solid of `solids` are mirrored across its nearest surface point in the same
+/// way (x' = x - 2 d n, d the solid distance, n its gradient), the image reaching only lattice
+/// points its particle reaches: liquid against a solid body reads as liquid up to the body.
 template <int Dim>
 VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
                               const SampleLattice<Dim>& lattice,
-                              const std::array<BoundaryType, 2 * Dim>& boundary);
+                              const std::array<BoundaryType, 2 * Dim>& boundary,
+                              const SolidField<Dim>& solids = {});
 
 /// Largest particle speed (for the CFL condition).
 template <int Dim>
