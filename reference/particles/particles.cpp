@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <random>
 
 #include "reference/grid/volume_fractions.hpp"
@@ -1187,7 +1188,9 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
 
   // slabs along the last axis, width > 2 R in lattice points
   constexpr int kLast = Dim - 1;
-  const int width = static_cast<int>(std::ceil(2.0 * max_support / h)) + 2;
+  // (a particle next to a solid reaches up to 2 R through its image, see below: slabs > 4 R)
+  const double reach_factor = solids.empty() ? 1.0 : 2.0;
+  const int width = static_cast<int>(std::ceil(2.0 * reach_factor * max_support / h)) + 2;
   const int slabs = std::max(1, (lattice.dims[kLast] + width - 1) / width);
   std::vector<int> slab_of(np), slab_start(slabs + 1, 0), order(np);
   for (long p = 0; p < np; ++p) {
@@ -1210,6 +1213,11 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
   for (int a = 0; a < Dim; ++a)
     for (int side = 0; side < 2; ++side)
       mirror[2 * a + side] = !grid.periodic(a) && boundary[2 * a + side] == BoundaryType::wall;
+
+  // the solid distance of the lattice points an image reaches, computed once per point when
+  // first needed (NaN: not yet); within a phase only one thread touches a point
+  std::vector<double> solid_distance;
+  if (!solids.empty()) solid_distance.assign(nl, std::numeric_limits<double>::quiet_NaN());
 
   // the sums of each lattice point side by side (weight, radius, position): one cache line per
   // point touched instead of three arrays' worth
@@ -1302,8 +1310,14 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
       if (a == Dim) break;
     }
     // the mirror image across the nearest solid surface within the support (x' = x - 2 d n),
-    // added only at lattice points the particle itself reaches: the points near the solid then
-    // see a symmetric cloud, and no image reaches through a thin solid to its dry side
+    // added at the lattice points the particle itself reaches and at those inside the solids
+    // (within 2 R of the particle): the points near the solid then see a symmetric cloud, the
+    // level set inside the solid next to liquid reads liquid (about as far in as the liquid
+    // reaches out), and no image reaches through a thin solid to its dry side. Without the
+    // points inside, a point about 1 dx deep got a contribution or not depending on where the
+    // jittered particles sat, and the weights of the cells cut by the solid (read on the level
+    // set extended into it, extend_liquid_into_solids) followed: left and right of a settling
+    // disk they differed by up to 0.2 and pushed it sideways (docs/particles.md)
     if (solids.empty()) return;
     const double d = solids.distance(xp);
     if (!(d > 0.0) || d >= R) return;
@@ -1313,16 +1327,24 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
     const Vec<Dim> xm = xp - (2.0 * d / len) * n;
     VecI<Dim> j0, j1;
     for (int a = 0; a < Dim; ++a) {
-      j0[a] = std::max(0, static_cast<int>(std::ceil((xp[a] - R - lattice.origin[a]) / h)));
+      j0[a] = std::max(0, static_cast<int>(std::ceil((xm[a] - R - lattice.origin[a]) / h)));
       j1[a] = std::min(lattice.dims[a] - 1,
-                       static_cast<int>(std::floor((xp[a] + R - lattice.origin[a]) / h)));
+                       static_cast<int>(std::floor((xm[a] + R - lattice.origin[a]) / h)));
       if (j0[a] > j1[a]) return;
     }
+    const double inv_reach2 = 0.25 * inv_r2;
     VecI<Dim> i = j0;
     while (true) {
       const Vec<Dim> y = lattice.position(i);
       const double q2 = (y - xm).squaredNorm() * inv_r2;
-      if (q2 < 1.0 && (y - xp).squaredNorm() * inv_r2 < 1.0) {
+      const double p2 = (y - xp).squaredNorm();
+      bool reached = q2 < 1.0 && p2 * inv_reach2 < 1.0;
+      if (reached && !(p2 * inv_r2 < 1.0)) {
+        double& ds = solid_distance[lattice.index(i)];
+        if (std::isnan(ds)) ds = solids.distance(y);
+        reached = ds < 0.0;
+      }
+      if (reached) {
         const double t = 1.0 - q2;
         const double k = t * t * t;
         double* sum = acc.data() + static_cast<std::size_t>(lattice.index(i)) * kStride;

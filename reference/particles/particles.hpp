@@ -128,8 +128,10 @@ inline constexpr int kSeedProjectionIterations = 2;
 /// level set bulges inward there and the cells along the wall get liquid fractions below one,
 /// which drives a flow in liquid at rest (docs/particles.md, "Still water"). Particles within
 /// the support of a solid of `solids` are mirrored across its nearest surface point in the same
-/// way (x' = x - 2 d n, d the solid distance, n its gradient), the image reaching only lattice
-/// points its particle reaches: liquid against a solid body reads as liquid up to the body.
+/// way (x' = x - 2 d n, d the solid distance, n its gradient), the image reaching the lattice
+/// points its particle reaches and those inside a solid within 2 R of the particle: liquid
+/// against a solid body reads as liquid up to the body and a little into it (what
+/// extend_liquid_into_solids builds on), and nothing leaks through a thin solid to its dry side.
 template <int Dim>
 VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
                               const SampleLattice<Dim>& lattice,
