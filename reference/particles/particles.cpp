@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <random>
 
 #include "reference/grid/volume_fractions.hpp"
@@ -46,8 +47,6 @@ constexpr double kProjectionTolerance = 1e-4;
 /// level set; there the density projection corrects an excess of particle volume only
 /// (project_particle_density, docs/particles.md "Still water").
 constexpr double kProjectionAirSide = 0.5;
-/// ... except within this many cells of a solid (the reach of a cell's hat plus half a box).
-constexpr double kProjectionSolidReach = 1.5;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
 /// Lattice points per axis of one particle's splat box held in a stack table (liquid_phi_on_lattice;
@@ -1002,9 +1001,32 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       }
     }
   }
-  // liquid fractions of the particle level set, smoothed by the same hat
-  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice, boundary);
-  const VectorX target = hat_liquid_fractions(grid, lattice, phi);
+  // liquid fractions of the particle level set, smoothed by the same hat. With solids, the level
+  // set (mirrored across them) reads liquid into a solid next to liquid: the target counts the
+  // liquid in the fluid only ({phi < 0} minus the solids: max(phi, -d_S) < 0, d_S the solid
+  // distance), as the particles' splat does, while the air side is decided on the level set
+  // extended into the solids (as the weights of eq. (8) see it, extend_liquid_into_solids), so a
+  // submerged cell cut by a solid is not taken for a free surface.
+  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice, boundary, solids);
+  VectorX target, wet;
+  if (solids.empty()) {
+    target = hat_liquid_fractions(grid, lattice, phi);
+  } else {
+    const int nl = lattice.size();
+    VectorX fluid_liquid = phi, extended = phi;
+    const double reach = kLiquidSolidReach * dx;
+#pragma omp parallel for schedule(static)
+    for (int li = 0; li < nl; ++li) {
+      // only points near the liquid can change (elsewhere phi >= 2 dx stays positive)
+      if (!(phi[li] < 2.0 * dx)) continue;
+      const double ds = solids.distance(lattice.position(lattice.coord(li)));
+      if (!(ds < 2.0 * dx)) continue;
+      fluid_liquid[li] = std::max(phi[li], -ds);
+      if (ds < 0.0 && phi[li] < reach) extended[li] = std::min(phi[li], -0.5 * dx);
+    }
+    target = hat_liquid_fractions(grid, lattice, fluid_liquid);
+    wet = hat_liquid_fractions(grid, lattice, extended);
+  }
 
   // unknowns: cells holding particle volume or smoothed liquid
   std::vector<int> unknown(nc, -1);
@@ -1050,12 +1072,10 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // further: on water at rest, projection after projection roughened the surface (column
     // heights 0.034 -> 0.11 dx in 2D, 0.028 -> 0.059 dx in 3D over 100-200 calls) and fed waves.
     // An excess there (particles outside the level set: drops, thin sheets) is still spread.
-    // Next to a solid a low T_c comes from the solid filling part of the cell, not from a free
-    // surface, so there the error stays two-sided as before.
+    // Next to a solid a low T_c can come from the solid filling part of the cell, not from a
+    // free surface, so with solids the air side is read from the level set extended into them.
     double e = rho[c] - target[c];
-    if (target[c] < kProjectionAirSide &&
-        (solids.empty() || solids.distance(grid.cell_center(ci)) > kProjectionSolidReach * dx))
-      e = std::max(e, 0.0);
+    if ((solids.empty() ? target[c] : wet[c]) < kProjectionAirSide) e = std::max(e, 0.0);
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
   }
@@ -1148,7 +1168,8 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
 template <int Dim>
 VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
                               const SampleLattice<Dim>& lattice,
-                              const std::array<BoundaryType, 2 * Dim>& boundary) {
+                              const std::array<BoundaryType, 2 * Dim>& boundary,
+                              const SolidField<Dim>& solids) {
   const int nl = lattice.size();
   const long np = static_cast<long>(particles.size());
   const double h = lattice.spacing;
@@ -1167,7 +1188,9 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
 
   // slabs along the last axis, width > 2 R in lattice points
   constexpr int kLast = Dim - 1;
-  const int width = static_cast<int>(std::ceil(2.0 * max_support / h)) + 2;
+  // (a particle next to a solid reaches up to 2 R through its image, see below: slabs > 4 R)
+  const double reach_factor = solids.empty() ? 1.0 : 2.0;
+  const int width = static_cast<int>(std::ceil(2.0 * reach_factor * max_support / h)) + 2;
   const int slabs = std::max(1, (lattice.dims[kLast] + width - 1) / width);
   std::vector<int> slab_of(np), slab_start(slabs + 1, 0), order(np);
   for (long p = 0; p < np; ++p) {
@@ -1190,6 +1213,11 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
   for (int a = 0; a < Dim; ++a)
     for (int side = 0; side < 2; ++side)
       mirror[2 * a + side] = !grid.periodic(a) && boundary[2 * a + side] == BoundaryType::wall;
+
+  // the solid distance of the lattice points an image reaches, computed once per point when
+  // first needed (NaN: not yet); within a phase only one thread touches a point
+  std::vector<double> solid_distance;
+  if (!solids.empty()) solid_distance.assign(nl, std::numeric_limits<double>::quiet_NaN());
 
   // the sums of each lattice point side by side (weight, radius, position): one cache line per
   // point touched instead of three arrays' worth
@@ -1281,6 +1309,56 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
       }
       if (a == Dim) break;
     }
+    // the mirror image across the nearest solid surface within the support (x' = x - 2 d n),
+    // added at the lattice points the particle itself reaches and at those inside the solids
+    // (within 2 R of the particle): the points near the solid then see a symmetric cloud, the
+    // level set inside the solid next to liquid reads liquid (about as far in as the liquid
+    // reaches out), and no image reaches through a thin solid to its dry side. Without the
+    // points inside, a point about 1 dx deep got a contribution or not depending on where the
+    // jittered particles sat, and the weights of the cells cut by the solid (read on the level
+    // set extended into it, extend_liquid_into_solids) followed: left and right of a settling
+    // disk they differed by up to 0.2 and pushed it sideways (docs/particles.md)
+    if (solids.empty()) return;
+    const double d = solids.distance(xp);
+    if (!(d > 0.0) || d >= R) return;
+    Vec<Dim> n = solids.gradient(xp);
+    const double len = n.norm();
+    if (!(len > 0.0)) return;
+    const Vec<Dim> xm = xp - (2.0 * d / len) * n;
+    VecI<Dim> j0, j1;
+    for (int a = 0; a < Dim; ++a) {
+      j0[a] = std::max(0, static_cast<int>(std::ceil((xm[a] - R - lattice.origin[a]) / h)));
+      j1[a] = std::min(lattice.dims[a] - 1,
+                       static_cast<int>(std::floor((xm[a] + R - lattice.origin[a]) / h)));
+      if (j0[a] > j1[a]) return;
+    }
+    const double inv_reach2 = 0.25 * inv_r2;
+    VecI<Dim> i = j0;
+    while (true) {
+      const Vec<Dim> y = lattice.position(i);
+      const double q2 = (y - xm).squaredNorm() * inv_r2;
+      const double p2 = (y - xp).squaredNorm();
+      bool reached = q2 < 1.0 && p2 * inv_reach2 < 1.0;
+      if (reached && !(p2 * inv_r2 < 1.0)) {
+        double& ds = solid_distance[lattice.index(i)];
+        if (std::isnan(ds)) ds = solids.distance(y);
+        reached = ds < 0.0;
+      }
+      if (reached) {
+        const double t = 1.0 - q2;
+        const double k = t * t * t;
+        double* sum = acc.data() + static_cast<std::size_t>(lattice.index(i)) * kStride;
+        sum[0] += k;
+        sum[1] += k * radius[p];
+        for (int a = 0; a < Dim; ++a) sum[2 + a] += k * xm[a];
+      }
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++i[a] <= j1[a]) break;
+        i[a] = j0[a];
+      }
+      if (a == Dim) break;
+    }
   };
 
   // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
@@ -1351,7 +1429,8 @@ double max_particle_speed(const Particles<Dim>& particles) {
       const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int);                          \
   template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
                                          const SampleLattice<D>&,                                  \
-                                         const std::array<BoundaryType, 2 * D>&);                  \
+                                         const std::array<BoundaryType, 2 * D>&,                   \
+                                         const SolidField<D>&);                                    \
   template double max_particle_speed(const Particles<D>&);
 
 MONOLITH_INSTANTIATE_PARTICLES(2)

@@ -126,11 +126,17 @@ inline constexpr int kSeedProjectionIterations = 2;
 /// two walls at a corner), so liquid against a wall reads as liquid up to and beyond the wall:
 /// without the images a lattice point near a wall averages particles on one side only, the
 /// level set bulges inward there and the cells along the wall get liquid fractions below one,
-/// which drives a flow in liquid at rest (docs/particles.md, "Still water").
+/// which drives a flow in liquid at rest (docs/particles.md, "Still water"). Particles within
+/// the support of a solid of `solids` are mirrored across its nearest surface point in the same
+/// way (x' = x - 2 d n, d the solid distance, n its gradient), the image reaching the lattice
+/// points its particle reaches and those inside a solid within 2 R of the particle: liquid
+/// against a solid body reads as liquid up to the body and a little into it (what
+/// extend_liquid_into_solids builds on), and nothing leaks through a thin solid to its dry side.
 template <int Dim>
 VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
                               const SampleLattice<Dim>& lattice,
-                              const std::array<BoundaryType, 2 * Dim>& boundary);
+                              const std::array<BoundaryType, 2 * Dim>& boundary,
+                              const SolidField<Dim>& solids = {});
 
 /// Largest particle speed (for the CFL condition).
 template <int Dim>

@@ -213,7 +213,9 @@ template <int Dim>
 void Simulation<Dim>::update_liquid_weights() {
   {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
-    liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_);
+    // mirrored across the walls and the solids, so liquid against either reads as liquid up to
+    // it (docs/particles.md, "Still water")
+    liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_);
   }
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
@@ -252,10 +254,12 @@ void Simulation<Dim>::update_liquid_weights() {
     for (const auto& m : mixture_.models) eta0.push_back(m.limiting_viscosity());
     cell_eta_ = cell_viscosity(grid_, particles_, eta0);
   }
-  // the reported volume is that of the particles' own level set (the extension lies in solids)
+  // the reported volume is that of the particles' own level set outside the solids (its mirror
+  // images and the extension reach into them)
   if (solids) {
-    classify_lattice_cells(grid_, lattice_, liquid_phi_, liquid_signs_);
-    cell_negative_fractions(grid_, lattice_, liquid_phi_, liquid_signs_, volume_cells_);
+    const VectorX fluid_phi = liquid_phi_.cwiseMax(-solid_phi_);
+    classify_lattice_cells(grid_, lattice_, fluid_phi, liquid_signs_);
+    cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
 }

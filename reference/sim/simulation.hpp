@@ -146,6 +146,8 @@ class Simulation : public AnySimulation {
   const Particles<Dim>& particles() const { return particles_; }
   /// Liquid signed distance of the particles (negative inside) on half_lattice(grid()).
   const VectorX& liquid_phi() const { return liquid_phi_; }
+  /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis.
+  const PressureWeights& weights() const { return weights_; }
   /// Face velocities (MacGrid face numbering).
   const VectorX& velocity() const { return u_; }
   /// Cell pressures of the last solve (Pa; zero before the first step).
