@@ -5,7 +5,7 @@
 // ask >= 1.6 idle on the Stokes solve and the particle step, >= 0.95 busy everywhere).
 //
 //   build/bench/bench_threads [--n N] [--particles-n N] [--scene NAME[,NAME...]] [--frames F] [--budget S]
-//                             [--only SUBSTRING] [--no-busy]
+//                             [--only SUBSTRING[,SUBSTRING...]] [--no-busy]
 //
 // "2t" is the library's default with 2 threads: each parallel kernel chooses its team size (1 or
 // 2) by measuring itself (AdaptiveTeam, reference/core/parallel.hpp); "2t fixed" runs every
@@ -237,7 +237,16 @@ int main(int argc, char** argv) {
 
   std::vector<Kernel> kernels;
   std::map<std::string, std::vector<std::vector<std::pair<std::string, double>>>> scene_phases;
-  auto wanted_name = [&](const std::string& name) { return only.empty() || name.find(only) != std::string::npos; };
+  // --only A,B,...: the kernels whose name contains one of the substrings
+  auto wanted_name = [&](const std::string& name) {
+    if (only.empty()) return true;
+    for (std::size_t from = 0; from <= only.size();) {
+      const std::size_t comma = std::min(only.find(',', from), only.size());
+      if (comma > from && name.find(only.substr(from, comma - from)) != std::string::npos) return true;
+      from = comma + 1;
+    }
+    return false;
+  };
   // a group is built when one of its kernels is wanted
   auto wanted = [&](const std::string& tag) {
     for (const char* k : {"", " apply", " SSOR", " solve (30 PCG it.)", " P2G", " G2P", " advect"})
