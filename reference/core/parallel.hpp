@@ -468,8 +468,13 @@ inline ThreadSpec parse_thread_spec(const std::string& value) {
   return spec;
 }
 
-/// The thread count of `auto`: the free cores of the affinity mask (free_cores), never more.
-inline int automatic_thread_count() { return free_cores(); }
+/// The thread count of `auto`: the CPUs of the affinity mask while the process-wide team follows
+/// the free cores (ProcessTeam: a run started next to a busy core takes one thread within 0.1 s
+/// and the second again when that core becomes free); without it (MONOLITH_ADAPTIVE_THREADS=0)
+/// the cores free at the start (free_cores), decided once.
+inline int automatic_thread_count() {
+  return core_monitor() ? static_cast<int>(affinity_cpus().size()) : free_cores();
+}
 
 /// Call first thing in main(). When the user set neither OMP_WAIT_POLICY nor GOMP_SPINCOUNT (and
 /// MONOLITH_KEEP_WAIT_POLICY is not set), sets GOMP_SPINCOUNT=kDefaultSpinCount and re-executes

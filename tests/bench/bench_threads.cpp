@@ -168,9 +168,9 @@ std::vector<std::pair<std::string, double>> phase_seconds(const std::string& pat
       line += static_cast<char>(ch);
       continue;
     }
-    const std::size_t at = line.find("\"timing\": {");
-    if (at != std::string::npos) {
-      std::size_t pos = at + 11;
+    const std::size_t at = line.find("\"timing\":");
+    if (at != std::string::npos && line.find('{', at) != std::string::npos) {
+      std::size_t pos = line.find('{', at) + 1;
       const std::size_t end = line.find('}', pos);
       while (pos < end) {
         const std::size_t q0 = line.find('"', pos);
@@ -378,6 +378,7 @@ int main(int argc, char** argv) {
   for (const Kernel& k : kernels) {
     if (!wanted_name(k.name)) continue;
     double t[2][3] = {{0, 0, 0}, {0, 0, 0}};
+    int team_after[2] = {0, 0};  // the process-wide team at the end of the 2t runs
     for (int busy = 0; busy < (busy_runs ? 2 : 1); ++busy) {
       BusyCore spinner;
       if (busy) spinner.start();
@@ -388,6 +389,7 @@ int main(int argc, char** argv) {
         const bool whole = k.name.rfind("scene", 0) == 0;
         if (!whole) k.run();  // warm up (a whole scene: one run, its start-up included)
         t[busy][config] = whole ? median_time(k.run, 0.0, 1) : median_time(k.run, budget);
+        if (config == 1) team_after[busy] = process_threads();
       }
       set_adaptive_teams(true);
       set_core_monitor(true);
@@ -396,8 +398,8 @@ int main(int argc, char** argv) {
     std::printf("%-40s %7.2fms %7.2fms %7.2fms %6.2f %6.2f", k.name.c_str(), ms(t[0][0]),
                 ms(t[0][1]), ms(t[0][2]), t[0][0] / t[0][1], t[0][0] / t[0][2]);
     if (busy_runs)
-      std::printf(" %7.2fms %7.2fms %7.2fms %6.2f %6.2f", ms(t[1][0]), ms(t[1][1]), ms(t[1][2]),
-                  t[1][0] / t[1][1], t[1][0] / t[1][2]);
+      std::printf(" %7.2fms %7.2fms %7.2fms %6.2f %6.2f  team %d/%d", ms(t[1][0]), ms(t[1][1]),
+                  ms(t[1][2]), t[1][0] / t[1][1], t[1][0] / t[1][2], team_after[0], team_after[1]);
     std::printf("\n");
     std::fflush(stdout);
   }
