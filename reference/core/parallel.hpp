@@ -13,16 +13,21 @@
 /// fall-back below kParallelMinWork, a short spin before sleeping (GOMP_SPINCOUNT, applied by
 /// re-executing the program once: libgomp reads it only when it loads), `auto` threads = the
 /// cores of the affinity mask that are currently idle, and a team size per kernel chosen by
-/// measurement (AdaptiveTeam: fewer threads while another process holds a core).
+/// measurement (AdaptiveTeam), all under one process-wide team size that follows the cores other
+/// processes take (ProcessTeam, process_threads(); loops outside the measured kernels take it
+/// through team_threads()).
 
+#include <Eigen/Core>
 #include <omp.h>
 #include <sched.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -70,10 +75,196 @@ inline bool adaptive_teams() {
 }
 inline void set_adaptive_teams(bool on) { adaptive_teams_flag().store(on ? 1 : 0); }
 
+/// The CPUs this process may run on (sched_getaffinity), in increasing order; {0..n-1} from
+/// hardware_concurrency when the mask cannot be read.
+inline std::vector<int> affinity_cpus() {
+  std::vector<int> cpus;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof(set), &set) == 0) {
+    for (int c = 0; c < CPU_SETSIZE; ++c)
+      if (CPU_ISSET(c, &set)) cpus.push_back(c);
+  }
+  if (cpus.empty()) {
+    const int n = std::max(1u, std::thread::hardware_concurrency());
+    for (int c = 0; c < n; ++c) cpus.push_back(c);
+  }
+  return cpus;
+}
+
+namespace detail {
+/// Busy and total jiffies per CPU from /proc/stat ("cpuN user nice system idle iowait irq
+/// softirq steal ..."); index = CPU number; empty when unreadable.
+inline std::vector<std::pair<unsigned long long, unsigned long long>> cpu_jiffies() {
+  std::vector<std::pair<unsigned long long, unsigned long long>> out;
+  std::ifstream in("/proc/stat");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.compare(0, 3, "cpu") != 0) {
+      if (!out.empty()) break;  // the per-CPU lines come first; skip the long "intr" line
+      continue;
+    }
+    if (line.size() < 4 || !std::isdigit(static_cast<unsigned char>(line[3]))) continue;
+    std::istringstream s(line.substr(3));
+    int cpu = -1;
+    s >> cpu;
+    unsigned long long v[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (auto& x : v) s >> x;
+    if (cpu < 0) continue;
+    if (static_cast<int>(out.size()) <= cpu) out.resize(cpu + 1, {0, 0});
+    unsigned long long total = 0;
+    for (auto x : v) total += x;
+    out[cpu] = {total - v[3] - v[4], total};  // busy = all but idle and iowait
+  }
+  return out;
+}
+}  // namespace detail
+
+/// Whether the process-wide team follows the cores other processes take (ProcessTeam). On
+/// unless MONOLITH_ADAPTIVE_THREADS=0 (then every region takes the whole cap); tests of the
+/// per-site policy switch it off so the machine's load does not change their cap.
+inline std::atomic<int>& core_monitor_flag() {
+  static std::atomic<int> flag{-1};  // -1: not decided yet
+  return flag;
+}
+inline bool core_monitor() {
+  int f = core_monitor_flag().load(std::memory_order_relaxed);
+  if (f < 0) {
+    const char* env = std::getenv("MONOLITH_ADAPTIVE_THREADS");
+    f = env && std::strcmp(env, "0") == 0 ? 0 : 1;
+    core_monitor_flag().store(f, std::memory_order_relaxed);
+  }
+  return f != 0;
+}
+inline void set_core_monitor(bool on) { core_monitor_flag().store(on ? 1 : 0); }
+
+/// The process-wide team size for the next window, from the cores other processes used in the
+/// last one: `cpus` = the CPUs of the affinity mask, `team` = the current size, `others` = the
+/// CPUs' busy time minus this process's own CPU time, in cores. Every thread of a team needs a
+/// core of its own (a thread sharing a core with another process makes every barrier wait for
+/// it), so the team is the cores left over: cpus - others, rounded with a hysteresis of
+/// +-0.1 core around the half (down when others exceeds the free share by 0.6 core, up when it
+/// is below it by 0.6, i.e. others < cpus - team - 0.4), so a measurement noise of a tick or
+/// two per window does not make the team flip. In 1..cpus.
+inline int next_process_team(int cpus, int team, double others) {
+  cpus = std::max(1, cpus);
+  team = std::clamp(team, 1, cpus);
+  const int down = cpus - static_cast<int>(std::ceil(others - 0.6));
+  const int up = cpus - static_cast<int>(std::ceil(others - 0.4));
+  if (down < team) team = down;
+  else if (up > team) team = up;
+  return std::clamp(team, 1, cpus);
+}
+
+/// The process-wide team size (issue 19): how many threads every parallel loop of the process
+/// may use now, from how much CPU time other processes take on the CPUs of the affinity mask.
+/// Every kMinWindow (at the first team query after it) it reads the busy time of each CPU
+/// (/proc/stat) and this process's own CPU time (CLOCK_PROCESS_CPUTIME_ID); the difference over
+/// the window is the cores the other processes used, and next_process_team turns it into the
+/// team for the next window. No trial runs: a kernel never runs with a team just to find out
+/// whether it is faster (short kernels' trials landed on the busy core and lost for the wrong
+/// reason), and no kernel pays for a slow probe. It reacts within one window (100 ms) when
+/// another process takes a core or gives it back. Without /proc/stat it keeps the whole mask.
+/// One instance per process (instance()); thread-safe (a query that finds another thread
+/// updating returns the current size).
+class ProcessTeam {
+ public:
+  static constexpr double kMinWindow = 0.1;  // seconds
+
+  static ProcessTeam& instance() {
+    static ProcessTeam team;
+    return team;
+  }
+
+  /// The team size now (1..the CPUs of the affinity mask), updated when a window has passed.
+  int size() {
+    const auto now = std::chrono::steady_clock::now();
+    if (std::chrono::duration<double>(now - last_).count() >= kMinWindow) {
+      std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+      if (lock.owns_lock() && std::chrono::duration<double>(now - last_).count() >= kMinWindow)
+        update(now);
+    }
+    return team_.load(std::memory_order_relaxed);
+  }
+
+  /// The cores other processes used in the last window (for benchmarks and logs).
+  double others() const { return others_.load(std::memory_order_relaxed); }
+
+ private:
+  ProcessTeam() : cpus_(affinity_cpus()), team_(static_cast<int>(cpus_.size())) {
+    last_ = std::chrono::steady_clock::now();
+    jiffies_ = detail::cpu_jiffies();
+    own_ = own_seconds();
+  }
+  static double own_seconds() {
+    timespec ts{};
+    if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) != 0) return 0.0;
+    return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+  }
+  void update(std::chrono::steady_clock::time_point now) {
+    const auto jiffies = detail::cpu_jiffies();
+    const double own = own_seconds();
+    const double wall = std::chrono::duration<double>(now - last_).count();
+    if (!jiffies.empty() && !jiffies_.empty() && wall > 0.0) {
+      double busy = 0.0;  // in cores: the sum of each CPU's busy fraction over the window
+      for (int c : cpus_) {
+        if (c >= static_cast<int>(jiffies.size()) || c >= static_cast<int>(jiffies_.size())) continue;
+        const double b = static_cast<double>(jiffies[c].first - jiffies_[c].first);
+        const double t = static_cast<double>(jiffies[c].second - jiffies_[c].second);
+        if (t > 0.0) busy += std::clamp(b / t, 0.0, 1.0);
+      }
+      const double others = std::max(0.0, busy - (own - own_) / wall);
+      others_.store(others, std::memory_order_relaxed);
+      team_.store(next_process_team(static_cast<int>(cpus_.size()), team_.load(), others),
+                  std::memory_order_relaxed);
+    }
+    jiffies_ = jiffies;
+    own_ = own;
+    last_ = now;
+  }
+
+  std::mutex mutex_;
+  std::vector<int> cpus_;
+  std::atomic<int> team_;
+  std::atomic<double> others_{0.0};
+  std::chrono::steady_clock::time_point last_;
+  std::vector<std::pair<unsigned long long, unsigned long long>> jiffies_;
+  double own_ = 0.0;
+};
+
+/// The team size of every parallel region of the library: at most omp_get_max_threads() (the
+/// cap, `--threads N`), and no more than ProcessTeam's free cores (unless MONOLITH_ADAPTIVE_THREADS=0
+/// or set_core_monitor(false)); 1 inside a parallel region.
+///
+/// Eigen's own OpenMP loops (a row-major sparse matrix times a dense vector above 20000
+/// non-zeros, dense matrix products) follow it too: each call hands the size to
+/// Eigen::setNbThreads when it changed (those loops write each output entry from one thread,
+/// so their results do not depend on it either).
+inline int process_threads() {
+  if (omp_in_parallel()) return 1;
+  const int cap = omp_get_max_threads();
+  const int team = core_monitor() ? std::max(1, std::min(cap, ProcessTeam::instance().size())) : cap;
+  static std::atomic<int> eigen_threads{0};
+  if (eigen_threads.load(std::memory_order_relaxed) != team) {
+    eigen_threads.store(team, std::memory_order_relaxed);
+    Eigen::setNbThreads(team);
+  }
+  return team;
+}
+
+/// The hook for a parallel loop over `work` entries (rows, cells, particles) outside the
+/// measured kernels: 1 below kParallelMinWork (the region would cost more than it saves), else
+/// process_threads(). Use as
+///   #pragma omp parallel for schedule(static) num_threads(team_threads(n))
+/// Any team size gives the same result in a loop whose iterations write disjoint entries.
+inline int team_threads(long work) { return work < kParallelMinWork ? 1 : process_threads(); }
+
 /// The team size of one parallel kernel (a "site": the Stokes apply, a pressure sweep, ...),
 /// chosen by measuring it (issue 19). Every kernel of the library gives bitwise the same result
 /// for any team size, so the team may change from one call to the next without changing a
-/// result; only the time changes. The cap is omp_get_max_threads() (`--threads N` = at most N).
+/// result; only the time changes. The cap is process_threads(): at most omp_get_max_threads()
+/// (`--threads N`) and at most the cores other processes leave free (ProcessTeam); a change of
+/// the cap starts the site afresh at the new cap.
 ///
 /// Policy: the site runs with its current team size t (at first the cap) and keeps the seconds
 /// per unit of work of its last 3 calls at t; their median is t's current estimate. Now and then
@@ -103,12 +294,15 @@ class AdaptiveTeam {
 
   /// The team size for the next call over `work` entries; 0 means "one thread, do not record".
   int choose(long work) {
-    if (work < kParallelMinWork || omp_in_parallel()) return 0;
-    const int cap = omp_get_max_threads();
-    if (cap <= 1) return 0;
+    if (omp_in_parallel()) return 0;
+    const int cap = process_threads();  // (updates the process-wide team now and then)
+    if (work < kParallelMinWork || cap <= 1) return 0;
     if (!adaptive_teams()) return cap;
     std::lock_guard<std::mutex> lock(mutex_);
-    if (current_ < 1 || current_ > cap) reset(cap);
+    if (current_ < 1 || cap != cap_) {
+      reset(cap);
+      cap_ = cap;
+    }
     if (confirm_ >= 1 && confirm_ <= cap) return confirm_;  // repeat a winning probe
     confirm_ = 0;
     if (++calls_ < interval_) return current_;
@@ -187,6 +381,7 @@ class AdaptiveTeam {
   int count_ = 0;                       // calls recorded at current_
   double average_ = 0.0;                // long-run average at current_
   int current_ = 0;
+  int cap_ = 0;                         // the cap current_ was chosen under
   int confirm_ = 0;                     // a probe size to repeat on the next call, 0 none
   int calls_ = 0;
   int interval_ = kFirstProbeInterval;
@@ -226,48 +421,6 @@ class TeamScope {
 /// 300000, spins ~1 ms, which on a core shared with another process is a millisecond taken from
 /// the thread everyone waits for).
 constexpr const char* kDefaultSpinCount = "10000";
-
-/// The CPUs this process may run on (sched_getaffinity), in increasing order; {0..n-1} from
-/// hardware_concurrency when the mask cannot be read.
-inline std::vector<int> affinity_cpus() {
-  std::vector<int> cpus;
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  if (sched_getaffinity(0, sizeof(set), &set) == 0) {
-    for (int c = 0; c < CPU_SETSIZE; ++c)
-      if (CPU_ISSET(c, &set)) cpus.push_back(c);
-  }
-  if (cpus.empty()) {
-    const int n = std::max(1u, std::thread::hardware_concurrency());
-    for (int c = 0; c < n; ++c) cpus.push_back(c);
-  }
-  return cpus;
-}
-
-namespace detail {
-/// Busy and total jiffies per CPU from /proc/stat ("cpuN user nice system idle iowait irq
-/// softirq steal ..."); index = CPU number; empty when unreadable.
-inline std::vector<std::pair<unsigned long long, unsigned long long>> cpu_jiffies() {
-  std::vector<std::pair<unsigned long long, unsigned long long>> out;
-  std::ifstream in("/proc/stat");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.compare(0, 3, "cpu") != 0 || line.size() < 4 || !std::isdigit(static_cast<unsigned char>(line[3])))
-      continue;
-    std::istringstream s(line.substr(3));
-    int cpu = -1;
-    s >> cpu;
-    unsigned long long v[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (auto& x : v) s >> x;
-    if (cpu < 0) continue;
-    if (static_cast<int>(out.size()) <= cpu) out.resize(cpu + 1, {0, 0});
-    unsigned long long total = 0;
-    for (auto x : v) total += x;
-    out[cpu] = {total - v[3] - v[4], total};  // busy = all but idle and iowait
-  }
-  return out;
-}
-}  // namespace detail
 
 /// The number of CPUs of the affinity mask that are free now: sampled from /proc/stat over
 /// `sample_ms`, a CPU counts as free when it was idle at least half of that time. At least 1.
@@ -315,8 +468,13 @@ inline ThreadSpec parse_thread_spec(const std::string& value) {
   return spec;
 }
 
-/// The thread count of `auto`: the free cores of the affinity mask (free_cores), never more.
-inline int automatic_thread_count() { return free_cores(); }
+/// The thread count of `auto`: the CPUs of the affinity mask while the process-wide team follows
+/// the free cores (ProcessTeam: a run started next to a busy core takes one thread within 0.1 s
+/// and the second again when that core becomes free); without it (MONOLITH_ADAPTIVE_THREADS=0)
+/// the cores free at the start (free_cores), decided once.
+inline int automatic_thread_count() {
+  return core_monitor() ? static_cast<int>(affinity_cpus().size()) : free_cores();
+}
 
 /// Call first thing in main(). When the user set neither OMP_WAIT_POLICY nor GOMP_SPINCOUNT (and
 /// MONOLITH_KEEP_WAIT_POLICY is not set), sets GOMP_SPINCOUNT=kDefaultSpinCount and re-executes

@@ -1,4 +1,5 @@
 #include "reference/coupling/coupling.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -72,7 +73,7 @@ void body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& sh
   const Box<Dim> box = shape.bounds();
   const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
   if (phi.size() != lattice.size()) phi.resize(lattice.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int k = 0; k < lattice.size(); ++k) {
     const Vec<Dim> x = lattice.position(lattice.coord(k));
     if (bounded) {
@@ -113,7 +114,7 @@ void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lat
       near.push_back(grid.face_index(axis, coord));
     });
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int n = 0; n < static_cast<int>(near.size()); ++n) {
     const int f = near[n];
     const auto [axis, coord] = grid.face_coord(f);

@@ -1,5 +1,7 @@
 #include "reference/coupling/monolithic_system.hpp"
 
+#include "reference/core/parallel.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -428,7 +430,7 @@ VectorX MonolithicSystem<Dim>::fluid_velocities(const VectorX& x_fluid) const {
   // apply_stokes_update on faces with W_F^u W_L^u > 0
   const VectorX force = matrix_free_stokes_->face_force(x_fluid);
   const PressureWeights& pw = w_.pressure;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(team_threads(grid_.num_faces()))
   for (int f = 0; f < grid_.num_faces(); ++f) {
     if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0)) continue;
     u[f] -= dt_ * force[f] / (pw.face_density[f] * pw.liquid_face[f]);

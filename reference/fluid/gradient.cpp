@@ -1,4 +1,5 @@
 #include "reference/fluid/gradient.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <vector>
 
@@ -27,7 +28,7 @@ VectorX apply_gradient(const MacGrid<Dim>& grid, const VectorX& p) {
   const double inv_dx = 1.0 / grid.dx();
   VectorX y(grid.num_faces());
   // difference across each face
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(team_threads(grid.num_faces()))
   for (int f = 0; f < grid.num_faces(); ++f) {
     const auto [axis, coord] = grid.face_coord(f);
     const int plus = grid.face_cell_plus(axis, coord);
@@ -43,7 +44,7 @@ VectorX apply_gradient_transpose(const MacGrid<Dim>& grid, const VectorX& u) {
   VectorX y(grid.num_cells());
   // gather per cell (race free): +u on the cell's minus-side faces (the cell is their plus
   // cell), -u on its plus-side faces
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(team_threads(grid.num_cells()))
   for (int c = 0; c < grid.num_cells(); ++c) {
     const VecI<Dim> cc = grid.cell_coord(c);
     double sum = 0.0;

@@ -2,6 +2,7 @@
 /// Eq. (27) per stress DOF and Algorithm 2 (herschel_bulkley.hpp).
 
 #include "reference/fluid/herschel_bulkley.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -89,7 +90,7 @@ VectorX shear_rate_norm(const StressGrid<Dim>& stress, const VectorX& rate,
       if (index >= 0) reach[index] = 1;
     });
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int i = 0; i < n; ++i) {
     if (!reach[i]) continue;
     double sum = 0.0, value = 0.0;

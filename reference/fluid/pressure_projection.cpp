@@ -406,7 +406,7 @@ VectorX MatrixFreePressureOperator<Dim>::rhs(const VectorX& u_star) const {
   // b_i = W_i sum_f s_if W_F^u_f u*_f / dx  (s = +1 on the cell's lower faces, -1 on upper, 0
   // on a face onto the cell itself)
   const int num_cells = static_cast<int>(q_.size());
-#pragma omp parallel for schedule(static) if (q_.size() > kParallelMin)
+#pragma omp parallel for schedule(static) num_threads(process_threads()) if (q_.size() > kParallelMin)
   for (int cell = 0; cell < num_cells; ++cell) {
     const int i = dof_of_cell_[cell];
     if (i < 0) continue;
@@ -449,7 +449,7 @@ void apply_pressure_update(const MacGrid<Dim>& grid, const PressureWeights& w, d
   // q = W_L^p p, then the face update with G q
   const VectorX q = w.liquid_cell.cwiseProduct(pressure);
   const VectorX gq = apply_gradient(grid, q);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(team_threads(grid.num_faces()))
   for (int f = 0; f < grid.num_faces(); ++f) {
     if (!(w.fluid_face[f] * w.liquid_face[f] > 0.0) || !(w.face_density[f] > 0.0)) continue;
     u[f] -= dt * gq[f] / (w.face_density[f] * w.liquid_face[f]);

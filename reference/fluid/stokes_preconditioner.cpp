@@ -1,4 +1,5 @@
 #include "reference/fluid/stokes_preconditioner.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <stdexcept>
 
@@ -14,7 +15,7 @@ void multiply(const SparseMatrix& m, const double* x, double* y) {
   const int* outer = m.outerIndexPtr();
   const int* inner = m.innerIndexPtr();
   const double* value = m.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows)
+#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
   for (int i = 0; i < n; ++i) {
     double s = 0.0;
     for (int k = outer[i]; k < outer[i + 1]; ++k) s += value[k] * x[inner[k]];

@@ -740,7 +740,7 @@ void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& 
 template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
   VectorX s = VectorX::Zero(num_stress_dofs_), q = VectorX::Zero(num_cells_), force(num_faces_);
-#pragma omp parallel if (active_work_ > kParallelMin)
+#pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
   {
     scatter(x, s.data(), q.data());
 #pragma omp barrier
@@ -789,7 +789,7 @@ VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
   // b = B^T W_F^u u*: the gather of apply without C and the N part
   const VectorX v = fluid_face_.cwiseProduct(u_star);
   VectorX s(num_stress_dofs_), q(num_cells_), b(size_);
-#pragma omp parallel if (active_work_ > kParallelMin)
+#pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
   {
     grid_from_faces(v.data(), s.data(), q.data());
 #pragma omp barrier
@@ -842,7 +842,7 @@ void apply_stokes_update(const MacGrid<Dim>& grid, const StressLayout<Dim>& layo
     force += D.transpose() * s;
   }
   const PressureWeights& pw = w.pressure;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(team_threads(grid.num_faces()))
   for (int f = 0; f < grid.num_faces(); ++f) {
     if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0)) continue;
     u[f] -= dt * force[f] / (pw.face_density[f] * pw.liquid_face[f]);

@@ -1,4 +1,5 @@
 #include "reference/fluid/velocity_operator.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -163,7 +164,7 @@ StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& 
   // the columns of B from the operator's stencils, per unknown (parallel, merged in order)
   const int n = f.size();
   std::vector<std::vector<std::pair<int, double>>> columns(n);
-#pragma omp parallel for schedule(static) if (n > kParallelRows)
+#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
   for (int i = 0; i < n; ++i) columns[i] = op.stencil(i);
   std::vector<Triplet> t;
   t.reserve(static_cast<std::size_t>(n) * 2 * Dim);
@@ -225,7 +226,7 @@ SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
   const int* t_outer = f.b_transpose.outerIndexPtr();
   const int* t_inner = f.b_transpose.innerIndexPtr();
   const double* t_value = f.b_transpose.valuePtr();
-#pragma omp parallel for schedule(static) if (nf > kParallelRows)
+#pragma omp parallel for schedule(static) if (nf > kParallelRows) num_threads(process_threads())
   for (int r = 0; r < nf; ++r) {
     std::vector<std::pair<int, double>>& row = rows[r];
     row.clear();

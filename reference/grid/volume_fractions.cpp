@@ -1,4 +1,5 @@
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -118,7 +119,7 @@ void solid_phi_on_lattice(const MacGrid<Dim>& /*grid*/, const SampleLattice<Dim>
     return;
   }
   // min over solids of the signed distance, then shifted inward by zeta (section 4.4.6)
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int k = 0; k < lattice.size(); ++k) {
     const Vec<Dim> x = lattice.position(lattice.coord(k));
     double d = std::numeric_limits<double>::infinity();
@@ -224,7 +225,7 @@ void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
   row_dims[0] = 1;
   const int rows = row_dims.prod();
   VecI<Dim> lo = signs.cells, hi = -VecI<Dim>::Ones();
-#pragma omp parallel
+#pragma omp parallel num_threads(process_threads())
   {
     VecI<Dim> tlo = signs.cells, thi = -VecI<Dim>::Ones();
     std::vector<int> column(nx + 1);
@@ -298,7 +299,7 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
     cstride[a] = cstride[a - 1] * signs.cells[a - 1];
     ostride[a] = ostride[a - 1] * dims[a - 1];
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int t = from[Dim - 1]; t <= to[Dim - 1]; ++t) {
     VecI<Dim> start = from;
     start[Dim - 1] = t;
@@ -458,7 +459,7 @@ void extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_p
   if (solid_phi.size() != liquid_phi.size()) return;
   const double inside = -0.5 * grid.dx();
   // lattice points inside a solid with liquid within reach count as liquid
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int k = 0; k < static_cast<int>(phi.size()); ++k)
     if (solid_phi[k] < 0.0 && liquid_phi[k] < reach) phi[k] = std::min(phi[k], inside);
 }

@@ -1,4 +1,5 @@
 #include "reference/particles/particles.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <omp.h>
 
@@ -338,7 +339,7 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
     ++per_layer[c + 1];
   }
   for (int c = 0; c < layers; ++c) per_layer[c + 1] += per_layer[c];
-  const int threads = std::max(1, std::min(omp_get_max_threads(), layers));
+  const int threads = std::max(1, std::min(process_threads(), layers));
   // slab t owns the face layers [first[t], first[t + 1]); the face lattices along the last axis
   // have at most layers + 1 samples
   std::vector<int> first(threads + 1, 0);
@@ -397,7 +398,7 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   }
 
   // velocities and densities from the sums
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) {
     const double m = face_mass[f];
     if (m > 0.0) {
@@ -417,7 +418,7 @@ template <int Dim>
 void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u) {
   constexpr int kCorners = 1 << Dim;
   const long np = static_cast<long>(particles.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     std::array<int, kCorners> idx;
     std::array<double, kCorners> w;
@@ -510,7 +511,7 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
     const int n = static_cast<int>(candidates.size());
     value.assign(n, 0.0);
     filled.assign(n, 0);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int i = 0; i < n; ++i) filled[i] = average(candidates[i], value[i]);
     // apply after all averages are taken (they read the previous layer's validity)
     std::vector<int> fresh;
@@ -544,7 +545,7 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
   const double max_move = kAdvectionSubstep * grid.dx();
   std::vector<char> remove(np, 0);
   long removed = 0;
-#pragma omp parallel for schedule(static) reduction(+ : removed)
+#pragma omp parallel for schedule(static) reduction(+ : removed) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     Vec<Dim> x = particles.x[p];
     // number of substeps from the speeds along the full-step midpoint path
@@ -711,7 +712,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<double> lambda(np, 0.0);
   std::vector<char> close_pair(np, 0);
   long compressed = 0;
-#pragma omp parallel reduction(+ : compressed)
+#pragma omp parallel reduction(+ : compressed) num_threads(process_threads())
   {
     std::vector<int> cand, cells;
 #pragma omp for schedule(dynamic, 16)
@@ -772,7 +773,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
 
   // pass 2: displacements from the multipliers (Jacobi, so the result is order independent)
   std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
-#pragma omp parallel
+#pragma omp parallel num_threads(process_threads())
   {
     std::vector<int> cand, cells;
 #pragma omp for schedule(dynamic, 16)
@@ -824,7 +825,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   }
 
   // apply, then keep clear of solids and walls
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     if (delta[p].squaredNorm() == 0.0) continue;
     Vec<Dim> x = particles.x[p] + delta[p];
@@ -879,7 +880,7 @@ VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
     }
     corner_offset[b] = offset;
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int k = 0; k < count; ++k) {
     const int base = lattice.index(lattice_coord<Dim>(k, dims));
     std::array<double, kCorners> corner;
@@ -895,7 +896,7 @@ VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
     for (int b = 0; b < Dim; ++b) out_count *= out_dims[b];
     VectorX next(out_count);
     const int n2 = dims[a];
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int k = 0; k < out_count; ++k) {
       const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
       double sum = 0.0;
@@ -943,8 +944,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   VectorX rho = VectorX::Zero(nc);
   constexpr int kLast = Dim - 1;
   const int layers = grid.cells()[kLast];
-  const int slabs = std::max(1, std::min(omp_get_max_threads(), layers));
-#pragma omp parallel for schedule(static, 1)
+  const int slabs = std::max(1, std::min(process_threads(), layers));
+#pragma omp parallel for schedule(static, 1) num_threads(process_threads())
   for (int slab = 0; slab < slabs; ++slab) {
     const int first = static_cast<int>(static_cast<long>(slab) * layers / slabs);
     const int end = static_cast<int>(static_cast<long>(slab + 1) * layers / slabs);
@@ -1092,7 +1093,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
 
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids
   VectorX move = VectorX::Zero(nf);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) {
     if (!(fluid_face[f] > 0.0)) continue;
     const auto [axis, coord] = grid.face_coord(f);
@@ -1106,7 +1107,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // move the particles (at most kProjectionMaxStep dx), then keep clear of solids and walls
   const double cap = kProjectionMaxStep * dx;
   double max_move = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : max_move)
+#pragma omp parallel for schedule(static) reduction(max : max_move) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     Vec<Dim> d = grid.interpolate_velocity(move, particles.x[p]);
     const double len = d.norm();
@@ -1378,7 +1379,7 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
       for (int s = 0; s < count; ++s)
         for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
     } else {
-#pragma omp parallel for schedule(dynamic, 1)
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
       for (int s = 0; s < count; ++s)
         for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
     }
@@ -1386,7 +1387,7 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
 
   // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
   VectorX phi(nl);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int li = 0; li < nl; ++li) {
     const double* sum = acc.data() + static_cast<std::size_t>(li) * kStride;
     if (sum[0] > 0.0) {
@@ -1404,7 +1405,7 @@ template <int Dim>
 double max_particle_speed(const Particles<Dim>& particles) {
   const long np = static_cast<long>(particles.size());
   double vmax = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : vmax)
+#pragma omp parallel for schedule(static) reduction(max : vmax) num_threads(process_threads())
   for (long p = 0; p < np; ++p) vmax = std::max(vmax, particles.v[p].norm());
   return vmax;
 }

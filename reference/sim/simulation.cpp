@@ -6,6 +6,7 @@
 /// without liquid step through RigidWorld.
 
 #include "reference/sim/simulation.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <algorithm>
 #include <cstdint>
@@ -735,7 +736,7 @@ void Simulation<Dim>::constrain_velocity_in_solids() {
   if (solids_.empty()) return;
   u_scratch_ = u_;  // (a buffer kept across steps)
   const VectorX& u_old = u_scratch_;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(team_threads(grid_.num_faces()))
   for (int f = 0; f < grid_.num_faces(); ++f) {
     const auto [axis, coord] = grid_.face_coord(f);
     // the face centre is lattice point 2 f + 1 - e_axis of the half lattice

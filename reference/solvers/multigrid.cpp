@@ -1,4 +1,5 @@
 #include "reference/solvers/multigrid.hpp"
+#include "reference/core/parallel.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -22,7 +23,7 @@ void product(const SparseMatrix& a, const VectorX& x, VectorX& y) {
   const int* outer = a.outerIndexPtr();
   const int* inner = a.innerIndexPtr();
   const double* value = a.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows)
+#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
   for (int i = 0; i < n; ++i) {
     double s = 0.0;
     for (int k = outer[i]; k < outer[i + 1]; ++k) s += value[k] * x[inner[k]];
@@ -37,7 +38,7 @@ void residual(const SparseMatrix& a, const VectorX& b, const VectorX& x, VectorX
   const int* outer = a.outerIndexPtr();
   const int* inner = a.innerIndexPtr();
   const double* value = a.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows)
+#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
   for (int i = 0; i < n; ++i) {
     double s = b[i];
     for (int k = outer[i]; k < outer[i + 1]; ++k) s -= value[k] * x[inner[k]];
@@ -100,7 +101,7 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing)
       offset[k + 1] = offset[k] + m * m;
     }
     inverse_[l].assign(offset.back(), 0.0);
-#pragma omp parallel for schedule(static) if (ps.size() > 1024)
+#pragma omp parallel for schedule(static) if (ps.size() > 1024) num_threads(process_threads())
     for (int k = 0; k < ps.size(); ++k) {
       const int* idx = ps.index.data() + ps.start[k];
       const int m = ps.start[k + 1] - ps.start[k];
@@ -156,7 +157,7 @@ void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const 
     const std::vector<int>& list = ps.colours[backward ? num_colours - 1 - step : step];
     const int count = static_cast<int>(list.size());
     // groups of one colour are independent: any thread count gives the serial result
-#pragma omp parallel for schedule(static) if (count > 1)
+#pragma omp parallel for schedule(static) if (count > 1) num_threads(process_threads())
     for (int q = 0; q < count; ++q) {
       const int g = list[backward ? count - 1 - q : q];
       const int first = ps.group_start[g], last = ps.group_start[g + 1];

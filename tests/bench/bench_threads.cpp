@@ -4,13 +4,14 @@
 // and fixed team) idle and busy, and the ratios t(1 thread) / t(2 threads) (above 1: the second thread helps; the goals
 // ask >= 1.6 idle on the Stokes solve and the particle step, >= 0.95 busy everywhere).
 //
-//   build/bench/bench_threads [--n N] [--particles-n N] [--scene NAME] [--frames F] [--budget S]
-//                             [--only SUBSTRING] [--no-busy]
+//   build/bench/bench_threads [--n N] [--particles-n N] [--scene NAME[,NAME...]] [--frames F] [--budget S]
+//                             [--only SUBSTRING[,SUBSTRING...]] [--no-busy]
 //
 // "2t" is the library's default with 2 threads: each parallel kernel chooses its team size (1 or
 // 2) by measuring itself (AdaptiveTeam, reference/core/parallel.hpp); "2t fixed" runs every
-// region with the whole team of 2 (set_adaptive_teams(false), MONOLITH_ADAPTIVE_THREADS=0 for
-// the scene's child process).
+// region with the whole team of 2 (set_adaptive_teams(false) and set_core_monitor(false),
+// MONOLITH_ADAPTIVE_THREADS=0 for the scene's child process). The default also caps every
+// region at the cores other processes leave free (ProcessTeam, parallel.hpp).
 //
 // Kernels: the 3D matrix-free Stokes operator of eq. (8)/(24) (apply, one SSOR application =
 // forward + backward red-black sweep, 30 SSOR-PCG iterations = "the solve"), the 3D matrix-free
@@ -32,6 +33,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <map>
 #include <memory>
 #include <random>
 #include <string>
@@ -60,11 +62,11 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-/// Median time of f over at least 3 runs and about `budget` seconds (at most 100 runs).
-double median_time(const std::function<void()>& f, double budget) {
+/// Median time of f over at least `min_runs` runs and about `budget` seconds (at most 100 runs).
+double median_time(const std::function<void()>& f, double budget, std::size_t min_runs = 3) {
   std::vector<double> t;
   double total = 0.0;
-  while (t.size() < 3 || (total < budget && t.size() < 100)) {
+  while (t.size() < min_runs || (total < budget && t.size() < 100)) {
     const auto t0 = Clock::now();
     f();
     t.push_back(seconds_since(t0));
@@ -154,6 +156,42 @@ StokesScene stokes_scene(int n) {
   return s;
 }
 
+/// The `timing` object of every line of a stats.jsonl summed per key ("solve", "particles", ...),
+/// as "key seconds" pairs in the order of the first line; empty when the file is missing.
+std::vector<std::pair<std::string, double>> phase_seconds(const std::string& path) {
+  std::vector<std::pair<std::string, double>> sums;
+  FILE* f = std::fopen(path.c_str(), "r");
+  if (!f) return sums;
+  std::string line;
+  for (int ch; (ch = std::fgetc(f)) != EOF;) {
+    if (ch != '\n') {
+      line += static_cast<char>(ch);
+      continue;
+    }
+    const std::size_t at = line.find("\"timing\":");
+    if (at != std::string::npos && line.find('{', at) != std::string::npos) {
+      std::size_t pos = line.find('{', at) + 1;
+      const std::size_t end = line.find('}', pos);
+      while (pos < end) {
+        const std::size_t q0 = line.find('"', pos);
+        if (q0 == std::string::npos || q0 > end) break;
+        const std::size_t q1 = line.find('"', q0 + 1);
+        const std::string key = line.substr(q0 + 1, q1 - q0 - 1);
+        const double value = std::atof(line.c_str() + line.find(':', q1) + 1);
+        auto it = std::find_if(sums.begin(), sums.end(), [&](const auto& e) { return e.first == key; });
+        if (it == sums.end()) sums.emplace_back(key, value);
+        else it->second += value;
+        pos = line.find(',', q1);
+        if (pos == std::string::npos) break;
+        ++pos;
+      }
+    }
+    line.clear();
+  }
+  std::fclose(f);
+  return sums;
+}
+
 std::string self_dir() {
   char buf[4096];
   const ssize_t len = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
@@ -198,7 +236,17 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
 
   std::vector<Kernel> kernels;
-  auto wanted_name = [&](const std::string& name) { return only.empty() || name.find(only) != std::string::npos; };
+  std::map<std::string, std::vector<std::vector<std::pair<std::string, double>>>> scene_phases;
+  // --only A,B,...: the kernels whose name contains one of the substrings
+  auto wanted_name = [&](const std::string& name) {
+    if (only.empty()) return true;
+    for (std::size_t from = 0; from <= only.size();) {
+      const std::size_t comma = std::min(only.find(',', from), only.size());
+      if (comma > from && name.find(only.substr(from, comma - from)) != std::string::npos) return true;
+      from = comma + 1;
+    }
+    return false;
+  };
   // a group is built when one of its kernels is wanted
   auto wanted = [&](const std::string& tag) {
     for (const char* k : {"", " apply", " SSOR", " solve (30 PCG it.)", " P2G", " G2P", " advect"})
@@ -297,19 +345,31 @@ int main(int argc, char** argv) {
                          advect_particles(moved, pgrid, pu_field, 0.01, no_solids, walls);
                        }});
   }
-  // a whole 3D scene through the CLI
+  // whole 3D scenes through the CLI (--scene A,B,...); the per-phase seconds of each run (the
+  // `timing` of stats.jsonl summed over the frames) go to scene_phases, printed after the table
   const std::string exe = self_dir() + "/../bin/monolith";
-  const std::string scene_tag = "scene " + scene + " (" + std::to_string(frames) + " frame)";
-  auto run_scene = [&]() {
-    const int threads = omp_get_max_threads();
-    const std::string out = "/tmp/bench_threads_scene_" + std::to_string(getpid());
-    const std::string cmd = std::string(adaptive_teams() ? "" : "MONOLITH_ADAPTIVE_THREADS=0 ") +
-                            exe + " run " + scene + " --frames " + std::to_string(frames) +
-                            " --threads " + std::to_string(threads) +
-                            " --no-render --quiet --out " + out + " >/dev/null 2>&1; rm -rf " + out;
-    if (std::system(cmd.c_str()) != 0) std::fprintf(stderr, "bench_threads: %s failed\n", cmd.c_str());
-  };
-  if (wanted_name(scene_tag)) kernels.push_back({scene_tag, run_scene});
+  std::vector<std::string> scenes;
+  for (std::size_t from = 0; from <= scene.size();) {
+    const std::size_t comma = std::min(scene.find(',', from), scene.size());
+    if (comma > from) scenes.push_back(scene.substr(from, comma - from));
+    from = comma + 1;
+  }
+  for (const std::string& name : scenes) {
+    const std::string scene_tag = "scene " + name + " (" + std::to_string(frames) + " frame" +
+                                  (frames == 1 ? "" : "s") + ")";
+    auto run_scene = [&, name, scene_tag]() {
+      const int threads = omp_get_max_threads();
+      const std::string out = "/tmp/bench_threads_scene_" + std::to_string(getpid());
+      const std::string cmd = std::string(adaptive_teams() ? "" : "MONOLITH_ADAPTIVE_THREADS=0 ") +
+                              exe + " run " + name + " --frames " + std::to_string(frames) +
+                              " --threads " + std::to_string(threads) +
+                              " --no-render --quiet --out " + out + " >/dev/null 2>&1";
+      if (std::system(cmd.c_str()) != 0) std::fprintf(stderr, "bench_threads: %s failed\n", cmd.c_str());
+      scene_phases[scene_tag].push_back(phase_seconds(out + "/stats.jsonl"));
+      std::system(("rm -rf " + out).c_str());
+    };
+    if (wanted_name(scene_tag)) kernels.push_back({scene_tag, run_scene});
+  }
 
   // measure: every kernel idle then busy; 1 thread, 2 threads with the team size measured per
   // call (AdaptiveTeam, the library's default: "at most 2"), 2 threads always (fixed team)
@@ -318,26 +378,42 @@ int main(int argc, char** argv) {
   for (const Kernel& k : kernels) {
     if (!wanted_name(k.name)) continue;
     double t[2][3] = {{0, 0, 0}, {0, 0, 0}};
+    int team_after[2] = {0, 0};  // the process-wide team at the end of the 2t runs
     for (int busy = 0; busy < (busy_runs ? 2 : 1); ++busy) {
       BusyCore spinner;
       if (busy) spinner.start();
       for (int config = 0; config < 3; ++config) {
         omp_set_num_threads(config == 0 ? 1 : 2);
         set_adaptive_teams(config != 2);
-        k.run();  // warm up
+        set_core_monitor(config != 2);
         const bool whole = k.name.rfind("scene", 0) == 0;
-        t[busy][config] = median_time(k.run, whole ? 0.0 : budget);
+        if (!whole) k.run();  // warm up (a whole scene: one run, its start-up included)
+        t[busy][config] = whole ? median_time(k.run, 0.0, 1) : median_time(k.run, budget);
+        if (config == 1) team_after[busy] = process_threads();
       }
       set_adaptive_teams(true);
+      set_core_monitor(true);
     }
     auto ms = [](double s) { return s * 1e3; };
     std::printf("%-40s %7.2fms %7.2fms %7.2fms %6.2f %6.2f", k.name.c_str(), ms(t[0][0]),
                 ms(t[0][1]), ms(t[0][2]), t[0][0] / t[0][1], t[0][0] / t[0][2]);
     if (busy_runs)
-      std::printf(" %7.2fms %7.2fms %7.2fms %6.2f %6.2f", ms(t[1][0]), ms(t[1][1]), ms(t[1][2]),
-                  t[1][0] / t[1][1], t[1][0] / t[1][2]);
+      std::printf(" %7.2fms %7.2fms %7.2fms %6.2f %6.2f  team %d/%d", ms(t[1][0]), ms(t[1][1]),
+                  ms(t[1][2]), t[1][0] / t[1][1], t[1][0] / t[1][2], team_after[0], team_after[1]);
     std::printf("\n");
     std::fflush(stdout);
+  }
+  // where a whole scene's time goes: the phases of stats.jsonl's `timing`, per configuration
+  // (idle 1t, 2t, 2t fixed, then busy 1t, 2t, 2t fixed)
+  for (const auto& [tag, runs] : scene_phases) {
+    std::printf("\n%s, seconds per phase (stats.jsonl timing summed over the frames):\n", tag.c_str());
+    const char* configs[] = {"idle 1t", "idle 2t", "idle 2t fixed", "busy 1t", "busy 2t", "busy 2t fixed"};
+    for (std::size_t r = 0; r < runs.size() && r < 6; ++r) {
+      std::printf("  %-14s", configs[r]);
+      for (const auto& [key, seconds] : runs[r])
+        if (seconds > 0.0) std::printf(" %s %.3f", key.c_str(), seconds);
+      std::printf("\n");
+    }
   }
   std::printf("\nload %.2f at the end (ratio = t(1 thread) / t(2 threads, team measured), fixed = "
               "t(1 thread) / t(2 threads always); goals: idle >= 1.6 on the Stokes solve and the "

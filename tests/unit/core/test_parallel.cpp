@@ -30,6 +30,15 @@ TEST_CASE("auto threads: between 1 and the CPUs of the affinity mask", "[unit]")
   const int free = free_cores(20);
   CHECK(free >= 1);
   CHECK(free <= cpus);
+  // with the process-wide team on, auto caps at the whole mask (the team follows the free
+  // cores during the run); without it, the cores free at the start
+  const bool monitor = core_monitor();
+  set_core_monitor(true);
+  CHECK(automatic_thread_count() == cpus);
+  set_core_monitor(false);
+  CHECK(automatic_thread_count() >= 1);
+  CHECK(automatic_thread_count() <= cpus);
+  set_core_monitor(monitor);
 }
 
 TEST_CASE("dynamic chunks: at least 1, about 8 per thread of the team", "[unit]") {

@@ -34,8 +34,9 @@ Outputs run_kernels(const LinearOperator& op, const VectorX& x, const VectorX& b
   const int saved = omp_get_max_threads();
   omp_set_num_threads(threads);
   // the whole team on every call (no measured choice of a smaller one), so "3 threads" is 3
-  const bool adaptive = adaptive_teams();
+  const bool adaptive = adaptive_teams(), monitor = core_monitor();
   set_adaptive_teams(false);
+  set_core_monitor(false);  // nor a smaller one because the machine is busy
   Outputs o;
   op.apply(x, o.y);
   ssor_precondition(op, b, o.z, 1.0);
@@ -45,6 +46,7 @@ Outputs run_kernels(const LinearOperator& op, const VectorX& x, const VectorX& b
   op.backward_sweep(b, o.backward, 0.8);
   omp_set_num_threads(saved);
   set_adaptive_teams(adaptive);
+  set_core_monitor(monitor);
   return o;
 }
 
@@ -138,18 +140,23 @@ std::vector<int> drive(AdaptiveTeam& site, const std::vector<double>& cost, int 
   return used;
 }
 
-/// Sets the OpenMP cap and switches the measured choice on for the scope.
+/// Sets the OpenMP cap and switches the measured choice on for the scope; the process-wide
+/// team (ProcessTeam) is off unless `monitor`, so the machine's load does not lower the cap of
+/// a test on made-up timings.
 struct TeamCap {
-  explicit TeamCap(int threads) : saved(omp_get_max_threads()), adaptive(adaptive_teams()) {
+  explicit TeamCap(int threads, bool monitor = false)
+      : saved(omp_get_max_threads()), adaptive(adaptive_teams()), monitored(core_monitor()) {
     omp_set_num_threads(threads);
     set_adaptive_teams(true);
+    set_core_monitor(monitor);
   }
   ~TeamCap() {
     omp_set_num_threads(saved);
     set_adaptive_teams(adaptive);
+    set_core_monitor(monitored);
   }
   int saved;
-  bool adaptive;
+  bool adaptive, monitored;
 };
 
 }  // namespace
@@ -245,7 +252,7 @@ TEST_CASE("PCG with measured team sizes: bitwise equal to the one-thread solve",
   settings.tolerance = 1e-10;
   settings.max_iterations = 40;  // enough calls of each kernel for several probes
   auto solve = [&](int threads) {
-    const TeamCap cap(threads);
+    const TeamCap cap(threads, true);  // measured teams under the process-wide team
     VectorX x;
     const PcgResult r = pcg_solve(op, b, x, settings);
     CHECK(r.iterations > 10);
@@ -257,4 +264,68 @@ TEST_CASE("PCG with measured team sizes: bitwise equal to the one-thread solve",
     const VectorX two = solve(2);
     CHECK((one - two).cwiseAbs().maxCoeff() == 0.0);
   }
+}
+
+TEST_CASE("process-wide team: the cores other processes leave free, with a hysteresis", "[unit]") {
+  // 2 CPUs: nobody else -> 2; another process on a whole core -> 1; back -> 2
+  CHECK(next_process_team(2, 2, 0.0) == 2);
+  CHECK(next_process_team(2, 2, 1.0) == 1);
+  CHECK(next_process_team(2, 1, 1.0) == 1);
+  CHECK(next_process_team(2, 1, 0.0) == 2);
+  // inside the band around half a core the team stays as it is (no flipping on noise)
+  for (double others : {0.45, 0.5, 0.55}) {
+    CAPTURE(others);
+    CHECK(next_process_team(2, 2, others) == 2);
+    CHECK(next_process_team(2, 1, others) == 1);
+  }
+  CHECK(next_process_team(2, 2, 0.65) == 1);
+  CHECK(next_process_team(2, 1, 0.35) == 2);
+  // never below 1 (both cores taken), never above the CPUs
+  CHECK(next_process_team(2, 2, 2.0) == 1);
+  CHECK(next_process_team(2, 1, 5.0) == 1);
+  CHECK(next_process_team(2, 7, 0.0) == 2);
+  CHECK(next_process_team(2, 0, 0.0) == 2);
+  // 8 CPUs, 3 cores taken -> 5; a fourth half-taken core: down only past the band
+  CHECK(next_process_team(8, 8, 3.0) == 5);
+  CHECK(next_process_team(8, 5, 3.55) == 5);
+  CHECK(next_process_team(8, 5, 3.65) == 4);
+  CHECK(next_process_team(8, 4, 3.45) == 4);
+  CHECK(next_process_team(8, 4, 3.35) == 5);
+}
+
+TEST_CASE("process-wide team: within 1..the cap, and the whole cap when switched off", "[unit]") {
+  const int cpus = static_cast<int>(affinity_cpus().size());
+  {
+    const TeamCap cap(2, true);
+    for (int i = 0; i < 3; ++i) {
+      const int team = process_threads();
+      CHECK(team >= 1);
+      CHECK(team <= std::min(2, cpus));
+      std::this_thread::sleep_for(std::chrono::milliseconds(110));  // a new window
+    }
+    CHECK(ProcessTeam::instance().others() >= 0.0);
+    CHECK(team_threads(kParallelMinWork - 1) == 1);
+    int nested = -1;
+#pragma omp parallel num_threads(2)
+    {
+#pragma omp single
+      nested = process_threads();
+    }
+    CHECK(nested == 1);
+  }
+  const TeamCap off(3, false);
+  CHECK(process_threads() == 3);
+  CHECK(team_threads(kParallelMinWork) == 3);
+}
+
+TEST_CASE("AdaptiveTeam: a change of the cap starts the site afresh at the new cap", "[unit]") {
+  AdaptiveTeam site;
+  {
+    const TeamCap cap(2);
+    drive(site, {0.0, 1.0e-3, 2.0e-3}, 8);
+    REQUIRE(site.current() == 1);
+  }
+  const TeamCap cap(3);
+  CHECK(site.choose(4 * kParallelMinWork) == 3);
+  CHECK(site.current() == 3);
 }
