@@ -8,6 +8,8 @@
 #include <cmath>
 #include <numeric>
 
+#include "reference/core/parallel.hpp"
+
 namespace monolith {
 
 namespace {
@@ -254,7 +256,7 @@ BroadPhase<Dim> broad_phase(const std::vector<RigidBody<Dim>>& bodies, double se
   for (const auto& p : bp.pairs) needed[p.first] = needed[p.second] = 1;
   for (int i = 0; i < n; ++i) needed[i] = needed[i] || bodies[i].is_dynamic();
   bp.world.resize(n);
-#pragma omp parallel for schedule(dynamic)
+#pragma omp parallel for schedule(dynamic) num_threads(process_threads())
   for (int i = 0; i < n; ++i) {
     if (!needed[i] || bodies[i].is_sphere()) continue;
     const Mat<Dim> r = bodies[i].rotation();
@@ -499,11 +501,11 @@ std::vector<Contact<Dim>> detect_contacts(const std::vector<RigidBody<Dim>>& bod
   const PairQuery<Dim> query{bodies, bp, search_distance, reduction};
   // narrow phase per pair, then the dynamic bodies against the walls, each in parallel
   std::vector<std::vector<Contact<Dim>>> pair_contacts(bp.pairs.size());
-#pragma omp parallel for schedule(dynamic)
+#pragma omp parallel for schedule(dynamic) num_threads(process_threads())
   for (std::size_t k = 0; k < bp.pairs.size(); ++k)
     pair_contacts[k] = narrow_phase<Dim>(query, bp.pairs[k]);
   std::vector<std::vector<Contact<Dim>>> body_wall_contacts(n);
-#pragma omp parallel for schedule(dynamic)
+#pragma omp parallel for schedule(dynamic) num_threads(process_threads())
   for (int i = 0; i < n; ++i)
     if (bodies[i].is_dynamic())
       body_wall_contacts[i] = wall_contacts<Dim>(bodies[i], i, bp.boxes[i], bp.world[i], walls,

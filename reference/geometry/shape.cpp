@@ -14,6 +14,7 @@
 #include <utility>
 
 #include "reference/core/errors.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/geometry/shape_tools.hpp"
 
 namespace monolith {
@@ -441,7 +442,7 @@ double volume_inside(const Shape<Dim>& shape, const Box<Dim>& region, int sample
   for (int a = 0; a < Dim; ++a) total *= n;
   long long inside = 0;
   // midpoint rule: count the sample points with negative distance
-#pragma omp parallel for reduction(+ : inside) schedule(static)
+#pragma omp parallel for reduction(+ : inside) schedule(static) num_threads(process_threads())
   for (long long i = 0; i < total; ++i) {
     long long r = i;
     Vec<Dim> x;

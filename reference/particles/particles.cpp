@@ -1016,7 +1016,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     const int nl = lattice.size();
     VectorX fluid_liquid = phi, extended = phi;
     const double reach = kLiquidSolidReach * dx;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int li = 0; li < nl; ++li) {
       // only points near the liquid can change (elsewhere phi >= 2 dx stays positive)
       if (!(phi[li] < 2.0 * dx)) continue;

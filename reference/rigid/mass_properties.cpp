@@ -12,6 +12,7 @@
 #include "dim2/shapes_2d.hpp"
 #include "dim3/shapes_3d.hpp"
 #include "reference/core/errors.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/geometry/shape_tools.hpp"
 
 namespace monolith {
@@ -306,15 +307,20 @@ MassProperties<Dim> integrate_mass_properties(const Shape<Dim>& shape, const Box
   const double cell_volume = std::pow(h, Dim);
   // each cell: fraction clamp(1/2 - d/h, 0, 1) of its volume at its centre, plus its own
   // second moment h^2/12 per axis
-  double vol = 0.0;
-  std::vector<double> acc(Dim + Dim * Dim, 0.0);
-#pragma omp parallel
-  {
+  // Partial sums over fixed blocks of cells, added in block order: the same bits for any thread
+  // count and any run (a critical section would add the threads' sums in arrival order).
+  constexpr long long kBlock = 4096;
+  const long long blocks = (total + kBlock - 1) / kBlock;
+  std::vector<double> vol_b(static_cast<std::size_t>(blocks), 0.0);
+  std::vector<Vec<Dim>> first_b(static_cast<std::size_t>(blocks), Vec<Dim>::Zero());
+  std::vector<Mat<Dim>> second_b(static_cast<std::size_t>(blocks), Mat<Dim>::Zero());
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (long long b = 0; b < blocks; ++b) {
     double vol_t = 0.0;
     Vec<Dim> first_t = Vec<Dim>::Zero();
     Mat<Dim> second_t = Mat<Dim>::Zero();
-#pragma omp for schedule(static)
-    for (long long i = 0; i < total; ++i) {
+    const long long end = std::min(total, (b + 1) * kBlock);
+    for (long long i = b * kBlock; i < end; ++i) {
       long long r = i;
       Vec<Dim> x;
       for (int a = 0; a < Dim; ++a) {
@@ -328,12 +334,16 @@ MassProperties<Dim> integrate_mass_properties(const Shape<Dim>& shape, const Box
       first_t += f * y;
       second_t += f * (y * y.transpose() + Mat<Dim>::Identity() * (h * h / 12.0));
     }
-#pragma omp critical
-    {
-      vol += vol_t;
-      for (int a = 0; a < Dim; ++a) acc[a] += first_t[a];
-      for (int a = 0; a < Dim * Dim; ++a) acc[Dim + a] += second_t.data()[a];
-    }
+    vol_b[b] = vol_t;
+    first_b[b] = first_t;
+    second_b[b] = second_t;
+  }
+  double vol = 0.0;
+  std::vector<double> acc(Dim + Dim * Dim, 0.0);
+  for (long long b = 0; b < blocks; ++b) {
+    vol += vol_b[b];
+    for (int a = 0; a < Dim; ++a) acc[a] += first_b[b][a];
+    for (int a = 0; a < Dim * Dim; ++a) acc[Dim + a] += second_b[b].data()[a];
   }
   Moments<Dim> m;
   m.volume = vol * cell_volume;
