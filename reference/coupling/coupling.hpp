@@ -88,8 +88,7 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
 /// Working buffers of solid_weights kept by a caller that computes the weights every step.
 template <int Dim>
 struct SolidWeightsScratch {
-  VectorX body_phi;         ///< one body's lattice phi
-  VectorX sum;              ///< sum of the raw face fractions (overlap rule)
+  VectorX body_phi;         ///< one body's lattice phi (released at the end of each call)
   LatticeSigns<Dim> signs;  ///< lattice-cell classes of the static solids', then the union's phi
   /// Set by the caller, one entry per body (missing entries count as false): the body never
   /// moves (a fixed body in the body list), so its lattice phi and raw face fractions are

@@ -258,6 +258,9 @@ void Simulation<Dim>::update_liquid_weights() {
     cell_negative_fractions(grid_, lattice_, liquid_phi_, liquid_signs_, volume_cells_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
+  // the extended level set is read by the weights above only: its lattice-sized buffer goes
+  // back to the heap for the solve
+  extended_phi_ = VectorX();
 }
 
 template <int Dim>
@@ -486,10 +489,12 @@ void Simulation<Dim>::update_moving_solids() {
   SolidWeights<Dim>& solids = coupled_in_.solids;
   if (solid_scratch_.fixed.empty())
     for (const auto& b : rigid_->bodies()) solid_scratch_.fixed.push_back(!b.moves());
+  // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
+  // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
+  // one lattice-sized vector serves both
+  solids.lattice_phi.swap(solid_phi_);
   solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
                      scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
-  // the union's level set moves to solid_phi_; the swap hands the old buffer back for the next
-  // call (nothing reads solids.lattice_phi after this)
   solid_phi_.swap(solids.lattice_phi);
   // W_F^u moves to weights_ the same way (solid_weights overwrites every entry of its
   // fluid_face, so the old buffer it gets back needs no values); W_F^s stays in solids, where
