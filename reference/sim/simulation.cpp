@@ -497,8 +497,10 @@ void Simulation<Dim>::update_moving_solids() {
                      scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
   solid_phi_.swap(solids.lattice_phi);
   // W_F^u moves to weights_ the same way (solid_weights overwrites every entry of its
-  // fluid_face, so the old buffer it gets back needs no values); W_F^s stays in solids, where
-  // solve_coupled reads it (stress_fluid_ is the uncoupled solve's: freed here)
+  // fluid_face, so the old buffer it gets back needs no values): coupled_in_.solids.fluid_face
+  // is stale from here on, W_F^u is weights_.fluid_face (in the solve:
+  // in.weights.pressure.fluid_face). W_F^s stays in solids, where solve_coupled reads it
+  // (stress_fluid_ is the uncoupled solve's: freed here)
   weights_.fluid_face.swap(solids.fluid_face);
   stress_fluid_ = VectorX();
   rebuild_solid_field();
