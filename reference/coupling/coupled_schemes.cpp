@@ -4,6 +4,7 @@
 #include "reference/coupling/coupled_schemes.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -150,12 +151,13 @@ std::vector<RigidBody<Dim>> with_velocities(std::vector<RigidBody<Dim>> bodies,
 
 template <int Dim>
 std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>& in,
-                                                    const StokesWeights& w, StressForm form,
+                                                    std::shared_ptr<const StokesWeights> w,
+                                                    StressForm form,
                                                     StokesUnknowns unknowns, const VectorX& u_star,
                                                     const std::vector<RigidBody<Dim>>& bodies,
                                                     Backend backend) {
   const ContactSystem<Dim> contacts(bodies, in.contacts, in.contact_params);
-  return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, w, in.dt, u_star, bodies,
+  return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, std::move(w), in.dt, u_star, bodies,
                                                  in.solids, contacts, backend, unknowns);
 }
 
@@ -308,9 +310,22 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   if (in.u_star.size() != in.grid.num_faces())
     throw std::invalid_argument("solve_coupled_step: u_star must have one entry per face");
   CoupledSolveResult r;
-  // the inviscid solves: viscosity zeroed, so no stress unknowns
-  StokesWeights inviscid = in.weights;
-  inviscid.viscosity.setZero();
+  // the inviscid solves: viscosity zeroed, so no stress unknowns. When the input viscosity is
+  // already +0 everywhere (inviscid liquids, the P.. C schemes) the input's weights serve as
+  // they are: a copy holds four face-, one cell- and three stress-sized vectors (1.8 GB at the
+  // paper's 256x128x256 grid)
+  const bool all_plus_zero =
+      std::all_of(in.weights.viscosity.data(),
+                  in.weights.viscosity.data() + in.weights.viscosity.size(),
+                  [](double eta) { return eta == 0.0 && !std::signbit(eta); });
+  // (the systems built below share their weights: they live in this function's State values,
+  // which in.weights outlives, so the input's weights are lent to them without an owner)
+  std::shared_ptr<const StokesWeights> inviscid(&in.weights, [](const StokesWeights*) {});
+  if (!all_plus_zero) {
+    auto zeroed = std::make_shared<StokesWeights>(in.weights);
+    zeroed->viscosity.setZero();
+    inviscid = std::move(zeroed);
+  }
   // the state between the solves of the sequence: the system and unknowns of the last solve
   // and the velocities (u, v) the next solve starts from (v empty: the bodies as given)
   struct State {
@@ -321,13 +336,13 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   };
   // builds eq. (24) from `from` and runs the scheme's solve (unified: the MLCP; otherwise the
   // partitioned solves), booking iterations and time as coupled or VC-coupled
-  auto solve = [&](const State& from, const StokesWeights& w, StressForm form,
+  auto solve = [&](const State& from, std::shared_ptr<const StokesWeights> w, StressForm form,
                    StokesUnknowns unknowns, bool unified, bool viscosity_stage) {
     State out;
     const std::vector<RigidBody<Dim>> bodies =
         from.v.size() ? with_velocities(in.bodies, from.system->contacts().body_dof, from.v)
                       : in.bodies;
-    out.system = build_system(in, w, form, unknowns, from.u, bodies, backend);
+    out.system = build_system(in, std::move(w), form, unknowns, from.u, bodies, backend);
     out.bodies = bodies;
     const MonolithicSystem<Dim>& sys = *out.system;
     if (unified) {
@@ -357,8 +372,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   };
   // PV.. C schemes: (tau, p) with the input viscosity or eta^k of Algorithm 2
   auto unified = [&](const State& from, const VectorX* eta) {
-    StokesWeights w = in.weights;
-    if (eta) w.viscosity = *eta;
+    auto w = std::make_shared<StokesWeights>(in.weights);
+    if (eta) w->viscosity = *eta;
     const State out = solve(from, w, StressForm::reduced, StokesUnknowns::pressure_and_stress,
                             scheme == CouplingScheme::pvc_unified, false);
     count_dofs(*out.system, r);
@@ -366,8 +381,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   };
   // the VC-unified solve of PC-VC-PC: stress only (p fixed at 0), the full form
   auto viscous = [&](const State& from, const VectorX* eta) {
-    StokesWeights w = in.weights;
-    if (eta) w.viscosity = *eta;
+    auto w = std::make_shared<StokesWeights>(in.weights);
+    if (eta) w->viscosity = *eta;
     const State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true);
     r.stress_dofs = out.system->num_stress();
     return out;

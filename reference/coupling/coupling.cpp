@@ -155,8 +155,6 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     classify_lattice_cells(grid, lattice, union_phi, scratch.signs);
     face_negative_fractions(grid, lattice, union_phi, scratch.signs, w.static_face);
   }
-  VectorX& sum = scratch.sum;
-  sum = w.static_face;
   w.body_face.resize(bodies.size());
   scratch.fixed_phi.resize(bodies.size());
   scratch.fixed_face.resize(bodies.size());
@@ -167,7 +165,6 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
         scratch.fixed_face[i].size() == nf) {
       // a body that never moves: its values of the first call
       w.body_face[i] = scratch.fixed_face[i];
-      sum += w.body_face[i];
       union_phi = union_phi.cwiseMin(scratch.fixed_phi[i]);
       continue;
     }
@@ -175,7 +172,6 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
                              scratch.body_phi);
     body_face_fractions<Dim>(grid, lattice, scratch.body_phi, body.shape->bounds(),
                              w.body_face[i]);
-    sum += w.body_face[i];
     union_phi = union_phi.cwiseMin(scratch.body_phi);
     if (fixed) {
       scratch.fixed_phi[i] = scratch.body_phi;
@@ -183,10 +179,17 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     }
   }
 
-  // overlap rule: scale every contribution by 1/sum where the sum exceeds 1
+  // the body's lattice phi is not needed any more: its memory goes back to the heap for the
+  // solve (a lattice-sized vector, 541 MB at the paper's 256x128x256 grid)
+  scratch.body_phi = VectorX();
+
+  // overlap rule: scale every contribution by 1/sum where the sum exceeds 1 (the sum in the
+  // order static, body 0, body 1, ..., formed per face instead of as a face-sized vector)
   for (int f = 0; f < nf; ++f) {
-    if (sum[f] <= 1.0) continue;
-    const double scale = 1.0 / sum[f];
+    double sum = w.static_face[f];
+    for (const VectorX& body : w.body_face) sum += body[f];
+    if (sum <= 1.0) continue;
+    const double scale = 1.0 / sum;
     w.static_face[f] *= scale;
     for (VectorX& body : w.body_face) body[f] *= scale;
   }

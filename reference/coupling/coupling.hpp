@@ -88,8 +88,7 @@ SolidWeights<Dim> solid_weights(const MacGrid<Dim>& grid,
 /// Working buffers of solid_weights kept by a caller that computes the weights every step.
 template <int Dim>
 struct SolidWeightsScratch {
-  VectorX body_phi;         ///< one body's lattice phi
-  VectorX sum;              ///< sum of the raw face fractions (overlap rule)
+  VectorX body_phi;         ///< one body's lattice phi (released at the end of each call)
   LatticeSigns<Dim> signs;  ///< lattice-cell classes of the static solids', then the union's phi
   /// Set by the caller, one entry per body (missing entries count as false): the body never
   /// moves (a fixed body in the body list), so its lattice phi and raw face fractions are
@@ -141,11 +140,18 @@ SparseMatrix aggregation_matrix(const MacGrid<Dim>& grid,
 /// or outside all bodies), the force terms cancel exactly, so only the surface cells and
 /// surface stress DOFs are visited and stored. The matrix-free products evaluate the same
 /// columns on the fly, so they equal the assembled matrices bit for bit.
+///
+/// The operator reads the per-body face weights of `weights` (weights.body_face) in place: they
+/// must outlive it and not change while it is used (a grid-sized vector per body is not copied;
+/// at the paper's 256x128x256 grid each is 200 MB).
 template <int Dim>
 class BodyCouplingOperator {
  public:
   BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
                        const SolidWeights<Dim>& weights, BodyGroup group);
+  /// A temporary's weights would not outlive the operator.
+  BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
+                       SolidWeights<Dim>&& weights, BodyGroup group) = delete;
 
   int num_rows() const { return num_rows_; }
   int num_cells() const { return grid_.num_cells(); }
@@ -198,7 +204,7 @@ class BodyCouplingOperator {
   MacGrid<Dim> grid_;
   StressGrid<Dim> stress_;
   std::vector<CouplingBody<Dim>> bodies_;
-  std::vector<VectorX> body_face_;
+  const std::vector<VectorX>& body_face_;  ///< SolidWeights::body_face of the constructor's weights
   std::vector<int> rows_;
   int num_rows_ = 0;
   std::vector<std::vector<int>> surface_cells_, surface_stress_;

@@ -59,9 +59,21 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
                                         const SolidWeights<Dim>& solids,
                                         const ContactSystem<Dim>& contacts,
                                         Backend backend, StokesUnknowns unknowns)
-    : grid_(grid), stress_(grid), layout_(stress_, form), w_(w), dt_(dt), u_star_(u_star),
-      backend_(backend), unknowns_(unknowns), matrix_free_(backend == Backend::matrix_free),
-      contacts_(contacts) {
+    : MonolithicSystem(grid, form, std::make_shared<const StokesWeights>(w), dt, u_star, bodies,
+                       solids, contacts, backend, unknowns) {}
+
+template <int Dim>
+MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm form,
+                                        std::shared_ptr<const StokesWeights> weights, double dt,
+                                        const VectorX& u_star,
+                                        const std::vector<RigidBody<Dim>>& bodies,
+                                        const SolidWeights<Dim>& solids,
+                                        const ContactSystem<Dim>& contacts,
+                                        Backend backend, StokesUnknowns unknowns)
+    : grid_(grid), stress_(grid), layout_(stress_, form), w_owner_(std::move(weights)),
+      w_(*w_owner_), dt_(dt), u_star_(u_star), backend_(backend), unknowns_(unknowns),
+      matrix_free_(backend == Backend::matrix_free), contacts_(contacts) {
+  const StokesWeights& w = w_;
   // alpha = 1 / dx^Dim, shared with the contact blocks (section 4.1)
   alpha_ = 1.0 / std::pow(grid.dx(), Dim);
   if (std::abs(contacts.alpha - alpha_) > 1e-12 * alpha_)

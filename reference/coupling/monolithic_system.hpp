@@ -67,6 +67,14 @@ class MonolithicSystem {
                    const SolidWeights<Dim>& solids, const ContactSystem<Dim>& contacts,
                    Backend backend,
                    StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
+  /// The same with weights shared instead of copied (the copy holds four face-, one cell- and
+  /// three stress-sized vectors: 2 GB at the paper's 256x128x256 grid). A caller whose weights
+  /// outlive the system may pass a non-owning pointer.
+  MonolithicSystem(const MacGrid<Dim>& grid, StressForm form,
+                   std::shared_ptr<const StokesWeights> w, double dt, const VectorX& u_star,
+                   const std::vector<RigidBody<Dim>>& bodies, const SolidWeights<Dim>& solids,
+                   const ContactSystem<Dim>& contacts, Backend backend,
+                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
 
   int num_stress() const { return dofs_.num_stress(); }
   int num_pressure() const { return dofs_.num_pressure(); }
@@ -208,7 +216,8 @@ class MonolithicSystem {
   MacGrid<Dim> grid_;
   StressGrid<Dim> stress_;
   StressLayout<Dim> layout_;
-  StokesWeights w_;
+  std::shared_ptr<const StokesWeights> w_owner_;  ///< the weights (shared or a copy of them)
+  const StokesWeights& w_;                         ///< *w_owner_
   double dt_ = 0.0, alpha_ = 1.0;
   VectorX u_star_;
   Backend backend_;

@@ -263,6 +263,9 @@ void Simulation<Dim>::update_liquid_weights() {
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
+  // the extended level set is read by the weights above only: its lattice-sized buffer goes
+  // back to the heap for the solve
+  extended_phi_ = VectorX();
 }
 
 template <int Dim>
@@ -491,13 +494,20 @@ void Simulation<Dim>::update_moving_solids() {
   SolidWeights<Dim>& solids = coupled_in_.solids;
   if (solid_scratch_.fixed.empty())
     for (const auto& b : rigid_->bodies()) solid_scratch_.fixed.push_back(!b.moves());
+  // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
+  // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
+  // one lattice-sized vector serves both
+  solids.lattice_phi.swap(solid_phi_);
   solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
                      scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
-  // the union's level set moves to solid_phi_; the swap hands the old buffer back for the next
-  // call (nothing reads solids.lattice_phi after this)
   solid_phi_.swap(solids.lattice_phi);
-  weights_.fluid_face = solids.fluid_face;
-  if (sequence_ != SolveSequence::pressure) stress_fluid_ = solids.fluid_stress;
+  // W_F^u moves to weights_ the same way (solid_weights overwrites every entry of its
+  // fluid_face, so the old buffer it gets back needs no values): coupled_in_.solids.fluid_face
+  // is stale from here on, W_F^u is weights_.fluid_face (in the solve:
+  // in.weights.pressure.fluid_face). W_F^s stays in solids, where solve_coupled reads it
+  // (stress_fluid_ is the uncoupled solve's: freed here)
+  weights_.fluid_face.swap(solids.fluid_face);
+  stress_fluid_ = VectorX();
   rebuild_solid_field();
 }
 
@@ -541,12 +551,28 @@ void Simulation<Dim>::solve_coupled(double dt) {
   stats_.contact_count = std::max(stats_.contact_count, contact_stats.contacts);
   stats_.max_penetration = std::max(stats_.max_penetration, contact_stats.max_penetration);
   // the weights of eq. (24): W_F from the bodies' pose, W_L from the liquid; the P.. C schemes
-  // and inviscid liquids have no stress unknowns (eta = 0 leaves every stress DOF inactive)
-  in.weights.pressure = weights_;
-  in.weights.fluid_stress = in.solids.fluid_stress;
+  // and inviscid liquids have no stress unknowns (eta = 0 leaves every stress DOF inactive).
+  // The grid-sized vectors are swapped into the input for the solve and back after it (copies
+  // of them were 1.2 GB at the paper's 256x128x256 grid); the zero vectors of the P.. C
+  // schemes are made once and stay zero (the solve reads its input only)
   const bool stress = sequence_ != SolveSequence::pressure;
-  in.weights.liquid_stress = stress ? stress_liquid_ : VectorX::Zero(stress_grid_.num_dofs());
-  in.weights.viscosity = stress ? stress_eta_ : VectorX::Zero(stress_grid_.num_dofs());
+  auto lend = [&] {
+    std::swap(in.weights.pressure, weights_);
+    in.weights.fluid_stress.swap(in.solids.fluid_stress);
+    if (stress) {
+      in.weights.liquid_stress.swap(stress_liquid_);
+      in.weights.viscosity.swap(stress_eta_);
+    }
+  };
+  if (!stress && in.weights.viscosity.size() != stress_grid_.num_dofs()) {
+    in.weights.liquid_stress.setZero(stress_grid_.num_dofs());
+    in.weights.viscosity.setZero(stress_grid_.num_dofs());
+  }
+  lend();
+  struct GiveBack {
+    std::function<void()> f;
+    ~GiveBack() { f(); }
+  } give_back{lend};
   // (7)-(11) the scheme's solves (section 6)
   StaggeredSettings ss;
   ss.max_iterations = std::max(1, scene_.solver.staggered_iterations);
@@ -560,9 +586,10 @@ void Simulation<Dim>::solve_coupled(double dt) {
   VectorX eta;
   if (non_newtonian_ && stress) {
     model = std::make_unique<NonNewtonianViscosity<Dim>>(
-        stress_grid_, deformation_rate_, in.solids.fluid_stress, stress_liquid_, mixture_);
+        stress_grid_, deformation_rate_, in.weights.fluid_stress, in.weights.liquid_stress,
+        mixture_);
     options.initial_viscosity = [&](const VectorX& u_star) {
-      eta = model->initial_viscosity(in.solids.fluid_face, u_star, previous_shear_rate_);
+      eta = model->initial_viscosity(in.weights.pressure.fluid_face, u_star, previous_shear_rate_);
       return eta;
     };
     options.update_viscosity = [&](const VectorX& tau, const VectorX& used) {

@@ -1,0 +1,155 @@
+#pragma once
+/// \file tiled_lattice.hpp
+/// Values on the points of a lattice (a SampleLattice's dims: the half lattice of the level sets
+/// and volume fractions) stored in tiles of 8^Dim points that exist only where something was
+/// written, every other point reading a background value. For quantities that differ from their
+/// background only in a band (around the liquid's particles, a moving body's surface): memory and
+/// clearing in proportion to the band instead of the box (issue 20; at the paper's 256x128x256
+/// grid one lattice-sized vector of doubles is 541 MB).
+///
+/// Each point holds `Stride` values of type T side by side (for example the Dim + 2 sums of a
+/// particle splat: weight, radius, position). Tiles are made serially (touch_box, at); once made,
+/// find() / point() of distinct points may run on several threads at once (no tile is made
+/// there). Tiles are ordered by tile index, points in a tile as the lattice orders them
+/// (lattice_index: axis 0 fastest), so for_each_point visits the points in a fixed order.
+
+#include <algorithm>
+#include <cstddef>
+#include <memory>
+#include <stdexcept>
+#include <vector>
+
+#include "reference/core/common.hpp"
+#include "reference/grid/mac_grid.hpp"
+
+namespace monolith {
+
+template <int Dim, class T, int Stride = 1>
+class TiledLattice {
+ public:
+  static constexpr int kTile = 8;  ///< points per tile along each axis
+  static constexpr int kTilePoints = Dim == 2 ? kTile * kTile : kTile * kTile * kTile;
+
+  TiledLattice() = default;
+  TiledLattice(const VecI<Dim>& dims, T background) { reset(dims, background); }
+
+  /// Empties the lattice: dims points per axis, every value `background`, no tile. The tile
+  /// table (one pointer per tile) is kept when the dims do not change; the tiles' memory is
+  /// released.
+  void reset(const VecI<Dim>& dims, T background) {
+    if ((dims.array() < 1).any())
+      throw std::invalid_argument("TiledLattice: every axis needs at least one point");
+    background_ = background;
+    if (dims != dims_ || tiles_.empty()) {
+      dims_ = dims;
+      for (int a = 0; a < Dim; ++a) tile_dims_[a] = (dims[a] + kTile - 1) / kTile;
+      tiles_.clear();
+      tiles_.resize(static_cast<std::size_t>(tile_dims_.prod()));
+    } else {
+      for (auto& t : tiles_) t.reset();
+    }
+    num_tiles_ = 0;
+  }
+
+  const VecI<Dim>& dims() const { return dims_; }
+  T background() const { return background_; }
+  /// Tiles made so far, and the bytes their values take.
+  int num_tiles() const { return num_tiles_; }
+  std::size_t value_bytes() const {
+    return static_cast<std::size_t>(num_tiles_) * kTilePoints * Stride * sizeof(T);
+  }
+
+  /// Makes every tile that holds a point of the box [lo, hi] (point coordinates, clamped to the
+  /// lattice; an empty box makes none), its values the background. Serial.
+  void touch_box(VecI<Dim> lo, VecI<Dim> hi) {
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = std::max(lo[a], 0);
+      hi[a] = std::min(hi[a], dims_[a] - 1);
+      if (lo[a] > hi[a]) return;
+      lo[a] /= kTile;
+      hi[a] /= kTile;
+    }
+    VecI<Dim> t = lo;
+    while (true) {
+      make_tile(lattice_index<Dim>(t, tile_dims_));
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++t[a] <= hi[a]) break;
+        t[a] = lo[a];
+      }
+      if (a == Dim) return;
+    }
+  }
+
+  /// The Stride values of point c, making its tile if needed. Serial (it may make a tile).
+  T* at(const VecI<Dim>& c) {
+    const auto [tile, local] = locate(c);
+    return make_tile(tile) + static_cast<std::size_t>(local) * Stride;
+  }
+  /// The Stride values of point c, null where no tile holds c (every value the background).
+  /// Safe on several threads once the tiles are made.
+  T* find(const VecI<Dim>& c) {
+    const auto [tile, local] = locate(c);
+    T* data = tiles_[tile].get();
+    return data ? data + static_cast<std::size_t>(local) * Stride : nullptr;
+  }
+  const T* find(const VecI<Dim>& c) const { return const_cast<TiledLattice*>(this)->find(c); }
+  /// Value s of point c (the background where no tile holds c).
+  T value(const VecI<Dim>& c, int s = 0) const {
+    const T* p = find(c);
+    return p ? p[s] : background_;
+  }
+
+  /// f(coord, values) for every point of every tile made (values: Stride entries), tiles in
+  /// tile-index order and points in lattice order within a tile; points of a partial tile at
+  /// the lattice's upper end that lie outside the lattice are skipped.
+  template <class F>
+  void for_each_point(F&& f) const {
+    for (int tile = 0; tile < static_cast<int>(tiles_.size()); ++tile) {
+      const T* data = tiles_[tile].get();
+      if (!data) continue;
+      const VecI<Dim> origin = kTile * lattice_coord<Dim>(tile, tile_dims_);
+      for (int local = 0; local < kTilePoints; ++local) {
+        const VecI<Dim> c = origin + lattice_coord<Dim>(local, VecI<Dim>::Constant(kTile));
+        if ((c.array() >= dims_.array()).any()) continue;
+        f(static_cast<const VecI<Dim>&>(c), data + static_cast<std::size_t>(local) * Stride);
+      }
+    }
+  }
+
+  /// Value s of every point as one dense vector in lattice_index order (the background where no
+  /// tile is): for code that reads whole-lattice vectors.
+  void to_dense(VectorX& out, int s = 0) const {
+    out.setConstant(dims_.prod(), static_cast<double>(background_));
+    for_each_point([&](const VecI<Dim>& c, const T* v) {
+      out[lattice_index<Dim>(c, dims_)] = static_cast<double>(v[s]);
+    });
+  }
+
+ private:
+  std::pair<int, int> locate(const VecI<Dim>& c) const {
+    VecI<Dim> t, l;
+    for (int a = 0; a < Dim; ++a) {
+      t[a] = c[a] / kTile;
+      l[a] = c[a] - t[a] * kTile;
+    }
+    return {lattice_index<Dim>(t, tile_dims_), lattice_index<Dim>(l, VecI<Dim>::Constant(kTile))};
+  }
+  T* make_tile(int tile) {
+    std::unique_ptr<T[]>& data = tiles_[tile];
+    if (!data) {
+      data.reset(new T[static_cast<std::size_t>(kTilePoints) * Stride]);
+      std::fill(data.get(), data.get() + static_cast<std::size_t>(kTilePoints) * Stride,
+                background_);
+      ++num_tiles_;
+    }
+    return data.get();
+  }
+
+  VecI<Dim> dims_ = VecI<Dim>::Zero(), tile_dims_ = VecI<Dim>::Zero();
+  T background_{};
+  std::vector<std::unique_ptr<T[]>> tiles_;
+  int num_tiles_ = 0;
+};
+
+}  // namespace monolith
