@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Reads the output of tools/heap_peak.c and prints the large blocks alive at the peak, grouped
+"""Reads the output of tests/tools/heap_peak.c and prints the large blocks alive at the peak, grouped
 by the call path into the executable (function names from `nm -C`), largest group first.
-    python3 tools/heap_peak_report.py build/bin/monolith peak.txt [frames]"""
+    python3 tests/tools/heap_peak_report.py build/bin/monolith peak.txt [frames]"""
 import bisect
 import subprocess
 import sys

@@ -3,8 +3,8 @@
  * (environment, default 4 MiB) is recorded with its call stack while it lives; at the moment the
  * sum of the live large blocks peaks, the live list is copied. At exit the peak list goes to
  * stderr (or HEAP_PEAK_OUT): size, then the return addresses as offsets into the executable,
- * which tools/heap_peak_report.py turns into function names (nm).
- *   cc -O2 -shared -fPIC -o heap_peak.so tools/heap_peak.c -ldl
+ * which tests/tools/heap_peak_report.py turns into function names (nm).
+ *   cc -O2 -shared -fPIC -o heap_peak.so tests/tools/heap_peak.c -ldl
  *   LD_PRELOAD=./heap_peak.so HEAP_PEAK_OUT=peak.txt build/bin/monolith run ...
  * Not thread-safe beyond a spin lock around the table (the allocations it records are rare). */
 #define _GNU_SOURCE

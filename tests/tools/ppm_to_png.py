@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Converts the binary PPM (P6, maxval 255) frames that `monolith run` writes into PNG files for
 the documentation, with nothing but the Python standard library (zlib for the image data).
-    python3 tools/ppm_to_png.py IN.ppm OUT.png [IN2.ppm OUT2.png ...]
+    python3 tests/tools/ppm_to_png.py IN.ppm OUT.png [IN2.ppm OUT2.png ...]
 Not part of the build: the project itself writes PPM only (docs/rendering.md)."""
 import struct
 import sys
