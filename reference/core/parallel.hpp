@@ -64,15 +64,18 @@ inline std::atomic<int>& adaptive_teams_flag() {
   static std::atomic<int> flag{-1};  // -1: not decided yet
   return flag;
 }
-inline bool adaptive_teams() {
-  int f = adaptive_teams_flag().load(std::memory_order_relaxed);
+/// A switch that is on unless MONOLITH_ADAPTIVE_THREADS=0, read from the environment the first
+/// time it is asked (flag -1) unless a set_... call decided it before.
+inline bool adaptive_switch(std::atomic<int>& flag) {
+  int f = flag.load(std::memory_order_relaxed);
   if (f < 0) {
     const char* env = std::getenv("MONOLITH_ADAPTIVE_THREADS");
     f = env && std::strcmp(env, "0") == 0 ? 0 : 1;
-    adaptive_teams_flag().store(f, std::memory_order_relaxed);
+    flag.store(f, std::memory_order_relaxed);
   }
   return f != 0;
 }
+inline bool adaptive_teams() { return adaptive_switch(adaptive_teams_flag()); }
 inline void set_adaptive_teams(bool on) { adaptive_teams_flag().store(on ? 1 : 0); }
 
 /// The CPUs this process may run on (sched_getaffinity), in increasing order; {0..n-1} from
@@ -127,15 +130,7 @@ inline std::atomic<int>& core_monitor_flag() {
   static std::atomic<int> flag{-1};  // -1: not decided yet
   return flag;
 }
-inline bool core_monitor() {
-  int f = core_monitor_flag().load(std::memory_order_relaxed);
-  if (f < 0) {
-    const char* env = std::getenv("MONOLITH_ADAPTIVE_THREADS");
-    f = env && std::strcmp(env, "0") == 0 ? 0 : 1;
-    core_monitor_flag().store(f, std::memory_order_relaxed);
-  }
-  return f != 0;
-}
+inline bool core_monitor() { return adaptive_switch(core_monitor_flag()); }
 inline void set_core_monitor(bool on) { core_monitor_flag().store(on ? 1 : 0); }
 
 /// The process-wide team size for the next window, from the cores other processes used in the
