@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "reference/core/errors.hpp"
+#include "tests/support/bench_args.hpp"
 #include "tests/support/coupled_validation.hpp"
 #include "tests/support/still_water.hpp"
 
@@ -48,24 +49,17 @@ std::vector<Variant> variants() {
 int main(int argc, char** argv) {
   int frames = 500, every = 1;
   std::vector<std::string> only, overrides;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+  bench::BenchArgs args(argc, argv);
+  while (args.next()) {
+    const std::string& a = args.flag();
     if (a == "--frames") {
-      frames = std::atoi(next().c_str());
+      frames = std::atoi(args.value().c_str());
     } else if (a == "--every") {
-      every = std::atoi(next().c_str());
+      every = std::atoi(args.value().c_str());
     } else if (a == "--only") {
-      std::stringstream list(next());
-      for (std::string item; std::getline(list, item, ',');) only.push_back(item);
+      for (const std::string& item : args.list()) only.push_back(item);
     } else if (a == "--set") {
-      overrides.push_back(next());
+      overrides.push_back(args.value());
     } else {
       std::cerr << "usage: bench_floating_rest [--frames N] [--every K] [--only NAME,...] "
                    "[--set KEY=VALUE]...\n";

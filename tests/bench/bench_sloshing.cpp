@@ -18,6 +18,7 @@
 #include <iostream>
 #include <string>
 
+#include "tests/support/bench_args.hpp"
 #include "tests/support/still_water.hpp"
 
 using namespace monolith;
@@ -29,23 +30,17 @@ int main(int argc, char** argv) {
   std::string backend = "matrixfree";
   bool no_projection = false, no_correction = false;
   double max_dt = 0.02;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--dim") dim = std::atoi(next().c_str());
-    else if (a == "--cells") cells = std::atoi(next().c_str());
-    else if (a == "--seconds") seconds = std::atof(next().c_str());
-    else if (a == "--slope") slope = std::atof(next().c_str());
-    else if (a == "--every") every = std::max(1, std::atoi(next().c_str()));
-    else if (a == "--backend") backend = next();
+  bench::BenchArgs args(argc, argv);
+  while (args.next()) {
+    const std::string& a = args.flag();
+    if (a == "--dim") dim = std::atoi(args.value().c_str());
+    else if (a == "--cells") cells = std::atoi(args.value().c_str());
+    else if (a == "--seconds") seconds = std::atof(args.value().c_str());
+    else if (a == "--slope") slope = std::atof(args.value().c_str());
+    else if (a == "--every") every = std::max(1, std::atoi(args.value().c_str()));
+    else if (a == "--backend") backend = args.value();
     else if (a == "--no-projection") no_projection = true;
-    else if (a == "--max-dt") max_dt = std::atof(next().c_str());
+    else if (a == "--max-dt") max_dt = std::atof(args.value().c_str());
     else if (a == "--no-correction") no_correction = true;
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "

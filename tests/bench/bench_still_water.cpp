@@ -25,6 +25,7 @@
 #include "reference/app/scene_file.hpp"
 #include "reference/core/errors.hpp"
 #include "reference/sim/simulation.hpp"
+#include "tests/support/bench_args.hpp"
 #include "tests/support/still_water.hpp"
 
 using namespace monolith;
@@ -105,30 +106,23 @@ int main(int argc, char** argv) {
   std::string backend = "matrixfree";
   std::vector<std::string> only, overrides;
   bool progress = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+  bench::BenchArgs args(argc, argv);
+  while (args.next()) {
+    const std::string& a = args.flag();
     if (a == "--dim") {
-      dim = std::atoi(next().c_str());
+      dim = std::atoi(args.value().c_str());
     } else if (a == "--cells") {
-      cells = std::atoi(next().c_str());
+      cells = std::atoi(args.value().c_str());
     } else if (a == "--seconds") {
-      seconds = std::atof(next().c_str());
+      seconds = std::atof(args.value().c_str());
     } else if (a == "--backend") {
-      backend = next();
+      backend = args.value();
     } else if (a == "--only") {
-      std::stringstream list(next());
-      for (std::string item; std::getline(list, item, ',');) only.push_back(item);
+      for (const std::string& item : args.list()) only.push_back(item);
     } else if (a == "--progress") {
       progress = true;
     } else if (a == "--set") {
-      overrides.push_back(next());
+      overrides.push_back(args.value());
     } else {
       std::cerr << "unknown argument " << a
                 << "\nusage: bench_still_water [--dim 2|3] [--cells N] [--seconds T] [--backend "
