@@ -180,6 +180,8 @@ class Simulation : public AnySimulation {
   /// The faces whose solved velocity is fed back to the particles: W_F^u > 0 and W_F^u W_L^u
   /// (unclamped) >= kTrustedLiquidFaceFraction, or mass outside the liquid weights.
   void trusted_faces(std::vector<char>& trusted) const;
+  /// One face of trusted_faces (weights of the step's start).
+  bool trusted_face(int f) const;
   /// The solved velocity extrapolated from the trusted faces, ceil(cfl) + 2 layers.
   void extrapolate_from_trusted_faces();
   /// Walls: zero normal velocity; fully solid faces: the solid's velocity; then
