@@ -1,5 +1,6 @@
 #include "reference/fluid/pressure_projection.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <memory>
@@ -85,9 +86,28 @@ inline void shift_stencil(int x, int n0, bool periodic0, int cell,
 template <int Dim>
 VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
                          double fallback_density) {
-  VectorX rho = face_density;
-  for (int f = 0; f < grid.num_faces(); ++f) {
-    if (face_density[f] > 0.0) continue;
+  const int nf = grid.num_faces();
+  // a face without a density whose cells have no face with one gets the fallback: that is every
+  // such face except those next to the faces with a density, which are collected from those
+  // (work in proportion to the liquid, not the box: issue 20)
+  VectorX rho(nf);
+  std::vector<int> near;
+  for (int f = 0; f < nf; ++f) {
+    if (face_density[f] > 0.0) {
+      rho[f] = face_density[f];
+      const auto [axis, coord] = grid.face_coord(f);
+      for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
+        if (cell < 0) continue;
+        for (int g : cell_faces<Dim>(grid, cell).face)
+          if (!(face_density[g] > 0.0)) near.push_back(g);
+      }
+    } else {
+      rho[f] = fallback_density;
+    }
+  }
+  std::sort(near.begin(), near.end());
+  near.erase(std::unique(near.begin(), near.end()), near.end());
+  for (int f : near) {
     // mean of the known densities on the faces of the two cells beside f
     const auto [axis, coord] = grid.face_coord(f);
     double sum = 0.0;

@@ -117,6 +117,24 @@ class TiledLattice {
     }
   }
 
+  /// Slots of the tile table (made or not): tile indices run over [0, num_tile_slots()).
+  int num_tile_slots() const { return static_cast<int>(tiles_.size()); }
+  /// Whether tile `tile` is made.
+  bool has_tile(int tile) const { return tiles_[tile] != nullptr; }
+  /// f(coord, values) for every point of one made tile (nothing for an absent one), points in
+  /// lattice order, those outside the lattice skipped. Distinct tiles may run on several threads.
+  template <class F>
+  void for_each_point_in_tile(int tile, F&& f) const {
+    const T* data = tiles_[tile].get();
+    if (!data) return;
+    const VecI<Dim> origin = kTile * lattice_coord<Dim>(tile, tile_dims_);
+    for (int local = 0; local < kTilePoints; ++local) {
+      const VecI<Dim> c = origin + lattice_coord<Dim>(local, VecI<Dim>::Constant(kTile));
+      if ((c.array() >= dims_.array()).any()) continue;
+      f(static_cast<const VecI<Dim>&>(c), data + static_cast<std::size_t>(local) * Stride);
+    }
+  }
+
   /// Value s of every point as one dense vector in lattice_index order (the background where no
   /// tile is): for code that reads whole-lattice vectors.
   void to_dense(VectorX& out, int s = 0) const {

@@ -10,6 +10,7 @@
 #include <limits>
 #include <random>
 
+#include "reference/grid/tiled_lattice.hpp"
 #include "reference/grid/volume_fractions.hpp"
 
 namespace monolith {
@@ -1171,11 +1172,24 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
                               const SampleLattice<Dim>& lattice,
                               const std::array<BoundaryType, 2 * Dim>& boundary,
                               const SolidField<Dim>& solids) {
+  VectorX phi;
+  liquid_phi_on_lattice(particles, grid, lattice, boundary, solids, phi);
+  return phi;
+}
+
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, VectorX& phi) {
   const int nl = lattice.size();
   const long np = static_cast<long>(particles.size());
   const double h = lattice.spacing;
   const double dx = grid.dx();
-  if (np == 0) return VectorX::Constant(nl, 3.0 * dx);
+  if (np == 0) {
+    phi.setConstant(nl, 3.0 * dx);
+    return;
+  }
 
   // per-particle support and radius
   std::vector<double> support(np), radius(np);
@@ -1216,17 +1230,24 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
       mirror[2 * a + side] = !grid.periodic(a) && boundary[2 * a + side] == BoundaryType::wall;
 
   // the solid distance of the lattice points an image reaches, computed once per point when
-  // first needed (NaN: not yet); within a phase only one thread touches a point
-  std::vector<double> solid_distance;
-  if (!solids.empty()) solid_distance.assign(nl, std::numeric_limits<double>::quiet_NaN());
+  // first needed (NaN: not yet); within a phase only one thread touches a point. Tiles only
+  // where a solid image reaches (issue 20: a half-lattice vector is 541 MB at 256x128x256).
+  TiledLattice<Dim, double> solid_distance(lattice.dims, std::numeric_limits<double>::quiet_NaN());
 
   // the sums of each lattice point side by side (weight, radius, position): one cache line per
-  // point touched instead of three arrays' worth
+  // point touched instead of three arrays' worth, in tiles of 8^Dim points made only where a
+  // particle or one of its images reaches (0 elsewhere: no particle)
   constexpr int kStride = Dim + 2;
-  std::vector<double> acc(static_cast<std::size_t>(nl) * kStride, 0.0);
+  TiledLattice<Dim, double, kStride> acc(lattice.dims, 0.0);
+  // each particle's image across the nearest solid surface (NaN where it has none), found by
+  // the serial pass that makes the tiles and read by the splat
+  std::vector<Vec<Dim>> solid_image;
+  if (!solids.empty())
+    solid_image.assign(np, Vec<Dim>::Constant(std::numeric_limits<double>::quiet_NaN()));
 
-  // splat one particle (with its periodic and wall images) onto the lattice
-  auto splat = [&](int p) {
+  // splat one particle (with its periodic and wall images) onto the lattice; with `make_tiles`
+  // it only makes the tiles under every box the splat visits (serial, before the splat)
+  auto splat = [&](int p, bool make_tiles) {
     const Vec<Dim> xp = particles.x[p];
     const double R = support[p];
     const double inv_r2 = 1.0 / (R * R);
@@ -1279,8 +1300,9 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
             offset[a][j - i0[a]] = (lattice.origin[a] + static_cast<double>(j) * h) - xi[a];
       }
       const double rp = radius[p];
+      if (make_tiles) acc.touch_box(i0, i1);
       VecI<Dim> i = i0;
-      while (true) {
+      while (!make_tiles) {
         Vec<Dim> d;
         if (fits) {
           for (int a = 0; a < Dim; ++a) d[a] = offset[a][i[a] - i0[a]];
@@ -1291,7 +1313,7 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
         if (q2 < 1.0) {
           const double t = 1.0 - q2;
           const double k = t * t * t;
-          double* sum = acc.data() + static_cast<std::size_t>(lattice.index(i)) * kStride;
+          double* sum = acc.find(i);
           sum[0] += k;
           sum[1] += k * rp;
           for (int a = 0; a < Dim; ++a) sum[2 + a] += k * xi[a];
@@ -1320,18 +1342,27 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
     // set extended into it, extend_liquid_into_solids) followed: left and right of a settling
     // disk they differed by up to 0.2 and pushed it sideways (docs/particles.md)
     if (solids.empty()) return;
-    const double d = solids.distance(xp);
-    if (!(d > 0.0) || d >= R) return;
-    Vec<Dim> n = solids.gradient(xp);
-    const double len = n.norm();
-    if (!(len > 0.0)) return;
-    const Vec<Dim> xm = xp - (2.0 * d / len) * n;
+    if (make_tiles) {
+      const double d = solids.distance(xp);
+      if (!(d > 0.0) || d >= R) return;
+      Vec<Dim> n = solids.gradient(xp);
+      const double len = n.norm();
+      if (!(len > 0.0)) return;
+      solid_image[p] = xp - (2.0 * d / len) * n;
+    }
+    const Vec<Dim> xm = solid_image[p];
+    if (std::isnan(xm[0])) return;
     VecI<Dim> j0, j1;
     for (int a = 0; a < Dim; ++a) {
       j0[a] = std::max(0, static_cast<int>(std::ceil((xm[a] - R - lattice.origin[a]) / h)));
       j1[a] = std::min(lattice.dims[a] - 1,
                        static_cast<int>(std::floor((xm[a] + R - lattice.origin[a]) / h)));
       if (j0[a] > j1[a]) return;
+    }
+    if (make_tiles) {
+      acc.touch_box(j0, j1);
+      solid_distance.touch_box(j0, j1);
+      return;
     }
     const double inv_reach2 = 0.25 * inv_r2;
     VecI<Dim> i = j0;
@@ -1341,14 +1372,14 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
       const double p2 = (y - xp).squaredNorm();
       bool reached = q2 < 1.0 && p2 * inv_reach2 < 1.0;
       if (reached && !(p2 * inv_r2 < 1.0)) {
-        double& ds = solid_distance[lattice.index(i)];
+        double& ds = *solid_distance.find(i);
         if (std::isnan(ds)) ds = solids.distance(y);
         reached = ds < 0.0;
       }
       if (reached) {
         const double t = 1.0 - q2;
         const double k = t * t * t;
-        double* sum = acc.data() + static_cast<std::size_t>(lattice.index(i)) * kStride;
+        double* sum = acc.find(i);
         sum[0] += k;
         sum[1] += k * radius[p];
         for (int a = 0; a < Dim; ++a) sum[2 + a] += k * xm[a];
@@ -1361,6 +1392,9 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
       if (a == Dim) break;
     }
   };
+
+  // the tiles under every box a particle or an image reaches, made serially before the splat
+  for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true);
 
   // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
   const bool wrap_last = grid.periodic(kLast);
@@ -1377,28 +1411,28 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
     const int count = static_cast<int>(list.size());
     if (phase == 2) {
       for (int s = 0; s < count; ++s)
-        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
+        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q], false);
     } else {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
       for (int s = 0; s < count; ++s)
-        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q]);
+        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) splat(order[q], false);
     }
   }
 
   // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
-  VectorX phi(nl);
+  // (every point outside the tiles)
+  phi.setConstant(nl, max_support);
+  const int slots = acc.num_tile_slots();
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int li = 0; li < nl; ++li) {
-    const double* sum = acc.data() + static_cast<std::size_t>(li) * kStride;
-    if (sum[0] > 0.0) {
-      Vec<Dim> xbar;
-      for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
-      phi[li] = (lattice.position(lattice.coord(li)) - xbar).norm() - sum[1] / sum[0];
-    } else {
-      phi[li] = max_support;
-    }
+  for (int tile = 0; tile < slots; ++tile) {
+    acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
+      if (sum[0] > 0.0) {
+        Vec<Dim> xbar;
+        for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
+        phi[lattice.index(c)] = (lattice.position(c) - xbar).norm() - sum[1] / sum[0];
+      }
+    });
   }
-  return phi;
 }
 
 template <int Dim>
@@ -1428,6 +1462,10 @@ double max_particle_speed(const Particles<Dim>& particles) {
   template DensityProjectionStats project_particle_density(                                        \
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
       const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int);                          \
+  template void liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                     \
+                                       const SampleLattice<D>&,                                    \
+                                       const std::array<BoundaryType, 2 * D>&,                     \
+                                       const SolidField<D>&, VectorX&);                            \
   template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
                                          const SampleLattice<D>&,                                  \
                                          const std::array<BoundaryType, 2 * D>&,                   \

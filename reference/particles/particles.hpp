@@ -137,6 +137,15 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
                               const SampleLattice<Dim>& lattice,
                               const std::array<BoundaryType, 2 * Dim>& boundary,
                               const SolidField<Dim>& solids = {});
+/// The same level set written into `phi` (resized to the lattice; its buffer is reused across
+/// calls). The splat's sums live in tiles of 8^Dim lattice points made only where a particle or
+/// one of its images reaches (reference/grid/tiled_lattice.hpp), so its memory and its passes
+/// follow the liquid, not the box (issue 20); every other point reads the kernel support.
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, VectorX& phi);
 
 /// Largest particle speed (for the CFL condition).
 template <int Dim>

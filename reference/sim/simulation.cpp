@@ -216,7 +216,8 @@ void Simulation<Dim>::update_liquid_weights() {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
     // mirrored across the walls and the solids, so liquid against either reads as liquid up to
     // it (docs/particles.md, "Still water")
-    liquid_phi_ = liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_);
+    // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
+    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_);
   }
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
@@ -257,8 +258,11 @@ void Simulation<Dim>::update_liquid_weights() {
   }
   // the reported volume is that of the particles' own level set outside the solids (its mirror
   // images and the extension reach into them)
+  // (in the extended level set's buffer, which the weights no longer read: no new lattice-sized
+  // vector)
   if (solids) {
-    const VectorX fluid_phi = liquid_phi_.cwiseMax(-solid_phi_);
+    extended_phi_ = liquid_phi_.cwiseMax(-solid_phi_);
+    const VectorX& fluid_phi = extended_phi_;
     classify_lattice_cells(grid_, lattice_, fluid_phi, liquid_signs_);
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
   }

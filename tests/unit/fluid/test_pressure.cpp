@@ -252,3 +252,59 @@ TEMPLATE_TEST_CASE_SIG("projection of a gradient field converges to the analytic
   CHECK(order > 1.7);
   CHECK(errors[2] < 1e-3);
 }
+
+TEMPLATE_TEST_CASE_SIG(
+    "density_diagonal: a face without a density gets the mean of its cells' faces that have one, "
+    "else the fallback (the band pass equals every face's own mean bit for bit)",
+    "[density]", ((int Dim), Dim), 2, 3) {
+  for (const bool periodic_x : {false, true}) {
+    std::array<bool, Dim> periodic{};
+    periodic[0] = periodic_x;
+    const int n = Dim == 2 ? 13 : 7;
+    const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+    // a few faces with a density (some at the box's ends and seam), zeros and negatives elsewhere
+    std::mt19937 rng(11 + Dim);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    VectorX rho = VectorX::Zero(grid.num_faces());
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      const double r = u(rng);
+      if (r < 0.08) rho[f] = 500.0 + 1000.0 * u(rng);
+      else if (r < 0.1) rho[f] = -1.0;
+    }
+    rho[0] = 900.0;
+    rho[grid.num_faces() - 1] = 1100.0;
+    const double fallback = 777.0;
+    const VectorX got = density_diagonal(grid, rho, fallback);
+    REQUIRE(got.size() == grid.num_faces());
+    int means = 0, fallbacks = 0;
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      if (rho[f] > 0.0) {
+        CHECK(got[f] == rho[f]);
+        continue;
+      }
+      // every face's own mean over the faces of the cells on either side
+      const auto [axis, coord] = grid.face_coord(f);
+      double sum = 0.0;
+      int count = 0;
+      for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
+        if (cell < 0) continue;
+        const VecI<Dim> c = grid.cell_coord(cell);
+        for (int a = 0; a < Dim; ++a) {
+          VecI<Dim> upper = c;
+          upper[a] += 1;
+          for (int g : {grid.face_index(a, c),
+                        grid.face_index(a, grid.periodic(a) ? grid.wrap_cell(upper) : upper)})
+            if (rho[g] > 0.0) {
+              sum += rho[g];
+              ++count;
+            }
+        }
+      }
+      const double want = count > 0 ? sum / count : fallback;
+      (count > 0 ? means : fallbacks) += 1;
+      CHECK(got[f] == want);
+    }
+    CHECK(means > 0);
+    CHECK(fallbacks > 0);
+  }
+}
