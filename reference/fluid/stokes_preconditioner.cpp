@@ -183,8 +183,16 @@ void StokesPreconditioner<Dim>::correct_cut(const VectorX& r, VectorX& z) const 
     for (int k = outer[q]; k < outer[q + 1]; ++k) s -= value[k] * z[inner[k]];
     cut_r_[q] = s;
   }
-  cut_d_ = cut_factor_->solve(cut_r_);  // into storage of the right size: no allocation
-  for (int q = 0; q < m; ++q) z[cut_[q]] += cut_d_[q];
+  // the LDL^T solve by hand: Eigen's solve permutes in place through a temporary mask
+  const CutBlockFactor& f = *cut_factor_;
+  const int* perm = f.permutationP().indices().data();
+  const bool permuted = f.permutationP().size() == m;
+  for (int q = 0; q < m; ++q) cut_d_[permuted ? perm[q] : q] = cut_r_[q];  // P r
+  f.matrixL().solveInPlace(cut_d_);
+  const double* diag = f.vectorD().data();
+  for (int q = 0; q < m; ++q) cut_d_[q] = (1.0 / diag[q]) * cut_d_[q];  // D^-1, as Eigen's solve
+  f.matrixU().solveInPlace(cut_d_);
+  for (int q = 0; q < m; ++q) z[cut_[q]] += cut_d_[permuted ? perm[q] : q];  // P^-1 d
 }
 
 template <int Dim>

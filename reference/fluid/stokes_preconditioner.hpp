@@ -12,7 +12,10 @@
 /// form, Sigma_pi^-1 = Sigma^-1 + Pi^-1). The preconditioner applies the right-hand sides with
 /// V^-1 replaced by multigrid V-cycles and S by a Cahouet-Chabard-type approximation
 /// (Poisson multigrid plus a viscosity-weighted diagonal), and wraps the result in SOR sweeps of
-/// A itself (a symmetric two-level composition): SPD for any choice of its parts.
+/// A itself (a symmetric two-level composition): SPD for any choice of its parts. Between the
+/// sweeps and that inverse, on each side, an exact solve with A's principal block A_CC on the
+/// unknowns next to a curved solid (the cut block, StokesPreconditionerOptions::cut_threshold;
+/// docs/preconditioners.md, section 12).
 
 #include <memory>
 #include <vector>
