@@ -169,6 +169,7 @@ void StokesPreconditioner<Dim>::build_cut_block() {
   cut_factor_ = std::move(factor);
   cut_r_.setZero(m);
   cut_d_.setZero(m);
+  cut_inverse_d_ = cut_factor_->vectorD().cwiseInverse();  // vectorD() returns a copy: once here
 }
 
 template <int Dim>
@@ -189,8 +190,7 @@ void StokesPreconditioner<Dim>::correct_cut(const VectorX& r, VectorX& z) const 
   const bool permuted = f.permutationP().size() == m;
   for (int q = 0; q < m; ++q) cut_d_[permuted ? perm[q] : q] = cut_r_[q];  // P r
   f.matrixL().solveInPlace(cut_d_);
-  const double* diag = f.vectorD().data();
-  for (int q = 0; q < m; ++q) cut_d_[q] = (1.0 / diag[q]) * cut_d_[q];  // D^-1, as Eigen's solve
+  for (int q = 0; q < m; ++q) cut_d_[q] = cut_inverse_d_[q] * cut_d_[q];  // D^-1, as Eigen's solve
   f.matrixU().solveInPlace(cut_d_);
   for (int q = 0; q < m; ++q) z[cut_[q]] += cut_d_[permuted ? perm[q] : q];  // P^-1 d
 }

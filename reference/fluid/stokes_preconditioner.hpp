@@ -117,6 +117,7 @@ class StokesPreconditioner : public Preconditioner {
   std::vector<int> cut_;    ///< the unknowns of C
   SparseMatrix cut_rows_;   ///< A_{C,:} (row-major, |C| x n)
   std::unique_ptr<CutBlockFactor> cut_factor_;  ///< of A_CC
+  VectorX cut_inverse_d_;   ///< 1 / D of the factor
   mutable VectorX cut_r_, cut_d_;
   // scratch
   mutable VectorX ir_, iz_, ip_, iap_;
