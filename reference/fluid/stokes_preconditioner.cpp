@@ -74,6 +74,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, std::move(shifted), mg);
     }
   }
+  if (!pressure_only_ && options.cut_threshold > 0.0) build_cut_block();
   h_.setZero(n_);
   back_.setZero(n_);
   y1_.setZero(n_);
@@ -86,6 +87,112 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   v_.setZero(nf_);
   e_.setZero(np_);
   s_.setZero(np_);
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::build_cut_block() {
+  // A with the system's own K (no W_F^s floor): the block is solved exactly
+  const SparseMatrix& k = f_.compliance_exact.size() ? f_.compliance_exact : f_.compliance;
+  // rows `list` of A = B^T C B + blkdiag(K, 0), row-major |list| x n
+  auto rows_of = [&](const std::vector<int>& list) {
+    const int m = static_cast<int>(list.size());
+    std::vector<Triplet> t;
+    t.reserve(m);
+    for (int q = 0; q < m; ++q) t.emplace_back(q, list[q], 1.0);
+    SparseMatrix select(m, n_);
+    select.setFromTriplets(t.begin(), t.end());
+    const SparseMatrix bt = select * f_.b_transpose;
+    SparseMatrix rows = SparseMatrix(bt * sparse_diagonal(f_.c)) * f_.b;
+    t.clear();
+    for (int q = 0; q < m; ++q)
+      if (list[q] < ns_)
+        for (SparseMatrix::InnerIterator it(k, list[q]); it; ++it) t.emplace_back(q, static_cast<int>(it.col()), it.value());
+    SparseMatrix kpart(m, n_);
+    kpart.setFromTriplets(t.begin(), t.end());
+    rows += kpart;
+    rows.makeCompressed();
+    return rows;
+  };
+  std::vector<char> in(n_, 0);
+  std::vector<int> list;
+  auto collect = [&]() {
+    list.clear();
+    for (int i = 0; i < n_; ++i)
+      if (in[i]) list.push_back(i);
+  };
+  // grow the set by the unknowns that rows `list` of A reach (pressure only, or all)
+  auto grow = [&](bool pressure_only) {
+    const SparseMatrix rows = rows_of(list);
+    for (int q = 0; q < rows.outerSize(); ++q)
+      for (SparseMatrix::InnerIterator it(rows, q); it; ++it)
+        if (it.value() != 0.0 && (!pressure_only || it.col() >= ns_)) in[it.col()] = 1;
+    collect();
+  };
+  // the seed: the stress unknowns cut by a solid
+  for (int i = 0; i < ns_; ++i)
+    if (i < f_.stress_fluid.size() && f_.stress_fluid[i] > 0.0 && f_.stress_fluid[i] < options_.cut_threshold) in[i] = 1;
+  collect();
+  if (list.empty()) return;
+  if (options_.cut_pressure && np_ > 0) grow(true);
+  for (int layer = 0; layer < options_.cut_layers; ++layer) grow(false);
+  SparseMatrix rows = rows_of(list);
+  // A_CC, a principal block of A. Its pressure diagonal is scaled by 1 + 1e-10 (as for the
+  // pressure hierarchy): A is only semi-definite for enclosed liquid (constant pressure), and C
+  // may hold all of that liquid's pressure unknowns.
+  std::vector<int> local(n_, -1);
+  for (std::size_t q = 0; q < list.size(); ++q) local[list[q]] = static_cast<int>(q);
+  std::vector<Triplet> t;
+  t.reserve(rows.nonZeros());
+  for (int q = 0; q < rows.outerSize(); ++q)
+    for (SparseMatrix::InnerIterator it(rows, q); it; ++it) {
+      const int j = local[it.col()];
+      if (j < 0) continue;
+      const bool scale = j == q && list[q] >= ns_;
+      t.emplace_back(q, j, scale ? it.value() * (1.0 + 1e-10) : it.value());
+    }
+  const int m = static_cast<int>(list.size());
+  Eigen::SparseMatrix<double> acc(m, m);
+  acc.setFromTriplets(t.begin(), t.end());
+  // no block when its factor would hold more than 8x the entries of the finest velocity
+  // operator (its two solves per application would then cost more than about half of the rest
+  // of an application; the symbolic analysis counts them before any numeric work); also none
+  // when the factor is unusable (not positive definite to round-off)
+  auto factor = std::make_unique<CutBlockFactor>();
+  factor->analyzePattern(acc);
+  if (factor->info() != Eigen::Success || factor->analysed_entries() > 8 * velocity_.level(0).a.nonZeros())
+    return;
+  factor->factorize(acc);
+  if (factor->info() != Eigen::Success || !factor->vectorD().allFinite() || factor->vectorD().minCoeff() <= 0.0)
+    return;
+  cut_ = std::move(list);
+  cut_rows_ = std::move(rows);
+  cut_factor_ = std::move(factor);
+  cut_r_.setZero(m);
+  cut_d_.setZero(m);
+  cut_inverse_d_ = cut_factor_->vectorD().cwiseInverse();  // vectorD() returns a copy: once here
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::correct_cut(const VectorX& r, VectorX& z) const {
+  if (cut_.empty()) return;
+  const int m = static_cast<int>(cut_.size());
+  const int* outer = cut_rows_.outerIndexPtr();
+  const int* inner = cut_rows_.innerIndexPtr();
+  const double* value = cut_rows_.valuePtr();
+  for (int q = 0; q < m; ++q) {
+    double s = r[cut_[q]];
+    for (int k = outer[q]; k < outer[q + 1]; ++k) s -= value[k] * z[inner[k]];
+    cut_r_[q] = s;
+  }
+  // the LDL^T solve by hand: Eigen's solve permutes in place through a temporary mask
+  const CutBlockFactor& f = *cut_factor_;
+  const int* perm = f.permutationP().indices().data();
+  const bool permuted = f.permutationP().size() == m;
+  for (int q = 0; q < m; ++q) cut_d_[permuted ? perm[q] : q] = cut_r_[q];  // P r
+  f.matrixL().solveInPlace(cut_d_);
+  for (int q = 0; q < m; ++q) cut_d_[q] = cut_inverse_d_[q] * cut_d_[q];  // D^-1, as Eigen's solve
+  f.matrixU().solveInPlace(cut_d_);
+  for (int q = 0; q < m; ++q) z[cut_[q]] += cut_d_[permuted ? perm[q] : q];  // P^-1 d
 }
 
 template <int Dim>
@@ -164,10 +271,12 @@ void StokesPreconditioner<Dim>::apply(const VectorX& r, VectorX& z) const {
   // the adjoint sweeps
   z.setZero(n_);
   for (int s = 0; s < sweeps; ++s) a_.forward_sweep(r, z, options_.omega);
+  correct_cut(r, z);
   a_.apply(z, az_);
   res_ = r - az_;
   apply_two_term(res_, d_);
   z += d_;
+  correct_cut(r, z);
   for (int s = 0; s < sweeps; ++s) a_.backward_sweep(r, z, options_.omega);
 }
 
@@ -179,6 +288,9 @@ std::size_t StokesPreconditioner<Dim>::memory_bytes() const {
   };
   std::size_t bytes = csr(f_.b) + csr(f_.b_transpose) + csr(f_.compliance) + csr(kinv_);
   bytes += velocity_.memory_bytes() + pressure_.memory_bytes();
+  if (cut_factor_)
+    bytes += csr(cut_rows_) + sizeof(double) * 3 * cut_.size() + sizeof(int) * cut_.size() +
+             (sizeof(double) + sizeof(int)) * static_cast<std::size_t>(cut_factor_->analysed_entries());
   bytes += sizeof(double) * (f_.c.size() + penalty_.size() + schur_diagonal_.size());
   bytes += sizeof(double) * (8 * static_cast<std::size_t>(n_) + 2 * nf_ + 2 * np_);
   return bytes;

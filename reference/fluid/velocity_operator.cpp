@@ -26,6 +26,16 @@ void fill_common(const StressLayout<Dim>& layout, const StokesWeights& w, const 
   f.num_stress = dofs.num_stress();
   f.num_pressure = dofs.num_pressure();
   f.compliance = stress_compliance(layout, dofs, w, min_fluid_fraction);
+  if (min_fluid_fraction > 0.0) f.compliance_exact = stress_compliance(layout, dofs, w, 0.0);
+  f.stress_fluid.resize(f.num_stress);
+  for (int i = 0; i < f.num_stress; ++i) {
+    const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);
+    const int k = stress.coord(d).first;
+    double wf = w.fluid_stress[d];
+    if (layout.form() == StressForm::reduced && StressGrid<Dim>::is_diagonal(k))
+      wf = std::min(wf, w.fluid_stress[eliminated_dof(stress, k, d)]);
+    f.stress_fluid[i] = wf;
+  }
   f.pressure_cell = dofs.pressure.cell_of_dof;
   f.pressure_liquid.resize(f.num_pressure);
   f.pressure_viscosity.resize(f.num_pressure);

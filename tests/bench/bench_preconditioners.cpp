@@ -7,7 +7,7 @@
 //   build/bench/bench_preconditioners [--dim 2|3] [--n 16,32] [--eta 0.1,1,10,100,1000,5000]
 //       [--scene tank|blob|pool] [--backend matrixfree|explicit] [--ssor-max N] [--no-ssor]
 //       [--gamma G] [--cycles K] [--smoothing S] [--sweeps W] [--no-schur] [--no-elements]
-//       [--clamp T] [--repeats R]
+//       [--clamp T] [--repeats R] [--cut-threshold T (0: no cut block)] [--cut-layers L]
 //
 // Scenes (unit box, walls, open top, rho = 1000, dt = 0.01, a smooth swirl plus one step of
 // gravity as u*):
@@ -257,6 +257,8 @@ int main(int argc, char** argv) {
     else if (a == "--additive") cfg.options.additive_pressure = true;
     else if (a == "--inner-cg") cfg.options.inner_cg = std::atoi(next());
     else if (a == "--max-coarse") cfg.options.max_coarse = std::atoi(next());
+    else if (a == "--cut-threshold") cfg.options.cut_threshold = std::atof(next());
+    else if (a == "--cut-layers") cfg.options.cut_layers = std::atoi(next());
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;

@@ -3,6 +3,7 @@
 // positive definiteness, agreement with CHOLMOD and between the back ends, thread independence.
 #include <catch2/catch.hpp>
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <omp.h>
 
@@ -533,5 +534,87 @@ TEMPLATE_TEST_CASE_SIG("MGPCG pressure solves: the stencil matrix is the assembl
       omp_set_num_threads(threads);
       CHECK((u_mg2 - u_mg).lpNorm<Eigen::Infinity>() == 0.0);
     }
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("the cut block: the stress unknowns cut by the solid, their pressures and two layers, "
+                       "solved exactly; SPD, both back ends, fewer iterations",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  CaseOptions o;
+  o.n = Dim == 2 ? 32 : 12;
+  o.eta = 5000.0;
+  const auto sc = make_case<Dim>(o);
+  const auto s = make_system(sc);
+  // the factors as solve_stokes builds them: K floored at W_F^s = 0.01, the block uses the exact K
+  const StokesPreconditionerOptions po;
+  const StokesFactors fm = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf, po.min_fluid_fraction);
+  const StokesFactors fe = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, s.sys, po.min_fluid_fraction);
+  REQUIRE(fm.compliance_exact.size() > 0);
+  const StokesPreconditioner<Dim> mm(sc.grid, *s.mf, fm, po);
+  const StokesPreconditioner<Dim> me(sc.grid, *s.ex, fe, po);
+  const std::vector<int>& cut = mm.cut_unknowns();
+  // the seed: every stress unknown with 0 < W_F^s < 1/2 (the solid ball cuts some), pressures, layers
+  int seed = 0, pressure = 0, layer = 0;
+  std::vector<char> in(s.mf->size(), 0);
+  for (int i : cut) in[i] = 1;
+  for (int i = 0; i < fm.num_stress; ++i)
+    if (fm.stress_fluid[i] > 0.0 && fm.stress_fluid[i] < po.cut_threshold) {
+      ++seed;
+      CHECK(in[i]);
+    }
+  for (int i : cut) {
+    if (i >= fm.num_stress) ++pressure;
+    else if (fm.stress_fluid[i] >= po.cut_threshold) ++layer;
+  }
+  INFO("block " << cut.size() << ": seed " << seed << ", pressure " << pressure << ", full stress " << layer
+                << " of " << s.mf->size());
+  CHECK(seed > 0);
+  CHECK(pressure > 0);
+  CHECK(layer > 0);
+  CHECK(static_cast<int>(cut.size()) < s.mf->size() / 2);
+  CHECK(std::is_sorted(cut.begin(), cut.end()));
+  CHECK(me.cut_unknowns() == cut);  // both back ends pick the same block
+  // each back end's preconditioned solve reaches CHOLMOD's solution, the block saves iterations
+  const VectorX exact = cholmod_solve(s.sys.A, s.sys.b);
+  PcgSettings settings;
+  settings.tolerance = 1e-10;
+  settings.max_iterations = 1000;
+  StokesPreconditionerOptions off = po;
+  off.cut_threshold = 0.0;
+  const StokesPreconditioner<Dim> mo(sc.grid, *s.mf, fm, off);
+  CHECK(mo.cut_unknowns().empty());
+  VectorX xm, xe, xo;
+  const PcgResult rm = pcg_solve(*s.mf, s.mf->rhs(sc.u_star), xm, settings, mm);
+  const PcgResult re = pcg_solve(*s.ex, s.sys.b, xe, settings, me);
+  const PcgResult ro = pcg_solve(*s.mf, s.mf->rhs(sc.u_star), xo, settings, mo);
+  INFO("iterations: block " << rm.iterations << " (explicit " << re.iterations << "), without " << ro.iterations);
+  CHECK(rm.converged);
+  CHECK(re.converged);
+  CHECK(rel_diff(xm, exact) < 1e-7);
+  CHECK(rel_diff(xe, exact) < 1e-7);
+  CHECK(std::abs(rm.iterations - re.iterations) <= 1);
+  CHECK(rm.iterations < ro.iterations);
+}
+
+TEMPLATE_TEST_CASE_SIG("the cut block keeps the preconditioner symmetric positive definite (pool around a "
+                       "solid, low and high viscosity)",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  for (double eta : {0.01, 5000.0}) {
+    CaseOptions o;
+    o.n = Dim == 2 ? 10 : 6;
+    o.eta = eta;
+    auto sc = make_case<Dim>(o);
+    const auto s = make_system(sc);
+    const StokesPreconditionerOptions po = small_options();
+    const StokesPreconditioner<Dim> m(sc.grid, *s.mf,
+                                      stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf, po.min_fluid_fraction), po);
+    INFO("eta " << eta << ", block " << m.cut_unknowns().size() << " of " << m.size());
+    REQUIRE(!m.cut_unknowns().empty());
+    const Eigen::MatrixXd p = dense(m);
+    CHECK((p - p.transpose()).cwiseAbs().maxCoeff() < 1e-9 * p.cwiseAbs().maxCoeff());
+    const VectorX scale = s.mf->diagonal().cwiseSqrt();
+    const Eigen::MatrixXd scaled = scale.asDiagonal() * (0.5 * (p + p.transpose())) * scale.asDiagonal();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(scaled, Eigen::EigenvaluesOnly);
+    CHECK(es.eigenvalues().minCoeff() > 0.0);
   }
 }
