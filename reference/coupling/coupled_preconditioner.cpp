@@ -51,15 +51,24 @@ CoupledPreconditioner<Dim>::CoupledPreconditioner(const MonolithicSystem<Dim>& s
       coupled_stokes_factors(system, options.fluid.min_fluid_fraction), options.fluid);
   const int nd = system.num_body_dofs();
   if (!options.body_correction || nd == 0 || nd > options.max_body_dofs) return;
-  // U = P B_f^T, column by column (nd applications of P)
-  u_.resize(nf_, nd);
+  // U = P B_f^T, column by column (an application of P per non-zero column of B_f^T; a body
+  // that touches no fluid unknown has zero columns, and with no non-zero column at all there is
+  // nothing to correct: Q = P)
+  u_.setZero(nf_, nd);
   VectorX e = VectorX::Zero(nd), column(nf_), pz(nf_);
+  bool coupled = false;
   for (int k = 0; k < nd; ++k) {
     e.setZero();
     e[k] = 1.0;
     column = system.fluid_body_force_transpose(e);
+    if (column.cwiseAbs().maxCoeff() == 0.0) continue;
+    coupled = true;
     fluid_->apply(column, pz);
     u_.col(k) = pz;
+  }
+  if (!coupled) {
+    u_.resize(0, 0);
+    return;
   }
   // B_f U (nd x nd), symmetric in exact arithmetic
   Eigen::MatrixXd bu(nd, nd);

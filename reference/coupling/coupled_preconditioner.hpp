@@ -65,7 +65,8 @@ class CoupledPreconditioner : public Preconditioner {
 
   /// The fluid part P.
   const StokesPreconditioner<Dim>& fluid() const { return *fluid_; }
-  /// Whether the Woodbury body correction is applied.
+  /// Whether the Woodbury body correction is applied (off when disabled, above max_body_dofs, or
+  /// when no body touches a fluid unknown: B_f = 0).
   bool body_correction() const { return nd_ > 0; }
 
  private:
