@@ -890,6 +890,10 @@ void step_stats_fields(Archive& a, FrameStats& s) {
   a(v.coupled_seconds);
   a(v.viscosity_residuals);
   a(v.max_viscosity_residual);
+  // the preconditioners booked so far in the frame (a run stopped mid-frame resumes with them)
+  a(v.stokes_solves_multigrid);
+  a(v.stokes_solves_ssor);
+  a(v.max_stokes_stiffness);
   for (const FramePhase p : enum_values<FramePhase>()) a(s.timing[p]);
 }
 
