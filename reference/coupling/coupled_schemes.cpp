@@ -12,6 +12,7 @@
 #include "reference/contact/staggered_projections.hpp"
 #include "reference/core/errors.hpp"
 #include "reference/core/timer.hpp"
+#include "reference/coupling/coupled_preconditioner.hpp"
 #include "reference/coupling/monolithic_system.hpp"
 #include "reference/coupling/solve_sequence.hpp"
 #include "reference/grid/stress_weights.hpp"
@@ -41,18 +42,55 @@ void record_mprgp(const MprgpResult& m, CoupledSolveResult& r, const char* what)
   r.max_relative_residual = std::max(r.max_relative_residual, m.relative_residual);
 }
 
-/// The fluid solve of the partitioned schemes: A_ff x_f = b_f - A_f3 lambda - A_f4 z by SSOR-PCG
-/// (FluidBodyOperator), warm-started from x.x_fluid. Returns the CG iterations.
+/// The preconditioner of one system's coupled solves (CoupledSchemeOptions::preconditioner):
+/// systems without stress unknowns follow pressure_preconditioner; the others the choice, auto
+/// by the system's stiffness as the liquid-only unified solves (choose_preconditioner), booked
+/// in r.
+template <int Dim>
+PreconditionerKind coupled_preconditioner_kind(const MonolithicSystem<Dim>& s,
+                                               const CoupledSchemeOptions& o,
+                                               CoupledSolveResult& r) {
+  if (s.num_fluid() == 0) return PreconditionerKind::ssor;
+  if (s.num_stress() == 0) return o.pressure_preconditioner;
+  const VectorX& eta = s.weights().viscosity;
+  const double eta_max = eta.size() > 0 ? std::max(0.0, eta.maxCoeff()) : 0.0;
+  const double stiffness = o.liquid_density > 0.0
+                               ? solve_stiffness(eta_max, s.dt(), o.liquid_density, s.grid().dx())
+                               : 0.0;
+  const PreconditionerKind kind = choose_preconditioner(o.preconditioner, Dim, stiffness);
+  (kind == PreconditionerKind::multigrid ? r.multigrid_systems : r.ssor_systems) += 1;
+  r.max_stiffness = std::max(r.max_stiffness, stiffness);
+  return kind;
+}
+
+/// The block preconditioner of A_ff (coupled_preconditioner.hpp), built on its first
+/// application (a zero right-hand side skips the set-up).
+template <int Dim>
+std::unique_ptr<LazyPreconditioner> fluid_body_preconditioner(const MonolithicSystem<Dim>& s,
+                                                              bool body_correction) {
+  return std::make_unique<LazyPreconditioner>(
+      s.num_fluid(), "coupled-block", [&s, body_correction]() -> std::unique_ptr<Preconditioner> {
+        CoupledPreconditionerOptions o;
+        o.body_correction = body_correction;
+        return std::make_unique<CoupledPreconditioner<Dim>>(s, false, VectorX(), o);
+      });
+}
+
+/// The fluid solve of the partitioned schemes: A_ff x_f = b_f - A_f3 lambda - A_f4 z by PCG
+/// (FluidBodyOperator) with SSOR or, when m is set, with m; warm-started from x.x_fluid.
+/// Returns the CG iterations.
 template <int Dim>
 long fluid_solve(const MonolithicSystem<Dim>& s, const FluidBodyOperator<Dim>& op,
-                 const StaggeredSettings& settings, Unknowns& x, CoupledSolveResult& r) {
+                 const StaggeredSettings& settings, Unknowns& x, CoupledSolveResult& r,
+                 const Preconditioner* m = nullptr) {
   if (s.num_fluid() == 0) return 0;
   PcgSettings pcg;
   pcg.tolerance = settings.mprgp.tolerance;
   pcg.max_iterations = settings.mprgp.max_iterations;
   pcg.omega = settings.mprgp.omega;
-  const PcgResult p = pcg_solve(op, s.fluid_rhs(x.lambda, x.z), x.x_fluid, pcg);
-  if (p.breakdown) throw SimulationError("fluid solve: SSOR-PCG broke down: " + p.message);
+  const PcgResult p = m ? pcg_solve(op, s.fluid_rhs(x.lambda, x.z), x.x_fluid, pcg, *m)
+        : pcg_solve(op, s.fluid_rhs(x.lambda, x.z), x.x_fluid, pcg);
+  if (p.breakdown) throw SimulationError("fluid solve: PCG broke down: " + p.message);
   r.converged = r.converged && p.converged;
   r.max_relative_residual = std::max(r.max_relative_residual, p.relative_residual);
   return p.iterations;
@@ -110,14 +148,20 @@ class ContactSolve {
 };
 
 /// PC-unified / PVC-unified / VC-unified on one system: the MLCP (26) by solve_pvc_unified, or
-/// SSOR-PCG on A_ff when there are no contacts (no box constraints, section 6).
+/// PCG on A_ff when there are no contacts (no box constraints, section 6); SSOR or, with `kind`
+/// multigrid, the block preconditioner of coupled_preconditioner.hpp on both.
 template <int Dim>
 Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& settings,
-                       CoupledSolveResult& r, long& iterations) {
+                       CoupledSolveResult& r, long& iterations,
+                       PreconditionerKind kind = PreconditionerKind::ssor,
+                       bool body_correction = true) {
   Unknowns x = zero_unknowns(s);
+  const bool multigrid = kind == PreconditionerKind::multigrid;
   if (s.num_contacts() == 0) {
     const FluidBodyOperator<Dim> op(s);
-    iterations += fluid_solve(s, op, settings, x, r);
+    const std::unique_ptr<LazyPreconditioner> m =
+        multigrid ? fluid_body_preconditioner(s, body_correction) : nullptr;
+    iterations += fluid_solve(s, op, settings, x, r, m.get());
     r.staggered_iterations += 1;
     return x;
   }
@@ -126,6 +170,8 @@ Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& 
   PvcUnifiedOptions options;
   options.jacobi_scaling = true;
   options.compute_updates = false;  // finish() updates from the unknowns
+  options.preconditioner = kind;
+  options.body_correction = body_correction;
   const PvcUnifiedResult u = solve_pvc_unified(s, settings, options);
   if (u.breakdown) throw SimulationError("unified solve: MPRGP broke down: " + u.message);
   r.converged = r.converged && u.converged;
@@ -177,6 +223,10 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
   // the operators, timed with their solves (the unified solves' timings include theirs too)
   Stopwatch t0;
   const FluidBodyOperator<Dim> fluid(s);
+  const std::unique_ptr<LazyPreconditioner> m =
+      coupled_preconditioner_kind(s, options, r) == PreconditionerKind::multigrid
+          ? fluid_body_preconditioner(s, options.body_correction)
+          : nullptr;
   r.fluid_seconds += t0.seconds();
   t0.restart();
   const ContactSolve<Dim> contact(s, settings);
@@ -184,7 +234,7 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
   Unknowns x = zero_unknowns(s);
   auto run_fluid = [&]() {
     const Stopwatch t0;
-    r.fluid_iterations += fluid_solve(s, fluid, settings, x, r);
+    r.fluid_iterations += fluid_solve(s, fluid, settings, x, r, m.get());
     r.fluid_seconds += t0.seconds();
   };
   auto run_contact = [&](int rounds, bool cold = false) {
@@ -347,8 +397,10 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     const MonolithicSystem<Dim>& sys = *out.system;
     if (unified) {
       const Stopwatch t0;
+      const PreconditionerKind kind = coupled_preconditioner_kind(sys, options, r);
       out.x = unified_solve(sys, settings, r,
-                            viscosity_stage ? r.viscosity_coupled_iterations : r.coupled_iterations);
+                            viscosity_stage ? r.viscosity_coupled_iterations : r.coupled_iterations,
+                            kind, options.body_correction);
       const double seconds = t0.seconds();
       r.coupled_seconds += seconds;
       if (viscosity_stage) r.viscosity_coupled_seconds += seconds;

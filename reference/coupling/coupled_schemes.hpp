@@ -39,6 +39,7 @@
 #include "reference/grid/mac_grid.hpp"
 #include "reference/rigid/rigid_body.hpp"
 #include "reference/solvers/backend.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -99,6 +100,11 @@ struct CoupledSolveResult {
   /// Every inner solve converged (and the iterative schemes met the tolerance within
   /// settings.max_iterations rounds).
   bool converged = true;
+  /// The systems with stress unknowns solved (one per system built), by the preconditioner of
+  /// their fluid rows, and the largest stiffness eta_max dt / (rho dx^2) among them
+  /// (CoupledSchemeOptions::preconditioner).
+  long multigrid_systems = 0, ssor_systems = 0;
+  double max_stiffness = 0.0;
   /// Largest relative residual of the inner solves (PCG: ||r||_inf / ||b||_inf; MPRGP: projected
   /// gradient).
   double max_relative_residual = 0.0;
@@ -126,6 +132,20 @@ struct CoupledSchemeOptions {
   /// the partitioned schemes (whose own step does not solve eq. (24); their results are
   /// unchanged). Not set: nothing is built.
   std::function<void(const SystemExport&)> export_sink;
+  /// The preconditioner of the coupled solves of systems with stress unknowns (the fluid solve on
+  /// A_ff and MPRGP on (26); docs/preconditioners.md, "The coupled systems"): ssor (the paper's,
+  /// the default here so that the library call keeps its iterates), multigrid (the block
+  /// preconditioner of coupled_preconditioner.hpp), or auto (choose_preconditioner with the
+  /// system's stiffness eta_max dt / (rho dx^2), rho = liquid_density: the rule of the
+  /// liquid-only unified solves). The simulator passes solver.preconditioner.
+  PreconditionerChoice preconditioner = PreconditionerChoice::ssor;
+  /// The same for the systems without stress unknowns (the P solves): solver.pressure_preconditioner.
+  PreconditionerKind pressure_preconditioner = PreconditionerKind::ssor;
+  /// The smallest liquid density (kg/m^3) of the stiffness under auto; <= 0: stiffness 0.
+  double liquid_density = 0.0;
+  /// multigrid: the Woodbury correction of the bodies' low-rank term
+  /// (CoupledPreconditionerOptions::body_correction).
+  bool body_correction = true;
 };
 
 /// One step's pressure / viscosity / contact solves under `scheme` (section 6), every

@@ -13,6 +13,7 @@
 #include "reference/contact/staggered_projections.hpp"
 #include "reference/solvers/colouring.hpp"
 #include "reference/solvers/mprgp.hpp"
+#include "reference/coupling/coupled_preconditioner.hpp"
 
 namespace monolith {
 
@@ -748,7 +749,26 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   r.x = VectorX::Zero(nf + nc);
   r.z = VectorX::Zero(nz);
   // ||A|| once per operator for all the staggered solves (each would estimate it again)
-  const MprgpSettings mlcp_settings = with_norm_estimate(op, settings.mprgp);
+  MprgpSettings mlcp_settings = with_norm_estimate(op, settings.mprgp);
+  // the block preconditioner (built on its first application, shared by the staggered solves),
+  // seen through the Jacobi scaling when MPRGP runs on S A S
+  std::unique_ptr<LazyPreconditioner> block;
+  std::unique_ptr<ScaledPreconditioner> scaled_block;
+  if (options.preconditioner == PreconditionerKind::multigrid && nf > 0 && settings.mprgp.precondition) {
+    const VectorX contact_diagonal = unscaled.diagonal().tail(nc);
+    const bool body_correction = options.body_correction;
+    block = std::make_unique<LazyPreconditioner>(
+        nf + nc, "coupled-block", [&system, contact_diagonal, body_correction]() -> std::unique_ptr<Preconditioner> {
+          CoupledPreconditionerOptions o;
+          o.body_correction = body_correction;
+          return std::make_unique<CoupledPreconditioner<Dim>>(system, true, contact_diagonal, o);
+        });
+    mlcp_settings.preconditioner = block.get();
+    if (options.jacobi_scaling) {
+      scaled_block = std::make_unique<ScaledPreconditioner>(*block, scaled.scale());
+      mlcp_settings.preconditioner = scaled_block.get();
+    }
+  }
   auto record = [&r](const MprgpResult& m) {
     r.mprgp_iterations += m.iterations;
     r.converged = r.converged && m.converged;

@@ -32,6 +32,7 @@
 #include "reference/grid/stress_grid.hpp"
 #include "reference/rigid/rigid_body.hpp"
 #include "reference/solvers/linear_operator.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -380,6 +381,14 @@ struct PvcUnifiedOptions {
   /// Fill u, body_velocity, stress and pressure of the result (eqs. (8), (21)); a caller that
   /// updates from x itself (solve_coupled_step) turns it off.
   bool compute_updates = true;
+  /// The preconditioner of the MPRGP solves of (26): ssor (the paper's, section 4.3) or
+  /// multigrid, the block preconditioner of coupled_preconditioner.hpp (the fluid rows by the
+  /// multigrid block preconditioner of eq. (8) with the bodies' low-rank term by Woodbury, Jacobi
+  /// on the contact rows), applied in face (docs/mprgp.md). Built once per call, on its first
+  /// application.
+  PreconditionerKind preconditioner = PreconditionerKind::ssor;
+  /// multigrid: CoupledPreconditionerOptions::body_correction.
+  bool body_correction = true;
 };
 
 struct PvcUnifiedResult {

@@ -68,7 +68,9 @@ struct SolverSpec {
   /// stress-only viscosity solve of PC-VC-PC): "auto" (default: per solve, multigrid in 2D and
   /// in 3D at a stiffness eta_max dt / (rho dx^2) >= 0.3, else SSOR; choose_preconditioner),
   /// "multigrid", or the paper's "ssor" (docs/preconditioners.md). The coupled systems (24)/(26)
-  /// with bodies keep SSOR; the pressure-only solves follow pressure_preconditioner.
+  /// with bodies and stress unknowns follow the same choice (the block preconditioner of
+  /// coupled_preconditioner.hpp, docs/preconditioners.md "The coupled systems"); the
+  /// pressure-only solves, coupled or not, follow pressure_preconditioner.
   PreconditionerChoice preconditioner = PreconditionerChoice::automatic;
   /// `solver.pressure_preconditioner`: the preconditioner of the liquid's pressure-only solves
   /// beside static solids (eq. (8) without stress: PC-unified, the P solves of PC-VC-PC):

@@ -122,6 +122,8 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
     throw std::invalid_argument("mprgp_solve: size mismatch between A, b and the bounds");
   for (int i = 0; i < n; ++i)
     if (!(lower[i] <= upper[i])) throw std::invalid_argument("mprgp_solve: lower > upper (or NaN bound)");
+  if (settings.preconditioner && settings.preconditioner->size() != n)
+    throw std::invalid_argument("mprgp_solve: preconditioner of the wrong size");
 
   // null space of A: only on unbounded variables, projected out of b, x and z (as in pcg_solve)
   const std::vector<VectorX>& null_space = a.null_space();
@@ -177,7 +179,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   std::vector<char> jacobi_row;
   VectorX a_diagonal;
   int num_jacobi_rows = 0;
-  if (settings.precondition) {
+  if (settings.precondition && !settings.preconditioner) {
     a_diagonal = a.diagonal();
     num_jacobi_rows = sweep_diagonal_mismatch(a, jacobi_row);
   }
@@ -187,6 +189,12 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   auto precondition = [&]() {
     if (!settings.precondition) {
       z = phi;
+    } else if (settings.preconditioner) {
+      // M block diagonal with a diagonal block on every bounded row: M^-1 phi masked to F is
+      // M_FF^-1 g_F
+      settings.preconditioner->apply(phi, z);
+      for (int i = 0; i < n; ++i)
+        if (!mask[i]) z[i] = 0.0;
     } else if (num_jacobi_rows == 0) {
       ssor_precondition(a, g, z, settings.omega, &mask);
     } else {

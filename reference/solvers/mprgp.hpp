@@ -15,6 +15,7 @@
 
 #include "reference/solvers/colouring.hpp"
 #include "reference/solvers/linear_operator.hpp"
+#include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
 
@@ -32,6 +33,13 @@ struct MprgpSettings {
   /// lowers f; otherwise the fixed step. Fewer expansion steps when many variables must reach
   /// their bounds (docs/mprgp.md); costs one or two extra operator applications per expansion.
   bool adaptive_expansion = false;
+  /// With precondition: instead of SSOR on the free set, z = M^-1 phi masked to the free set F
+  /// (phi the free gradient). M must be a fixed SPD map that is block diagonal with a diagonal
+  /// block over every bounded variable (e.g. CoupledPreconditioner of coupled_preconditioner.hpp:
+  /// a fluid block over the unbounded (tau, p) rows, Jacobi on the contact rows); then the masked
+  /// application is exactly M_FF^-1 on every free set, i.e. preconditioning in face
+  /// (docs/mprgp.md). Not owned; nullptr: SSOR.
+  const Preconditioner* preconditioner = nullptr;
 };
 
 struct MprgpResult {

@@ -1,0 +1,318 @@
+// The block preconditioner of the coupled systems (24)/(26) (reference/coupling/
+// coupled_preconditioner.hpp): SPD on small 2D and 3D cases with bodies, walls, a free surface
+// and several viscosities; its body correction is the Woodbury identity; PCG on A_ff with it
+// gives the dense solution and the SSOR solution; MPRGP on (26) with it preconditioning in face
+// reaches the same KKT point as with SSOR; both back ends agree; 1 and 2 threads are bitwise
+// identical; solve_coupled_step with "multigrid" equals the SSOR step to tolerance (PVC-unified,
+// PV-C, C-PV, PC-VC-PC-unified).
+#include <omp.h>
+
+#include <Eigen/Eigenvalues>
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+#include "reference/contact/collision.hpp"
+#include "reference/contact/contact_system.hpp"
+#include "reference/coupling/coupled_preconditioner.hpp"
+#include "reference/coupling/coupled_schemes.hpp"
+#include "reference/coupling/coupling.hpp"
+#include "reference/coupling/monolithic_system.hpp"
+#include "reference/grid/volume_fractions.hpp"
+#include "reference/solvers/mprgp.hpp"
+#include "reference/solvers/pcg.hpp"
+#include "tests/support/body_helpers.hpp"
+#include "tests/support/test_helpers.hpp"
+
+using namespace monolith;
+using monolith::testing::make_body;
+
+namespace {
+
+constexpr double kRho = 1000.0;
+constexpr double kDt = 0.01;
+
+template <int Dim>
+Vec<Dim> at(double x, double y) {
+  Vec<Dim> p = Vec<Dim>::Constant(0.5);
+  p[0] = x;
+  p[1] = y;
+  return p;
+}
+
+/// A coupled step in the unit tank (walls, open top): a liquid of viscosity eta below y = 0.55
+/// with a random u* plus gravity; a dynamic box floating half in the liquid, a dynamic ball on
+/// the floor 0.1 dx into it (contacts with the floor wall), friction mu.
+template <int Dim>
+CoupledStepInput<Dim> tank(int n, double eta, double mu) {
+  CoupledStepInput<Dim> in{testing::unit_grid<Dim>(n), {}, kDt, {}, {}, {}, {}, {}};
+  const double dx = in.grid.dx();
+  ShapeSpec ball;
+  ball.type = ShapeType::sphere;
+  ball.radius = 0.15;
+  ball.center = testing::as_std<Dim>(at<Dim>(0.7, 0.15 - 0.1 * dx));
+  in.bodies = {testing::make_box<Dim>(at<Dim>(0.3, 0.55), Vec<Dim>::Constant(0.12), 600.0, mu),
+               make_body<Dim>(ball, 2500.0, mu)};
+  for (int b = 0; b < 2; ++b) {
+    BodyVec<Dim> v = BodyVec<Dim>::Zero();
+    v[0] = 0.05 * (b + 1);
+    v[1] = -9.81 * kDt - 0.1;
+    in.bodies[b].set_generalized_velocity(v);
+  }
+  std::array<BoundaryType, 2 * Dim> boundary = testing::all_boundaries<Dim>(BoundaryType::wall);
+  boundary[3] = BoundaryType::open;
+  in.solids = solid_weights<Dim>(in.grid, coupling_bodies(in.bodies), {}, boundary, 0.01 * dx);
+  const VectorX phi = testing::sample_lattice<Dim>(half_lattice(in.grid),
+                                                   [&](const Vec<Dim>& x) { return x[1] - 0.55; });
+  in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
+  in.u_star = 0.2 * testing::random_vector(in.grid.num_faces(), 7);
+  in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).array() += -9.81 * kDt;
+  Walls<Dim> walls;
+  walls.lower = Vec<Dim>::Zero();
+  walls.upper = Vec<Dim>::Ones();
+  walls.is_wall.fill(true);
+  walls.friction = mu;
+  in.contacts = detect_contacts<Dim>(in.bodies, walls, 0.3 * dx);
+  in.contact_params.dt = kDt;
+  in.contact_params.dx = dx;
+  return in;
+}
+
+template <int Dim>
+MonolithicSystem<Dim> make_system(const CoupledStepInput<Dim>& in, Backend backend) {
+  const ContactSystem<Dim> contacts(in.bodies, in.contacts, in.contact_params);
+  return MonolithicSystem<Dim>(in.grid, StressForm::reduced, in.weights, in.dt, in.u_star,
+                               in.bodies, in.solids, contacts, backend);
+}
+
+/// M^-1 densely (column by column through apply).
+Eigen::MatrixXd dense(const Preconditioner& m) {
+  const int n = m.size();
+  Eigen::MatrixXd d(n, n);
+  VectorX e = VectorX::Zero(n), z;
+  for (int k = 0; k < n; ++k) {
+    e.setZero();
+    e[k] = 1.0;
+    m.apply(e, z);
+    d.col(k) = z;
+  }
+  return d;
+}
+
+template <int Dim>
+void check_spd(int n, double eta) {
+  INFO(Dim << "D n=" << n << " eta " << eta);
+  const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
+  const MonolithicSystem<Dim> s = make_system(in, Backend::matrix_free);
+  REQUIRE(s.num_stress() > 0);
+  REQUIRE(s.num_contacts() > 0);
+  REQUIRE(s.num_body_dofs() == 2 * kBodyDofs<Dim>);
+  const MonolithicOperator<Dim> op(s, 1e-4);
+  const VectorX contact_diagonal = op.diagonal().tail(s.num_contacts());
+  CoupledPreconditionerOptions with, without;
+  without.body_correction = false;
+  const CoupledPreconditioner<Dim> mc(s, true, contact_diagonal, with);
+  const CoupledPreconditioner<Dim> mp(s, true, contact_diagonal, without);
+  REQUIRE(mc.body_correction());
+  REQUIRE(!mp.body_correction());
+  const Eigen::MatrixXd dc = dense(mc), dp = dense(mp);
+  for (const Eigen::MatrixXd* d : {&dc, &dp}) {
+    const double asym = (*d - d->transpose()).norm() / d->norm();
+    CHECK(asym < 1e-9);
+    const Eigen::MatrixXd sym = 0.5 * (*d + d->transpose());
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(sym, Eigen::EigenvaluesOnly);
+    const double lo = es.eigenvalues().minCoeff(), hi = es.eigenvalues().maxCoeff();
+    CHECK(lo > 0.0);
+    CHECK(lo > 1e-14 * hi);
+    std::printf("coupled preconditioner %dD n=%d eta %g: %d unknowns, asymmetry %.1e, eigenvalues"
+                " of M^-1 in [%.2e, %.2e]\n", Dim, n, eta, mc.size(), asym, lo, hi);
+  }
+  // the body correction is Woodbury: (M_c)^-1 - (M_p)^-1 = dt alpha B_f^T M_r^-1 B_f on the fluid
+  // rows, 0 elsewhere
+  const int nf = s.num_fluid();
+  const Eigen::MatrixXd diff = dc.inverse() - dp.inverse();
+  Eigen::MatrixXd rigid = Eigen::MatrixXd::Zero(mc.size(), mc.size());
+  const Eigen::MatrixXd mr(s.contacts().m_r_inverse);
+  Eigen::MatrixXd b(s.num_body_dofs(), nf);
+  for (int k = 0; k < nf; ++k) {
+    VectorX e = VectorX::Zero(nf);
+    e[k] = 1.0;
+    b.col(k) = s.fluid_body_force(e);
+  }
+  REQUIRE(b.norm() > 0.0);
+  rigid.topLeftCorner(nf, nf) = s.dt() * s.alpha() * b.transpose() * mr * b;
+  const double werr = (diff - rigid).norm() / rigid.norm();
+  CHECK(werr < 1e-6);
+  std::printf("  Woodbury: ||M_c^-1 - M_p^-1 - dt alpha B^T M_r^-1 B|| / ||.|| = %.1e\n", werr);
+}
+
+/// PCG on A_ff with the block preconditioner against the dense solution and SSOR-PCG; both
+/// back ends; 1 and 2 threads bitwise.
+template <int Dim>
+void check_fluid_body_solve(int n, double eta) {
+  INFO(Dim << "D n=" << n << " eta " << eta);
+  const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
+  const MonolithicSystem<Dim> e = make_system(in, Backend::explicit_matrices);
+  const MonolithicSystem<Dim> m = make_system(in, Backend::matrix_free);
+  const FluidBodyOperator<Dim> oe(e), om(m);
+  const VectorX b = m.fluid_rhs(VectorX(), VectorX());
+  // the dense solution (A_ff is SPD here: open top)
+  const Eigen::MatrixXd a = om.dense_matrix();
+  const VectorX exact = a.ldlt().solve(b);
+  REQUIRE((a * exact - b).norm() <= 1e-9 * b.norm());
+  PcgSettings settings;
+  settings.tolerance = 1e-10;
+  settings.max_iterations = 20000;
+  VectorX x_ssor, x_e, x_m, x_m2;
+  const PcgResult rs = pcg_solve(om, b, x_ssor, settings);
+  const CoupledPreconditioner<Dim> pe(e, false, VectorX()), pm(m, false, VectorX());
+  const PcgResult re = pcg_solve(oe, b, x_e, settings, pe);
+  const PcgResult rm = pcg_solve(om, b, x_m, settings, pm);
+  CHECK(rs.converged);
+  CHECK(re.converged);
+  CHECK(rm.converged);
+  const double scale = exact.cwiseAbs().maxCoeff();
+  CHECK((x_m - exact).cwiseAbs().maxCoeff() <= 1e-6 * scale);
+  CHECK((x_m - x_ssor).cwiseAbs().maxCoeff() <= 1e-6 * scale);
+  CHECK((x_e - x_m).cwiseAbs().maxCoeff() <= 1e-8 * scale);
+  CHECK(std::abs(re.iterations - rm.iterations) <= 2);
+  // far fewer iterations than SSOR on the stiff cases
+  if (eta >= 100.0) CHECK(4 * rm.iterations < rs.iterations);
+  // (the two back ends' preconditioners differ by design: P's outer SOR sweeps of F run in row
+  // order on the explicit matrix and in colour groups on the stencils; their solutions agree)
+  const VectorX r = testing::random_vector(m.num_fluid(), 3);
+  VectorX zm;
+  pm.apply(r, zm);
+  // 1 vs 2 threads, matrix-free: bitwise
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(2);
+  const CoupledPreconditioner<Dim> pm2(m, false, VectorX());
+  VectorX zm2;
+  pm2.apply(r, zm2);
+  const PcgResult rm2 = pcg_solve(om, b, x_m2, settings, pm2);
+  omp_set_num_threads(threads);
+  CHECK((zm2 - zm).cwiseAbs().maxCoeff() == 0.0);
+  CHECK((x_m2 - x_m).cwiseAbs().maxCoeff() == 0.0);
+  CHECK(rm2.iterations == rm.iterations);
+  std::printf("A_ff solve %dD n=%d eta %g: %d unknowns, SSOR %d iterations, block %d (explicit %d),"
+              " error vs dense %.1e\n", Dim, n, eta, m.num_fluid(), rs.iterations, rm.iterations,
+              re.iterations, (x_m - exact).cwiseAbs().maxCoeff() / scale);
+}
+
+/// KKT conditions of the MLCP (26) (no friction) at x = (tau, p, lambda) for the dense A (boost
+/// included) and b: fluid rows A x = b, lambda >= 0, w = A x - b >= 0 on the contact rows,
+/// lambda_i w_i = 0. Returns the largest violation relative to ||b||_inf.
+double kkt_violation(const Eigen::MatrixXd& a, const VectorX& b, const VectorX& x, int nf) {
+  const VectorX w = a * x - b;
+  const double scale = b.cwiseAbs().maxCoeff();
+  double worst = w.head(nf).cwiseAbs().maxCoeff();
+  for (int i = nf; i < x.size(); ++i) {
+    worst = std::max(worst, -x[i] * std::sqrt(a(i, i)));
+    worst = std::max(worst, -w[i]);
+    worst = std::max(worst, std::min(std::abs(w[i]), x[i] * std::sqrt(a(i, i))));
+  }
+  return worst / scale;
+}
+
+template <int Dim>
+void check_mprgp(int n, double eta) {
+  INFO(Dim << "D n=" << n << " eta " << eta);
+  const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
+  double worst_diff = 0.0;
+  for (Backend backend : {Backend::explicit_matrices, Backend::matrix_free}) {
+    const MonolithicSystem<Dim> s = make_system(in, backend);
+    REQUIRE(s.num_contacts() > 0);
+    StaggeredSettings settings;
+    settings.mprgp.tolerance = 1e-9;
+    settings.mprgp.max_iterations = 50000;
+    PvcUnifiedOptions ssor, block;
+    ssor.jacobi_scaling = block.jacobi_scaling = true;
+    block.preconditioner = PreconditionerKind::multigrid;
+    const PvcUnifiedResult rs = solve_pvc_unified(s, settings, ssor);
+    const PvcUnifiedResult rb = solve_pvc_unified(s, settings, block);
+    CHECK(rs.converged);
+    CHECK(rb.converged);
+    CHECK(!rb.breakdown);
+    const MonolithicOperator<Dim> op(s, settings.diagonal_boost);
+    const Eigen::MatrixXd a = op.dense_matrix();
+    const VectorX b = s.mlcp_rhs(VectorX::Zero(s.num_friction()));
+    const double kkt_s = kkt_violation(a, b, rs.x, s.num_fluid());
+    const double kkt_b = kkt_violation(a, b, rb.x, s.num_fluid());
+    CHECK(kkt_b < 1e-6);
+    CHECK(kkt_s < 1e-6);
+    // the QP is strictly convex (A SPD with the boost): one KKT point
+    const double diff = (rb.x - rs.x).cwiseAbs().maxCoeff() / rs.x.cwiseAbs().maxCoeff();
+    CHECK(diff < 1e-5);
+    worst_diff = std::max(worst_diff, diff);
+    // some contact is active and some force positive (the case tests the bounds)
+    CHECK(rb.lambda.maxCoeff() > 0.0);
+    if (eta >= 100.0) CHECK(2 * rb.mprgp_iterations < rs.mprgp_iterations);
+    std::printf("MPRGP (26) %dD n=%d eta %g %s: %d unknowns, %d contacts, SSOR %ld iterations, "
+                "block %ld; KKT violation %.1e / %.1e\n", Dim, n, eta, enum_name(backend).c_str(),
+                op.size(), s.num_contacts(), rs.mprgp_iterations, rb.mprgp_iterations, kkt_s, kkt_b);
+  }
+  std::printf("  largest relative difference block vs SSOR %.1e\n", worst_diff);
+}
+
+}  // namespace
+
+TEST_CASE("the coupled block preconditioner is SPD and its body correction is Woodbury", "[coupled_preconditioner]") {
+  for (double eta : {0.1, 10.0, 1000.0}) check_spd<2>(10, eta);
+  check_spd<3>(6, 1000.0);
+}
+
+TEST_CASE("PCG on A_ff with the coupled block preconditioner: dense and SSOR solution, back ends, threads", "[coupled_preconditioner]") {
+  for (double eta : {1.0, 1000.0}) check_fluid_body_solve<2>(24, eta);
+  check_fluid_body_solve<3>(8, 500.0);
+}
+
+TEST_CASE("MPRGP on (26) preconditioned in face by the coupled block preconditioner: the KKT point of SSOR", "[coupled_preconditioner]") {
+  for (double eta : {1.0, 1000.0}) check_mprgp<2>(16, eta);
+  check_mprgp<3>(8, 500.0);
+}
+
+TEST_CASE("solve_coupled_step with the coupled block preconditioner equals the SSOR step", "[coupled_preconditioner]") {
+  auto run = [](auto dim_tag, int n) {
+    constexpr int Dim = decltype(dim_tag)::value;
+    const CoupledStepInput<Dim> in = tank<Dim>(n, 500.0, 0.3);
+    StaggeredSettings settings;
+    settings.max_iterations = 20;
+    settings.tolerance = 1e-8;
+    settings.mprgp.tolerance = 1e-9;
+    settings.mprgp.max_iterations = 50000;
+    for (CouplingScheme scheme : {CouplingScheme::pvc_unified, CouplingScheme::pv_c,
+                                  CouplingScheme::pc_vc_pc_unified, CouplingScheme::c_pv}) {
+      INFO(Dim << "D " << enum_name(scheme));
+      CoupledSchemeOptions ssor, block;
+      block.preconditioner = PreconditionerChoice::multigrid;
+      const CoupledSolveResult rs = solve_coupled_step<Dim>(in, scheme, Backend::matrix_free, settings, ssor);
+      const CoupledSolveResult rb = solve_coupled_step<Dim>(in, scheme, Backend::matrix_free, settings, block);
+      CHECK(rs.converged);
+      CHECK(rb.converged);
+      CHECK(rb.multigrid_systems >= 1);
+      CHECK(rb.ssor_systems == 0);
+      CHECK(rs.multigrid_systems == 0);
+      const double du = (rb.u - rs.u).cwiseAbs().maxCoeff() / rs.u.cwiseAbs().maxCoeff();
+      const double dv = (rb.body_velocity - rs.body_velocity).cwiseAbs().maxCoeff() /
+                        rs.body_velocity.cwiseAbs().maxCoeff();
+      CHECK(du < 1e-5);
+      CHECK(dv < 1e-5);
+      // 1 vs 2 threads: bitwise
+      const int threads = omp_get_max_threads();
+      omp_set_num_threads(1);
+      const CoupledSolveResult r1 = solve_coupled_step<Dim>(in, scheme, Backend::matrix_free, settings, block);
+      omp_set_num_threads(2);
+      const CoupledSolveResult r2 = solve_coupled_step<Dim>(in, scheme, Backend::matrix_free, settings, block);
+      omp_set_num_threads(threads);
+      CHECK((r1.u - r2.u).cwiseAbs().maxCoeff() == 0.0);
+      CHECK((r1.body_velocity - r2.body_velocity).cwiseAbs().maxCoeff() == 0.0);
+      CHECK((r1.lambda - r2.lambda).cwiseAbs().maxCoeff() == 0.0);
+      std::printf("step %dD %s: iterations SSOR %ld, block %ld; relative difference u %.1e, v %.1e\n",
+                  Dim, enum_name(scheme).c_str(), rs.fluid_iterations + rs.coupled_iterations + rs.contact_iterations,
+                  rb.fluid_iterations + rb.coupled_iterations + rb.contact_iterations, du, dv);
+    }
+  };
+  run(std::integral_constant<int, 2>{}, 16);
+  run(std::integral_constant<int, 3>{}, 8);
+}
