@@ -528,6 +528,69 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
   }
 }
 
+template <int Dim>
+void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                  const VectorX& phi, const VectorX& fluid_face,
+                                  const std::vector<char>& trusted,
+                                  const std::vector<char>& valid, int layers, VectorX& u) {
+  const int nc = grid.num_cells();
+  const double dx = grid.dx();
+  const double reach = layers * dx;
+  // the air cells of the band, nearest the liquid first (ties in cell order)
+  std::vector<std::pair<double, int>> band;
+  for (int c = 0; c < nc; ++c) {
+    const VecI<Dim> ci = grid.cell_coord(c);
+    const double p = phi[lattice.index(2 * ci + VecI<Dim>::Ones())];
+    if (p > 0.0 && p < reach) band.emplace_back(p, c);
+  }
+  std::sort(band.begin(), band.end());
+  for (const auto& [p, c] : band) {
+    (void)p;
+    const VecI<Dim> ci = grid.cell_coord(c);
+    const VecI<Dim> li = 2 * ci + VecI<Dim>::Ones();
+    // the level set's gradient at the centre (central differences on the half lattice)
+    int axis = 0;
+    double largest = -1.0, sign = 1.0;
+    for (int a = 0; a < Dim; ++a) {
+      VecI<Dim> lo = li, hi = li;
+      lo[a] -= 1;
+      hi[a] += 1;
+      const double g = phi[lattice.index(hi)] - phi[lattice.index(lo)];
+      if (std::abs(g) > largest) {
+        largest = std::abs(g);
+        axis = a;
+        sign = g >= 0.0 ? 1.0 : -1.0;
+      }
+    }
+    // the cell's faces: minus and plus side per axis
+    std::array<std::array<int, 2>, Dim> face;
+    bool cut = false;
+    for (int a = 0; a < Dim; ++a)
+      for (int s = 0; s < 2; ++s) {
+        VecI<Dim> fc = ci;
+        fc[a] += s;
+        if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;
+        face[a][s] = grid.face_index(a, fc);
+        const double w = fluid_face[face[a][s]];
+        // a face cut by a solid, or one the extrapolation did not reach (stale), leaves the
+        // cell as it is
+        if ((w > 0.0 && w < 1.0) || (w > 0.0 && !valid[face[a][s]])) cut = true;
+      }
+    if (cut) continue;
+    const int outer = face[axis][sign > 0.0 ? 1 : 0];
+    if (trusted[outer] || !(fluid_face[outer] > 0.0)) continue;
+    // sum over the other faces of the outward flux; the outer face closes it
+    double flux = 0.0;
+    for (int a = 0; a < Dim; ++a)
+      for (int s = 0; s < 2; ++s) {
+        const int f = face[a][s];
+        if (f == outer) continue;
+        flux += (s == 1 ? 1.0 : -1.0) * u[f];
+      }
+    u[outer] = (sign > 0.0 ? -1.0 : 1.0) * flux;
+  }
+}
+
 // --- advection -----------------------------------------------------------------------------------
 
 /// Midpoint rule (RK2), Algorithm 1 line 14, in substeps with continuous collision against the
@@ -1455,6 +1518,10 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                   VectorX&);                                                       \
   template void grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&);               \
   template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \
+  template void divergence_free_air_velocity(const MacGrid<D>&, const SampleLattice<D>&,          \
+                                            const VectorX&, const VectorX&,                       \
+                                            const std::vector<char>&,                             \
+                                            const std::vector<char>&, int, VectorX&);             \
   template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,         \
                                  const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);    \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \

@@ -59,6 +59,19 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
 template <int Dim>
 void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u);
 
+/// Makes the extrapolated velocity divergence-free in the air cells beside the liquid: for each
+/// cell whose centre lies outside the liquid (0 < phi < layers dx, phi the liquid level set on the
+/// half lattice), in order of increasing phi, the face on the cell's outer side (along the axis of
+/// the level set's largest gradient component, towards larger phi) is set so that the cell's
+/// divergence vanishes, unless that face is trusted (trusted[f] != 0), a wall or cut by a solid.
+/// Cells with a face cut by a solid (0 < fluid_face < 1) or a fluid face the extrapolation did
+/// not reach (valid[f] == 0) are left as they are.
+template <int Dim>
+void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                  const VectorX& phi, const VectorX& fluid_face,
+                                  const std::vector<char>& trusted,
+                                  const std::vector<char>& valid, int layers, VectorX& u);
+
 /// Extends u from faces with valid[f] != 0 into the others, `layers` rings deep (averaging valid
 /// neighbours of the same component); marks the filled faces valid.
 template <int Dim>

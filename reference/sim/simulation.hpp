@@ -51,6 +51,17 @@ struct StageSwitches {
   /// The velocity is extrapolated from the trusted faces after the solve (false: every other
   /// face keeps what the solve, or the extrapolation before it, left there)
   bool extrapolate_after_solve = true;
+  /// The particles drift half a step with the last step's velocity before the solve and half a
+  /// step with the new one after it (drift-kick-drift, second order in time); false (the
+  /// default): the whole step's drift after the solve (symplectic Euler). Off by default since
+  /// free fall then conserves energy exactly, and test_robustness's pour-into-bowl-2d (energy
+  /// never above its start) reads +5e-6 of it at frame 1 (docs/particles.md, "Sloshing").
+  bool split_advection = false;
+  /// After the extrapolation, the air cells beside the liquid get a divergence-free velocity
+  /// (divergence_free_air_velocity; off: the extrapolated averages as they are). A measurement
+  /// switch (docs/particles.md "Sloshing"): it halves the liquid's volume loss without the density
+  /// projection but does not lower the sloshing tank's energy rise.
+  bool divergence_free_air = false;
   /// Measure the energy change of every stage (energy_ledger()): several extra sweeps over the
   /// faces and particles per step, so off unless a diagnosis asks for it.
   bool energy_ledger = false;
@@ -187,12 +198,19 @@ class Simulation : public AnySimulation {
   /// Walls: zero normal velocity; fully solid faces: the solid's velocity; then
   /// constrain_velocity_in_solids.
   void apply_wall_and_solid_velocities();
+  /// The air cells beside the liquid made divergence-free (StageSwitches::divergence_free_air).
+  void divergence_free_air();
   /// Line 13: the bodies' poses (coupled scenes) and the particles' SolidField at the new pose.
   void move_bodies(double dt);
   /// The particles' SolidField from the static shapes and the posed moving bodies.
   void rebuild_solid_field();
   /// Line 14: grid to particles (APIC) and RK2 advection.
   void advect(double dt);
+  /// Whether the step splits the particles' drift around the kick (StageSwitches::split_advection;
+  /// scenes with moving bodies keep the whole drift after the solve, as the bodies do).
+  bool split_drift() const;
+  /// Line 14's first half under the split: half a step through the last solved velocity.
+  void first_half_drift(double dt);
   /// Line 15: position correction and the particle density projection (when enabled).
   void correct_volume(double dt);
   /// The energy ledger (only with StageSwitches::energy_ledger; otherwise nothing is measured):

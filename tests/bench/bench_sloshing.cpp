@@ -5,7 +5,8 @@
 // of the available energy and ends below its start.
 //
 //   bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] [--every K] [--backend NAME]
-//                  [--no-projection] [--no-correction] [--max-dt DT]
+//                  [--no-projection] [--no-correction] [--max-dt DT] [--split-drift]
+//                  [--divergence-free-air]
 //
 // Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
 // line before: which stage of the step changed the energy.
@@ -28,7 +29,7 @@ int main(int argc, char** argv) {
   int dim = 2, cells = 0, every = 25;
   double seconds = 10.0, slope = 0.1;
   std::string backend = "matrixfree";
-  bool no_projection = false, no_correction = false;
+  bool no_projection = false, no_correction = false, split_drift = false, divfree_air = false;
   double max_dt = 0.02;
   bench::BenchArgs args(argc, argv);
   while (args.next()) {
@@ -42,6 +43,8 @@ int main(int argc, char** argv) {
     else if (a == "--no-projection") no_projection = true;
     else if (a == "--max-dt") max_dt = std::atof(args.value().c_str());
     else if (a == "--no-correction") no_correction = true;
+    else if (a == "--split-drift") split_drift = true;
+    else if (a == "--divergence-free-air") divfree_air = true;
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
                    "[--every K] [--backend NAME]\n";
@@ -57,6 +60,8 @@ int main(int argc, char** argv) {
   switches.energy_ledger = true;
   if (no_projection) switches.density_projection = false;
   if (no_correction) switches.position_correction = false;
+  if (split_drift) switches.split_advection = true;
+  if (divfree_air) switches.divergence_free_air = true;
   nlohmann::json scene = tank(dim, cells, seconds, backend, slope);
   scene["time"]["max_dt"] = max_dt;
   const auto sim = make_simulation(parse_scene(scene, "sloshing.json", "."), switches);

@@ -130,9 +130,9 @@ struct SloshResult {
 /// 2.75 J in 2D 64^2 and 0.21 J in 3D 24^3, while the potential energy falls by 3.9-4.0 J at the
 /// first crossing in both; docs/particles.md, "Sloshing".)
 inline SloshResult run_slosh(int dim, int cells, double seconds, const std::string& backend,
-                             double slope) {
+                             double slope, const StageSwitches& switches = StageSwitches{}) {
   const auto sim = make_simulation(
-      parse_scene(tank(dim, cells, seconds, backend, slope), "sloshing.json", "."));
+      parse_scene(tank(dim, cells, seconds, backend, slope), "sloshing.json", "."), switches);
   const FrameStats s0 = sim->current_stats();
   const double e0 = total_energy(s0);
   SloshResult r;
