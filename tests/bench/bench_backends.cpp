@@ -339,11 +339,8 @@ CoupledStepInput<Dim> coupled_scene(int n, double eta) {
   for (int k = 0; k < lattice.size(); ++k) phi[k] = lattice.position(lattice.coord(k))[1] - 0.6;
   in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
   in.u_star = viscous_scene_velocity(in.grid);
-  Walls<Dim> walls;
-  walls.lower = Vec<Dim>::Zero();
-  walls.upper = Vec<Dim>::Ones();
-  walls.is_wall.fill(true);
-  walls.is_wall[3] = false;
+  Walls<Dim> walls = testing::unit_box_walls<Dim>();
+  walls.is_wall[3] = false;  // open top
   in.contacts = detect_contacts<Dim>(in.bodies, walls, 0.2 * dx + 2.0 * kDt * 0.4);
   for (Contact<Dim>& c : in.contacts) c.friction = c.restitution = 0.0;
   in.contact_params.dt = kDt;

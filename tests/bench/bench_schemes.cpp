@@ -85,10 +85,7 @@ CoupledStepInput<Dim> bowl_scene(int n, double eta) {
   in.u_star = VectorX::Zero(in.grid.num_faces());
   in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).setConstant(-0.3 + kGravity * kDt);
   // contacts as the rigid world finds them (margin 0.1 dx), no friction or restitution
-  Walls<Dim> walls;
-  walls.lower = Vec<Dim>::Zero();
-  walls.upper = Vec<Dim>::Ones();
-  walls.is_wall.fill(true);
+  const Walls<Dim> walls = testing::unit_box_walls<Dim>();
   const double search = 0.1 * dx + 2.0 * kDt * 0.4 + 0.1 * dx;
   in.contacts = detect_contacts<Dim>(in.bodies, walls, search);
   for (Contact<Dim>& c : in.contacts) c.friction = c.restitution = 0.0;

@@ -16,6 +16,17 @@
 
 namespace monolith::testing {
 
+/// Walls on every face of the unit box [0, 1]^Dim with the given friction coefficient.
+template <int Dim>
+Walls<Dim> unit_box_walls(double friction = 0.0) {
+  Walls<Dim> walls;
+  walls.lower = Vec<Dim>::Zero();
+  walls.upper = Vec<Dim>::Ones();
+  walls.is_wall.fill(true);
+  walls.friction = friction;
+  return walls;
+}
+
 /// A rigid body of `shape` (named after its type) with the given density (kg/m^3), friction
 /// coefficient and motion, at rest; mass properties from mass_properties.
 template <int Dim>

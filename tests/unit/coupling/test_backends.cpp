@@ -132,12 +132,7 @@ CoupledStepInput<Dim> random_scene(int n, unsigned seed, double eta, double mu, 
   in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
   in.u_star = 0.3 * testing::random_vector(in.grid.num_faces(), seed + 100);
   in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).array() += kGravity * kDt;
-  Walls<Dim> walls;
-  walls.lower = Vec<Dim>::Zero();
-  walls.upper = Vec<Dim>::Ones();
-  walls.is_wall.fill(true);
-  walls.friction = mu;
-  in.contacts = detect_contacts<Dim>(in.bodies, walls, 0.3 * dx);
+  in.contacts = detect_contacts<Dim>(in.bodies, testing::unit_box_walls<Dim>(mu), 0.3 * dx);
   in.contact_params.dt = kDt;
   in.contact_params.dx = dx;
   return in;

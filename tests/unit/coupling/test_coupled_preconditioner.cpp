@@ -68,12 +68,7 @@ CoupledStepInput<Dim> tank(int n, double eta, double mu) {
   in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
   in.u_star = 0.2 * testing::random_vector(in.grid.num_faces(), 7);
   in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).array() += -9.81 * kDt;
-  Walls<Dim> walls;
-  walls.lower = Vec<Dim>::Zero();
-  walls.upper = Vec<Dim>::Ones();
-  walls.is_wall.fill(true);
-  walls.friction = mu;
-  in.contacts = detect_contacts<Dim>(in.bodies, walls, 0.3 * dx);
+  in.contacts = detect_contacts<Dim>(in.bodies, testing::unit_box_walls<Dim>(mu), 0.3 * dx);
   in.contact_params.dt = kDt;
   in.contact_params.dx = dx;
   return in;
