@@ -157,7 +157,7 @@ void StokesPreconditioner<Dim>::build_cut_block() {
   // operator (its two solves per application would then cost more than about half of the rest
   // of an application; the symbolic analysis counts them before any numeric work); also none
   // when the factor is unusable (not positive definite to round-off)
-  auto factor = std::make_unique<CutBlockFactor>();
+  auto factor = std::make_unique<SparseLdlt>();
   factor->analyzePattern(acc);
   if (factor->info() != Eigen::Success || factor->analysed_entries() > 8 * velocity_.level(0).a.nonZeros())
     return;
@@ -167,9 +167,9 @@ void StokesPreconditioner<Dim>::build_cut_block() {
   cut_ = std::move(list);
   cut_rows_ = std::move(rows);
   cut_factor_ = std::move(factor);
+  cut_factor_->prepare_solve();
   cut_r_.setZero(m);
   cut_d_.setZero(m);
-  cut_inverse_d_ = cut_factor_->vectorD().cwiseInverse();  // vectorD() returns a copy: once here
 }
 
 template <int Dim>
@@ -184,15 +184,8 @@ void StokesPreconditioner<Dim>::correct_cut(const VectorX& r, VectorX& z) const 
     for (int k = outer[q]; k < outer[q + 1]; ++k) s -= value[k] * z[inner[k]];
     cut_r_[q] = s;
   }
-  // the LDL^T solve by hand: Eigen's solve permutes in place through a temporary mask
-  const CutBlockFactor& f = *cut_factor_;
-  const int* perm = f.permutationP().indices().data();
-  const bool permuted = f.permutationP().size() == m;
-  for (int q = 0; q < m; ++q) cut_d_[permuted ? perm[q] : q] = cut_r_[q];  // P r
-  f.matrixL().solveInPlace(cut_d_);
-  for (int q = 0; q < m; ++q) cut_d_[q] = cut_inverse_d_[q] * cut_d_[q];  // D^-1, as Eigen's solve
-  f.matrixU().solveInPlace(cut_d_);
-  for (int q = 0; q < m; ++q) z[cut_[q]] += cut_d_[permuted ? perm[q] : q];  // P^-1 d
+  cut_factor_->solve_into(cut_r_, cut_d_);  // no allocation
+  for (int q = 0; q < m; ++q) z[cut_[q]] += cut_d_[q];
 }
 
 template <int Dim>

@@ -68,13 +68,6 @@ struct StokesPreconditionerOptions {
   int cut_layers = 2;
 };
 
-/// Sparse LDL^T of the cut block whose symbolic analysis already tells the factor's size.
-class CutBlockFactor : public Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> {
- public:
-  /// Entries of L, known after analyzePattern.
-  Eigen::Index analysed_entries() const { return m_matrix.nonZeros(); }
-};
-
 /// The preconditioner over the unknowns (tau, p) of StokesDofs. Holds a reference to `a` (the
 /// system operator, whose SOR sweeps it uses; explicit or matrix-free); everything else it owns.
 /// apply allocates nothing; one object must not run two applications at once.
@@ -116,8 +109,7 @@ class StokesPreconditioner : public Preconditioner {
   bool pressure_only_ = false;
   std::vector<int> cut_;    ///< the unknowns of C
   SparseMatrix cut_rows_;   ///< A_{C,:} (row-major, |C| x n)
-  std::unique_ptr<CutBlockFactor> cut_factor_;  ///< of A_CC
-  VectorX cut_inverse_d_;   ///< 1 / D of the factor
+  std::unique_ptr<SparseLdlt> cut_factor_;  ///< of A_CC
   mutable VectorX cut_r_, cut_d_;
   // scratch
   mutable VectorX ir_, iz_, ip_, iap_;

@@ -120,10 +120,11 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing)
   }
   apply_residual_.setZero(levels_[0].a.rows());
   apply_correction_.setZero(levels_[0].a.rows());
-  coarse_ = std::make_unique<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>>();
+  coarse_ = std::make_unique<SparseLdlt>();
   coarse_->compute(Eigen::SparseMatrix<double>(levels_.back().a));
   if (coarse_->info() != Eigen::Success)
     throw std::invalid_argument("Multigrid: the coarsest operator could not be factored");
+  coarse_->prepare_solve();
 }
 
 void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const {
@@ -172,7 +173,7 @@ void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const 
 void Multigrid::cycle(int l, const VectorX& b, VectorX& x) const {
   const int num = static_cast<int>(levels_.size());
   if (l + 1 == num) {
-    x = coarse_->solve(b);
+    coarse_->solve_into(b, x);  // no allocation per cycle
     return;
   }
   const MultigridLevel& lv = levels_[l];

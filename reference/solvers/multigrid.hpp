@@ -28,6 +28,7 @@
 
 #include "reference/core/common.hpp"
 #include "reference/solvers/preconditioner.hpp"
+#include "reference/solvers/sparse_ldlt.hpp"
 
 namespace monolith {
 
@@ -93,7 +94,7 @@ class Multigrid {
   std::vector<SparseMatrix> restriction_;        ///< prolongation transposes, row-major
   std::vector<std::vector<int>> inverse_start_;  ///< per level, per patch: offset into inverse_
   std::vector<std::vector<double>> inverse_;     ///< per level: dense patch inverses, row-major
-  std::unique_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> coarse_;  ///< movable
+  std::unique_ptr<SparseLdlt> coarse_;  ///< movable
   int smoothing_ = 1;
   // scratch per level
   mutable std::vector<VectorX> residual_, coarse_rhs_, coarse_x_, work_;
