@@ -42,41 +42,62 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
   }
   VectorX eta = VectorX::Zero(n);
   std::vector<char> known(n, 0);
+  std::vector<int> frontier;  // the samples made known in the last round
   for (int i = 0; i < n; ++i)
     if (mass[i] > 0.0) {
       eta[i] = mass_eta[i] / mass[i];
       known[i] = 1;
+      frontier.push_back(i);
     }
-  // fill: unreached samples take the mean of their reached axis neighbours, ring by ring
-  for (int layer = 0; layer < kViscosityFillLayers; ++layer) {
-    std::vector<int> filled;
-    VectorX next = eta;
-    for (int i = 0; i < n; ++i) {
-      if (known[i]) continue;
+  // the axis neighbour of c in direction s along a, -1 outside a non-periodic lattice
+  auto neighbour = [&](const VecI<Dim>& c, int a, int s) {
+    VecI<Dim> d = c;
+    d[a] += s;
+    if (grid.periodic(a))
+      d[a] = (d[a] % dims[a] + dims[a]) % dims[a];
+    else if (d[a] < 0 || d[a] >= dims[a])
+      return -1;
+    return lattice_index<Dim>(d, dims);
+  };
+  // fill: unreached samples take the mean of their reached axis neighbours, ring by ring. Only
+  // the unreached neighbours of the last ring are visited (the lattice is mostly far from the
+  // liquid); each takes the same sum in the same neighbour order as a sweep over the whole
+  // lattice would, and reads only samples known before the ring.
+  std::vector<char> queued(n, 0);
+  std::vector<int> candidates, filled;
+  for (int layer = 0; layer < kViscosityFillLayers && !frontier.empty(); ++layer) {
+    candidates.clear();
+    for (int i : frontier) {
+      const VecI<Dim> c = lattice_coord<Dim>(i, dims);
+      for (int a = 0; a < Dim; ++a)
+        for (int s : {-1, 1}) {
+          const int j = neighbour(c, a, s);
+          if (j >= 0 && !known[j] && !queued[j]) {
+            queued[j] = 1;
+            candidates.push_back(j);
+          }
+        }
+    }
+    filled.clear();
+    for (int i : candidates) {
+      queued[i] = 0;
       const VecI<Dim> c = lattice_coord<Dim>(i, dims);
       double sum = 0.0;
       int count = 0;
       for (int a = 0; a < Dim; ++a)
         for (int s : {-1, 1}) {
-          VecI<Dim> d = c;
-          d[a] += s;
-          if (grid.periodic(a))
-            d[a] = (d[a] % dims[a] + dims[a]) % dims[a];
-          else if (d[a] < 0 || d[a] >= dims[a])
-            continue;
-          const int j = lattice_index<Dim>(d, dims);
-          if (!known[j]) continue;
+          const int j = neighbour(c, a, s);
+          if (j < 0 || !known[j]) continue;
           sum += eta[j];
           ++count;
         }
       if (count > 0) {
-        next[i] = sum / count;
+        eta[i] = sum / count;
         filled.push_back(i);
       }
     }
-    if (filled.empty()) break;
-    eta = next;
     for (int i : filled) known[i] = 1;
+    frontier.swap(filled);
   }
   // the rest: the mean viscosity of the whole liquid
   const double mean = total_mass > 0.0 ? total_mass_eta / total_mass : 0.0;

@@ -3,7 +3,10 @@
 // half-parabolic profile, two liquids of different viscosity in one scene each behave as their
 // own viscosity says, and the scheme picks the solves (2D and 3D).
 #include <catch2/catch.hpp>
+#include <array>
 #include <cmath>
+#include <random>
+#include <vector>
 
 #include "reference/app/scene_file.hpp"
 #include "reference/fluid/viscosity_field.hpp"
@@ -416,4 +419,113 @@ TEMPLATE_TEST_CASE_SIG("eta per stress DOF from the particles: exact for one liq
   CHECK(cells[grid.cell_index(VecI<Dim>::Constant(1))] == Approx(2.0));
   CHECK(cells[grid.cell_index(VecI<Dim>::Unit(0) * 5 + VecI<Dim>::Constant(1) - VecI<Dim>::Unit(0))] ==
         Approx(8.0));
+}
+
+namespace {
+
+/// sample_viscosity's fill as a sweep over the whole lattice (the definition, ring by ring):
+/// the reference for the frontier version in viscosity_field.cpp.
+template <int Dim>
+VectorX fill_by_sweeps(const MacGrid<Dim>& grid, const VecI<Dim>& dims, VectorX eta, std::vector<char> known,
+                       double mean) {
+  const int n = dims.prod();
+  for (int layer = 0; layer < kViscosityFillLayers; ++layer) {
+    std::vector<int> filled;
+    VectorX next = eta;
+    for (int i = 0; i < n; ++i) {
+      if (known[i]) continue;
+      const VecI<Dim> c = lattice_coord<Dim>(i, dims);
+      double sum = 0.0;
+      int count = 0;
+      for (int a = 0; a < Dim; ++a)
+        for (int s : {-1, 1}) {
+          VecI<Dim> d = c;
+          d[a] += s;
+          if (grid.periodic(a))
+            d[a] = (d[a] % dims[a] + dims[a]) % dims[a];
+          else if (d[a] < 0 || d[a] >= dims[a])
+            continue;
+          const int j = lattice_index<Dim>(d, dims);
+          if (!known[j]) continue;
+          sum += eta[j];
+          ++count;
+        }
+      if (count > 0) {
+        next[i] = sum / count;
+        filled.push_back(i);
+      }
+    }
+    if (filled.empty()) break;
+    eta = next;
+    for (int i : filled) known[i] = 1;
+  }
+  for (int i = 0; i < n; ++i)
+    if (!known[i]) eta[i] = mean;
+  return eta;
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE_SIG("sample_viscosity's frontier fill equals the ring-by-ring sweep over the whole lattice, "
+                       "bit for bit",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // a random blob of two liquids in a box periodic along x, sampled on a stress lattice
+  const int n = Dim == 2 ? 24 : 12;
+  std::array<bool, Dim> periodic{};
+  periodic[0] = true;
+  const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), periodic);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Particles<Dim> p;
+  for (int k = 0; k < 40 * (Dim == 2 ? 4 : 8); ++k) {
+    Vec<Dim> x;
+    for (int a = 0; a < Dim; ++a) x[a] = a == 0 ? u(rng) : 0.3 + 0.3 * u(rng);  // crosses the seam
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(0.5 + u(rng));
+    p.density.push_back(1000.0);
+    p.liquid.push_back(k % 3 == 0 ? 1 : 0);
+  }
+  const std::vector<double> liquid_eta{2.0, 8.0};
+  const StressGrid<Dim> stress(grid);
+  for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
+    const VecI<Dim> dims = stress.dims(k);
+    const Vec<Dim> shift = StressGrid<Dim>::shift(k);
+    const VectorX got = sample_viscosity(grid, shift, dims, p, liquid_eta);
+    // the reached samples and the overall mean, recomputed as sample_viscosity defines them
+    const int m = dims.prod();
+    VectorX mass = VectorX::Zero(m), mass_eta = VectorX::Zero(m);
+    double total = 0.0, total_eta = 0.0;
+    std::array<int, (1 << Dim)> idx;
+    std::array<double, (1 << Dim)> w;
+    for (std::size_t q = 0; q < p.size(); ++q) {
+      const double eta = liquid_eta[p.liquid[q]];
+      total += p.mass[q];
+      total_eta += p.mass[q] * eta;
+      grid.stencil(grid.wrap_position(p.x[q]), shift, dims, idx, w);
+      for (int c = 0; c < (1 << Dim); ++c) {
+        if (w[c] == 0.0) continue;
+        mass[idx[c]] += w[c] * p.mass[q];
+        mass_eta[idx[c]] += w[c] * p.mass[q] * eta;
+      }
+    }
+    VectorX eta0 = VectorX::Zero(m);
+    std::vector<char> known(m, 0);
+    int reached = 0, far = 0;
+    for (int i = 0; i < m; ++i)
+      if (mass[i] > 0.0) {
+        eta0[i] = mass_eta[i] / mass[i];
+        known[i] = 1;
+        ++reached;
+      }
+    const VectorX want = fill_by_sweeps<Dim>(grid, dims, eta0, known, total_eta / total);
+    REQUIRE(got.size() == want.size());
+    CHECK((got - want).cwiseAbs().maxCoeff() == 0.0);
+    for (int i = 0; i < m; ++i) far += want[i] == total_eta / total && !known[i];
+    // the case exercises all three kinds of samples: reached, filled, far
+    CHECK(reached > 0);
+    CHECK(far > 0);
+    CHECK(reached + far < m);
+  }
 }
