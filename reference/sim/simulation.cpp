@@ -641,9 +641,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // the liquid-only solves, with the smallest liquid density) and pressure_preconditioner
   options.preconditioner = scene_.solver.preconditioner;
   options.pressure_preconditioner = scene_.solver.pressure_preconditioner;
-  options.liquid_density = std::numeric_limits<double>::infinity();
-  for (const LiquidSpec& l : scene_.liquids) options.liquid_density = std::min(options.liquid_density, l.density);
-  if (!std::isfinite(options.liquid_density)) options.liquid_density = 0.0;
+  options.liquid_density = smallest_liquid_density();
   std::unique_ptr<NonNewtonianViscosity<Dim>> model;
   VectorX eta;
   if (non_newtonian_ && stress) {
@@ -701,13 +699,18 @@ void Simulation<Dim>::solve_coupled(double dt) {
 }
 
 template <int Dim>
-StokesSolveOptions Simulation<Dim>::stokes_options(const VectorX& eta, double dt) {
-  // the stiffness with the smallest liquid density (the largest stiffness of the scene's liquids)
+double Simulation<Dim>::smallest_liquid_density() const {
   double rho = std::numeric_limits<double>::infinity();
   for (const LiquidSpec& l : scene_.liquids) rho = std::min(rho, l.density);
+  return std::isfinite(rho) ? rho : 0.0;
+}
+
+template <int Dim>
+StokesSolveOptions Simulation<Dim>::stokes_options(const VectorX& eta, double dt) {
+  // the stiffness with the smallest liquid density (the largest stiffness of the scene's liquids)
+  const double rho = smallest_liquid_density();
   const double eta_max = eta.size() > 0 ? std::max(0.0, eta.maxCoeff()) : 0.0;
-  const double stiffness =
-      std::isfinite(rho) && rho > 0.0 ? solve_stiffness(eta_max, dt, rho, grid_.dx()) : 0.0;
+  const double stiffness = rho > 0.0 ? solve_stiffness(eta_max, dt, rho, grid_.dx()) : 0.0;
   StokesSolveOptions o;
   o.preconditioner = choose_preconditioner(scene_.solver.preconditioner, Dim, stiffness);
   stats_.solver.add_stokes_preconditioner(o.preconditioner, stiffness);

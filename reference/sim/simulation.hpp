@@ -346,6 +346,9 @@ class Simulation : public AnySimulation {
   /// eta_max dt / (rho dx^2) (choose_preconditioner); the choice and the stiffness are booked in
   /// the frame's solver stats.
   StokesSolveOptions stokes_options(const VectorX& eta, double dt);
+  /// The smallest density of the scene's liquids (kg/m^3; 0 without liquids): the one of the
+  /// largest stiffness eta dt / (rho dx^2), which the automatic preconditioner choice reads.
+  double smallest_liquid_density() const;
   // time and statistics
   int frame_ = 0;
   double time_ = 0.0;
