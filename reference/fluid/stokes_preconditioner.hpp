@@ -18,10 +18,8 @@
 /// docs/preconditioners.md, section 12).
 
 #include <memory>
-#include <vector>
-
-#include <Eigen/SparseCholesky>
 #include <string>
+#include <vector>
 
 #include "reference/core/common.hpp"
 #include "reference/fluid/mac_hierarchy.hpp"
@@ -30,6 +28,7 @@
 #include "reference/grid/mac_grid.hpp"
 #include "reference/solvers/multigrid.hpp"
 #include "reference/solvers/preconditioner.hpp"
+#include "reference/solvers/sparse_ldlt.hpp"
 
 namespace monolith {
 
