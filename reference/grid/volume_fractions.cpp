@@ -457,11 +457,11 @@ void extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_p
                                const VectorX& solid_phi, double reach, VectorX& phi) {
   phi = liquid_phi;  // no allocation when phi already has the size
   if (solid_phi.size() != liquid_phi.size()) return;
-  const double inside = -0.5 * grid.dx();
+  const double dx = grid.dx();
   // lattice points inside a solid with liquid within reach count as liquid
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int k = 0; k < static_cast<int>(phi.size()); ++k)
-    if (solid_phi[k] < 0.0 && liquid_phi[k] < reach) phi[k] = std::min(phi[k], inside);
+    phi[k] = liquid_extended_into_solid(liquid_phi[k], solid_phi[k], reach, dx);
 }
 
 template <int Dim>

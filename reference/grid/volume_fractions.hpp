@@ -13,6 +13,7 @@
 /// Outside the domain: on a periodic axis lattice points wrap; on a wall or open axis the half of
 /// a boundary face's control volume that lies outside the domain mirrors the inside half.
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -179,6 +180,12 @@ inline constexpr double kLiquidSolidReach = 1.0;
 template <int Dim>
 VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
                                   const VectorX& solid_phi, double reach);
+/// The rule of extend_liquid_into_solids at one point, for callers that have the solid distance
+/// pointwise instead of as a lattice (the density projection).
+inline double liquid_extended_into_solid(double liquid_phi, double solid_phi, double reach,
+                                         double dx) {
+  return solid_phi < 0.0 && liquid_phi < reach ? std::min(liquid_phi, -0.5 * dx) : liquid_phi;
+}
 /// The same into `out` (reused across steps when it has the lattice's size).
 template <int Dim>
 void extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,

@@ -1087,7 +1087,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       const double ds = solids.distance(lattice.position(lattice.coord(li)));
       if (!(ds < 2.0 * dx)) continue;
       fluid_liquid[li] = std::max(phi[li], -ds);
-      if (ds < 0.0 && phi[li] < reach) extended[li] = std::min(phi[li], -0.5 * dx);
+      extended[li] = liquid_extended_into_solid(phi[li], ds, reach, dx);
     }
     target = hat_liquid_fractions(grid, lattice, fluid_liquid);
     wet = hat_liquid_fractions(grid, lattice, extended);
