@@ -370,7 +370,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
                   [](double eta) { return eta == 0.0 && !std::signbit(eta); });
   // (the systems built below share their weights: they live in this function's State values,
   // which in.weights outlives, so the input's weights are lent to them without an owner)
-  std::shared_ptr<const StokesWeights> inviscid(&in.weights, [](const StokesWeights*) {});
+  const std::shared_ptr<const StokesWeights> input(&in.weights, [](const StokesWeights*) {});
+  std::shared_ptr<const StokesWeights> inviscid = input;
   if (!all_plus_zero) {
     auto zeroed = std::make_shared<StokesWeights>(in.weights);
     zeroed->viscosity.setZero();
@@ -423,9 +424,15 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     return out;
   };
   // PV.. C schemes: (tau, p) with the input viscosity or eta^k of Algorithm 2
-  auto unified = [&](const State& from, const VectorX* eta) {
+  // the input's weights with the viscosity eta (none: the input's own, lent, not copied)
+  auto with_viscosity = [&](const VectorX* eta) -> std::shared_ptr<const StokesWeights> {
+    if (!eta) return input;
     auto w = std::make_shared<StokesWeights>(in.weights);
-    if (eta) w->viscosity = *eta;
+    w->viscosity = *eta;
+    return w;
+  };
+  auto unified = [&](const State& from, const VectorX* eta) {
+    const auto w = with_viscosity(eta);
     const State out = solve(from, w, StressForm::reduced, StokesUnknowns::pressure_and_stress,
                             scheme == CouplingScheme::pvc_unified, false);
     count_dofs(*out.system, r);
@@ -433,8 +440,7 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   };
   // the VC-unified solve of PC-VC-PC: stress only (p fixed at 0), the full form
   auto viscous = [&](const State& from, const VectorX* eta) {
-    auto w = std::make_shared<StokesWeights>(in.weights);
-    if (eta) w->viscosity = *eta;
+    const auto w = with_viscosity(eta);
     const State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true);
     r.stress_dofs = out.system->num_stress();
     return out;
