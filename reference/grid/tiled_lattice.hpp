@@ -105,16 +105,7 @@ class TiledLattice {
   /// the lattice's upper end that lie outside the lattice are skipped.
   template <class F>
   void for_each_point(F&& f) const {
-    for (int tile = 0; tile < static_cast<int>(tiles_.size()); ++tile) {
-      const T* data = tiles_[tile].get();
-      if (!data) continue;
-      const VecI<Dim> origin = kTile * lattice_coord<Dim>(tile, tile_dims_);
-      for (int local = 0; local < kTilePoints; ++local) {
-        const VecI<Dim> c = origin + lattice_coord<Dim>(local, VecI<Dim>::Constant(kTile));
-        if ((c.array() >= dims_.array()).any()) continue;
-        f(static_cast<const VecI<Dim>&>(c), data + static_cast<std::size_t>(local) * Stride);
-      }
-    }
+    for (int tile = 0; tile < num_tile_slots(); ++tile) for_each_point_in_tile(tile, f);
   }
 
   /// Slots of the tile table (made or not): tile indices run over [0, num_tile_slots()).
