@@ -26,7 +26,10 @@ void fill_common(const StressLayout<Dim>& layout, const StokesWeights& w, const 
   f.num_stress = dofs.num_stress();
   f.num_pressure = dofs.num_pressure();
   f.compliance = stress_compliance(layout, dofs, w, min_fluid_fraction);
-  if (min_fluid_fraction > 0.0) f.compliance_exact = stress_compliance(layout, dofs, w, 0.0);
+  // K without the floor differs from K only if some W_F^s lies strictly between 0 and the floor
+  const bool floored = min_fluid_fraction > 0.0 &&
+                       (w.fluid_stress.array() > 0.0 && w.fluid_stress.array() < min_fluid_fraction).any();
+  if (floored) f.compliance_exact = stress_compliance(layout, dofs, w, 0.0);
   f.stress_fluid.resize(f.num_stress);
   for (int i = 0; i < f.num_stress; ++i) {
     const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);

@@ -41,8 +41,8 @@ struct StokesFactors {
   SparseMatrix b;             ///< B: faces x (n_tau + n_p), row-major
   SparseMatrix b_transpose;   ///< B^T: (n_tau + n_p) x faces, row-major
   SparseMatrix compliance;    ///< K = 1/2 N^-1 W^s: n_tau square, blocks of 1 (and 2 in 3D reduced)
-  /// K without the W_F^s floor (the system's own A11 term); empty when the floor is 0 (then
-  /// `compliance` is exact).
+  /// K without the W_F^s floor (the system's own A11 term); empty when the floor changes nothing
+  /// (floor 0, or no W_F^s strictly between 0 and it): then `compliance` is exact.
   SparseMatrix compliance_exact;
   /// W_F^s of each stress unknown (in the 3D reduced form the smaller of its own and that of its
   /// cell's eliminated diagonal DOF): small on the stress DOFs cut by a solid.
