@@ -229,6 +229,13 @@ class MatrixFreeStokesOperator : public LinearOperator {
   mutable VectorX stress_scratch_, cell_scratch_, face_scratch_;
 };
 
+/// D^T M W_L^s tau_full on every face (the stress part of the force of apply_stokes_update), by
+/// the stencil of D, without assembling it: bit for bit Eigen's product with
+/// deformation_rate_matrix(stress).
+template <int Dim>
+VectorX deformation_rate_transpose_product(const StressGrid<Dim>& stress, const VectorX& liquid_stress,
+                                           const VectorX& tau_full);
+
 /// u <- u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau_full) on faces with
 /// W_F^u W_L^u > 0 (eq. (4) in the form of eq. (8)); M = diag(multiplicity) because one
 /// off-diagonal DOF is both tau_ab and tau_ba in div tau. `pressure_cells` is a cell field (zero
