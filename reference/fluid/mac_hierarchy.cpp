@@ -361,7 +361,7 @@ Multigrid face_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& face_
     faces = std::move(coarse);
     g = gc;
   }
-  return Multigrid(std::move(levels), options.smoothing);
+  return Multigrid(std::move(levels), options.smoothing, options.renumber);
 }
 
 template <int Dim>
@@ -388,7 +388,7 @@ Multigrid cell_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& cell_
     cells = std::move(coarse);
     g = gc;
   }
-  return Multigrid(std::move(levels), options.smoothing);
+  return Multigrid(std::move(levels), options.smoothing, options.renumber);
 }
 
 #define MONOLITH_INSTANTIATE(D)                                                                  \

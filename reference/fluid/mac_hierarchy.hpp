@@ -36,6 +36,8 @@ struct MacMultigridOptions {
   bool transverse_linear = true;
   /// false: the finest level relaxes only the extra patches (when given), not the cells.
   bool fine_cell_patches = true;
+  /// Multigrid's renumbering of the smoothed levels for locality (same results bit for bit).
+  bool renumber = true;
 };
 
 /// The coarse grid of `grid`: ceil(cells / 2) cells of twice the width, same origin and periodic

@@ -38,6 +38,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   MacMultigridOptions mg;
   mg.smoothing = options.smoothing;
   mg.max_coarse = options.max_coarse;
+  mg.renumber = options.renumber;
   // A22 = B_p^T C B_p, the pressure Poisson block
   SparseMatrix a22;
   if (np_ > 0) {
@@ -74,6 +75,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, std::move(shifted), mg);
     }
   }
+  if (!pressure_only_ && options.inner_cg > 0) velocity_finest_ = velocity_.finest_operator();
   if (!pressure_only_ && options.cut_threshold > 0.0) build_cut_block();
   h_.setZero(n_);
   back_.setZero(n_);
@@ -199,7 +201,7 @@ void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, Vector
     velocity_.apply(face_, v_, options_.velocity_cycles);
   } else {
     // a few CG steps on V with the V-cycle as preconditioner, from zero
-    const SparseMatrix& vm = velocity_.level(0).a;
+    const SparseMatrix& vm = velocity_finest_;  // V in the numbering of f_.face
     v_.setZero(nf_);
     ir_ = face_;
     velocity_.apply(ir_, iz_, 1);

@@ -52,6 +52,7 @@ struct StokesPreconditionerOptions {
   int max_coarse = 1500;             ///< multigrid coarsest-level size
   bool transverse_linear = true;     ///< MacMultigridOptions::transverse_linear of the velocity levels
   bool fine_cell_patches = true;     ///< MacMultigridOptions::fine_cell_patches
+  bool renumber = true;              ///< MacMultigridOptions::renumber (locality; same bits)
   /// The cut block C, solved exactly (sparse LDL^T of A_CC with the system's own K, no floor)
   /// after the forward outer sweeps and before the backward ones, around the two-term inverse
   /// (a symmetric multiplicative composition: SPD as before). C = the stress unknowns with
@@ -105,6 +106,7 @@ class StokesPreconditioner : public Preconditioner {
   VectorX penalty_;         ///< Pi
   VectorX schur_diagonal_;  ///< Pi^-1 + factor eta / W_L^p
   Multigrid velocity_, pressure_;
+  SparseMatrix velocity_finest_;  ///< V in the faces' numbering (inner_cg > 0 only)
   bool pressure_only_ = false;
   std::vector<int> cut_;    ///< the unknowns of C
   SparseMatrix cut_rows_;   ///< A_{C,:} (row-major, |C| x n)

@@ -46,6 +46,62 @@ void residual(const SparseMatrix& a, const VectorX& b, const VectorX& x, VectorX
   }
 }
 
+/// The unknowns of a level in the order the forward sweep first touches them (colours, groups,
+/// patches, members), then the unknowns of no patch in increasing order: new -> old.
+std::vector<int> sweep_order(const PatchSet& ps, int n) {
+  std::vector<int> order;
+  order.reserve(n);
+  std::vector<char> seen(n, 0);
+  for (const std::vector<int>& colour : ps.colours)
+    for (int g : colour)
+      for (int k = ps.group_start[g]; k < ps.group_start[g + 1]; ++k)
+        for (int q = ps.start[k]; q < ps.start[k + 1]; ++q) {
+          const int i = ps.index[q];
+          if (!seen[i]) {
+            seen[i] = 1;
+            order.push_back(i);
+          }
+        }
+  for (int i = 0; i < n; ++i)
+    if (!seen[i]) order.push_back(i);
+  return order;
+}
+
+/// The inverse of a permutation (old -> new from new -> old).
+std::vector<int> inverse_permutation(const std::vector<int>& order) {
+  std::vector<int> inv(order.size());
+  for (std::size_t q = 0; q < order.size(); ++q) inv[order[q]] = static_cast<int>(q);
+  return inv;
+}
+
+/// m with its rows taken in the order `row_order` (new -> old; empty: unchanged) and its column
+/// indices mapped through `column_map` (old -> new; empty: unchanged), every row's entries kept
+/// in their stored order (so every row sum is formed by the same additions in the same order as
+/// before; the column indices of a row need no longer increase).
+SparseMatrix permuted(const SparseMatrix& m, const std::vector<int>& row_order, const std::vector<int>& column_map) {
+  const int rows = static_cast<int>(m.rows());
+  const int* outer = m.outerIndexPtr();
+  const int* inner = m.innerIndexPtr();
+  const double* value = m.valuePtr();
+  SparseMatrix r(rows, m.cols());
+  r.resizeNonZeros(m.nonZeros());
+  int* r_outer = r.outerIndexPtr();
+  int* r_inner = r.innerIndexPtr();
+  double* r_value = r.valuePtr();
+  int pos = 0;
+  r_outer[0] = 0;
+  for (int i = 0; i < rows; ++i) {
+    const int old = row_order.empty() ? i : row_order[i];
+    for (int k = outer[old]; k < outer[old + 1]; ++k) {
+      r_inner[pos] = column_map.empty() ? inner[k] : column_map[inner[k]];
+      r_value[pos] = value[k];
+      ++pos;
+    }
+    r_outer[i + 1] = pos;
+  }
+  return r;
+}
+
 }  // namespace
 
 int PatchSet::add(const std::vector<int>& unknowns) {
@@ -64,7 +120,7 @@ void PatchSet::close_group(int colour) {
   colours[colour].push_back(num_groups() - 1);
 }
 
-Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing)
+Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool renumber_levels)
     : levels_(std::move(levels)), smoothing_(std::max(1, smoothing)) {
   if (levels_.empty()) throw std::invalid_argument("Multigrid: no levels");
   const int num = static_cast<int>(levels_.size());
@@ -125,6 +181,53 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing)
   if (coarse_->info() != Eigen::Success)
     throw std::invalid_argument("Multigrid: the coarsest operator could not be factored");
   coarse_->prepare_solve();
+  order_.assign(levels_.size(), {});
+  if (renumber_levels) renumber();
+}
+
+void Multigrid::renumber() {
+  // Every smoothed level is renumbered in the order its forward sweep first touches its unknowns
+  // (locality): the rows a group of patches gathers, stored apart before (the MAC faces of one
+  // cell lie in three axis blocks of the face numbering), become neighbours in memory. Rows keep
+  // their entries in their stored order and patches their members, so every sweep, residual and
+  // transfer performs the same additions as before in the same order: the same bits. The
+  // coarsest level (sparse LDL^T) keeps its numbering.
+  const int num = static_cast<int>(levels_.size());
+  order_.assign(num, {});
+  std::vector<std::vector<int>> inverse(num);
+  for (int l = 0; l + 1 < num; ++l) {
+    const int n = static_cast<int>(levels_[l].a.rows());
+    order_[l] = sweep_order(levels_[l].patches, n);
+    inverse[l] = inverse_permutation(order_[l]);
+  }
+  for (int l = 0; l + 1 < num; ++l) {
+    MultigridLevel& lv = levels_[l];
+    lv.a = permuted(lv.a, order_[l], inverse[l]);
+    for (int& i : lv.patches.index) i = inverse[l][i];
+    // prolongation: fine rows in the new order, coarse columns renumbered; restriction (the
+    // transpose as Eigen stored it) the other way round
+    lv.prolongation = permuted(lv.prolongation, order_[l], inverse[l + 1]);
+    restriction_[l] = permuted(restriction_[l], order_[l + 1], inverse[l]);
+  }
+  if (!order_.empty() && !order_[0].empty()) {
+    apply_in_.setZero(levels_[0].a.rows());
+    apply_out_.setZero(levels_[0].a.rows());
+  }
+}
+
+SparseMatrix Multigrid::finest_operator() const {
+  if (order_.empty() || order_[0].empty()) return levels_[0].a;
+  // back to the caller's numbering, columns sorted (a matrix like the one given)
+  const SparseMatrix& a = levels_[0].a;
+  std::vector<Triplet> t;
+  t.reserve(a.nonZeros());
+  for (int i = 0; i < a.outerSize(); ++i)
+    for (SparseMatrix::InnerIterator it(a, i); it; ++it)
+      t.emplace_back(order_[0][i], order_[0][it.col()], it.value());
+  SparseMatrix r(a.rows(), a.cols());
+  r.setFromTriplets(t.begin(), t.end());
+  r.makeCompressed();
+  return r;
 }
 
 void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const {
@@ -188,6 +291,21 @@ void Multigrid::cycle(int l, const VectorX& b, VectorX& x) const {
 }
 
 void Multigrid::apply(const VectorX& b, VectorX& x, int cycles) const {
+  const std::vector<int>* order = order_.empty() || order_[0].empty() ? nullptr : &order_[0];
+  if (!order) {
+    apply_internal(b, x, cycles);
+    return;
+  }
+  // into the finest level's internal numbering and back (scratch: no allocation)
+  const int n = static_cast<int>(order->size());
+  const int* o = order->data();
+  for (int i = 0; i < n; ++i) apply_in_[i] = b[o[i]];
+  apply_internal(apply_in_, apply_out_, cycles);
+  x.resize(n);
+  for (int i = 0; i < n; ++i) x[o[i]] = apply_out_[i];
+}
+
+void Multigrid::apply_internal(const VectorX& b, VectorX& x, int cycles) const {
   cycle(0, b, x);
   if (cycles <= 1) return;
   // further cycles of x <- x + Q (b - A x), in scratch sized at construction (no allocation)
@@ -214,7 +332,8 @@ std::size_t Multigrid::memory_bytes() const {
     bytes += sizeof(double) * (residual_[l].size() + coarse_rhs_[l].size() + coarse_x_[l].size() +
                                work_[l].size());
   }
-  bytes += sizeof(double) * (apply_residual_.size() + apply_correction_.size());
+  bytes += sizeof(double) * (apply_residual_.size() + apply_correction_.size() + apply_in_.size() + apply_out_.size());
+  for (const std::vector<int>& o : order_) bytes += sizeof(int) * o.size();
   // the coarse factor: at most the dense triangle of the coarsest level
   const std::size_t nc = levels_.empty() ? 0 : static_cast<std::size_t>(levels_.back().a.rows());
   bytes += sizeof(double) * std::min(nc * nc / 2, static_cast<std::size_t>(levels_.back().a.nonZeros()) * 8);

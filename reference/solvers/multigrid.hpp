@@ -69,19 +69,33 @@ class Multigrid {
   /// inverses and factors the coarsest operator (sparse LDL^T). `smoothing` is the number of
   /// sweeps before and after the coarse correction on every level. Throws std::invalid_argument
   /// on inconsistent sizes, a patch larger than kMaxPatchSize, or a singular patch block.
-  Multigrid(std::vector<MultigridLevel> levels, int smoothing);
+  /// `renumber` false keeps the caller's numbering on every level (the same results bit for bit,
+  /// only slower on large levels; for the test that checks exactly that).
+  Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool renumber = true);
 
   int size() const { return levels_.empty() ? 0 : static_cast<int>(levels_[0].a.rows()); }
   int num_levels() const { return static_cast<int>(levels_.size()); }
+  /// Level l in its internal numbering: every level but the coarsest is renumbered at
+  /// construction in the order its forward sweep first touches the unknowns (order(l)), for
+  /// locality; its operator, patches and transfers are the given ones in that numbering. The
+  /// results of apply are unchanged by this, bit for bit (see renumber in multigrid.cpp).
   const MultigridLevel& level(int l) const { return levels_[l]; }
+  /// The numbering of level l: internal unknown i is the caller's unknown order(l)[i] (empty on
+  /// the coarsest level: unchanged).
+  const std::vector<int>& order(int l) const { return order_[l]; }
+  /// The finest operator in the caller's numbering (a copy; for tests and reports).
+  SparseMatrix finest_operator() const;
   int smoothing() const { return smoothing_; }
 
-  /// x = Q_k b: `cycles` V-cycles of the stationary iteration from x = 0 (cycles >= 1).
+  /// x = Q_k b: `cycles` V-cycles of the stationary iteration from x = 0 (cycles >= 1), b and x
+  /// in the caller's numbering of the finest level.
   void apply(const VectorX& b, VectorX& x, int cycles = 1) const;
-  /// One V-cycle on level l from x = 0: x = Q_l b (b and x of that level's size).
+  /// One V-cycle on level l from x = 0: x = Q_l b (b and x of that level's size, in its
+  /// internal numbering).
   void cycle(int level, const VectorX& b, VectorX& x) const;
-  /// One smoothing sweep on level l: all colours forward (backward = reverse colour order and
-  /// reverse order within a colour), every patch relaxed exactly: x_P += A_PP^-1 (b - A x)_P.
+  /// One smoothing sweep on level l (internal numbering): all colours forward (backward =
+  /// reverse colour order and reverse order within a colour), every patch relaxed exactly:
+  /// x_P += A_PP^-1 (b - A x)_P.
   void sweep(int level, const VectorX& b, VectorX& x, bool backward) const;
 
   /// Bytes held (matrices, prolongations, patch inverses, coarse factor estimate, scratch).
@@ -90,7 +104,11 @@ class Multigrid {
   double operator_complexity() const;
 
  private:
+  void renumber();
+  void apply_internal(const VectorX& b, VectorX& x, int cycles) const;
+
   std::vector<MultigridLevel> levels_;
+  std::vector<std::vector<int>> order_;  ///< per level: internal -> caller's numbering (empty: same)
   std::vector<SparseMatrix> restriction_;        ///< prolongation transposes, row-major
   std::vector<std::vector<int>> inverse_start_;  ///< per level, per patch: offset into inverse_
   std::vector<std::vector<double>> inverse_;     ///< per level: dense patch inverses, row-major
@@ -99,6 +117,7 @@ class Multigrid {
   // scratch per level
   mutable std::vector<VectorX> residual_, coarse_rhs_, coarse_x_, work_;
   mutable VectorX apply_residual_, apply_correction_;  ///< cycles >= 2 of apply (finest size)
+  mutable VectorX apply_in_, apply_out_;  ///< apply's b and x in the internal numbering
 };
 
 /// A multigrid hierarchy used as a PCG preconditioner: z = Q_k r, `cycles` symmetric V-cycles

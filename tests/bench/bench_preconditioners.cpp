@@ -8,6 +8,7 @@
 //       [--scene tank|blob|pool] [--backend matrixfree|explicit] [--ssor-max N] [--no-ssor]
 //       [--gamma G] [--cycles K] [--smoothing S] [--sweeps W] [--no-schur] [--no-elements]
 //       [--clamp T] [--repeats R] [--cut-threshold T (0: no cut block)] [--cut-layers L]
+//       [--no-renumber (Multigrid keeps the caller's numbering: same results, for timing)]
 //
 // Scenes (unit box, walls, open top, rho = 1000, dt = 0.01, a smooth swirl plus one step of
 // gravity as u*):
@@ -259,6 +260,7 @@ int main(int argc, char** argv) {
     else if (a == "--max-coarse") cfg.options.max_coarse = std::atoi(next());
     else if (a == "--cut-threshold") cfg.options.cut_threshold = std::atof(next());
     else if (a == "--cut-layers") cfg.options.cut_layers = std::atoi(next());
+    else if (a == "--no-renumber") cfg.options.renumber = false;
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;
