@@ -709,7 +709,7 @@ void parse_settings(SceneParser& p, const json& j, SceneFile& s) {
       const json& o = *sv;
       p.check_keys(o, "solver", {"scheme", "tolerance", "max_iterations", "staggered_iterations", "backend",
                                  "preconditioner", "baumgarte", "contact_margin", "shrink", "diagonal_boost",
-                                 "on_nonconvergence", "pressure_preconditioner"});
+                                 "on_nonconvergence", "pressure_preconditioner", "max_recovery_speed"});
       p.opt_enum(o, "solver", "scheme", s.solver.scheme);
       p.opt_number(o, "solver", "tolerance", kUnitOpen, s.solver.tolerance);
       p.opt_int(o, "solver", "max_iterations", 1, 100000000, "an integer in 1..100000000", s.solver.max_iterations);
@@ -718,6 +718,7 @@ void parse_settings(SceneParser& p, const json& j, SceneFile& s) {
       p.opt_enum(o, "solver", "preconditioner", s.solver.preconditioner);
       p.opt_enum(o, "solver", "pressure_preconditioner", s.solver.pressure_preconditioner);
       p.opt_number(o, "solver", "baumgarte", kUnitClosed, s.solver.baumgarte);
+      p.opt_number(o, "solver", "max_recovery_speed", kPositive, s.solver.max_recovery_speed);
       p.opt_number(o, "solver", "contact_margin", kNonNegative, s.solver.contact_margin);
       p.opt_number(o, "solver", "shrink", kNonNegative, s.solver.shrink);
       p.opt_number(o, "solver", "diagonal_boost", kNonNegative, s.solver.diagonal_boost);

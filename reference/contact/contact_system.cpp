@@ -175,11 +175,14 @@ VectorX ContactSystem<Dim>::b3() const {
   VectorX b(nc);
   for (int c = 0; c < nc; ++c) {
     // the lowest admissible relative normal velocity after the step
+    // (eq. (16)'s recovery -beta phi / dt, at most max_recovery_speed: a penetration is pushed
+    // out at a speed that does not grow without bound as dt shrinks)
     double target = 0.0;
     if (restitution_scale[c] > 1.0)
-      target = -(restitution_scale[c] - 1.0) * un[c] - params.baumgarte * std::min(phi[c], 0.0) / params.dt;
+      target = -(restitution_scale[c] - 1.0) * un[c] +
+               std::min(-params.baumgarte * std::min(phi[c], 0.0) / params.dt, params.max_recovery_speed);
     else if (phi[c] <= 0.0)
-      target = -params.baumgarte * phi[c] / params.dt;
+      target = std::min(-params.baumgarte * phi[c] / params.dt, params.max_recovery_speed);
     else
       target = -phi[c] / params.dt;
     // with restitution the target holds -R u*, so -alpha (u* - target) = -alpha (C u* + ...)

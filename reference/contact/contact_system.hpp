@@ -13,6 +13,7 @@
 /// side). Contact rows follow the order of the contact list; friction rows are (Dim - 1) per
 /// contact, contact c owning rows (Dim - 1) c ... (Dim - 1) c + Dim - 2.
 
+#include <limits>
 #include <utility>
 #include <vector>
 
@@ -30,6 +31,12 @@ struct ContactParameters {
   double dx = 1.0;
   /// beta of eq. (16).
   double baumgarte = 0.2;
+  /// The largest speed (m/s) at which eq. (16) pushes a penetration out: the recovery target
+  /// -beta phi / dt becomes min(-beta phi / dt, max_recovery_speed). Departure from the paper
+  /// (docs/rigid-bodies.md, "A cap on the recovery speed"): -beta phi / dt grows without bound as
+  /// dt shrinks, and the speed stays with the body after the step. Infinite (no cap) by default
+  /// here; the simulator sets solver.max_recovery_speed (RigidWorldSettings::from_scene).
+  double max_recovery_speed = std::numeric_limits<double>::infinity();
   /// epsilon of section 3.2.4 in units of dx (solver.contact_margin).
   double margin_cells = 0.1;
   /// Restitution acts only on contacts approaching faster than this (m/s); resting contacts,

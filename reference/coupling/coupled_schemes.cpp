@@ -199,11 +199,12 @@ template <int Dim>
 std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>& in,
                                                     std::shared_ptr<const StokesWeights> w,
                                                     StressForm form,
-                                                    StokesUnknowns unknowns, const VectorX& u_star,
+                                                    StokesUnknowns unknowns,
+                                                    std::shared_ptr<const VectorX> u_star,
                                                     const std::vector<RigidBody<Dim>>& bodies,
                                                     Backend backend) {
   const ContactSystem<Dim> contacts(bodies, in.contacts, in.contact_params);
-  return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, std::move(w), in.dt, u_star, bodies,
+  return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, std::move(w), in.dt, std::move(u_star), bodies,
                                                  in.solids, contacts, backend, unknowns);
 }
 
@@ -356,10 +357,26 @@ template <int Dim>
 CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme,
                                       Backend backend, const StaggeredSettings& settings,
                                       const CoupledSchemeOptions& options) {
+  CoupledSolveResult r;
+  solve_coupled_step<Dim>(in, scheme, backend, settings, options, r);
+  return r;
+}
+
+template <int Dim>
+void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, Backend backend,
+                        const StaggeredSettings& settings, const CoupledSchemeOptions& options,
+                        CoupledSolveResult& result) {
   const Stopwatch t_start;
   if (in.u_star.size() != in.grid.num_faces())
     throw std::invalid_argument("solve_coupled_step: u_star must have one entry per face");
-  CoupledSolveResult r;
+  // the caller's u, pressure and stress buffers (a previous step's, when the result lives
+  // across steps) are the first solve's outputs; every other field starts afresh
+  VectorX spare_u, spare_pressure, spare_stress;
+  spare_u.swap(result.u);
+  spare_pressure.swap(result.pressure);
+  spare_stress.swap(result.stress);
+  result = CoupledSolveResult();
+  CoupledSolveResult& r = result;
   // the inviscid solves: viscosity zeroed, so no stress unknowns. When the input viscosity is
   // already +0 everywhere (inviscid liquids, the P.. C schemes) the input's weights serve as
   // they are: a copy holds four face-, one cell- and three stress-sized vectors (1.8 GB at the
@@ -378,7 +395,8 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     inviscid = std::move(zeroed);
   }
   // the state between the solves of the sequence: the system and unknowns of the last solve
-  // and the velocities (u, v) the next solve starts from (v empty: the bodies as given)
+  // and the velocities (u, v) the next solve starts from (v empty: the bodies as given; u empty
+  // in the start state: in.u_star, not copied)
   struct State {
     std::shared_ptr<const MonolithicSystem<Dim>> system;
     std::vector<RigidBody<Dim>> bodies;  ///< the bodies `system` was built from
@@ -393,7 +411,13 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     const std::vector<RigidBody<Dim>> bodies =
         from.v.size() ? with_velocities(in.bodies, from.system->contacts().body_dof, from.v)
                       : in.bodies;
-    out.system = build_system(in, std::move(w), form, unknowns, from.u, bodies, backend);
+    // u* of the system: lent (the system's solve and updates below are all that read it, while
+    // `from` lives), or a copy when the oracle reads the final system after the sequence
+    const VectorX& u_from = from.u.size() ? from.u : in.u_star;
+    std::shared_ptr<const VectorX> u_star =
+        options.export_sink ? std::make_shared<const VectorX>(u_from)
+                            : std::shared_ptr<const VectorX>(&u_from, [](const VectorX*) {});
+    out.system = build_system(in, std::move(w), form, unknowns, std::move(u_star), bodies, backend);
     out.bodies = bodies;
     const MonolithicSystem<Dim>& sys = *out.system;
     if (unified) {
@@ -408,18 +432,21 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     } else {
       out.x = partitioned_solve(sys, scheme, settings, options, r);
     }
-    out.u = sys.fluid_velocities(out.x.x_fluid);
+    // the outputs into the caller's buffers while they last (the first solve's), then fresh
+    out.u.swap(spare_u);
+    out.pressure.swap(spare_pressure);
+    out.stress.swap(spare_stress);
+    sys.fluid_velocities_into(out.x.x_fluid, out.u);
     out.v = sys.body_velocities(out.x.x_fluid, out.x.lambda, out.x.z);
-    out.pressure = sys.pressure_cells(out.x.x_fluid);
-    out.stress = sys.stress_full(out.x.x_fluid);
+    sys.pressure_cells_into(out.x.x_fluid, out.pressure);
+    sys.stress_full_into(out.x.x_fluid, out.stress);
     return out;
   };
   const bool pc_vc_pc = scheme == CouplingScheme::pc_vc_pc_unified;
   // P.. C schemes, and the P solves of PC-VC-PC-unified (as PC-unified)
   auto pressure = [&](const State& from, SolveStage stage) {
-    const State out = solve(from, inviscid, StressForm::reduced,
-                            StokesUnknowns::pressure_and_stress,
-                            pc_vc_pc || scheme == CouplingScheme::pc_unified, false);
+    State out = solve(from, inviscid, StressForm::reduced, StokesUnknowns::pressure_and_stress,
+                      pc_vc_pc || scheme == CouplingScheme::pc_unified, false);
     if (stage != SolveStage::second_pressure) count_dofs(*out.system, r);
     return out;
   };
@@ -433,15 +460,15 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
   };
   auto unified = [&](const State& from, const VectorX* eta) {
     const auto w = with_viscosity(eta);
-    const State out = solve(from, w, StressForm::reduced, StokesUnknowns::pressure_and_stress,
-                            scheme == CouplingScheme::pvc_unified, false);
+    State out = solve(from, w, StressForm::reduced, StokesUnknowns::pressure_and_stress,
+                      scheme == CouplingScheme::pvc_unified, false);
     count_dofs(*out.system, r);
     return out;
   };
   // the VC-unified solve of PC-VC-PC: stress only (p fixed at 0), the full form
   auto viscous = [&](const State& from, const VectorX* eta) {
     const auto w = with_viscosity(eta);
-    const State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true);
+    State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true);
     r.stress_dofs = out.system->num_stress();
     return out;
   };
@@ -452,23 +479,23 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
     viscosity.update = options.update_viscosity;
   }
   State start;
-  start.u = in.u_star;
+  // Algorithm 2's eta^1 reads the start state's u; the solves themselves read in.u_star
+  if (viscosity.non_newtonian()) start.u = in.u_star;
   // with bodies every scheme keeps its own sequence, viscous liquid or not
-  const State end = run_solve_sequence(solve_sequence(scheme, true), start, viscosity, pressure,
-                                       unified, viscous);
+  State end = run_solve_sequence(solve_sequence(scheme, true), start, viscosity, pressure,
+                                 unified, viscous);
   if (pc_vc_pc) r.coupled_iterations += r.viscosity_coupled_iterations;
   export_step(options, *end.system, end.bodies, in, settings, scheme, end.x,
               pc_vc_pc || scheme == CouplingScheme::pc_unified ||
                   scheme == CouplingScheme::pvc_unified);
-  r.u = end.u;
-  r.pressure = end.pressure;
-  r.stress = end.stress;
-  r.body_velocity = end.v;
-  r.lambda = end.x.lambda;
-  r.z = end.x.z;
+  r.u.swap(end.u);
+  r.pressure.swap(end.pressure);
+  r.stress.swap(end.stress);
+  r.body_velocity.swap(end.v);
+  r.lambda.swap(end.x.lambda);
+  r.z.swap(end.x.z);
   r.body_dof = end.system->contacts().body_dof;
   r.total_seconds = t_start.seconds();
-  return r;
 }
 
 template <int Dim>
@@ -501,5 +528,11 @@ template CoupledSolveResult solve_coupled_step<2>(const CoupledStepInput<2>&, Co
 template CoupledSolveResult solve_coupled_step<3>(const CoupledStepInput<3>&, CouplingScheme,
                                                   Backend, const StaggeredSettings&,
                                                   const CoupledSchemeOptions&);
+template void solve_coupled_step<2>(const CoupledStepInput<2>&, CouplingScheme, Backend,
+                                    const StaggeredSettings&, const CoupledSchemeOptions&,
+                                    CoupledSolveResult&);
+template void solve_coupled_step<3>(const CoupledStepInput<3>&, CouplingScheme, Backend,
+                                    const StaggeredSettings&, const CoupledSchemeOptions&,
+                                    CoupledSolveResult&);
 
 }  // namespace monolith

@@ -192,4 +192,14 @@ CoupledSolveResult solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingS
                                       Backend backend, const StaggeredSettings& settings,
                                       const CoupledSchemeOptions& options = {});
 
+/// The same into `result`, whose u, pressure and stress vectors (when of the right size) are
+/// written in place of allocating new ones: a caller that keeps one CoupledSolveResult across
+/// steps (and swaps those vectors with its own, as Simulation does) allocates no face-, cell- or
+/// stress-sized result after its first step. Every other field of `result` is reset. The same
+/// values, bit for bit, as the returning form.
+template <int Dim>
+void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, Backend backend,
+                        const StaggeredSettings& settings, const CoupledSchemeOptions& options,
+                        CoupledSolveResult& result);
+
 }  // namespace monolith

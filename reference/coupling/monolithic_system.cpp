@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <array>
 #include <map>
+#include <unordered_map>
 #include <memory>
 #include <stdexcept>
 #include <utility>
@@ -71,9 +73,22 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
                                         const SolidWeights<Dim>& solids,
                                         const ContactSystem<Dim>& contacts,
                                         Backend backend, StokesUnknowns unknowns)
+    : MonolithicSystem(grid, form, std::move(weights), dt, std::make_shared<const VectorX>(u_star),
+                       bodies, solids, contacts, backend, unknowns) {}
+
+template <int Dim>
+MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm form,
+                                        std::shared_ptr<const StokesWeights> weights, double dt,
+                                        std::shared_ptr<const VectorX> u_star_shared,
+                                        const std::vector<RigidBody<Dim>>& bodies,
+                                        const SolidWeights<Dim>& solids,
+                                        const ContactSystem<Dim>& contacts,
+                                        Backend backend, StokesUnknowns unknowns)
     : grid_(grid), stress_(grid), layout_(stress_, form), w_owner_(std::move(weights)),
-      w_(*w_owner_), dt_(dt), u_star_(u_star), backend_(backend), unknowns_(unknowns),
+      w_(*w_owner_), dt_(dt), u_star_owner_(std::move(u_star_shared)), u_star_(*u_star_owner_),
+      backend_(backend), unknowns_(unknowns),
       matrix_free_(backend == Backend::matrix_free), contacts_(contacts) {
+  const VectorX& u_star = u_star_;
   const StokesWeights& w = w_;
   // alpha = 1 / dx^Dim, shared with the contact blocks (section 4.1)
   alpha_ = 1.0 / std::pow(grid.dx(), Dim);
@@ -90,17 +105,7 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   j_lambda_t_ = contacts.j_lambda.transpose();
   j_z_t_ = contacts.j_z.transpose();
 
-  // the body part of b1, b2: alpha W_L J^T v* of both groups (subtracted; section 4.4.4), over
-  // all stress DOFs and cells
-  VectorX body_stress = VectorX::Zero(stress_.num_dofs());
-  VectorX body_cells = VectorX::Zero(grid.num_cells());
-  subtract_body_stress_rhs<Dim>(two, grid, w.liquid_stress, contacts.v_star, body_stress);
-  subtract_body_pressure_rhs<Dim>(two, grid, w.pressure.liquid_cell, contacts.v_star, body_cells);
   const VectorX v_one = group_velocities(bodies, BodyGroup::one_way);
-  if (one.num_rows() > 0) {
-    subtract_body_stress_rhs<Dim>(one, grid, w.liquid_stress, v_one, body_stress);
-    subtract_body_pressure_rhs<Dim>(one, grid, w.pressure.liquid_cell, v_one, body_cells);
-  }
 
   if (matrix_free_) {
     // the fluid part by stencils; b = B^T W_F^u u* by the same stencils
@@ -108,14 +113,22 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
     const VectorX b = op->rhs(u_star);
     matrix_free_stokes_ = op;
     stokes_operator_ = op;
-    // (S_tau E^T, S_p) of the body terms, selected DOF by DOF
-    const VectorX body_unknowns = layout_.expand_transpose(body_stress);
     b1_ = b.head(num_stress());
-    for (int k = 0; k < num_stress(); ++k) b1_[k] += body_unknowns[dofs_.unknown_of_dof[k]];
     b2_ = b.tail(num_pressure());
-    for (int k = 0; k < num_pressure(); ++k) b2_[k] += body_cells[dofs_.pressure.cell_of_dof[k]];
+    add_body_rhs(two, one, contacts.v_star, v_one);
     build_rigid_columns(two);
     return;
+  }
+
+  // the body part of b1, b2: alpha W_L J^T v* of both groups (subtracted; section 4.4.4), over
+  // all stress DOFs and cells
+  VectorX body_stress = VectorX::Zero(stress_.num_dofs());
+  VectorX body_cells = VectorX::Zero(grid.num_cells());
+  subtract_body_stress_rhs<Dim>(two, grid, w.liquid_stress, contacts.v_star, body_stress);
+  subtract_body_pressure_rhs<Dim>(two, grid, w.pressure.liquid_cell, contacts.v_star, body_cells);
+  if (one.num_rows() > 0) {
+    subtract_body_stress_rhs<Dim>(one, grid, w.liquid_stress, v_one, body_stress);
+    subtract_body_pressure_rhs<Dim>(one, grid, w.pressure.liquid_cell, v_one, body_cells);
   }
 
   // explicit: every matrix of eq. (8) by name
@@ -141,6 +154,70 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   b_fluid_t_ = b_fluid_.transpose();
   b1_ = st.b1 + st.S_tau * (st.E.transpose() * body_stress);
   b2_ = st.b2 + st.S_p * body_cells;
+}
+
+template <int Dim>
+void MonolithicSystem<Dim>::add_body_rhs(const BodyCouplingOperator<Dim>& two,
+                                         const BodyCouplingOperator<Dim>& one,
+                                         const VectorX& v_two, const VectorX& v_one) {
+  // The body part of b1, b2 of eq. (24) (section 4.4.4): b -= S E^T (alpha W_L J^T v) over both
+  // groups, as subtract_body_stress_rhs / subtract_body_pressure_rhs and expand_transpose compute
+  // it over every stress DOF and cell (the explicit back end still does), here over the bodies'
+  // surface DOFs only: per touched DOF the sums J^T v of each group in the same order (bodies,
+  // then their surface DOFs), combined as 0 - alpha (W_L t_two) - alpha (W_L t_one); every other
+  // DOF is +0 there. Each active unknown then adds its value (+0 when untouched, as before: the
+  // bits of a -0 entry of b change under + 0 exactly as they did).
+  const double alpha = 1.0 / grid_.cell_volume();
+  const bool with_one = one.num_rows() > 0;
+  // touched DOF -> (t_two, t_one)
+  auto sums = [&](bool stress) {
+    std::unordered_map<int, std::array<double, 2>> t;
+    auto add = [&](const BodyCouplingOperator<Dim>& op, const VectorX& v, int g) {
+      for (const auto& c : stress ? op.stress_columns() : op.pressure_columns()) {
+        auto& e = t.try_emplace(c.index, std::array<double, 2>{0.0, 0.0}).first->second;
+        e[g] += c.column.dot(v.template segment<kBodyDofs<Dim>>(c.row));
+      }
+    };
+    add(two, v_two, 0);
+    if (with_one) add(one, v_one, 1);
+    return t;
+  };
+  auto value = [&](const std::unordered_map<int, std::array<double, 2>>& t, int index,
+                   double wl) {
+    const auto it = t.find(index);
+    const double t_two = it == t.end() ? 0.0 : it->second[0];
+    double v = 0.0;
+    v -= alpha * (wl * t_two);
+    if (with_one) v -= alpha * (wl * (it == t.end() ? 0.0 : it->second[1]));
+    return v;
+  };
+  if (num_pressure() > 0) {
+    const auto t = sums(false);
+    const VectorX& wl = w_.pressure.liquid_cell;
+    for (int k = 0; k < num_pressure(); ++k) {
+      const int c = dofs_.pressure.cell_of_dof[k];
+      b2_[k] += value(t, c, wl[c]);
+    }
+  }
+  if (num_stress() > 0) {
+    const auto t = sums(true);
+    const VectorX& wl = w_.liquid_stress;
+    const bool reduced = layout_.form() == StressForm::reduced;
+    const int eliminated = stress_.offset(Dim - 1);
+    for (int k = 0; k < num_stress(); ++k) {
+      // (E^T s)_u = s at the unknown's DOF, minus s at the eliminated DOF of its cell (reduced
+      // form, diagonal components)
+      const int u = dofs_.unknown_of_dof[k];
+      const int j = layout_.component_of_unknown(u);
+      const int comp = layout_.component(j);
+      const int local = u - layout_.offset(j);
+      const int d = stress_.offset(comp) + local;
+      double e = value(t, d, wl[d]);
+      if (reduced && StressGrid<Dim>::is_diagonal(comp))
+        e -= value(t, eliminated + local, wl[eliminated + local]);
+      b1_[k] += e;
+    }
+  }
 }
 
 template <int Dim>
@@ -424,20 +501,62 @@ VectorX MonolithicSystem<Dim>::body_velocities(const VectorX& x_fluid, const Vec
 
 template <int Dim>
 VectorX MonolithicSystem<Dim>::pressure_cells(const VectorX& x_fluid) const {
-  return scatter_stokes_pressure(dofs_, x_fluid, grid_.num_cells());
+  VectorX p;
+  pressure_cells_into(x_fluid, p);
+  return p;
+}
+
+template <int Dim>
+void MonolithicSystem<Dim>::pressure_cells_into(const VectorX& x_fluid, VectorX& out) const {
+  // scatter_stokes_pressure into a kept buffer
+  out.setZero(grid_.num_cells());
+  const int ns = num_stress();
+  for (int k = 0; k < num_pressure(); ++k) out[dofs_.pressure.cell_of_dof[k]] = x_fluid[ns + k];
 }
 
 template <int Dim>
 VectorX MonolithicSystem<Dim>::stress_full(const VectorX& x_fluid) const {
-  return scatter_stress<Dim>(layout_, dofs_, x_fluid);
+  VectorX tau;
+  stress_full_into(x_fluid, tau);
+  return tau;
+}
+
+template <int Dim>
+void MonolithicSystem<Dim>::stress_full_into(const VectorX& x_fluid, VectorX& out) const {
+  // tau_full = E S_tau^T tau (scatter_stress) without the unknown-sized and full-sized
+  // temporaries: each active unknown writes its own DOF and, in the reduced form, a diagonal
+  // unknown subtracts itself from the eliminated component of its cell. The active unknowns come
+  // in increasing order (component blocks in order), so the eliminated component is
+  // 0 - tau_xx - tau_yy (3D) in the order StressLayout::expand sums it; the inactive unknowns
+  // it skips are +0 there, and 0 - 0 = +0, so the bits are expand's.
+  out.setZero(stress_.num_dofs());
+  const int ns = num_stress();
+  if (ns == 0) return;
+  const bool reduced = layout_.form() == StressForm::reduced;
+  const int eliminated = stress_.offset(Dim - 1);
+  for (int k = 0; k < ns; ++k) {
+    const int u = dofs_.unknown_of_dof[k];
+    const int j = layout_.component_of_unknown(u);
+    const int c = layout_.component(j);
+    const int local = u - layout_.offset(j);
+    out[stress_.offset(c) + local] = x_fluid[k];
+    if (reduced && StressGrid<Dim>::is_diagonal(c)) out[eliminated + local] -= x_fluid[k];
+  }
 }
 
 template <int Dim>
 VectorX MonolithicSystem<Dim>::fluid_velocities(const VectorX& x_fluid) const {
-  VectorX u = u_star_;
+  VectorX u;
+  fluid_velocities_into(x_fluid, u);
+  return u;
+}
+
+template <int Dim>
+void MonolithicSystem<Dim>::fluid_velocities_into(const VectorX& x_fluid, VectorX& u) const {
+  u = u_star_;
   if (!matrix_free_) {
     apply_stokes_update<Dim>(grid_, layout_, w_, dt_, pressure_cells(x_fluid), stress_full(x_fluid), u);
-    return u;
+    return;
   }
   // the face force B x = G W_L^p p + D^T M W_L^s tau by the stencils, then the update of
   // apply_stokes_update on faces with W_F^u W_L^u > 0
@@ -448,7 +567,6 @@ VectorX MonolithicSystem<Dim>::fluid_velocities(const VectorX& x_fluid) const {
     if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0)) continue;
     u[f] -= dt_ * force[f] / (pw.face_density[f] * pw.liquid_face[f]);
   }
-  return u;
 }
 
 // ---------------------------------------------------------------------------------------------

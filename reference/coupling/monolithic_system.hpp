@@ -76,6 +76,14 @@ class MonolithicSystem {
                    const std::vector<RigidBody<Dim>>& bodies, const SolidWeights<Dim>& solids,
                    const ContactSystem<Dim>& contacts, Backend backend,
                    StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
+  /// The same with u* shared too (a face-sized vector: 194 MiB at the paper's 256x128x256 grid).
+  /// A caller whose u* outlives the system may pass a non-owning pointer.
+  MonolithicSystem(const MacGrid<Dim>& grid, StressForm form,
+                   std::shared_ptr<const StokesWeights> w, double dt,
+                   std::shared_ptr<const VectorX> u_star,
+                   const std::vector<RigidBody<Dim>>& bodies, const SolidWeights<Dim>& solids,
+                   const ContactSystem<Dim>& contacts, Backend backend,
+                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
 
   int num_stress() const { return dofs_.num_stress(); }
   int num_pressure() const { return dofs_.num_pressure(); }
@@ -173,6 +181,13 @@ class MonolithicSystem {
   /// Cell pressures and all stress components of x_fluid = (tau, p).
   VectorX pressure_cells(const VectorX& x_fluid) const;
   VectorX stress_full(const VectorX& x_fluid) const;
+  /// The same three into `out` (resized only when its size differs, so a buffer kept across
+  /// steps is reused); the same values bit for bit. stress_full_into of a system without stress
+  /// unknowns (an inviscid solve) only zeroes `out`. fluid_velocities_into still allocates one
+  /// face-sized temporary under matrixfree (MatrixFreeStokesOperator::face_force).
+  void fluid_velocities_into(const VectorX& x_fluid, VectorX& out) const;
+  void pressure_cells_into(const VectorX& x_fluid, VectorX& out) const;
+  void stress_full_into(const VectorX& x_fluid, VectorX& out) const;
 
   Backend backend() const { return backend_; }
   bool matrix_free() const { return matrix_free_; }
@@ -211,6 +226,10 @@ class MonolithicSystem {
   VectorX body_force(int j, const VectorX& x) const;
   /// B_i^T f for block i.
   VectorX body_force_transpose(int i, const VectorX& f) const;
+  /// matrixfree: b1_, b2_ -= the bodies' part of eq. (24)'s right-hand side (both groups), over
+  /// the bodies' surface DOFs (no grid-sized temporaries).
+  void add_body_rhs(const BodyCouplingOperator<Dim>& two, const BodyCouplingOperator<Dim>& one,
+                    const VectorX& v_two, const VectorX& v_one);
   /// The matrixfree column blocks of B_f from the two-way BodyCouplingOperator.
   void build_rigid_columns(const BodyCouplingOperator<Dim>& two);
 
@@ -220,7 +239,8 @@ class MonolithicSystem {
   std::shared_ptr<const StokesWeights> w_owner_;  ///< the weights (shared or a copy of them)
   const StokesWeights& w_;                         ///< *w_owner_
   double dt_ = 0.0, alpha_ = 1.0;
-  VectorX u_star_;
+  std::shared_ptr<const VectorX> u_star_owner_;  ///< u* (shared or a copy of it)
+  const VectorX& u_star_;                         ///< *u_star_owner_
   Backend backend_;
   StokesUnknowns unknowns_ = StokesUnknowns::pressure_and_stress;
   bool matrix_free_ = false;

@@ -13,10 +13,24 @@
 
 namespace monolith {
 
+namespace {
+
+/// The longest step a scene takes: max_dt, or the frame when that is shorter.
+double largest_step(const TimeSpec& t) {
+  return t.fps > 0.0 ? std::min(t.max_dt, 1.0 / t.fps) : t.max_dt;
+}
+
+}  // namespace
+
 RigidWorldSettings RigidWorldSettings::from_scene(const SceneDesc& scene) {
   RigidWorldSettings s;
   s.dx = scene.dx();
   s.baumgarte = scene.solver.baumgarte;
+  // the recovery cap: the scene's, or the speed eq. (16) gives a one-cell penetration at the
+  // largest step (docs/rigid-bodies.md, "A cap on the recovery speed")
+  s.max_recovery_speed = scene.solver.max_recovery_speed > 0.0
+                             ? scene.solver.max_recovery_speed
+                             : scene.solver.baumgarte * scene.dx() / largest_step(scene.time);
   s.margin_cells = scene.solver.contact_margin;
   s.diagonal_boost = scene.solver.diagonal_boost;
   s.staggered_iterations = std::max(1, scene.solver.staggered_iterations);
@@ -95,6 +109,7 @@ ContactParameters RigidWorld<Dim>::contact_parameters(double dt, const Vec<Dim>&
   params.dt = dt;
   params.dx = settings_.dx;
   params.baumgarte = settings_.baumgarte;
+  params.max_recovery_speed = settings_.max_recovery_speed;
   params.margin_cells = settings_.margin_cells;
   params.restitution_threshold = 2.0 * gravity.norm() * dt;
   return params;

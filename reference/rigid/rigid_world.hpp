@@ -7,6 +7,7 @@
 /// are updated (eq. (13)) and the positions integrated. docs/rigid-bodies.md, "Contact model".
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "reference/contact/collision.hpp"
@@ -23,6 +24,9 @@ namespace monolith {
 struct RigidWorldSettings {
   double dx = 1.0;  ///< cell width: margin epsilon = margin_cells dx, alpha = 1/dx^Dim
   double baumgarte = SolverSpec{}.baumgarte;            ///< beta of eq. (16)
+  /// Cap on eq. (16)'s recovery speed (m/s; ContactParameters::max_recovery_speed). Infinite
+  /// unless set; from_scene: solver.max_recovery_speed, or beta dx / time.max_dt without it.
+  double max_recovery_speed = std::numeric_limits<double>::infinity();
   double margin_cells = SolverSpec{}.contact_margin;    ///< epsilon / dx (solver.contact_margin)
   double diagonal_boost = SolverSpec{}.diagonal_boost;  ///< gamma of section 4.4.5
   int staggered_iterations = SolverSpec{}.staggered_iterations;  ///< outer iterations of 4.2

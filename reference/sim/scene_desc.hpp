@@ -80,6 +80,11 @@ struct SolverSpec {
   /// multigrid preconditioner only; SSOR keeps the paper's zero start). Not a scene key.
   bool stokes_warm_start = false;
   double baumgarte = 0.2;
+  /// `solver.max_recovery_speed` (m/s): the cap on eq. (16)'s recovery speed -beta phi / dt
+  /// (ContactParameters::max_recovery_speed); 0 (the key absent) = the default rule
+  /// beta dx / time.max_dt, the speed eq. (16) gives a penetration of one cell at the scene's
+  /// largest step (RigidWorldSettings::from_scene).
+  double max_recovery_speed = 0.0;
   double contact_margin = 0.1;  ///< epsilon of section 3.2.4, in units of dx
   double shrink = 0.01;         ///< zeta of section 4.4.6, in units of dx
   double diagonal_boost = 1e-4; ///< gamma of section 4.4.5

@@ -659,8 +659,8 @@ void Simulation<Dim>::solve_coupled(double dt) {
   }
   // the oracle: this step's system to the requested sink (request_system_export)
   if (export_sink_ && stats_.steps + 1 == export_step_) options.export_sink = export_sink_;
-  CoupledSolveResult r =
-      solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options);
+  CoupledSolveResult& r = coupled_out_;
+  solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options, r);
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
   if (model) {

@@ -305,6 +305,9 @@ class Simulation : public AnySimulation {
   /// its `solids` are the weights of the last update_moving_solids (whose lattice_phi has moved
   /// to solid_phi_), the rest is filled by solve_coupled.
   CoupledStepInput<Dim> coupled_in_;
+  /// Its result, kept likewise: solve_coupled swaps u, pressure and stress with u_, pressure_,
+  /// stress_, so the next step's solve writes into the previous step's vectors.
+  CoupledSolveResult coupled_out_;
   SolidWeightsScratch<Dim> solid_scratch_;  ///< solid_weights' buffers
   // the weights of eq. (8): W_F^u, W_L^p, W_L^u, P (weights_), W_F^s, W_L^s
   PressureWeights weights_;

@@ -282,6 +282,7 @@ TEST_CASE("defaults are filled in 2D and 3D", "[unit]") {
     CHECK(s.solver.shrink == 0.01);
     CHECK(s.solver.diagonal_boost == 1e-4);
     CHECK(s.solver.baumgarte == 0.2);
+    CHECK(s.solver.max_recovery_speed == 0.0);  // the default rule (RigidWorldSettings::from_scene)
     CHECK(s.particles.per_cell == 0);
     CHECK(s.particles.position_correction);
     CHECK(s.render.enabled);
@@ -642,6 +643,11 @@ TEST_CASE("solver.preconditioner: auto (the default), multigrid, ssor; anything 
   // "auto" is a choice of the unified solves only, not of the pressure-only ones
   j["solver"] = {{"pressure_preconditioner", "auto"}};
   CHECK(mentions(problems_of(j), "solver.pressure_preconditioner"));
+  // the recovery cap is a speed > 0
+  j["solver"] = {{"max_recovery_speed", 0.0}};
+  CHECK(mentions(problems_of(j), "solver.max_recovery_speed"));
+  j["solver"] = {{"max_recovery_speed", 0.5}};
+  CHECK(problems_of(j).empty());
 }
 
 TEST_CASE("an unknown viscosity preset names the file, the key path and the allowed names",

@@ -11,6 +11,7 @@
 #include "reference/contact/collision.hpp"
 #include "reference/contact/contact_system.hpp"
 #include "reference/rigid/rigid_body.hpp"
+#include "reference/rigid/rigid_world.hpp"
 
 using namespace monolith;
 using nlohmann::json;
@@ -271,6 +272,77 @@ TEMPLATE_TEST_CASE_SIG("b3 of eq. (16): zero at rest at phi = -epsilon, negative
     const VectorX v = sys.velocity_update(r.lambda, r.z);
     CHECK(v[1] == Approx(-(0.005 + eps) / p.dt).epsilon(1e-3));
   }
+}
+
+TEMPLATE_TEST_CASE_SIG("eq. (16) with the recovery cap: the push-out speed stops growing as dt shrinks",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  Vec<Dim> c = Vec<Dim>::Constant(0.5);
+  c[1] = 0.1;
+  json bodies = json::array();
+  bodies.push_back({{"density", 500}, {"shape", {{"type", "sphere"}, {"center", vec_json<Dim>(c)}, {"radius", 0.1}}}});
+  std::vector<RigidBody<Dim>> b = make_bodies<Dim>(scene_with(Dim, bodies));
+  b[0].velocity.setZero();
+  const ContactParameters p = test_parameters<Dim>();
+  const double eps = p.margin_cells * p.dx;
+  Contact<Dim> k;
+  k.body_a = 0;
+  k.body_b = -1;
+  k.wall_face = 2;
+  k.normal = Vec<Dim>::Unit(1);
+  k.point = c - 0.1 * Vec<Dim>::Unit(1);
+  k.phi = -eps - 0.004;  // 4 mm beyond the margin, at rest
+  // the speed after the solve of the contact alone (the push-out speed of eq. (16))
+  auto push_out = [&](const ContactParameters& q) {
+    const ContactSystem<Dim> sys(b, {k}, q);
+    const StaggeredResult r = solve_staggered_projections<Dim>(sys, StaggeredSettings{});
+    return sys.velocity_update(r.lambda, r.z)[1];
+  };
+  // the cap of RigidWorldSettings::from_scene's rule: a one-cell penetration at dt = 0.01
+  ContactParameters capped = p;
+  capped.max_recovery_speed = p.baumgarte * p.dx / 0.01;
+  // at the largest step the penetration (below one cell) is pushed out at beta phi / dt, capped
+  // or not: the cap changes nothing there (b3 bit for bit)
+  CHECK(ContactSystem<Dim>(b, {k}, capped).b3()[0] == ContactSystem<Dim>(b, {k}, p).b3()[0]);
+  CHECK(push_out(capped) == Approx(p.baumgarte * 0.004 / p.dt).epsilon(1e-3));
+  // dt 100x shorter: uncapped, the push-out speed is 100x faster; capped, it is the cap
+  for (double scale : {0.1, 0.01, 1e-4}) {
+    ContactParameters q = p, qc = capped;
+    q.dt = qc.dt = scale * p.dt;
+    q.restitution_threshold = qc.restitution_threshold = 2.0 * 9.81 * q.dt;
+    INFO("dt = " << q.dt);
+    CHECK(push_out(q) == Approx(p.baumgarte * 0.004 / q.dt).epsilon(1e-3));
+    CHECK(push_out(qc) == Approx(capped.max_recovery_speed).epsilon(1e-3));
+    CHECK(push_out(qc) < push_out(q));
+  }
+  // the cap acts on the Baumgarte part only: an approaching contact above the restitution
+  // threshold still bounces at e u*, plus at most the cap
+  b[0].velocity = -1.0 * Vec<Dim>::Unit(1);
+  k.restitution = 0.5;
+  ContactParameters q = capped;
+  q.dt = 1e-4;
+  q.restitution_threshold = 2.0 * 9.81 * q.dt;
+  const ContactSystem<Dim> sys(b, {k}, q);
+  REQUIRE(sys.restitution_scale[0] == Approx(1.5));
+  const VectorX un = sys.normal_velocity(sys.v_star);
+  CHECK(sys.b3()[0] / sys.alpha == Approx(-un[0] - 0.5 * un[0] + capped.max_recovery_speed));
+}
+
+TEST_CASE("the recovery cap of a scene: solver.max_recovery_speed, or beta dx / the largest step",
+          "[unit]") {
+  SceneDesc s = scene_with(3, json::array());
+  s.time.max_dt = 0.01;
+  s.time.fps = 50.0;
+  s.solver.baumgarte = 0.2;
+  // dx = 1/32: 0.2 / 32 / 0.01
+  CHECK(RigidWorldSettings::from_scene(s).max_recovery_speed == Approx(0.625));
+  // frames shorter than max_dt: the frame is the largest step
+  s.time.fps = 200.0;
+  CHECK(RigidWorldSettings::from_scene(s).max_recovery_speed == Approx(0.2 / 32.0 / 0.005));
+  s.solver.max_recovery_speed = 3.0;
+  CHECK(RigidWorldSettings::from_scene(s).max_recovery_speed == 3.0);
+  // the world hands it to the contact system
+  const RigidWorld<3> world(s);
+  CHECK(world.contact_parameters(0.001, Vec<3>(0.0, -9.81, 0.0)).max_recovery_speed == 3.0);
 }
 
 TEMPLATE_TEST_CASE_SIG("restitution: per contact row, max over the pair, only above the threshold",
