@@ -918,6 +918,60 @@ double box_hat_weight(double t, double width) {
   return (hat_integral(t + 0.5 * width) - hat_integral(t - 0.5 * width)) / width;
 }
 
+/// The runs of consecutive indices that [lo, hi] covers on an axis of n entries, wrapped on a
+/// periodic axis and clamped to [0, n) otherwise: at most two (a periodic range across the seam).
+int axis_runs(int lo, int hi, int n, bool periodic, std::array<std::array<int, 2>, 2>& runs) {
+  if (!periodic) {
+    lo = std::max(lo, 0);
+    hi = std::min(hi, n - 1);
+    if (lo > hi) return 0;
+    runs[0] = {lo, hi};
+    return 1;
+  }
+  if (hi - lo + 1 >= n) {
+    runs[0] = {0, n - 1};
+    return 1;
+  }
+  const int wl = ((lo % n) + n) % n, wh = ((hi % n) + n) % n;
+  if (wl <= wh) {
+    runs[0] = {wl, wh};
+    return 1;
+  }
+  runs[0] = {wl, n - 1};
+  runs[1] = {0, wh};
+  return 2;
+}
+
+/// Makes the tiles of `tiles` under the box of runs `runs[a][0 .. count[a])` per axis (every
+/// combination of one run per axis).
+template <int Dim, class Tiles>
+void touch_runs(Tiles& tiles, const std::array<std::array<std::array<int, 2>, 2>, Dim>& runs,
+                const std::array<int, Dim>& count) {
+  for (int a = 0; a < Dim; ++a)
+    if (count[a] == 0) return;
+  std::array<int, Dim> k{};
+  while (true) {
+    VecI<Dim> lo, hi;
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = runs[a][k[a]][0];
+      hi[a] = runs[a][k[a]][1];
+    }
+    tiles.touch_box(lo, hi);
+    int a = 0;
+    for (; a < Dim; ++a) {
+      if (++k[a] < count[a]) break;
+      k[a] = 0;
+    }
+    if (a == Dim) return;
+  }
+}
+
+/// The density projection's per-cell values, in tiles of cells (TiledLattice over the grid's
+/// cells) made only in the band around the particles: particle volume fraction rho~, target T,
+/// the air-side test's T on the level set extended into the solids, and the row of the cell in
+/// the Poisson problem (-1: not an unknown). Every cell outside the tiles has rho~ = T = 0.
+enum ProjectionValue { kRho = 0, kTarget = 1, kWet = 2, kRow = 3, kProjectionValues = 4 };
+
 /// The liquid indicator of the level set convolved with the multilinear hat of each cell centre,
 ///   T_c = dx^-Dim int hat_c(x) H(-phi(x)) dx,
 /// i.e. what a perfectly even distribution of liquid particles filling {phi < 0} would splat
@@ -925,66 +979,109 @@ double box_hat_weight(double t, double width) {
 /// fractions from lattice_cell_negative_fraction): per axis, the half cells 2c-1 .. 2c+2 carry the
 /// hat integrals 1/8, 3/8, 3/8, 1/8. A half cell outside a non-periodic domain passes its weight
 /// to the adjacent inside one, as the clamped particle stencil does.
-template <int Dim>
-VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi) {
+///
+/// Written for the cells of one tile of `values` (component `slot`), from the lattice values
+/// `corner_value(point)`: the half cells under the tile's hats (2 x 8 + 2 per axis) and their
+/// fractions, then the three (two) passes of the taps along the axes, each output the same sum
+/// in the same order as a pass over the whole grid would form it (so the same bits).
+template <int Dim, class Values, class CornerValue>
+void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int tile, int slot,
+                                  CornerValue&& corner_value) {
+  constexpr int kTile = Values::kTile;
+  constexpr int kHalf = 2 * kTile + 2;  // half cells under the hats of one tile's cells, per axis
   constexpr int kCorners = 1 << Dim;
-  // liquid fractions of the half cells
-  VecI<Dim> dims = 2 * grid.cells();
-  int count = 1;
-  for (int a = 0; a < Dim; ++a) count *= dims[a];
-  VectorX cur(count);
-  // lattice index offsets of the 2^Dim corners from a half cell's lower corner
-  std::array<int, kCorners> corner_offset;
-  for (int b = 0; b < kCorners; ++b) {
-    int offset = 0, stride = 1;
-    for (int a = 0; a < Dim; ++a) {
-      offset += ((b >> a) & 1) * stride;
-      stride *= lattice.dims[a];
+  const VecI<Dim> t0 = values.tile_origin(tile);
+  // per axis: the half cell of each local one (wrapped or clamped as the taps read them) and the
+  // distinct lattice points their corners take, gathered once
+  std::array<std::array<int, kHalf>, Dim> lo_point, hi_point;  // local corner indices
+  std::array<std::array<int, 2 * kHalf>, Dim> point;          // lattice point coordinates
+  std::array<int, Dim> points{};
+  for (int a = 0; a < Dim; ++a) {
+    const int n2 = 2 * grid.cells()[a];
+    for (int l = 0; l < kHalf; ++l) {
+      int j = 2 * t0[a] - 1 + l;
+      if (grid.periodic(a))
+        j = ((j % n2) + n2) % n2;
+      else
+        j = std::clamp(j, 0, n2 - 1);
+      for (int o = 0; o < 2; ++o) {
+        int k = 0;
+        while (k < points[a] && point[a][k] != j + o) ++k;
+        if (k == points[a]) point[a][points[a]++] = j + o;
+        (o == 0 ? lo_point : hi_point)[a][l] = k;
+      }
     }
-    corner_offset[b] = offset;
   }
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int k = 0; k < count; ++k) {
-    const int base = lattice.index(lattice_coord<Dim>(k, dims));
-    std::array<double, kCorners> corner;
-    for (int b = 0; b < kCorners; ++b) corner[b] = phi[base + corner_offset[b]];
-    cur[k] = lattice_cell_negative_fraction<Dim>(corner);
+  // the lattice values at the gathered points (axis 0 fastest)
+  int gathered = 1;
+  for (int a = 0; a < Dim; ++a) gathered *= points[a];
+  std::vector<double> value(gathered);
+  {
+    std::array<int, Dim> k{};
+    for (int g = 0; g < gathered; ++g) {
+      VecI<Dim> c;
+      for (int a = 0; a < Dim; ++a) c[a] = point[a][k[a]];
+      value[g] = corner_value(c);
+      for (int a = 0; a < Dim; ++a) {
+        if (++k[a] < points[a]) break;
+        k[a] = 0;
+      }
+    }
   }
-  // per axis, the 4-tap hat integrals from half cells to cells
+  // liquid fractions of the half cells (axis 0 fastest)
+  int count = 1;
+  for (int a = 0; a < Dim; ++a) count *= kHalf;
+  std::vector<double> cur(count), next;
+  {
+    std::array<int, Dim> l{};
+    for (int h = 0; h < count; ++h) {
+      std::array<double, kCorners> corner;
+      for (int b = 0; b < kCorners; ++b) {
+        int g = 0;
+        for (int a = Dim - 1; a >= 0; --a)
+          g = g * points[a] + (((b >> a) & 1) ? hi_point[a][l[a]] : lo_point[a][l[a]]);
+        corner[b] = value[g];
+      }
+      cur[h] = lattice_cell_negative_fraction<Dim>(corner);
+      for (int a = 0; a < Dim; ++a) {
+        if (++l[a] < kHalf) break;
+        l[a] = 0;
+      }
+    }
+  }
+  // per axis, the 4-tap hat integrals from half cells to cells: local cell o reads the local
+  // half cells 2 o .. 2 o + 3
   static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
+  VecI<Dim> dims = VecI<Dim>::Constant(kHalf);
   for (int a = 0; a < Dim; ++a) {
     VecI<Dim> out_dims = dims;
-    out_dims[a] = grid.cells()[a];
-    int out_count = 1;
-    for (int b = 0; b < Dim; ++b) out_count *= out_dims[b];
-    VectorX next(out_count);
-    const int n2 = dims[a];
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+    out_dims[a] = kTile;
+    const int out_count = out_dims.prod();
+    next.assign(out_count, 0.0);
+    int stride = 1;
+    for (int b = 0; b < a; ++b) stride *= dims[b];
     for (int k = 0; k < out_count; ++k) {
       const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
+      VecI<Dim> i = o;
+      i[a] = 2 * o[a];
+      const int base = lattice_index<Dim>(i, dims);
       double sum = 0.0;
-      for (int t = 0; t < 4; ++t) {
-        int j = 2 * o[a] - 1 + t;
-        if (grid.periodic(a))
-          j = (j + n2) % n2;
-        else
-          j = std::clamp(j, 0, n2 - 1);
-        VecI<Dim> i = o;
-        i[a] = j;
-        int li = 0;
-        for (int b = Dim - 1; b >= 0; --b) li = li * dims[b] + i[b];
-        sum += kTaps[t] * cur[li];
-      }
+      for (int t = 0; t < 4; ++t) sum += kTaps[t] * cur[base + t * stride];
       next[k] = sum;
     }
     cur.swap(next);
     dims = out_dims;
   }
-  return cur;
+  values.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, double* v) {
+    v[slot] = cur[lattice_index<Dim>(VecI<Dim>(c - t0), dims)];
+  });
 }
 
-/// One (reconstruction, solve, move) of project_particle_density.
+/// One (reconstruction, solve, move) of project_particle_density. Its grid work visits only the
+/// band of cells within reach of a particle (tiles of 8^Dim cells): outside it no particle
+/// splats volume and the level set has no liquid, so rho~ = T = 0 there and no cell is an
+/// unknown; the values in the band, the rows (in cell order) and the moves are those of a pass
+/// over the whole grid, bit for bit.
 template <int Dim>
 DensityProjectionStats project_density_once(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                             const SampleLattice<Dim>& lattice,
@@ -994,10 +1091,44 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   DensityProjectionStats stats;
   const long np = static_cast<long>(particles.size());
   if (np == 0) return stats;
-  const int nc = grid.num_cells();
   const int nf = grid.num_faces();
   const double dx = grid.dx();
   const double cell_volume = grid.cell_volume();
+  std::array<bool, Dim> periodic{};
+  for (int a = 0; a < Dim; ++a) periodic[a] = grid.periodic(a);
+
+  // the band: the cells within `ring` of a particle's cell (in tiles of 8^Dim cells, so a few
+  // cells more). The splat reaches two cells from a particle's cell; the level set is negative
+  // only at lattice points within the support R of a particle (2 R with solids: a particle's
+  // image across a solid reaches points inside it), and T_c reads the lattice points of
+  // [c - 1/2, c + 3/2] dx per axis, so T_c > 0 needs a particle with |c - c_p| < 3/2 + R / dx
+  double max_support = 0.0;
+  for (long p = 0; p < np; ++p)
+    max_support = std::max(max_support, kSurfaceSupport * particle_spacing(particles, p, dx));
+  const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
+  const int ring = std::max(2, static_cast<int>(std::floor(1.5 + reach / dx + 1e-6)));
+  // the particles' cells (wrapped, clamped), each once
+  TiledLattice<Dim, char> occupied(grid.cells(), 0);
+  std::vector<VecI<Dim>> occupied_cells;
+  for (long p = 0; p < np; ++p) {
+    const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
+    char* o = occupied.at(c);
+    if (*o) continue;
+    *o = 1;
+    occupied_cells.push_back(c);
+  }
+  TiledLattice<Dim, double, kProjectionValues> values(grid.cells(), 0.0);
+  for (const VecI<Dim>& c : occupied_cells) {
+    std::array<std::array<std::array<int, 2>, 2>, Dim> runs;
+    std::array<int, Dim> count;
+    for (int a = 0; a < Dim; ++a)
+      count[a] = axis_runs(c[a] - ring, c[a] + ring, grid.cells()[a], periodic[a], runs[a]);
+    touch_runs<Dim>(values, runs, count);
+  }
+  std::vector<int> band;  // the made tiles of `values`
+  for (int t = 0; t < values.num_tile_slots(); ++t)
+    if (values.has_tile(t)) band.push_back(t);
+  const int band_tiles = static_cast<int>(band.size());
 
   // particle volume fractions: each particle's volume spread as a box of its rest spacing and
   // then by the hat of the cell centres. In parallel without races: the cells are split into
@@ -1005,7 +1136,6 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // order, skips those whose five layers miss its slab and adds only into its own cells, so every
   // cell sums its contributions in the order of the serial loop (the same bits for any number of
   // threads, and as before)
-  VectorX rho = VectorX::Zero(nc);
   constexpr int kLast = Dim - 1;
   const int layers = grid.cells()[kLast];
   const int slabs = std::max(1, std::min(process_threads(), layers));
@@ -1056,7 +1186,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
           w *= weight[a][k[a]];
           ci[a] = cell[a][k[a]];
         }
-        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) rho[grid.cell_index(ci)] += w;
+        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) values.find(ci)[kRho] += w;
         int a = 0;
         for (; a < Dim; ++a) {
           if (++k[a] < 5) break;
@@ -1073,35 +1203,74 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // extended into the solids (as the weights of eq. (8) see it, extend_liquid_into_solids), so a
   // submerged cell cut by a solid is not taken for a free surface.
   const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice, boundary, solids);
-  VectorX target, wet;
   if (solids.empty()) {
-    target = hat_liquid_fractions(grid, lattice, phi);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
+    for (int b = 0; b < band_tiles; ++b)
+      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget,
+                                        [&](const VecI<Dim>& c) { return phi[lattice.index(c)]; });
   } else {
-    const int nl = lattice.size();
-    VectorX fluid_liquid = phi, extended = phi;
-    const double reach = kLiquidSolidReach * dx;
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (int li = 0; li < nl; ++li) {
-      // only points near the liquid can change (elsewhere phi >= 2 dx stays positive)
-      if (!(phi[li] < 2.0 * dx)) continue;
-      const double ds = solids.distance(lattice.position(lattice.coord(li)));
-      if (!(ds < 2.0 * dx)) continue;
-      fluid_liquid[li] = std::max(phi[li], -ds);
-      extended[li] = liquid_extended_into_solid(phi[li], ds, reach, dx);
+    // the solid distances of the lattice points under the band's hats where the level set is
+    // within 2 dx of liquid (elsewhere phi >= 2 dx stays positive), each computed once: tiles of
+    // the half lattice made under every band tile, filled in parallel tile by tile (NaN: not
+    // needed)
+    TiledLattice<Dim, double> solid_distance(lattice.dims,
+                                             std::numeric_limits<double>::quiet_NaN());
+    for (int b = 0; b < band_tiles; ++b) {
+      const VecI<Dim> t0 = values.tile_origin(band[b]);
+      std::array<std::array<std::array<int, 2>, 2>, Dim> runs;
+      std::array<int, Dim> count;
+      for (int a = 0; a < Dim; ++a) {
+        // half cells 2 t0 - 1 .. 2 t0 + 2 kTile, their corner points one further
+        count[a] = axis_runs(2 * t0[a] - 1, 2 * t0[a] + 2 * TiledLattice<Dim, char>::kTile,
+                             2 * grid.cells()[a], periodic[a], runs[a]);
+        for (int r = 0; r < count[a]; ++r) ++runs[a][r][1];
+      }
+      touch_runs<Dim>(solid_distance, runs, count);
     }
-    target = hat_liquid_fractions(grid, lattice, fluid_liquid);
-    wet = hat_liquid_fractions(grid, lattice, extended);
+    const int slots = solid_distance.num_tile_slots();
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
+    for (int t = 0; t < slots; ++t)
+      solid_distance.for_each_point_in_tile(t, [&](const VecI<Dim>& c, double* ds) {
+        if (phi[lattice.index(c)] < 2.0 * dx) *ds = solids.distance(lattice.position(c));
+      });
+    const double solid_reach = kLiquidSolidReach * dx;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
+    for (int b = 0; b < band_tiles; ++b) {
+      // the fluid's liquid max(phi, -d_S) for the target, the level set extended into the
+      // solids for the air side (only near liquid and solids: elsewhere both are phi)
+      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget, [&](const VecI<Dim>& c) {
+        const double v = phi[lattice.index(c)];
+        if (!(v < 2.0 * dx)) return v;
+        const double ds = *solid_distance.find(c);
+        return ds < 2.0 * dx ? std::max(v, -ds) : v;
+      });
+      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kWet, [&](const VecI<Dim>& c) {
+        const double v = phi[lattice.index(c)];
+        if (!(v < 2.0 * dx)) return v;
+        const double ds = *solid_distance.find(c);
+        return ds < 2.0 * dx ? liquid_extended_into_solid(v, ds, solid_reach, dx) : v;
+      });
+    }
   }
 
-  // unknowns: cells holding particle volume or smoothed liquid
-  std::vector<int> unknown(nc, -1);
+  // unknowns: cells holding particle volume or smoothed liquid, rows in cell order
   std::vector<int> cells;
-  for (int c = 0; c < nc; ++c)
-    if (rho[c] > 0.0 || target[c] > 0.0) {
-      unknown[c] = static_cast<int>(cells.size());
-      cells.push_back(c);
-    }
+  for (int b = 0; b < band_tiles; ++b)
+    values.for_each_point_in_tile(band[b], [&](const VecI<Dim>& c, double* v) {
+      v[kRow] = -1.0;
+      if (v[kRho] > 0.0 || v[kTarget] > 0.0) cells.push_back(grid.cell_index(c));
+    });
+  std::sort(cells.begin(), cells.end());
   const int n = static_cast<int>(cells.size());
+  for (int r = 0; r < n; ++r) values.find(grid.cell_coord(cells[r]))[kRow] = r;
+  // the row of cell c (coordinates, wrapped on periodic axes; -1 outside the domain, outside the
+  // band or not an unknown)
+  auto row_of = [&](VecI<Dim> c) {
+    c = grid.wrap_cell(c);
+    if (!grid.cell_in_range(c)) return -1;
+    const double* v = values.find(c);
+    return v ? static_cast<int>(v[kRow]) : -1;
+  };
   stats.cells = n;
   if (n == 0) return stats;
 
@@ -1112,6 +1281,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   for (int r = 0; r < n; ++r) {
     const int c = cells[r];
     const VecI<Dim> ci = grid.cell_coord(c);
+    const double* v = values.find(ci);
     double diag = 0.0;
     for (int a = 0; a < Dim; ++a)
       for (int s = 0; s < 2; ++s) {
@@ -1126,7 +1296,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
         VecI<Dim> cj = ci;
         cj[a] += s == 0 ? -1 : 1;
         const int j = grid.cell_index_or_outside(cj);
-        if (j >= 0 && unknown[j] >= 0 && j != c) triplets.emplace_back(r, unknown[j], -wf);
+        const int rj = j >= 0 ? row_of(cj) : -1;
+        if (rj >= 0 && j != c) triplets.emplace_back(r, rj, -wf);
       }
     // a tiny shift keeps fully enclosed liquid (no air neighbour) non-singular
     triplets.emplace_back(r, r, diag * (1.0 + 1e-6) + 1e-12);
@@ -1139,8 +1310,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // An excess there (particles outside the level set: drops, thin sheets) is still spread.
     // Next to a solid a low T_c can come from the solid filling part of the cell, not from a
     // free surface, so with solids the air side is read from the level set extended into them.
-    double e = rho[c] - target[c];
-    if ((solids.empty() ? target[c] : wet[c]) < kProjectionAirSide) e = std::max(e, 0.0);
+    double e = v[kRho] - v[kTarget];
+    if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide) e = std::max(e, 0.0);
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
   }
@@ -1155,17 +1326,32 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   const VectorX psi = cg.solve(rhs);  // in units of dx^2
   stats.iterations = static_cast<int>(cg.iterations());
 
-  // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids
+  // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
+  // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell
+  // if that is an unknown, else its plus cell.
   VectorX move = VectorX::Zero(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f) {
-    if (!(fluid_face[f] > 0.0)) continue;
-    const auto [axis, coord] = grid.face_coord(f);
-    const int minus = grid.face_cell_minus(axis, coord);
-    const int plus = grid.face_cell_plus(axis, coord);
-    const double pm = minus >= 0 && unknown[minus] >= 0 ? psi[unknown[minus]] : 0.0;
-    const double pp = plus >= 0 && unknown[plus] >= 0 ? psi[unknown[plus]] : 0.0;
-    move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+  for (int r = 0; r < n; ++r) {
+    const VecI<Dim> ci = grid.cell_coord(cells[r]);
+    for (int a = 0; a < Dim; ++a) {
+      VecI<Dim> lower = ci, upper = ci;
+      lower[a] -= 1;
+      upper[a] += 1;
+      const int r_minus = row_of(lower);
+      const int r_plus = row_of(upper);
+      // the face on the minus side (unless the minus cell writes it) and on the plus side
+      for (int s = 0; s < 2; ++s) {
+        if (s == 0 && r_minus >= 0) continue;
+        VecI<Dim> fc = ci;
+        fc[a] += s;
+        if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
+        const int f = grid.face_index(a, fc);
+        if (!(fluid_face[f] > 0.0)) continue;
+        const double pm = s == 0 ? 0.0 : psi[r];
+        const double pp = s == 0 ? psi[r] : (r_plus >= 0 ? psi[r_plus] : 0.0);
+        move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+      }
+    }
   }
 
   // move the particles (at most kProjectionMaxStep dx), then keep clear of solids and walls
