@@ -695,22 +695,48 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     max_support = std::max(max_support, support[p]);
   }
 
-  // spatial hash: particles bucketed by grid cell (counting sort, stable in particle order), with
-  // the wrapped positions stored in bucket order for locality
+  // spatial hash by occupied cells only (no table the size of the grid): the particles sorted by
+  // cell (a stable radix sort, so in particle order within a cell), each occupied cell a run of
+  // slots, the wrapped positions stored in slot order for locality; runs found through tiles of
+  // 8^Dim cells made only where particles are
   const int nc = grid.num_cells();
-  std::vector<int> bucket(np), start(nc + 1, 0), order(np);
+  std::vector<int> bucket(np), order(np);
   std::vector<Vec<Dim>> xw(np), xs(np);
   for (long p = 0; p < np; ++p) {
     xw[p] = grid.wrap_position(particles.x[p]);
     bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
-    ++start[bucket[p] + 1];
+    order[p] = static_cast<int>(p);
   }
-  for (int c = 0; c < nc; ++c) start[c + 1] += start[c];
   {
-    std::vector<int> fill(start.begin(), start.end() - 1);
-    for (long p = 0; p < np; ++p) order[fill[bucket[p]]++] = static_cast<int>(p);
+    constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
+    int bits = 0;
+    while ((1L << bits) < nc) ++bits;
+    std::vector<int> sorted(np);
+    std::vector<int> count(kDigits + 1);
+    for (int shift = 0; shift < bits; shift += kDigitBits) {
+      std::fill(count.begin(), count.end(), 0);
+      for (long s = 0; s < np; ++s) ++count[((bucket[order[s]] >> shift) & (kDigits - 1)) + 1];
+      for (int d = 0; d < kDigits; ++d) count[d + 1] += count[d];
+      for (long s = 0; s < np; ++s) {
+        const int p = order[s];
+        sorted[count[(bucket[p] >> shift) & (kDigits - 1)]++] = p;
+      }
+      order.swap(sorted);
+    }
   }
   for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
+  // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1])
+  std::vector<int> run_cell, run_start;
+  for (long s = 0; s < np; ++s)
+    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) {
+      run_cell.push_back(bucket[order[s]]);
+      run_start.push_back(static_cast<int>(s));
+    }
+  run_start.push_back(static_cast<int>(np));
+  const int runs = static_cast<int>(run_cell.size());
+  TiledLattice<Dim, int> run_of(grid.cells(), -1);
+  for (int k = 0; k < runs; ++k) *run_of.at(grid.cell_coord(run_cell[k])) = k;
+
   // cells to search around a particle's own: the support is one cell at the default 8 (4) particles
   // per cell, but (m / rho)^(1/Dim) rounds to a hair above dx / 2, and a plain ceil then searched
   // two rings (125 cells instead of 27 in 3D) for neighbours that cannot lie there: a pair in
@@ -726,35 +752,22 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     any_periodic = any_periodic || grid.periodic(a);
   }
 
-  // the bucket slots of the cells around `cell` (each cell once)
-  auto gather_candidates = [&](int cell, std::vector<int>& cand, std::vector<int>& cells) {
-    cand.clear();
+  // the occupied cells around run k's cell (each once, in stencil order)
+  auto neighbour_runs = [&](int k, std::vector<int>& out, std::vector<int>& cells) {
+    out.clear();
     cells.clear();
-    const VecI<Dim> ci = grid.cell_coord(cell);
-    for (int k = 0; k < neighbour_cells; ++k) {
-      const VecI<Dim> cj =
-          ci + lattice_coord<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring);
-      const int c = grid.cell_index_or_outside(cj);
-      if (c < 0) continue;
+    const VecI<Dim> ci = grid.cell_coord(run_cell[k]);
+    for (int o = 0; o < neighbour_cells; ++o) {
+      const VecI<Dim> cj = grid.wrap_cell(
+          ci + lattice_coord<Dim>(o, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring));
+      if (!grid.cell_in_range(cj)) continue;
       if (dedup) {
+        const int c = grid.cell_index(cj);
         if (std::find(cells.begin(), cells.end(), c) != cells.end()) continue;
+        cells.push_back(c);
       }
-      cells.push_back(c);
-      for (int q = start[c]; q < start[c + 1]; ++q) cand.push_back(q);
-    }
-  };
-  // visits every neighbour j != p within the support of p (minimum image on periodic axes)
-  auto for_neighbours = [&](int p, const std::vector<int>& cand, auto&& visit) {
-    const double h = support[p];
-    const Vec<Dim> xp = xw[p];
-    for (int q : cand) {
-      Vec<Dim> d = xp - xs[q];
-      if (any_periodic) d = periodic_difference(grid, d);
-      const double r2 = d.squaredNorm();
-      if (r2 >= h * h) continue;
-      const int j = order[q];
-      if (j == p) continue;
-      visit(j, d, std::sqrt(r2), h);
+      const int r = run_of.value(cj);
+      if (r >= 0) out.push_back(r);
     }
   };
 
@@ -772,53 +785,66 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     return Vec<Dim>(-3.0 * t * t / h * dir);
   };
 
-  // pass 1: constraint values and multipliers (zero unless the particle is compressed)
+  // pass 1: constraint values and multipliers (zero unless the particle is compressed). Each
+  // particle keeps the slots of its neighbours within the support, in candidate order (per
+  // thread buffer, found through neighbours_of): the gradients and pass 2 visit only those, in
+  // the order the full scan visits them
   std::vector<double> lambda(np, 0.0);
   std::vector<char> close_pair(np, 0);
+  const int team = process_threads();
+  std::vector<std::vector<int>> neighbour_slots(team);
+  std::vector<std::array<int, 3>> neighbours_of(np);  // (buffer, first, count)
   long compressed = 0;
-#pragma omp parallel reduction(+ : compressed) num_threads(process_threads())
+#pragma omp parallel reduction(+ : compressed) num_threads(team)
   {
-    std::vector<int> cand, cells;
+    std::vector<int> near, cells, cand;
+    std::vector<int>& buffer = neighbour_slots[omp_get_thread_num()];
+    const int thread = omp_get_thread_num();
 #pragma omp for schedule(dynamic, 16)
-    for (int cell = 0; cell < nc; ++cell) {
-      if (start[cell] == start[cell + 1]) continue;
-      gather_candidates(cell, cand, cells);
-      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+    for (int k = 0; k < runs; ++k) {
+      neighbour_runs(k, near, cells);
+      cand.clear();
+      for (int r : near)
+        for (int q = run_start[r]; q < run_start[r + 1]; ++q) cand.push_back(q);
+      for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot) {
         const int p = order[slot];
         const double h = support[p];
         const double inv_h2 = 1.0 / (h * h);
         const double min_distance = kCorrectionMinDistance * h / kCorrectionSupport;
         const double min_distance2 = min_distance * min_distance;
         const Vec<Dim> xp = xw[p];
-        // number density from squared distances only (no square roots), without branches: a
-        // candidate outside the support (or p itself, at its own slot) adds +0.0, which leaves
-        // the sum (at least 1) bit for bit as skipping it would
+        // number density from squared distances only (no square roots): a candidate outside
+        // the support (or p itself) adds nothing, and skipping it leaves the sum (at least 1)
+        // bit for bit as adding +0.0 would
         double n = 1.0;  // the particle itself
         const double h2 = h * h;
         bool close = false;
-        const auto density_term = [&](int q, const Vec<Dim>& d) {
+        const int first = static_cast<int>(buffer.size());
+        for (int q : cand) {
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
           const double r2 = d.squaredNorm();
-          const bool inside = r2 < h2 && q != slot;
-          close = close || (inside && r2 < min_distance2);
+          if (!(r2 < h2) || q == slot) continue;
+          buffer.push_back(q);
+          close = close || r2 < min_distance2;
           const double t = 1.0 - r2 * inv_h2;
-          return inside && t > 0.0 ? t * t * t : 0.0;
-        };
-        if (any_periodic) {
-          for (int q : cand) n += density_term(q, periodic_difference(grid, Vec<Dim>(xp - xs[q])));
-        } else {
-          for (int q : cand) n += density_term(q, Vec<Dim>(xp - xs[q]));
+          if (t > 0.0) n += t * t * t;
         }
+        neighbours_of[p] = {thread, first, static_cast<int>(buffer.size()) - first};
         if (close) close_pair[p] = 1;
         const double c = n / n0 - 1.0 - kCorrectionSlack;
         if (c <= 0.0) continue;
         // constraint gradients, only for the compressed particles
         Vec<Dim> grad_self = Vec<Dim>::Zero();
         double grad_others = 0.0;
-        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double hp) {
-          const Vec<Dim> g = spiky_gradient(p, j, d, r, hp) / n0;
+        for (int i = first; i < static_cast<int>(buffer.size()); ++i) {
+          const int q = buffer[i];
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
+          const Vec<Dim> g = spiky_gradient(p, order[q], d, std::sqrt(d.squaredNorm()), h) / n0;
           grad_self += g;
           grad_others += g.squaredNorm();
-        });
+        }
         // eps regularises the denominator (units 1/length^2, scaled by h)
         const double eps = 1e-6 / (h * h);
         lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
@@ -830,24 +856,24 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   if (compressed == 0 && std::find(close_pair.begin(), close_pair.end(), 1) == close_pair.end())
     return;
 
-  // cells holding a compressed particle or a close pair: only their neighbourhoods move
-  std::vector<char> active_cell(nc, 0);
-  for (long p = 0; p < np; ++p)
-    if (lambda[p] != 0.0 || close_pair[p]) active_cell[bucket[p]] = 1;
+  // occupied cells holding a compressed particle or a close pair: only their neighbourhoods move
+  std::vector<char> active_run(runs, 0);
+  for (int k = 0; k < runs; ++k)
+    for (int s = run_start[k]; s < run_start[k + 1]; ++s)
+      if (lambda[order[s]] != 0.0 || close_pair[order[s]]) active_run[k] = 1;
 
   // pass 2: displacements from the multipliers (Jacobi, so the result is order independent)
   std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
-#pragma omp parallel num_threads(process_threads())
+#pragma omp parallel num_threads(team)
   {
-    std::vector<int> cand, cells;
+    std::vector<int> near, cells;
 #pragma omp for schedule(dynamic, 16)
-    for (int cell = 0; cell < nc; ++cell) {
-      if (start[cell] == start[cell + 1]) continue;
-      gather_candidates(cell, cand, cells);
+    for (int k = 0; k < runs; ++k) {
+      neighbour_runs(k, near, cells);
       bool near_active = false;
-      for (int c : cells) near_active = near_active || active_cell[c];
+      for (int r : near) near_active = near_active || active_run[r];
       if (!near_active) continue;
-      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+      for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot) {
         const int p = order[slot];
         Vec<Dim> push = Vec<Dim>::Zero();
         const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
@@ -855,13 +881,14 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         // contributes nothing: skip its square root (the margin keeps the skip conservative)
         const double skip_r2 = min_distance * min_distance * (1.0 + 1e-9);
         const double h = support[p];
-        const double h2 = h * h;
         const Vec<Dim> xp = xw[p];
-        for (int q : cand) {
+        const auto [buffer, first, count] = neighbours_of[p];
+        const int* slots = neighbour_slots[buffer].data() + first;
+        for (int i = 0; i < count; ++i) {
+          const int q = slots[i];
           Vec<Dim> d = xp - xs[q];
           if (any_periodic) d = periodic_difference(grid, d);
           const double r2 = d.squaredNorm();
-          if (r2 >= h2 || q == slot) continue;
           const int j = order[q];
           // density constraints
           const double l = lambda[p] + lambda[j];
