@@ -687,26 +687,26 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   const double alpha = kCorrectionRelaxation * std::min(1.0, dt / kCorrectionTime);
   const double n0 = lattice_number_density<Dim>();
 
-  // kernel supports h_i from the rest spacings
+  // kernel supports h_i from the rest spacings, wrapped positions and cells (in parallel; the
+  // largest support does not depend on the order)
+  const int nc = grid.num_cells();
   std::vector<double> support(np);
+  std::vector<int> bucket(np), order(np);
+  std::vector<Vec<Dim>> xw(np), xs(np);
   double max_support = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
     max_support = std::max(max_support, support[p]);
+    xw[p] = grid.wrap_position(particles.x[p]);
+    bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
+    order[p] = static_cast<int>(p);
   }
 
   // spatial hash by occupied cells only (no table the size of the grid): the particles sorted by
   // cell (a stable radix sort, so in particle order within a cell), each occupied cell a run of
   // slots, the wrapped positions stored in slot order for locality; runs found through tiles of
   // 8^Dim cells made only where particles are
-  const int nc = grid.num_cells();
-  std::vector<int> bucket(np), order(np);
-  std::vector<Vec<Dim>> xw(np), xs(np);
-  for (long p = 0; p < np; ++p) {
-    xw[p] = grid.wrap_position(particles.x[p]);
-    bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
-    order[p] = static_cast<int>(p);
-  }
   {
     constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
     int bits = 0;
@@ -1515,8 +1515,8 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   // particle or one of its images reaches (0 elsewhere: no particle)
   constexpr int kStride = Dim + 2;
   TiledLattice<Dim, double, kStride> acc(lattice.dims, 0.0);
-  // each particle's image across the nearest solid surface (NaN where it has none), found by
-  // the serial pass that makes the tiles and read by the splat
+  // each particle's image across the nearest solid surface (NaN where it has none), found before
+  // the tiles are made and read by the splat
   std::vector<Vec<Dim>> solid_image;
   if (!solids.empty())
     solid_image.assign(np, Vec<Dim>::Constant(std::numeric_limits<double>::quiet_NaN()));
@@ -1618,14 +1618,6 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
     // set extended into it, extend_liquid_into_solids) followed: left and right of a settling
     // disk they differed by up to 0.2 and pushed it sideways (docs/particles.md)
     if (solids.empty()) return;
-    if (make_tiles) {
-      const double d = solids.distance(xp);
-      if (!(d > 0.0) || d >= R) return;
-      Vec<Dim> n = solids.gradient(xp);
-      const double len = n.norm();
-      if (!(len > 0.0)) return;
-      solid_image[p] = xp - (2.0 * d / len) * n;
-    }
     const Vec<Dim> xm = solid_image[p];
     if (std::isnan(xm[0])) return;
     VecI<Dim> j0, j1;
@@ -1669,7 +1661,21 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
     }
   };
 
-  // the tiles under every box a particle or an image reaches, made serially before the splat
+  // each particle's image across the nearest solid surface within its support (independent per
+  // particle, in parallel), then the tiles under every box a particle or an image reaches, made
+  // serially before the splat
+  if (!solids.empty()) {
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (long p = 0; p < np; ++p) {
+      const Vec<Dim> xp = particles.x[p];
+      const double d = solids.distance(xp);
+      if (!(d > 0.0) || d >= support[p]) continue;
+      const Vec<Dim> n = solids.gradient(xp);
+      const double len = n.norm();
+      if (!(len > 0.0)) continue;
+      solid_image[p] = xp - (2.0 * d / len) * n;
+    }
+  }
   for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true);
 
   // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
