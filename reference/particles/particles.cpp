@@ -1515,6 +1515,7 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   // particle or one of its images reaches (0 elsewhere: no particle)
   constexpr int kStride = Dim + 2;
   TiledLattice<Dim, double, kStride> acc(lattice.dims, 0.0);
+  constexpr int kSplatTile = TiledLattice<Dim, double, kStride>::kTile;
   // each particle's image across the nearest solid surface (NaN where it has none), found before
   // the tiles are made and read by the splat
   std::vector<Vec<Dim>> solid_image;
@@ -1578,6 +1579,9 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
       const double rp = radius[p];
       if (make_tiles) acc.touch_box(i0, i1);
       VecI<Dim> i = i0;
+      // the sums of point i, found once per run of points along axis 0 within one tile (the
+      // points of a tile row are consecutive in it), null until needed
+      double* row = nullptr;
       while (!make_tiles) {
         Vec<Dim> d;
         if (fits) {
@@ -1589,7 +1593,8 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
         if (q2 < 1.0) {
           const double t = 1.0 - q2;
           const double k = t * t * t;
-          double* sum = acc.find(i);
+          if (!row) row = acc.find(i);
+          double* sum = row;
           sum[0] += k;
           sum[1] += k * rp;
           for (int a = 0; a < Dim; ++a) sum[2 + a] += k * xi[a];
@@ -1600,6 +1605,10 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
           i[a] = i0[a];
         }
         if (a == Dim) break;
+        if (a == 0 && row && i[0] % kSplatTile != 0)
+          row += kStride;
+        else
+          row = nullptr;
       }
       int a = 0;
       for (; a < Dim; ++a) {
