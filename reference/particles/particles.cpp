@@ -929,6 +929,15 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
 
 namespace {
 
+/// The particle level set of liquid_phi_on_lattice (particles > 0) in tiles of the lattice: the
+/// same values where a particle or image reaches, the kernel support (its background)
+/// elsewhere; no lattice-sized vector (defined with liquid_phi_on_lattice below).
+template <int Dim>
+void liquid_phi_tiles(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                      const SampleLattice<Dim>& lattice,
+                      const std::array<BoundaryType, 2 * Dim>& boundary,
+                      const SolidField<Dim>& solids, TiledLattice<Dim, double>& phi);
+
 /// Antiderivative of the hat max(0, 1 - |u|).
 double hat_integral(double u) {
   if (u <= -1.0) return 0.0;
@@ -1229,12 +1238,14 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // distance), as the particles' splat does, while the air side is decided on the level set
   // extended into the solids (as the weights of eq. (8) see it, extend_liquid_into_solids), so a
   // submerged cell cut by a solid is not taken for a free surface.
-  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice, boundary, solids);
+  // (in tiles: no lattice-sized vector; 541 MB at Fig. 2's 256x128x256 grid)
+  TiledLattice<Dim, double> phi;
+  liquid_phi_tiles(particles, grid, lattice, boundary, solids, phi);
   if (solids.empty()) {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
     for (int b = 0; b < band_tiles; ++b)
       hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget,
-                                        [&](const VecI<Dim>& c) { return phi[lattice.index(c)]; });
+                                        [&](const VecI<Dim>& c) { return phi.value(c); });
   } else {
     // the solid distances of the lattice points under the band's hats where the level set is
     // within 2 dx of liquid (elsewhere phi >= 2 dx stays positive), each computed once: tiles of
@@ -1258,7 +1269,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
 #pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
     for (int t = 0; t < slots; ++t)
       solid_distance.for_each_point_in_tile(t, [&](const VecI<Dim>& c, double* ds) {
-        if (phi[lattice.index(c)] < 2.0 * dx) *ds = solids.distance(lattice.position(c));
+        if (phi.value(c) < 2.0 * dx) *ds = solids.distance(lattice.position(c));
       });
     const double solid_reach = kLiquidSolidReach * dx;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
@@ -1266,13 +1277,13 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       // the fluid's liquid max(phi, -d_S) for the target, the level set extended into the
       // solids for the air side (only near liquid and solids: elsewhere both are phi)
       hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget, [&](const VecI<Dim>& c) {
-        const double v = phi[lattice.index(c)];
+        const double v = phi.value(c);
         if (!(v < 2.0 * dx)) return v;
         const double ds = *solid_distance.find(c);
         return ds < 2.0 * dx ? std::max(v, -ds) : v;
       });
       hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kWet, [&](const VecI<Dim>& c) {
-        const double v = phi[lattice.index(c)];
+        const double v = phi.value(c);
         if (!(v < 2.0 * dx)) return v;
         const double ds = *solid_distance.find(c);
         return ds < 2.0 * dx ? liquid_extended_into_solid(v, ds, solid_reach, dx) : v;
@@ -1453,19 +1464,19 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
   return phi;
 }
 
+namespace {
+
+/// The splat of liquid_phi_on_lattice (particles > 0): per lattice point the sums of k, k r_p and
+/// k x_p over the particles and images that reach it, in tiles made where they reach (`acc`,
+/// reset here). Returns the largest kernel support, the level set's value where nothing reaches.
 template <int Dim>
-void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
-                           const SampleLattice<Dim>& lattice,
-                           const std::array<BoundaryType, 2 * Dim>& boundary,
-                           const SolidField<Dim>& solids, VectorX& phi) {
-  const int nl = lattice.size();
+double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                    const SampleLattice<Dim>& lattice,
+                    const std::array<BoundaryType, 2 * Dim>& boundary,
+                    const SolidField<Dim>& solids, TiledLattice<Dim, double, Dim + 2>& acc) {
   const long np = static_cast<long>(particles.size());
   const double h = lattice.spacing;
   const double dx = grid.dx();
-  if (np == 0) {
-    phi.setConstant(nl, 3.0 * dx);
-    return;
-  }
 
   // per-particle support and radius
   std::vector<double> support(np), radius(np);
@@ -1514,7 +1525,7 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   // point touched instead of three arrays' worth, in tiles of 8^Dim points made only where a
   // particle or one of its images reaches (0 elsewhere: no particle)
   constexpr int kStride = Dim + 2;
-  TiledLattice<Dim, double, kStride> acc(lattice.dims, 0.0);
+  acc.reset(lattice.dims, 0.0);
   constexpr int kSplatTile = TiledLattice<Dim, double, kStride>::kTile;
   // each particle's image across the nearest solid surface (NaN where it has none), found before
   // the tiles are made and read by the splat
@@ -1710,6 +1721,51 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
     }
   }
 
+  return max_support;
+}
+
+/// phi = |x - x_bar| - r_bar at a lattice point from its sums (weight > 0).
+template <int Dim>
+double surface_phi(const SampleLattice<Dim>& lattice, const VecI<Dim>& c, const double* sum) {
+  Vec<Dim> xbar;
+  for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
+  return (lattice.position(c) - xbar).norm() - sum[1] / sum[0];
+}
+
+template <int Dim>
+void liquid_phi_tiles(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                      const SampleLattice<Dim>& lattice,
+                      const std::array<BoundaryType, 2 * Dim>& boundary,
+                      const SolidField<Dim>& solids, TiledLattice<Dim, double>& phi) {
+  TiledLattice<Dim, double, Dim + 2> acc;
+  const double max_support = surface_sums(particles, grid, lattice, boundary, solids, acc);
+  // the level set in the splat's tiles, the kernel support everywhere else
+  phi.reset(lattice.dims, max_support);
+  const int slots = acc.num_tile_slots();
+  for (int tile = 0; tile < slots; ++tile)
+    if (acc.has_tile(tile)) phi.touch_box(acc.tile_origin(tile), acc.tile_origin(tile));
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int tile = 0; tile < slots; ++tile) {
+    acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
+      if (sum[0] > 0.0) *phi.find(c) = surface_phi(lattice, c, sum);
+    });
+  }
+}
+
+}  // namespace
+
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, VectorX& phi) {
+  const int nl = lattice.size();
+  if (particles.size() == 0) {
+    phi.setConstant(nl, 3.0 * grid.dx());
+    return;
+  }
+  TiledLattice<Dim, double, Dim + 2> acc;
+  const double max_support = surface_sums(particles, grid, lattice, boundary, solids, acc);
   // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
   // (every point outside the tiles)
   phi.setConstant(nl, max_support);
@@ -1717,11 +1773,7 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int tile = 0; tile < slots; ++tile) {
     acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
-      if (sum[0] > 0.0) {
-        Vec<Dim> xbar;
-        for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
-        phi[lattice.index(c)] = (lattice.position(c) - xbar).norm() - sum[1] / sum[0];
-      }
+      if (sum[0] > 0.0) phi[lattice.index(c)] = surface_phi(lattice, c, sum);
     });
   }
 }
