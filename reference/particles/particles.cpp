@@ -609,7 +609,9 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
   const double max_move = kAdvectionSubstep * grid.dx();
   std::vector<char> remove(np, 0);
   long removed = 0;
-#pragma omp parallel for schedule(static) reduction(+ : removed) num_threads(process_threads())
+  // chunks handed out as threads come free: the substeps per particle follow its speed, which
+  // varies across the liquid (each particle is independent, so the result does not change)
+#pragma omp parallel for schedule(dynamic, 512) reduction(+ : removed) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     Vec<Dim> x = particles.x[p];
     // number of substeps from the speeds along the full-step midpoint path
@@ -1003,10 +1005,12 @@ void touch_runs(Tiles& tiles, const std::array<std::array<std::array<int, 2>, 2>
 }
 
 /// The density projection's per-cell values, in tiles of cells (TiledLattice over the grid's
-/// cells) made only in the band around the particles: particle volume fraction rho~, target T,
-/// the air-side test's T on the level set extended into the solids, and the row of the cell in
-/// the Poisson problem (-1: not an unknown). Every cell outside the tiles has rho~ = T = 0.
-enum ProjectionValue { kRho = 0, kTarget = 1, kWet = 2, kRow = 3, kProjectionValues = 4 };
+/// cells) made only in the band around the particles: target T, the air-side test's T on the
+/// level set extended into the solids, and the row of the cell in the Poisson problem (-1: not
+/// an unknown); the particle volume fraction rho~ has tiles of its own (the splat's 5^Dim cells
+/// per particle then touch as many cache lines as in a dense array). Every cell outside the
+/// tiles has rho~ = T = 0.
+enum ProjectionValue { kTarget = 0, kWet = 1, kRow = 2, kProjectionValues = 3 };
 
 /// The liquid indicator of the level set convolved with the multilinear hat of each cell centre,
 ///   T_c = dx^-Dim int hat_c(x) H(-phi(x)) dx,
@@ -1154,6 +1158,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     occupied_cells.push_back(c);
   }
   TiledLattice<Dim, double, kProjectionValues> values(grid.cells(), 0.0);
+  TiledLattice<Dim, double> rho(grid.cells(), 0.0);
   for (const VecI<Dim>& c : occupied_cells) {
     std::array<std::array<std::array<int, 2>, 2>, Dim> runs;
     std::array<int, Dim> count;
@@ -1161,9 +1166,12 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       count[a] = axis_runs(c[a] - ring, c[a] + ring, grid.cells()[a], periodic[a], runs[a]);
     touch_runs<Dim>(values, runs, count);
   }
-  std::vector<int> band;  // the made tiles of `values`
+  std::vector<int> band;  // the made tiles of `values` (and of `rho`)
   for (int t = 0; t < values.num_tile_slots(); ++t)
-    if (values.has_tile(t)) band.push_back(t);
+    if (values.has_tile(t)) {
+      band.push_back(t);
+      rho.touch_box(values.tile_origin(t), values.tile_origin(t));
+    }
   const int band_tiles = static_cast<int>(band.size());
 
   // particle volume fractions: each particle's volume spread as a box of its rest spacing and
@@ -1222,7 +1230,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
           w *= weight[a][k[a]];
           ci[a] = cell[a][k[a]];
         }
-        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) values.find(ci)[kRho] += w;
+        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) *rho.find(ci) += w;
         int a = 0;
         for (; a < Dim; ++a) {
           if (++k[a] < 5) break;
@@ -1296,7 +1304,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   for (int b = 0; b < band_tiles; ++b)
     values.for_each_point_in_tile(band[b], [&](const VecI<Dim>& c, double* v) {
       v[kRow] = -1.0;
-      if (v[kRho] > 0.0 || v[kTarget] > 0.0) cells.push_back(grid.cell_index(c));
+      if (*rho.find(c) > 0.0 || v[kTarget] > 0.0) cells.push_back(grid.cell_index(c));
     });
   std::sort(cells.begin(), cells.end());
   const int n = static_cast<int>(cells.size());
@@ -1348,7 +1356,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // An excess there (particles outside the level set: drops, thin sheets) is still spread.
     // Next to a solid a low T_c can come from the solid filling part of the cell, not from a
     // free surface, so with solids the air side is read from the level set extended into them.
-    double e = v[kRho] - v[kTarget];
+    double e = *rho.find(ci) - v[kTarget];
     if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide) e = std::max(e, 0.0);
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
