@@ -1143,15 +1143,20 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // image across a solid reaches points inside it), and T_c reads the lattice points of
   // [c - 1/2, c + 3/2] dx per axis, so T_c > 0 needs a particle with |c - c_p| < 3/2 + R / dx
   double max_support = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
   for (long p = 0; p < np; ++p)
     max_support = std::max(max_support, kSurfaceSupport * particle_spacing(particles, p, dx));
   const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
   const int ring = std::max(2, static_cast<int>(std::floor(1.5 + reach / dx + 1e-6)));
   // the particles' cells (wrapped, clamped), each once
+  std::vector<VecI<Dim>> particle_cell(np);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (long p = 0; p < np; ++p)
+    particle_cell[p] = grid.cell_containing(grid.wrap_position(particles.x[p]));
   TiledLattice<Dim, char> occupied(grid.cells(), 0);
   std::vector<VecI<Dim>> occupied_cells;
   for (long p = 0; p < np; ++p) {
-    const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
+    const VecI<Dim>& c = particle_cell[p];
     char* o = occupied.at(c);
     if (*o) continue;
     *o = 1;
@@ -1489,6 +1494,7 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // per-particle support and radius
   std::vector<double> support(np), radius(np);
   double max_support = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     const double s = particle_spacing(particles, p, dx);
     support[p] = kSurfaceSupport * s;
