@@ -126,6 +126,21 @@ class TiledLattice {
     }
   }
 
+  /// f(coord, values) as above, the values writable. Distinct tiles may run on several threads.
+  template <class F>
+  void for_each_point_in_tile(int tile, F&& f) {
+    T* data = tiles_[tile].get();
+    if (!data) return;
+    const VecI<Dim> origin = tile_origin(tile);
+    for (int local = 0; local < kTilePoints; ++local) {
+      const VecI<Dim> c = origin + lattice_coord<Dim>(local, VecI<Dim>::Constant(kTile));
+      if ((c.array() >= dims_.array()).any()) continue;
+      f(static_cast<const VecI<Dim>&>(c), data + static_cast<std::size_t>(local) * Stride);
+    }
+  }
+  /// The point coordinates of the lowest point of tile `tile` (made or not).
+  VecI<Dim> tile_origin(int tile) const { return kTile * lattice_coord<Dim>(tile, tile_dims_); }
+
   /// Value s of every point as one dense vector in lattice_index order (the background where no
   /// tile is): for code that reads whole-lattice vectors.
   void to_dense(VectorX& out, int s = 0) const {

@@ -609,7 +609,9 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
   const double max_move = kAdvectionSubstep * grid.dx();
   std::vector<char> remove(np, 0);
   long removed = 0;
-#pragma omp parallel for schedule(static) reduction(+ : removed) num_threads(process_threads())
+  // chunks handed out as threads come free: the substeps per particle follow its speed, which
+  // varies across the liquid (each particle is independent, so the result does not change)
+#pragma omp parallel for schedule(dynamic, 512) reduction(+ : removed) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     Vec<Dim> x = particles.x[p];
     // number of substeps from the speeds along the full-step midpoint path
@@ -687,30 +689,56 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   const double alpha = kCorrectionRelaxation * std::min(1.0, dt / kCorrectionTime);
   const double n0 = lattice_number_density<Dim>();
 
-  // kernel supports h_i from the rest spacings
+  // kernel supports h_i from the rest spacings, wrapped positions and cells (in parallel; the
+  // largest support does not depend on the order)
+  const int nc = grid.num_cells();
   std::vector<double> support(np);
+  std::vector<int> bucket(np), order(np);
+  std::vector<Vec<Dim>> xw(np), xs(np);
   double max_support = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
     max_support = std::max(max_support, support[p]);
-  }
-
-  // spatial hash: particles bucketed by grid cell (counting sort, stable in particle order), with
-  // the wrapped positions stored in bucket order for locality
-  const int nc = grid.num_cells();
-  std::vector<int> bucket(np), start(nc + 1, 0), order(np);
-  std::vector<Vec<Dim>> xw(np), xs(np);
-  for (long p = 0; p < np; ++p) {
     xw[p] = grid.wrap_position(particles.x[p]);
     bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
-    ++start[bucket[p] + 1];
+    order[p] = static_cast<int>(p);
   }
-  for (int c = 0; c < nc; ++c) start[c + 1] += start[c];
+
+  // spatial hash by occupied cells only (no table the size of the grid): the particles sorted by
+  // cell (a stable radix sort, so in particle order within a cell), each occupied cell a run of
+  // slots, the wrapped positions stored in slot order for locality; runs found through tiles of
+  // 8^Dim cells made only where particles are
   {
-    std::vector<int> fill(start.begin(), start.end() - 1);
-    for (long p = 0; p < np; ++p) order[fill[bucket[p]]++] = static_cast<int>(p);
+    constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
+    int bits = 0;
+    while ((1L << bits) < nc) ++bits;
+    std::vector<int> sorted(np);
+    std::vector<int> count(kDigits + 1);
+    for (int shift = 0; shift < bits; shift += kDigitBits) {
+      std::fill(count.begin(), count.end(), 0);
+      for (long s = 0; s < np; ++s) ++count[((bucket[order[s]] >> shift) & (kDigits - 1)) + 1];
+      for (int d = 0; d < kDigits; ++d) count[d + 1] += count[d];
+      for (long s = 0; s < np; ++s) {
+        const int p = order[s];
+        sorted[count[(bucket[p] >> shift) & (kDigits - 1)]++] = p;
+      }
+      order.swap(sorted);
+    }
   }
   for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
+  // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1])
+  std::vector<int> run_cell, run_start;
+  for (long s = 0; s < np; ++s)
+    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) {
+      run_cell.push_back(bucket[order[s]]);
+      run_start.push_back(static_cast<int>(s));
+    }
+  run_start.push_back(static_cast<int>(np));
+  const int runs = static_cast<int>(run_cell.size());
+  TiledLattice<Dim, int> run_of(grid.cells(), -1);
+  for (int k = 0; k < runs; ++k) *run_of.at(grid.cell_coord(run_cell[k])) = k;
+
   // cells to search around a particle's own: the support is one cell at the default 8 (4) particles
   // per cell, but (m / rho)^(1/Dim) rounds to a hair above dx / 2, and a plain ceil then searched
   // two rings (125 cells instead of 27 in 3D) for neighbours that cannot lie there: a pair in
@@ -726,35 +754,22 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     any_periodic = any_periodic || grid.periodic(a);
   }
 
-  // the bucket slots of the cells around `cell` (each cell once)
-  auto gather_candidates = [&](int cell, std::vector<int>& cand, std::vector<int>& cells) {
-    cand.clear();
+  // the occupied cells around run k's cell (each once, in stencil order)
+  auto neighbour_runs = [&](int k, std::vector<int>& out, std::vector<int>& cells) {
+    out.clear();
     cells.clear();
-    const VecI<Dim> ci = grid.cell_coord(cell);
-    for (int k = 0; k < neighbour_cells; ++k) {
-      const VecI<Dim> cj =
-          ci + lattice_coord<Dim>(k, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring);
-      const int c = grid.cell_index_or_outside(cj);
-      if (c < 0) continue;
+    const VecI<Dim> ci = grid.cell_coord(run_cell[k]);
+    for (int o = 0; o < neighbour_cells; ++o) {
+      const VecI<Dim> cj = grid.wrap_cell(
+          ci + lattice_coord<Dim>(o, VecI<Dim>::Constant(side)) - VecI<Dim>::Constant(ring));
+      if (!grid.cell_in_range(cj)) continue;
       if (dedup) {
+        const int c = grid.cell_index(cj);
         if (std::find(cells.begin(), cells.end(), c) != cells.end()) continue;
+        cells.push_back(c);
       }
-      cells.push_back(c);
-      for (int q = start[c]; q < start[c + 1]; ++q) cand.push_back(q);
-    }
-  };
-  // visits every neighbour j != p within the support of p (minimum image on periodic axes)
-  auto for_neighbours = [&](int p, const std::vector<int>& cand, auto&& visit) {
-    const double h = support[p];
-    const Vec<Dim> xp = xw[p];
-    for (int q : cand) {
-      Vec<Dim> d = xp - xs[q];
-      if (any_periodic) d = periodic_difference(grid, d);
-      const double r2 = d.squaredNorm();
-      if (r2 >= h * h) continue;
-      const int j = order[q];
-      if (j == p) continue;
-      visit(j, d, std::sqrt(r2), h);
+      const int r = run_of.value(cj);
+      if (r >= 0) out.push_back(r);
     }
   };
 
@@ -772,53 +787,66 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     return Vec<Dim>(-3.0 * t * t / h * dir);
   };
 
-  // pass 1: constraint values and multipliers (zero unless the particle is compressed)
+  // pass 1: constraint values and multipliers (zero unless the particle is compressed). Each
+  // particle keeps the slots of its neighbours within the support, in candidate order (per
+  // thread buffer, found through neighbours_of): the gradients and pass 2 visit only those, in
+  // the order the full scan visits them
   std::vector<double> lambda(np, 0.0);
   std::vector<char> close_pair(np, 0);
+  const int team = process_threads();
+  std::vector<std::vector<int>> neighbour_slots(team);
+  std::vector<std::array<int, 3>> neighbours_of(np);  // (buffer, first, count)
   long compressed = 0;
-#pragma omp parallel reduction(+ : compressed) num_threads(process_threads())
+#pragma omp parallel reduction(+ : compressed) num_threads(team)
   {
-    std::vector<int> cand, cells;
+    std::vector<int> near, cells, cand;
+    std::vector<int>& buffer = neighbour_slots[omp_get_thread_num()];
+    const int thread = omp_get_thread_num();
 #pragma omp for schedule(dynamic, 16)
-    for (int cell = 0; cell < nc; ++cell) {
-      if (start[cell] == start[cell + 1]) continue;
-      gather_candidates(cell, cand, cells);
-      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+    for (int k = 0; k < runs; ++k) {
+      neighbour_runs(k, near, cells);
+      cand.clear();
+      for (int r : near)
+        for (int q = run_start[r]; q < run_start[r + 1]; ++q) cand.push_back(q);
+      for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot) {
         const int p = order[slot];
         const double h = support[p];
         const double inv_h2 = 1.0 / (h * h);
         const double min_distance = kCorrectionMinDistance * h / kCorrectionSupport;
         const double min_distance2 = min_distance * min_distance;
         const Vec<Dim> xp = xw[p];
-        // number density from squared distances only (no square roots), without branches: a
-        // candidate outside the support (or p itself, at its own slot) adds +0.0, which leaves
-        // the sum (at least 1) bit for bit as skipping it would
+        // number density from squared distances only (no square roots): a candidate outside
+        // the support (or p itself) adds nothing, and skipping it leaves the sum (at least 1)
+        // bit for bit as adding +0.0 would
         double n = 1.0;  // the particle itself
         const double h2 = h * h;
         bool close = false;
-        const auto density_term = [&](int q, const Vec<Dim>& d) {
+        const int first = static_cast<int>(buffer.size());
+        for (int q : cand) {
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
           const double r2 = d.squaredNorm();
-          const bool inside = r2 < h2 && q != slot;
-          close = close || (inside && r2 < min_distance2);
+          if (!(r2 < h2) || q == slot) continue;
+          buffer.push_back(q);
+          close = close || r2 < min_distance2;
           const double t = 1.0 - r2 * inv_h2;
-          return inside && t > 0.0 ? t * t * t : 0.0;
-        };
-        if (any_periodic) {
-          for (int q : cand) n += density_term(q, periodic_difference(grid, Vec<Dim>(xp - xs[q])));
-        } else {
-          for (int q : cand) n += density_term(q, Vec<Dim>(xp - xs[q]));
+          if (t > 0.0) n += t * t * t;
         }
+        neighbours_of[p] = {thread, first, static_cast<int>(buffer.size()) - first};
         if (close) close_pair[p] = 1;
         const double c = n / n0 - 1.0 - kCorrectionSlack;
         if (c <= 0.0) continue;
         // constraint gradients, only for the compressed particles
         Vec<Dim> grad_self = Vec<Dim>::Zero();
         double grad_others = 0.0;
-        for_neighbours(p, cand, [&](int j, const Vec<Dim>& d, double r, double hp) {
-          const Vec<Dim> g = spiky_gradient(p, j, d, r, hp) / n0;
+        for (int i = first; i < static_cast<int>(buffer.size()); ++i) {
+          const int q = buffer[i];
+          Vec<Dim> d = xp - xs[q];
+          if (any_periodic) d = periodic_difference(grid, d);
+          const Vec<Dim> g = spiky_gradient(p, order[q], d, std::sqrt(d.squaredNorm()), h) / n0;
           grad_self += g;
           grad_others += g.squaredNorm();
-        });
+        }
         // eps regularises the denominator (units 1/length^2, scaled by h)
         const double eps = 1e-6 / (h * h);
         lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
@@ -830,24 +858,24 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   if (compressed == 0 && std::find(close_pair.begin(), close_pair.end(), 1) == close_pair.end())
     return;
 
-  // cells holding a compressed particle or a close pair: only their neighbourhoods move
-  std::vector<char> active_cell(nc, 0);
-  for (long p = 0; p < np; ++p)
-    if (lambda[p] != 0.0 || close_pair[p]) active_cell[bucket[p]] = 1;
+  // occupied cells holding a compressed particle or a close pair: only their neighbourhoods move
+  std::vector<char> active_run(runs, 0);
+  for (int k = 0; k < runs; ++k)
+    for (int s = run_start[k]; s < run_start[k + 1]; ++s)
+      if (lambda[order[s]] != 0.0 || close_pair[order[s]]) active_run[k] = 1;
 
   // pass 2: displacements from the multipliers (Jacobi, so the result is order independent)
   std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
-#pragma omp parallel num_threads(process_threads())
+#pragma omp parallel num_threads(team)
   {
-    std::vector<int> cand, cells;
+    std::vector<int> near, cells;
 #pragma omp for schedule(dynamic, 16)
-    for (int cell = 0; cell < nc; ++cell) {
-      if (start[cell] == start[cell + 1]) continue;
-      gather_candidates(cell, cand, cells);
+    for (int k = 0; k < runs; ++k) {
+      neighbour_runs(k, near, cells);
       bool near_active = false;
-      for (int c : cells) near_active = near_active || active_cell[c];
+      for (int r : near) near_active = near_active || active_run[r];
       if (!near_active) continue;
-      for (int slot = start[cell]; slot < start[cell + 1]; ++slot) {
+      for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot) {
         const int p = order[slot];
         Vec<Dim> push = Vec<Dim>::Zero();
         const double min_distance = kCorrectionMinDistance * support[p] / kCorrectionSupport;
@@ -855,13 +883,14 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         // contributes nothing: skip its square root (the margin keeps the skip conservative)
         const double skip_r2 = min_distance * min_distance * (1.0 + 1e-9);
         const double h = support[p];
-        const double h2 = h * h;
         const Vec<Dim> xp = xw[p];
-        for (int q : cand) {
+        const auto [buffer, first, count] = neighbours_of[p];
+        const int* slots = neighbour_slots[buffer].data() + first;
+        for (int i = 0; i < count; ++i) {
+          const int q = slots[i];
           Vec<Dim> d = xp - xs[q];
           if (any_periodic) d = periodic_difference(grid, d);
           const double r2 = d.squaredNorm();
-          if (r2 >= h2 || q == slot) continue;
           const int j = order[q];
           // density constraints
           const double l = lambda[p] + lambda[j];
@@ -902,6 +931,15 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
 
 namespace {
 
+/// The particle level set of liquid_phi_on_lattice (particles > 0) in tiles of the lattice: the
+/// same values where a particle or image reaches, the kernel support (its background)
+/// elsewhere; no lattice-sized vector (defined with liquid_phi_on_lattice below).
+template <int Dim>
+void liquid_phi_tiles(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                      const SampleLattice<Dim>& lattice,
+                      const std::array<BoundaryType, 2 * Dim>& boundary,
+                      const SolidField<Dim>& solids, TiledLattice<Dim, double>& phi);
+
 /// Antiderivative of the hat max(0, 1 - |u|).
 double hat_integral(double u) {
   if (u <= -1.0) return 0.0;
@@ -918,6 +956,62 @@ double box_hat_weight(double t, double width) {
   return (hat_integral(t + 0.5 * width) - hat_integral(t - 0.5 * width)) / width;
 }
 
+/// The runs of consecutive indices that [lo, hi] covers on an axis of n entries, wrapped on a
+/// periodic axis and clamped to [0, n) otherwise: at most two (a periodic range across the seam).
+int axis_runs(int lo, int hi, int n, bool periodic, std::array<std::array<int, 2>, 2>& runs) {
+  if (!periodic) {
+    lo = std::max(lo, 0);
+    hi = std::min(hi, n - 1);
+    if (lo > hi) return 0;
+    runs[0] = {lo, hi};
+    return 1;
+  }
+  if (hi - lo + 1 >= n) {
+    runs[0] = {0, n - 1};
+    return 1;
+  }
+  const int wl = ((lo % n) + n) % n, wh = ((hi % n) + n) % n;
+  if (wl <= wh) {
+    runs[0] = {wl, wh};
+    return 1;
+  }
+  runs[0] = {wl, n - 1};
+  runs[1] = {0, wh};
+  return 2;
+}
+
+/// Makes the tiles of `tiles` under the box of runs `runs[a][0 .. count[a])` per axis (every
+/// combination of one run per axis).
+template <int Dim, class Tiles>
+void touch_runs(Tiles& tiles, const std::array<std::array<std::array<int, 2>, 2>, Dim>& runs,
+                const std::array<int, Dim>& count) {
+  for (int a = 0; a < Dim; ++a)
+    if (count[a] == 0) return;
+  std::array<int, Dim> k{};
+  while (true) {
+    VecI<Dim> lo, hi;
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = runs[a][k[a]][0];
+      hi[a] = runs[a][k[a]][1];
+    }
+    tiles.touch_box(lo, hi);
+    int a = 0;
+    for (; a < Dim; ++a) {
+      if (++k[a] < count[a]) break;
+      k[a] = 0;
+    }
+    if (a == Dim) return;
+  }
+}
+
+/// The density projection's per-cell values, in tiles of cells (TiledLattice over the grid's
+/// cells) made only in the band around the particles: target T, the air-side test's T on the
+/// level set extended into the solids, and the row of the cell in the Poisson problem (-1: not
+/// an unknown); the particle volume fraction rho~ has tiles of its own (the splat's 5^Dim cells
+/// per particle then touch as many cache lines as in a dense array). Every cell outside the
+/// tiles has rho~ = T = 0.
+enum ProjectionValue { kTarget = 0, kWet = 1, kRow = 2, kProjectionValues = 3 };
+
 /// The liquid indicator of the level set convolved with the multilinear hat of each cell centre,
 ///   T_c = dx^-Dim int hat_c(x) H(-phi(x)) dx,
 /// i.e. what a perfectly even distribution of liquid particles filling {phi < 0} would splat
@@ -925,66 +1019,109 @@ double box_hat_weight(double t, double width) {
 /// fractions from lattice_cell_negative_fraction): per axis, the half cells 2c-1 .. 2c+2 carry the
 /// hat integrals 1/8, 3/8, 3/8, 1/8. A half cell outside a non-periodic domain passes its weight
 /// to the adjacent inside one, as the clamped particle stencil does.
-template <int Dim>
-VectorX hat_liquid_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi) {
+///
+/// Written for the cells of one tile of `values` (component `slot`), from the lattice values
+/// `corner_value(point)`: the half cells under the tile's hats (2 x 8 + 2 per axis) and their
+/// fractions, then the three (two) passes of the taps along the axes, each output the same sum
+/// in the same order as a pass over the whole grid would form it (so the same bits).
+template <int Dim, class Values, class CornerValue>
+void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int tile, int slot,
+                                  CornerValue&& corner_value) {
+  constexpr int kTile = Values::kTile;
+  constexpr int kHalf = 2 * kTile + 2;  // half cells under the hats of one tile's cells, per axis
   constexpr int kCorners = 1 << Dim;
-  // liquid fractions of the half cells
-  VecI<Dim> dims = 2 * grid.cells();
-  int count = 1;
-  for (int a = 0; a < Dim; ++a) count *= dims[a];
-  VectorX cur(count);
-  // lattice index offsets of the 2^Dim corners from a half cell's lower corner
-  std::array<int, kCorners> corner_offset;
-  for (int b = 0; b < kCorners; ++b) {
-    int offset = 0, stride = 1;
-    for (int a = 0; a < Dim; ++a) {
-      offset += ((b >> a) & 1) * stride;
-      stride *= lattice.dims[a];
+  const VecI<Dim> t0 = values.tile_origin(tile);
+  // per axis: the half cell of each local one (wrapped or clamped as the taps read them) and the
+  // distinct lattice points their corners take, gathered once
+  std::array<std::array<int, kHalf>, Dim> lo_point, hi_point;  // local corner indices
+  std::array<std::array<int, 2 * kHalf>, Dim> point;          // lattice point coordinates
+  std::array<int, Dim> points{};
+  for (int a = 0; a < Dim; ++a) {
+    const int n2 = 2 * grid.cells()[a];
+    for (int l = 0; l < kHalf; ++l) {
+      int j = 2 * t0[a] - 1 + l;
+      if (grid.periodic(a))
+        j = ((j % n2) + n2) % n2;
+      else
+        j = std::clamp(j, 0, n2 - 1);
+      for (int o = 0; o < 2; ++o) {
+        int k = 0;
+        while (k < points[a] && point[a][k] != j + o) ++k;
+        if (k == points[a]) point[a][points[a]++] = j + o;
+        (o == 0 ? lo_point : hi_point)[a][l] = k;
+      }
     }
-    corner_offset[b] = offset;
   }
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int k = 0; k < count; ++k) {
-    const int base = lattice.index(lattice_coord<Dim>(k, dims));
-    std::array<double, kCorners> corner;
-    for (int b = 0; b < kCorners; ++b) corner[b] = phi[base + corner_offset[b]];
-    cur[k] = lattice_cell_negative_fraction<Dim>(corner);
+  // the lattice values at the gathered points (axis 0 fastest)
+  int gathered = 1;
+  for (int a = 0; a < Dim; ++a) gathered *= points[a];
+  std::vector<double> value(gathered);
+  {
+    std::array<int, Dim> k{};
+    for (int g = 0; g < gathered; ++g) {
+      VecI<Dim> c;
+      for (int a = 0; a < Dim; ++a) c[a] = point[a][k[a]];
+      value[g] = corner_value(c);
+      for (int a = 0; a < Dim; ++a) {
+        if (++k[a] < points[a]) break;
+        k[a] = 0;
+      }
+    }
   }
-  // per axis, the 4-tap hat integrals from half cells to cells
+  // liquid fractions of the half cells (axis 0 fastest)
+  int count = 1;
+  for (int a = 0; a < Dim; ++a) count *= kHalf;
+  std::vector<double> cur(count), next;
+  {
+    std::array<int, Dim> l{};
+    for (int h = 0; h < count; ++h) {
+      std::array<double, kCorners> corner;
+      for (int b = 0; b < kCorners; ++b) {
+        int g = 0;
+        for (int a = Dim - 1; a >= 0; --a)
+          g = g * points[a] + (((b >> a) & 1) ? hi_point[a][l[a]] : lo_point[a][l[a]]);
+        corner[b] = value[g];
+      }
+      cur[h] = lattice_cell_negative_fraction<Dim>(corner);
+      for (int a = 0; a < Dim; ++a) {
+        if (++l[a] < kHalf) break;
+        l[a] = 0;
+      }
+    }
+  }
+  // per axis, the 4-tap hat integrals from half cells to cells: local cell o reads the local
+  // half cells 2 o .. 2 o + 3
   static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
+  VecI<Dim> dims = VecI<Dim>::Constant(kHalf);
   for (int a = 0; a < Dim; ++a) {
     VecI<Dim> out_dims = dims;
-    out_dims[a] = grid.cells()[a];
-    int out_count = 1;
-    for (int b = 0; b < Dim; ++b) out_count *= out_dims[b];
-    VectorX next(out_count);
-    const int n2 = dims[a];
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+    out_dims[a] = kTile;
+    const int out_count = out_dims.prod();
+    next.assign(out_count, 0.0);
+    int stride = 1;
+    for (int b = 0; b < a; ++b) stride *= dims[b];
     for (int k = 0; k < out_count; ++k) {
       const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
+      VecI<Dim> i = o;
+      i[a] = 2 * o[a];
+      const int base = lattice_index<Dim>(i, dims);
       double sum = 0.0;
-      for (int t = 0; t < 4; ++t) {
-        int j = 2 * o[a] - 1 + t;
-        if (grid.periodic(a))
-          j = (j + n2) % n2;
-        else
-          j = std::clamp(j, 0, n2 - 1);
-        VecI<Dim> i = o;
-        i[a] = j;
-        int li = 0;
-        for (int b = Dim - 1; b >= 0; --b) li = li * dims[b] + i[b];
-        sum += kTaps[t] * cur[li];
-      }
+      for (int t = 0; t < 4; ++t) sum += kTaps[t] * cur[base + t * stride];
       next[k] = sum;
     }
     cur.swap(next);
     dims = out_dims;
   }
-  return cur;
+  values.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, double* v) {
+    v[slot] = cur[lattice_index<Dim>(VecI<Dim>(c - t0), dims)];
+  });
 }
 
-/// One (reconstruction, solve, move) of project_particle_density.
+/// One (reconstruction, solve, move) of project_particle_density. Its grid work visits only the
+/// band of cells within reach of a particle (tiles of 8^Dim cells): outside it no particle
+/// splats volume and the level set has no liquid, so rho~ = T = 0 there and no cell is an
+/// unknown; the values in the band, the rows (in cell order) and the moves are those of a pass
+/// over the whole grid, bit for bit.
 template <int Dim>
 DensityProjectionStats project_density_once(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                             const SampleLattice<Dim>& lattice,
@@ -994,10 +1131,53 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   DensityProjectionStats stats;
   const long np = static_cast<long>(particles.size());
   if (np == 0) return stats;
-  const int nc = grid.num_cells();
   const int nf = grid.num_faces();
   const double dx = grid.dx();
   const double cell_volume = grid.cell_volume();
+  std::array<bool, Dim> periodic{};
+  for (int a = 0; a < Dim; ++a) periodic[a] = grid.periodic(a);
+
+  // the band: the cells within `ring` of a particle's cell (in tiles of 8^Dim cells, so a few
+  // cells more). The splat reaches two cells from a particle's cell; the level set is negative
+  // only at lattice points within the support R of a particle (2 R with solids: a particle's
+  // image across a solid reaches points inside it), and T_c reads the lattice points of
+  // [c - 1/2, c + 3/2] dx per axis, so T_c > 0 needs a particle with |c - c_p| < 3/2 + R / dx
+  double max_support = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
+  for (long p = 0; p < np; ++p)
+    max_support = std::max(max_support, kSurfaceSupport * particle_spacing(particles, p, dx));
+  const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
+  const int ring = std::max(2, static_cast<int>(std::floor(1.5 + reach / dx + 1e-6)));
+  // the particles' cells (wrapped, clamped), each once
+  std::vector<VecI<Dim>> particle_cell(np);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (long p = 0; p < np; ++p)
+    particle_cell[p] = grid.cell_containing(grid.wrap_position(particles.x[p]));
+  TiledLattice<Dim, char> occupied(grid.cells(), 0);
+  std::vector<VecI<Dim>> occupied_cells;
+  for (long p = 0; p < np; ++p) {
+    const VecI<Dim>& c = particle_cell[p];
+    char* o = occupied.at(c);
+    if (*o) continue;
+    *o = 1;
+    occupied_cells.push_back(c);
+  }
+  TiledLattice<Dim, double, kProjectionValues> values(grid.cells(), 0.0);
+  TiledLattice<Dim, double> rho(grid.cells(), 0.0);
+  for (const VecI<Dim>& c : occupied_cells) {
+    std::array<std::array<std::array<int, 2>, 2>, Dim> runs;
+    std::array<int, Dim> count;
+    for (int a = 0; a < Dim; ++a)
+      count[a] = axis_runs(c[a] - ring, c[a] + ring, grid.cells()[a], periodic[a], runs[a]);
+    touch_runs<Dim>(values, runs, count);
+  }
+  std::vector<int> band;  // the made tiles of `values` (and of `rho`)
+  for (int t = 0; t < values.num_tile_slots(); ++t)
+    if (values.has_tile(t)) {
+      band.push_back(t);
+      rho.touch_box(values.tile_origin(t), values.tile_origin(t));
+    }
+  const int band_tiles = static_cast<int>(band.size());
 
   // particle volume fractions: each particle's volume spread as a box of its rest spacing and
   // then by the hat of the cell centres. In parallel without races: the cells are split into
@@ -1005,7 +1185,6 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // order, skips those whose five layers miss its slab and adds only into its own cells, so every
   // cell sums its contributions in the order of the serial loop (the same bits for any number of
   // threads, and as before)
-  VectorX rho = VectorX::Zero(nc);
   constexpr int kLast = Dim - 1;
   const int layers = grid.cells()[kLast];
   const int slabs = std::max(1, std::min(process_threads(), layers));
@@ -1056,7 +1235,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
           w *= weight[a][k[a]];
           ci[a] = cell[a][k[a]];
         }
-        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) rho[grid.cell_index(ci)] += w;
+        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) *rho.find(ci) += w;
         int a = 0;
         for (; a < Dim; ++a) {
           if (++k[a] < 5) break;
@@ -1072,36 +1251,77 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // distance), as the particles' splat does, while the air side is decided on the level set
   // extended into the solids (as the weights of eq. (8) see it, extend_liquid_into_solids), so a
   // submerged cell cut by a solid is not taken for a free surface.
-  const VectorX phi = liquid_phi_on_lattice(particles, grid, lattice, boundary, solids);
-  VectorX target, wet;
+  // (in tiles: no lattice-sized vector; 541 MB at Fig. 2's 256x128x256 grid)
+  TiledLattice<Dim, double> phi;
+  liquid_phi_tiles(particles, grid, lattice, boundary, solids, phi);
   if (solids.empty()) {
-    target = hat_liquid_fractions(grid, lattice, phi);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
+    for (int b = 0; b < band_tiles; ++b)
+      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget,
+                                        [&](const VecI<Dim>& c) { return phi.value(c); });
   } else {
-    const int nl = lattice.size();
-    VectorX fluid_liquid = phi, extended = phi;
-    const double reach = kLiquidSolidReach * dx;
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (int li = 0; li < nl; ++li) {
-      // only points near the liquid can change (elsewhere phi >= 2 dx stays positive)
-      if (!(phi[li] < 2.0 * dx)) continue;
-      const double ds = solids.distance(lattice.position(lattice.coord(li)));
-      if (!(ds < 2.0 * dx)) continue;
-      fluid_liquid[li] = std::max(phi[li], -ds);
-      extended[li] = liquid_extended_into_solid(phi[li], ds, reach, dx);
+    // the solid distances of the lattice points under the band's hats where the level set is
+    // within 2 dx of liquid (elsewhere phi >= 2 dx stays positive), each computed once: tiles of
+    // the half lattice made under every band tile, filled in parallel tile by tile (NaN: not
+    // needed)
+    TiledLattice<Dim, double> solid_distance(lattice.dims,
+                                             std::numeric_limits<double>::quiet_NaN());
+    for (int b = 0; b < band_tiles; ++b) {
+      const VecI<Dim> t0 = values.tile_origin(band[b]);
+      std::array<std::array<std::array<int, 2>, 2>, Dim> runs;
+      std::array<int, Dim> count;
+      for (int a = 0; a < Dim; ++a) {
+        // half cells 2 t0 - 1 .. 2 t0 + 2 kTile, their corner points one further
+        count[a] = axis_runs(2 * t0[a] - 1, 2 * t0[a] + 2 * TiledLattice<Dim, char>::kTile,
+                             2 * grid.cells()[a], periodic[a], runs[a]);
+        for (int r = 0; r < count[a]; ++r) ++runs[a][r][1];
+      }
+      touch_runs<Dim>(solid_distance, runs, count);
     }
-    target = hat_liquid_fractions(grid, lattice, fluid_liquid);
-    wet = hat_liquid_fractions(grid, lattice, extended);
+    const int slots = solid_distance.num_tile_slots();
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
+    for (int t = 0; t < slots; ++t)
+      solid_distance.for_each_point_in_tile(t, [&](const VecI<Dim>& c, double* ds) {
+        if (phi.value(c) < 2.0 * dx) *ds = solids.distance(lattice.position(c));
+      });
+    const double solid_reach = kLiquidSolidReach * dx;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
+    for (int b = 0; b < band_tiles; ++b) {
+      // the fluid's liquid max(phi, -d_S) for the target, the level set extended into the
+      // solids for the air side (only near liquid and solids: elsewhere both are phi)
+      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget, [&](const VecI<Dim>& c) {
+        const double v = phi.value(c);
+        if (!(v < 2.0 * dx)) return v;
+        const double ds = *solid_distance.find(c);
+        return ds < 2.0 * dx ? std::max(v, -ds) : v;
+      });
+      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kWet, [&](const VecI<Dim>& c) {
+        const double v = phi.value(c);
+        if (!(v < 2.0 * dx)) return v;
+        const double ds = *solid_distance.find(c);
+        return ds < 2.0 * dx ? liquid_extended_into_solid(v, ds, solid_reach, dx) : v;
+      });
+    }
   }
 
-  // unknowns: cells holding particle volume or smoothed liquid
-  std::vector<int> unknown(nc, -1);
+  // unknowns: cells holding particle volume or smoothed liquid, rows in cell order
   std::vector<int> cells;
-  for (int c = 0; c < nc; ++c)
-    if (rho[c] > 0.0 || target[c] > 0.0) {
-      unknown[c] = static_cast<int>(cells.size());
-      cells.push_back(c);
-    }
+  for (int b = 0; b < band_tiles; ++b)
+    values.for_each_point_in_tile(band[b], [&](const VecI<Dim>& c, double* v) {
+      v[kRow] = -1.0;
+      if (*rho.find(c) > 0.0 || v[kTarget] > 0.0) cells.push_back(grid.cell_index(c));
+    });
+  std::sort(cells.begin(), cells.end());
   const int n = static_cast<int>(cells.size());
+  for (int r = 0; r < n; ++r) values.find(grid.cell_coord(cells[r]))[kRow] = r;
+  // the row of cell c (coordinates, wrapped on periodic axes; -1 outside the domain, outside the
+  // band or not an unknown)
+  auto row_of = [&](VecI<Dim> c) {
+    c = grid.wrap_cell(c);
+    if (!grid.cell_in_range(c)) return -1;
+    const double* v = values.find(c);
+    return v ? static_cast<int>(v[kRow]) : -1;
+  };
   stats.cells = n;
   if (n == 0) return stats;
 
@@ -1112,6 +1332,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   for (int r = 0; r < n; ++r) {
     const int c = cells[r];
     const VecI<Dim> ci = grid.cell_coord(c);
+    const double* v = values.find(ci);
     double diag = 0.0;
     for (int a = 0; a < Dim; ++a)
       for (int s = 0; s < 2; ++s) {
@@ -1126,7 +1347,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
         VecI<Dim> cj = ci;
         cj[a] += s == 0 ? -1 : 1;
         const int j = grid.cell_index_or_outside(cj);
-        if (j >= 0 && unknown[j] >= 0 && j != c) triplets.emplace_back(r, unknown[j], -wf);
+        const int rj = j >= 0 ? row_of(cj) : -1;
+        if (rj >= 0 && j != c) triplets.emplace_back(r, rj, -wf);
       }
     // a tiny shift keeps fully enclosed liquid (no air neighbour) non-singular
     triplets.emplace_back(r, r, diag * (1.0 + 1e-6) + 1e-12);
@@ -1139,8 +1361,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // An excess there (particles outside the level set: drops, thin sheets) is still spread.
     // Next to a solid a low T_c can come from the solid filling part of the cell, not from a
     // free surface, so with solids the air side is read from the level set extended into them.
-    double e = rho[c] - target[c];
-    if ((solids.empty() ? target[c] : wet[c]) < kProjectionAirSide) e = std::max(e, 0.0);
+    double e = *rho.find(ci) - v[kTarget];
+    if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide) e = std::max(e, 0.0);
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
   }
@@ -1155,17 +1377,32 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   const VectorX psi = cg.solve(rhs);  // in units of dx^2
   stats.iterations = static_cast<int>(cg.iterations());
 
-  // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids
+  // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
+  // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell
+  // if that is an unknown, else its plus cell.
   VectorX move = VectorX::Zero(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f) {
-    if (!(fluid_face[f] > 0.0)) continue;
-    const auto [axis, coord] = grid.face_coord(f);
-    const int minus = grid.face_cell_minus(axis, coord);
-    const int plus = grid.face_cell_plus(axis, coord);
-    const double pm = minus >= 0 && unknown[minus] >= 0 ? psi[unknown[minus]] : 0.0;
-    const double pp = plus >= 0 && unknown[plus] >= 0 ? psi[unknown[plus]] : 0.0;
-    move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+  for (int r = 0; r < n; ++r) {
+    const VecI<Dim> ci = grid.cell_coord(cells[r]);
+    for (int a = 0; a < Dim; ++a) {
+      VecI<Dim> lower = ci, upper = ci;
+      lower[a] -= 1;
+      upper[a] += 1;
+      const int r_minus = row_of(lower);
+      const int r_plus = row_of(upper);
+      // the face on the minus side (unless the minus cell writes it) and on the plus side
+      for (int s = 0; s < 2; ++s) {
+        if (s == 0 && r_minus >= 0) continue;
+        VecI<Dim> fc = ci;
+        fc[a] += s;
+        if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
+        const int f = grid.face_index(a, fc);
+        if (!(fluid_face[f] > 0.0)) continue;
+        const double pm = s == 0 ? 0.0 : psi[r];
+        const double pp = s == 0 ? psi[r] : (r_plus >= 0 ? psi[r_plus] : 0.0);
+        move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+      }
+    }
   }
 
   // move the particles (at most kProjectionMaxStep dx), then keep clear of solids and walls
@@ -1240,23 +1477,24 @@ VectorX liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim
   return phi;
 }
 
+namespace {
+
+/// The splat of liquid_phi_on_lattice (particles > 0): per lattice point the sums of k, k r_p and
+/// k x_p over the particles and images that reach it, in tiles made where they reach (`acc`,
+/// reset here). Returns the largest kernel support, the level set's value where nothing reaches.
 template <int Dim>
-void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
-                           const SampleLattice<Dim>& lattice,
-                           const std::array<BoundaryType, 2 * Dim>& boundary,
-                           const SolidField<Dim>& solids, VectorX& phi) {
-  const int nl = lattice.size();
+double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                    const SampleLattice<Dim>& lattice,
+                    const std::array<BoundaryType, 2 * Dim>& boundary,
+                    const SolidField<Dim>& solids, TiledLattice<Dim, double, Dim + 2>& acc) {
   const long np = static_cast<long>(particles.size());
   const double h = lattice.spacing;
   const double dx = grid.dx();
-  if (np == 0) {
-    phi.setConstant(nl, 3.0 * dx);
-    return;
-  }
 
   // per-particle support and radius
   std::vector<double> support(np), radius(np);
   double max_support = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     const double s = particle_spacing(particles, p, dx);
     support[p] = kSurfaceSupport * s;
@@ -1301,9 +1539,10 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   // point touched instead of three arrays' worth, in tiles of 8^Dim points made only where a
   // particle or one of its images reaches (0 elsewhere: no particle)
   constexpr int kStride = Dim + 2;
-  TiledLattice<Dim, double, kStride> acc(lattice.dims, 0.0);
-  // each particle's image across the nearest solid surface (NaN where it has none), found by
-  // the serial pass that makes the tiles and read by the splat
+  acc.reset(lattice.dims, 0.0);
+  constexpr int kSplatTile = TiledLattice<Dim, double, kStride>::kTile;
+  // each particle's image across the nearest solid surface (NaN where it has none), found before
+  // the tiles are made and read by the splat
   std::vector<Vec<Dim>> solid_image;
   if (!solids.empty())
     solid_image.assign(np, Vec<Dim>::Constant(std::numeric_limits<double>::quiet_NaN()));
@@ -1365,6 +1604,9 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
       const double rp = radius[p];
       if (make_tiles) acc.touch_box(i0, i1);
       VecI<Dim> i = i0;
+      // the sums of point i, found once per run of points along axis 0 within one tile (the
+      // points of a tile row are consecutive in it), null until needed
+      double* row = nullptr;
       while (!make_tiles) {
         Vec<Dim> d;
         if (fits) {
@@ -1376,7 +1618,8 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
         if (q2 < 1.0) {
           const double t = 1.0 - q2;
           const double k = t * t * t;
-          double* sum = acc.find(i);
+          if (!row) row = acc.find(i);
+          double* sum = row;
           sum[0] += k;
           sum[1] += k * rp;
           for (int a = 0; a < Dim; ++a) sum[2 + a] += k * xi[a];
@@ -1387,6 +1630,10 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
           i[a] = i0[a];
         }
         if (a == Dim) break;
+        if (a == 0 && row && i[0] % kSplatTile != 0)
+          row += kStride;
+        else
+          row = nullptr;
       }
       int a = 0;
       for (; a < Dim; ++a) {
@@ -1405,14 +1652,6 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
     // set extended into it, extend_liquid_into_solids) followed: left and right of a settling
     // disk they differed by up to 0.2 and pushed it sideways (docs/particles.md)
     if (solids.empty()) return;
-    if (make_tiles) {
-      const double d = solids.distance(xp);
-      if (!(d > 0.0) || d >= R) return;
-      Vec<Dim> n = solids.gradient(xp);
-      const double len = n.norm();
-      if (!(len > 0.0)) return;
-      solid_image[p] = xp - (2.0 * d / len) * n;
-    }
     const Vec<Dim> xm = solid_image[p];
     if (std::isnan(xm[0])) return;
     VecI<Dim> j0, j1;
@@ -1456,7 +1695,21 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
     }
   };
 
-  // the tiles under every box a particle or an image reaches, made serially before the splat
+  // each particle's image across the nearest solid surface within its support (independent per
+  // particle, in parallel), then the tiles under every box a particle or an image reaches, made
+  // serially before the splat
+  if (!solids.empty()) {
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (long p = 0; p < np; ++p) {
+      const Vec<Dim> xp = particles.x[p];
+      const double d = solids.distance(xp);
+      if (!(d > 0.0) || d >= support[p]) continue;
+      const Vec<Dim> n = solids.gradient(xp);
+      const double len = n.norm();
+      if (!(len > 0.0)) continue;
+      solid_image[p] = xp - (2.0 * d / len) * n;
+    }
+  }
   for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true);
 
   // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
@@ -1482,6 +1735,51 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
     }
   }
 
+  return max_support;
+}
+
+/// phi = |x - x_bar| - r_bar at a lattice point from its sums (weight > 0).
+template <int Dim>
+double surface_phi(const SampleLattice<Dim>& lattice, const VecI<Dim>& c, const double* sum) {
+  Vec<Dim> xbar;
+  for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
+  return (lattice.position(c) - xbar).norm() - sum[1] / sum[0];
+}
+
+template <int Dim>
+void liquid_phi_tiles(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                      const SampleLattice<Dim>& lattice,
+                      const std::array<BoundaryType, 2 * Dim>& boundary,
+                      const SolidField<Dim>& solids, TiledLattice<Dim, double>& phi) {
+  TiledLattice<Dim, double, Dim + 2> acc;
+  const double max_support = surface_sums(particles, grid, lattice, boundary, solids, acc);
+  // the level set in the splat's tiles, the kernel support everywhere else
+  phi.reset(lattice.dims, max_support);
+  const int slots = acc.num_tile_slots();
+  for (int tile = 0; tile < slots; ++tile)
+    if (acc.has_tile(tile)) phi.touch_box(acc.tile_origin(tile), acc.tile_origin(tile));
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int tile = 0; tile < slots; ++tile) {
+    acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
+      if (sum[0] > 0.0) *phi.find(c) = surface_phi(lattice, c, sum);
+    });
+  }
+}
+
+}  // namespace
+
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, VectorX& phi) {
+  const int nl = lattice.size();
+  if (particles.size() == 0) {
+    phi.setConstant(nl, 3.0 * grid.dx());
+    return;
+  }
+  TiledLattice<Dim, double, Dim + 2> acc;
+  const double max_support = surface_sums(particles, grid, lattice, boundary, solids, acc);
   // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
   // (every point outside the tiles)
   phi.setConstant(nl, max_support);
@@ -1489,11 +1787,7 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int tile = 0; tile < slots; ++tile) {
     acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
-      if (sum[0] > 0.0) {
-        Vec<Dim> xbar;
-        for (int a = 0; a < Dim; ++a) xbar[a] = sum[2 + a] / sum[0];
-        phi[lattice.index(c)] = (lattice.position(c) - xbar).norm() - sum[1] / sum[0];
-      }
+      if (sum[0] > 0.0) phi[lattice.index(c)] = surface_phi(lattice, c, sum);
     });
   }
 }
