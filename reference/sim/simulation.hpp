@@ -297,6 +297,9 @@ class Simulation : public AnySimulation {
   std::vector<ShapePtr<Dim>> solid_shapes_;
   SolidField<Dim> solids_;
   VectorX solid_phi_;
+  /// Inclusive box of the lattice points where solid_phi_ may be < 0 (lo > hi: none); set
+  /// wherever solid_phi_ is: the velocity constraints in the solids visit only its faces.
+  VecI<Dim> solid_lo_ = VecI<Dim>::Zero(), solid_hi_ = -VecI<Dim>::Ones();
   // moving bodies with contact (scenes with dynamic or kinematic bodies)
   std::unique_ptr<RigidWorld<Dim>> rigid_;
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
