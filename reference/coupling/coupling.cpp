@@ -2,6 +2,7 @@
 #include "reference/core/parallel.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "reference/grid/stress_weights.hpp"
@@ -66,8 +67,12 @@ void for_range(const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
 /// only within 2 dx of its bounds: farther out the distance to the bounds box (plus zeta), a
 /// positive lower bound of the true distance, stands in. The fractions, which read only signs
 /// and the values next to sign changes, are the same; a 3D mesh body costs its own box of
-/// samples instead of the whole lattice in every step. Rows of the lattice along x (one
-/// coordinate per row, not per point: no divisions per point).
+/// samples instead of the whole lattice in every step.
+///
+/// By rows along x: the distance to the box is sqrt((t_0^2 + t_1^2) + t_2^2), t_a the point's
+/// offset from the box along axis a (one table per axis), summed in the order of Eigen's norm()
+/// of the offset vector (the same bits as that expression); the shape is evaluated only at the
+/// points of a row where that distance is at most `far`.
 template <int Dim>
 void body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
                          double shrink_in_metres, double far, VectorX& phi) {
@@ -78,21 +83,44 @@ void body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& sh
   VecI<Dim> row_dims = lattice.dims;
   row_dims[0] = 1;
   const int rows = row_dims.prod();
+  // offsets from the box per axis: component a of p - clamp(p, box) at coordinate c
+  std::array<std::vector<double>, Dim> offset;
+  if (bounded)
+    for (int a = 0; a < Dim; ++a) {
+      offset[a].resize(lattice.dims[a]);
+      for (int c = 0; c < lattice.dims[a]; ++c) {
+        const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
+        offset[a][c] = (p - p.cwiseMax(box.min()).cwiseMin(box.max()))[a];
+      }
+    }
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int q = 0; q < rows; ++q) {
     VecI<Dim> c = lattice_coord<Dim>(q, row_dims);
     double* out = phi.data() + static_cast<std::size_t>(q) * nx;
-    for (int x = 0; x < nx; ++x) {
-      c[0] = x;
-      const Vec<Dim> p = lattice.position(c);
-      if (bounded) {
-        const double outside = (p - p.cwiseMax(box.min()).cwiseMin(box.max())).norm();
-        if (outside > far) {
-          out[x] = outside + shrink_in_metres;
-          continue;
-        }
+    if (!bounded) {
+      for (int x = 0; x < nx; ++x) {
+        c[0] = x;
+        out[x] = shape.distance(lattice.position(c)) + shrink_in_metres;
       }
-      out[x] = shape.distance(p) + shrink_in_metres;
+      continue;
+    }
+    // the squares of the row's other offsets
+    std::array<double, Dim> square;
+    for (int a = 1; a < Dim; ++a) square[a] = offset[a][c[a]] * offset[a][c[a]];
+    const auto outside = [&](int x) {
+      double sum = offset[0][x] * offset[0][x];
+      for (int a = 1; a < Dim; ++a) sum += square[a];
+      return std::sqrt(sum);
+    };
+    for (int x = 0; x < nx; ++x) out[x] = outside(x) + shrink_in_metres;
+    // a point within `far` has |t_a| <= far on every axis (the rounded sums only grow)
+    double rest = 0.0;
+    for (int a = 1; a < Dim; ++a) rest += square[a];
+    if (std::sqrt(rest) > far) continue;
+    for (int x = 0; x < nx; ++x) {
+      if (std::abs(offset[0][x]) > far || outside(x) > far) continue;
+      c[0] = x;
+      out[x] = shape.distance(lattice.position(c)) + shrink_in_metres;
     }
   }
 }
@@ -190,9 +218,14 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   // body writes it directly (min(+infinity, phi) = phi: the same values without the +infinity
   // fill and a pass of min)
   bool have_union = false;
+  // static_face and solid_face kept (else W_S^u's static share is 0 off the walls)
+  const bool parts = scratch.parts || !static_solids.empty();
   if (static_solids.empty()) {
     // phi is +infinity everywhere: no fraction anywhere
-    w.static_face.setZero(nf);
+    if (parts)
+      w.static_face.setZero(nf);
+    else
+      w.static_face = VectorX();
   } else {
     solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres, union_phi);
     have_union = true;
@@ -246,21 +279,28 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   // order static, body 0, body 1, ..., formed per face instead of as a face-sized vector); then
   // W_S^u as the sum of its parts (in the same order), capped at 1, and W_F^u = 1 - W_S^u. One
   // pass over the faces; the wall faces are set below.
-  if (w.solid_face.size() != nf) w.solid_face.resize(nf);
+  if (!parts)
+    w.solid_face = VectorX();
+  else if (w.solid_face.size() != nf)
+    w.solid_face.resize(nf);
   if (w.fluid_face.size() != nf) w.fluid_face.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(team_threads(nf))
   for (int f = 0; f < nf; ++f) {
-    double sum = w.static_face[f];
+    double static_part = parts ? w.static_face[f] : 0.0;
+    double sum = static_part;
     for (const VectorX& body : w.body_face) sum += body[f];
     if (sum > 1.0) {
       const double scale = 1.0 / sum;
-      w.static_face[f] *= scale;
+      static_part *= scale;
       for (VectorX& body : w.body_face) body[f] *= scale;
     }
-    double solid = w.static_face[f];
+    double solid = static_part;
     for (const VectorX& body : w.body_face) solid += body[f];
     solid = std::min(solid, 1.0);
-    w.solid_face[f] = solid;
+    if (parts) {
+      w.static_face[f] = static_part;
+      w.solid_face[f] = solid;
+    }
     w.fluid_face[f] = 1.0 - solid;
   }
 
@@ -274,9 +314,11 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
       lo[axis] = hi[axis] = side == 0 ? 0 : grid.cells()[axis];
       for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
         const int f = grid.face_index(axis, coord);
-        w.static_face[f] = 1.0;
         for (VectorX& body : w.body_face) body[f] = 0.0;
-        w.solid_face[f] = 1.0;
+        if (parts) {
+          w.static_face[f] = 1.0;
+          w.solid_face[f] = 1.0;
+        }
         w.fluid_face[f] = 0.0;
       });
     }

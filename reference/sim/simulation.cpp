@@ -582,6 +582,7 @@ void Simulation<Dim>::update_moving_solids() {
   SolidWeights<Dim>& solids = coupled_in_.solids;
   if (solid_scratch_.fixed.empty())
     for (const auto& b : rigid_->bodies()) solid_scratch_.fixed.push_back(!b.moves());
+  solid_scratch_.parts = false;  // W_S^u and its static share: read by nothing here
   // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
@@ -873,12 +874,12 @@ template <int Dim>
 void Simulation<Dim>::constrain_velocity_in_solids() {
   if (solids_.empty()) return;
   if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
-  u_scratch_ = u_;  // (a buffer kept across steps)
-  const VectorX& u_old = u_scratch_;
+  // the faces whose centre lies in a solid: the centre is lattice point 2 f + 1 - e_axis of the
+  // half lattice, so only the faces of the box of the solids' negative points are tested (a
+  // loose range; the test decides)
+  std::vector<int>& faces = solid_faces_;
+  faces.clear();
   for (int axis = 0; axis < Dim; ++axis) {
-    // the face centre is lattice point 2 f + 1 - e_axis of the half lattice: the faces whose
-    // centre can lie in the box of the solids' negative points (a loose range; the test below
-    // decides)
     const VecI<Dim> fdims = grid_.face_dims(axis);
     VecI<Dim> lo, hi;
     for (int a = 0; a < Dim; ++a) {
@@ -886,23 +887,32 @@ void Simulation<Dim>::constrain_velocity_in_solids() {
       hi[a] = std::min(solid_hi_[a] / 2 + 1, fdims[a] - 1);
     }
     if ((lo.array() > hi.array()).any()) continue;
-    VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
-    const int count = row_dims.prod();
-#pragma omp parallel for schedule(static) num_threads(team_threads(count))
-    for (int j = 0; j < count; ++j) {
-      const VecI<Dim> coord = lo + lattice_coord<Dim>(j, row_dims);
+    const VecI<Dim> box = hi - lo + VecI<Dim>::Ones();
+    for (int j = 0; j < box.prod(); ++j) {
+      const VecI<Dim> coord = lo + lattice_coord<Dim>(j, box);
       VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
       k[axis] -= 1;
       if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
-      if (!(solid_phi_[lattice_.index(k)] < 0.0)) continue;
-      const Vec<Dim> x = grid_.face_center(axis, coord);
-      const Vec<Dim> n = solids_.gradient(x);
-      Vec<Dim> v = grid_.interpolate_velocity(u_old, x);
-      const double vn = (v - (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero())).dot(n);
-      if (vn < 0.0) v -= vn * n;
-      u_[grid_.face_index(axis, coord)] = v[axis];
+      if (solid_phi_[lattice_.index(k)] < 0.0) faces.push_back(grid_.face_index(axis, coord));
     }
   }
+  // every new value from the velocity before this stage, then all written (instead of a copy
+  // of the whole velocity to read from)
+  std::vector<double>& values = solid_values_;
+  values.resize(faces.size());
+  const int count = static_cast<int>(faces.size());
+#pragma omp parallel for schedule(static) num_threads(team_threads(count))
+  for (int j = 0; j < count; ++j) {
+    const int f = faces[j];
+    const auto [axis, coord] = grid_.face_coord(f);
+    const Vec<Dim> x = grid_.face_center(axis, coord);
+    const Vec<Dim> n = solids_.gradient(x);
+    Vec<Dim> v = grid_.interpolate_velocity(u_, x);
+    const double vn = (v - (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero())).dot(n);
+    if (vn < 0.0) v -= vn * n;
+    values[j] = v[axis];
+  }
+  for (int j = 0; j < count; ++j) u_[faces[j]] = values[j];
 }
 
 template <int Dim>

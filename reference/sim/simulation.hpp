@@ -318,9 +318,10 @@ class Simulation : public AnySimulation {
   VectorX extended_phi_, volume_cells_;
   LatticeSigns<Dim> liquid_signs_;
   // per-step buffers of the velocity stages: face flags (faces that carry mass, trusted faces)
-  // and the velocity before constrain_velocity_in_solids
+  // and constrain_velocity_in_solids' faces in the solids with their new values
   std::vector<char> face_flags_;
-  VectorX u_scratch_;
+  std::vector<int> solid_faces_;
+  std::vector<double> solid_values_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF
