@@ -156,6 +156,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
   solid_phi_ =
       solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
   std::tie(solid_lo_, solid_hi_) = negative_point_box(lattice_, solid_phi_);
+  find_faces_in_solids();
   weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
   // moving bodies: the rigid world; next to a liquid they enter the weights of every step
   // (W_F^u, W_F^s from their pose) and the particles never start inside them
@@ -287,6 +288,11 @@ void Simulation<Dim>::update_liquid_weights() {
   // the extended level set is read by the weights above only: its lattice-sized buffer goes
   // back to the heap for the solve
   extended_phi_ = VectorX();
+  // with moving bodies the solids' level set is made again with the next weights
+  // (update_moving_solids always runs before this) and read by nothing else (the velocity
+  // constraints use the faces in solids found with it): its buffer goes back to the heap too
+  // (541 MB at the paper's 256x128x256 grid)
+  if (coupled_) solid_phi_ = VectorX();
 }
 
 template <int Dim>
@@ -598,6 +604,7 @@ void Simulation<Dim>::update_moving_solids() {
     solid_lo_ = VecI<Dim>::Zero();
     solid_hi_ = -VecI<Dim>::Ones();
   }
+  find_faces_in_solids();
   // W_F^u moves to weights_ the same way (solid_weights overwrites every entry of its
   // fluid_face, so the old buffer it gets back needs no values): coupled_in_.solids.fluid_face
   // is stale from here on, W_F^u is weights_.fluid_face (in the solve:
@@ -871,14 +878,13 @@ void Simulation<Dim>::note_unconverged(const std::string& what, long iterations,
 }
 
 template <int Dim>
-void Simulation<Dim>::constrain_velocity_in_solids() {
-  if (solids_.empty()) return;
-  if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
+void Simulation<Dim>::find_faces_in_solids() {
   // the faces whose centre lies in a solid: the centre is lattice point 2 f + 1 - e_axis of the
   // half lattice, so only the faces of the box of the solids' negative points are tested (a
-  // loose range; the test decides)
+  // loose range; the test decides), axis by axis in face order
   std::vector<int>& faces = solid_faces_;
   faces.clear();
+  if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
   for (int axis = 0; axis < Dim; ++axis) {
     const VecI<Dim> fdims = grid_.face_dims(axis);
     VecI<Dim> lo, hi;
@@ -896,8 +902,15 @@ void Simulation<Dim>::constrain_velocity_in_solids() {
       if (solid_phi_[lattice_.index(k)] < 0.0) faces.push_back(grid_.face_index(axis, coord));
     }
   }
+}
+
+template <int Dim>
+void Simulation<Dim>::constrain_velocity_in_solids() {
+  if (solids_.empty()) return;
   // every new value from the velocity before this stage, then all written (instead of a copy
-  // of the whole velocity to read from)
+  // of the whole velocity to read from); the faces in solids are those of the last
+  // find_faces_in_solids (the solids have not moved since)
+  const std::vector<int>& faces = solid_faces_;
   std::vector<double>& values = solid_values_;
   values.resize(faces.size());
   const int count = static_cast<int>(faces.size());
