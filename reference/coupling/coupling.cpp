@@ -2,6 +2,7 @@
 #include "reference/core/parallel.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "reference/grid/stress_weights.hpp"
@@ -67,24 +68,85 @@ void for_range(const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
 /// positive lower bound of the true distance, stands in. The fractions, which read only signs
 /// and the values next to sign changes, are the same; a 3D mesh body costs its own box of
 /// samples instead of the whole lattice in every step.
+///
+/// By rows along x: the distance to the box is sqrt((t_0^2 + t_1^2) + t_2^2), t_a the point's
+/// offset from the box along axis a (one table per axis), summed in the order of Eigen's norm()
+/// of the offset vector (the same bits as that expression); the shape is evaluated only at the
+/// points of a row where that distance is at most `far`.
 template <int Dim>
 void body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
                          double shrink_in_metres, double far, VectorX& phi) {
   const Box<Dim> box = shape.bounds();
   const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
   if (phi.size() != lattice.size()) phi.resize(lattice.size());
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int k = 0; k < lattice.size(); ++k) {
-    const Vec<Dim> x = lattice.position(lattice.coord(k));
-    if (bounded) {
-      const double outside = (x - x.cwiseMax(box.min()).cwiseMin(box.max())).norm();
-      if (outside > far) {
-        phi[k] = outside + shrink_in_metres;
-        continue;
+  const int nx = lattice.dims[0];
+  VecI<Dim> row_dims = lattice.dims;
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+  // offsets from the box per axis: component a of p - clamp(p, box) at coordinate c
+  std::array<std::vector<double>, Dim> offset;
+  if (bounded)
+    for (int a = 0; a < Dim; ++a) {
+      offset[a].resize(lattice.dims[a]);
+      for (int c = 0; c < lattice.dims[a]; ++c) {
+        const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
+        offset[a][c] = (p - p.cwiseMax(box.min()).cwiseMin(box.max()))[a];
       }
     }
-    phi[k] = shape.distance(x) + shrink_in_metres;
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int q = 0; q < rows; ++q) {
+    VecI<Dim> c = lattice_coord<Dim>(q, row_dims);
+    double* out = phi.data() + static_cast<std::size_t>(q) * nx;
+    if (!bounded) {
+      for (int x = 0; x < nx; ++x) {
+        c[0] = x;
+        out[x] = shape.distance(lattice.position(c)) + shrink_in_metres;
+      }
+      continue;
+    }
+    // the squares of the row's other offsets
+    std::array<double, Dim> square;
+    for (int a = 1; a < Dim; ++a) square[a] = offset[a][c[a]] * offset[a][c[a]];
+    const auto outside = [&](int x) {
+      double sum = offset[0][x] * offset[0][x];
+      for (int a = 1; a < Dim; ++a) sum += square[a];
+      return std::sqrt(sum);
+    };
+    for (int x = 0; x < nx; ++x) out[x] = outside(x) + shrink_in_metres;
+    // a point within `far` has |t_a| <= far on every axis (the rounded sums only grow)
+    double rest = 0.0;
+    for (int a = 1; a < Dim; ++a) rest += square[a];
+    if (std::sqrt(rest) > far) continue;
+    for (int x = 0; x < nx; ++x) {
+      if (std::abs(offset[0][x]) > far || outside(x) > far) continue;
+      c[0] = x;
+      out[x] = shape.distance(lattice.position(c)) + shrink_in_metres;
+    }
   }
+}
+
+/// The lattice points where body_phi_on_lattice may be negative: those within `far` of the
+/// bounds (every other point reads the distance to the bounds plus zeta >= 0), one point of
+/// margin for rounding. False for an unbounded shape (no such box).
+template <int Dim>
+bool body_phi_negative_box(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
+                           double far, VecI<Dim>& lo, VecI<Dim>& hi) {
+  const Box<Dim> box = shape.bounds();
+  if (box.isEmpty()) {
+    // no point is within the bounds: every value is the positive far value
+    lo = lattice.dims;
+    hi = -VecI<Dim>::Ones();
+    return true;
+  }
+  if (!box.min().allFinite() || !box.max().allFinite()) return false;
+  for (int a = 0; a < Dim; ++a) {
+    const double from = (box.min()[a] - far - lattice.origin[a]) / lattice.spacing;
+    const double to = (box.max()[a] + far - lattice.origin[a]) / lattice.spacing;
+    const double top = static_cast<double>(lattice.dims[a] - 1);
+    lo[a] = static_cast<int>(std::clamp(std::floor(from) - 1.0, 0.0, top + 1.0));
+    hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 1.0, -1.0, top));
+  }
+  return true;
 }
 
 /// face_negative_fractions of a body's lattice phi, evaluated only on faces whose control
@@ -147,11 +209,26 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   // raw fractions: every body on its own, the static solids as one union (section 4.4.6 shrink);
   // w.lattice_phi becomes the union of all solids
   VectorX& union_phi = w.lattice_phi;
-  solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres, union_phi);
+  const double far = 2.0 * grid.dx();
+  // the box of lattice points outside which the union is nowhere negative, while every part has
+  // one (bounded bodies, no static solid): the union's classes are then made in that box only
+  bool union_box = static_solids.empty() && far + shrink_in_metres >= 0.0;
+  VecI<Dim> union_lo = lattice.dims, union_hi = -VecI<Dim>::Ones();
+  // whether union_phi holds the union of the parts so far; without static solids the first
+  // body writes it directly (min(+infinity, phi) = phi: the same values without the +infinity
+  // fill and a pass of min)
+  bool have_union = false;
+  // static_face and solid_face kept (else W_S^u's static share is 0 off the walls)
+  const bool parts = scratch.parts || !static_solids.empty();
   if (static_solids.empty()) {
     // phi is +infinity everywhere: no fraction anywhere
-    w.static_face.setZero(nf);
+    if (parts)
+      w.static_face.setZero(nf);
+    else
+      w.static_face = VectorX();
   } else {
+    solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres, union_phi);
+    have_union = true;
     classify_lattice_cells(grid, lattice, union_phi, scratch.signs);
     face_negative_fractions(grid, lattice, union_phi, scratch.signs, w.static_face);
   }
@@ -160,41 +237,75 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   scratch.fixed_face.resize(bodies.size());
   for (std::size_t i = 0; i < bodies.size(); ++i) {
     const CouplingBody<Dim>& body = bodies[i];
+    if (union_box) {
+      VecI<Dim> lo, hi;
+      if (body_phi_negative_box<Dim>(lattice, *body.shape, far, lo, hi)) {
+        union_lo = union_lo.cwiseMin(lo);
+        union_hi = union_hi.cwiseMax(hi);
+      } else {
+        union_box = false;
+      }
+    }
     const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
     if (fixed && scratch.fixed_phi[i].size() == lattice.size() &&
         scratch.fixed_face[i].size() == nf) {
       // a body that never moves: its values of the first call
       w.body_face[i] = scratch.fixed_face[i];
-      union_phi = union_phi.cwiseMin(scratch.fixed_phi[i]);
+      if (have_union)
+        union_phi = union_phi.cwiseMin(scratch.fixed_phi[i]);
+      else
+        union_phi = scratch.fixed_phi[i];
+      have_union = true;
       continue;
     }
-    body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, 2.0 * grid.dx(),
-                             scratch.body_phi);
-    body_face_fractions<Dim>(grid, lattice, scratch.body_phi, body.shape->bounds(),
-                             w.body_face[i]);
-    union_phi = union_phi.cwiseMin(scratch.body_phi);
+    VectorX& body_phi = have_union ? scratch.body_phi : union_phi;
+    body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, far, body_phi);
+    body_face_fractions<Dim>(grid, lattice, body_phi, body.shape->bounds(), w.body_face[i]);
     if (fixed) {
-      scratch.fixed_phi[i] = scratch.body_phi;
+      scratch.fixed_phi[i] = body_phi;
       scratch.fixed_face[i] = w.body_face[i];
     }
+    if (have_union) union_phi = union_phi.cwiseMin(body_phi);
+    have_union = true;
   }
+  // no solid at all: +infinity everywhere
+  if (!have_union) solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres, union_phi);
 
   // the body's lattice phi is not needed any more: its memory goes back to the heap for the
   // solve (a lattice-sized vector, 541 MB at the paper's 256x128x256 grid)
   scratch.body_phi = VectorX();
 
   // overlap rule: scale every contribution by 1/sum where the sum exceeds 1 (the sum in the
-  // order static, body 0, body 1, ..., formed per face instead of as a face-sized vector)
+  // order static, body 0, body 1, ..., formed per face instead of as a face-sized vector); then
+  // W_S^u as the sum of its parts (in the same order), capped at 1, and W_F^u = 1 - W_S^u. One
+  // pass over the faces; the wall faces are set below.
+  if (!parts)
+    w.solid_face = VectorX();
+  else if (w.solid_face.size() != nf)
+    w.solid_face.resize(nf);
+  if (w.fluid_face.size() != nf) w.fluid_face.resize(nf);
+#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
   for (int f = 0; f < nf; ++f) {
-    double sum = w.static_face[f];
+    double static_part = parts ? w.static_face[f] : 0.0;
+    double sum = static_part;
     for (const VectorX& body : w.body_face) sum += body[f];
-    if (sum <= 1.0) continue;
-    const double scale = 1.0 / sum;
-    w.static_face[f] *= scale;
-    for (VectorX& body : w.body_face) body[f] *= scale;
+    if (sum > 1.0) {
+      const double scale = 1.0 / sum;
+      static_part *= scale;
+      for (VectorX& body : w.body_face) body[f] *= scale;
+    }
+    double solid = static_part;
+    for (const VectorX& body : w.body_face) solid += body[f];
+    solid = std::min(solid, 1.0);
+    if (parts) {
+      w.static_face[f] = static_part;
+      w.solid_face[f] = solid;
+    }
+    w.fluid_face[f] = 1.0 - solid;
   }
 
-  // wall faces belong to the wall (the two boundary layers of faces normal to each wall axis)
+  // wall faces belong to the wall (the two boundary layers of faces normal to each wall axis):
+  // W_S^u = 1 (1 + 0 + ... capped), W_F^u = 0
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid.periodic(axis)) continue;
     for (int side = 0; side < 2; ++side) {
@@ -203,20 +314,21 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
       lo[axis] = hi[axis] = side == 0 ? 0 : grid.cells()[axis];
       for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
         const int f = grid.face_index(axis, coord);
-        w.static_face[f] = 1.0;
         for (VectorX& body : w.body_face) body[f] = 0.0;
+        if (parts) {
+          w.static_face[f] = 1.0;
+          w.solid_face[f] = 1.0;
+        }
+        w.fluid_face[f] = 0.0;
       });
     }
   }
 
-  // W_S^u as the sum of its parts, W_F^u = 1 - W_S^u
-  w.solid_face = w.static_face;
-  for (const VectorX& body : w.body_face) w.solid_face += body;
-  w.solid_face = w.solid_face.cwiseMin(1.0);
-  w.fluid_face = VectorX::Ones(nf) - w.solid_face;
-
-  // W_F^s from the union of all solids
-  classify_lattice_cells(grid, lattice, union_phi, scratch.signs);
+  // W_F^s from the union of all solids (its classes in the bodies' box when there is one)
+  if (union_box)
+    classify_lattice_cells_in_box(grid, lattice, union_phi, union_lo, union_hi, scratch.signs);
+  else
+    classify_lattice_cells(grid, lattice, union_phi, scratch.signs);
   stress_fluid_weights(StressGrid<Dim>(grid), lattice, union_phi, scratch.signs, boundary,
                        w.fluid_stress);
 }

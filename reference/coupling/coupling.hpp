@@ -62,8 +62,12 @@ enum class BodyGroup { two_way, one_way };
 template <int Dim>
 struct SolidWeights {
   std::vector<VectorX> body_face;  ///< W_{S,i}^u per body (after the overlap rule), num_faces
-  VectorX static_face;             ///< static solids and walls' share of W_S^u, num_faces
-  VectorX solid_face;              ///< W_S^u = static_face + sum_i body_face[i], num_faces
+  /// static solids and walls' share of W_S^u, num_faces (empty from a call whose scratch has
+  /// `parts` false and no static solid)
+  VectorX static_face;
+  /// W_S^u = static_face + sum_i body_face[i], num_faces (empty like static_face; the
+  /// aggregation matrix reads it)
+  VectorX solid_face;
   VectorX fluid_face;              ///< W_F^u = 1 - W_S^u (0 on wall faces), num_faces
   /// W_F^s per StressGrid DOF: stress_fluid_weights of the union of all solids (bodies and
   /// static), shrunk by zeta; equals 1 - (sum of the stress-control-volume fractions) wherever
@@ -95,6 +99,11 @@ struct SolidWeightsScratch {
   /// computed once and kept below. Costs one lattice-sized vector per such body.
   std::vector<char> fixed;
   std::vector<VectorX> fixed_phi, fixed_face;  ///< the kept values, per body (empty: not yet)
+  /// Set by the caller: false when it reads neither SolidWeights::static_face nor solid_face
+  /// (the simulation: the coupled solve reads W_F^u, the bodies' W_{S,i}^u and W_F^s). Without
+  /// static solids those two face-sized vectors are then left empty (at the paper's
+  /// 256x128x256 grid 200 MB each).
+  bool parts = true;
 };
 
 /// The same into `w`, whose vectors (and the scratch buffers) are reused when they have the

@@ -47,23 +47,30 @@ void stress_fluid_weights(const StressGrid<Dim>& stress, const SampleLattice<Dim
   // fluid = not solid (mirrored / wrapped outside the domain)
   stress_negative_fractions(stress, lattice, solid_phi, signs, w);
   w = VectorX::Ones(stress.num_dofs()) - w;  // element-wise into the same storage
-  // boundary DOFs: beyond a wall is solid (keep the inside half), an open side has no shear DOF
+  // boundary DOFs: beyond a wall is solid (keep the inside half), an open side has no shear DOF.
+  // Only the boundary layers of each shear component are visited, axis a's before axis b's (a
+  // DOF on two of them, at an edge, gets both rules in that order)
   for (int k = Dim; k < StressGrid<Dim>::num_components(); ++k) {
     const auto [a, b] = StressGrid<Dim>::component_axes(k);
     const VecI<Dim> dims = stress.dims(k);
-    for (int j = 0; j < stress.num_dofs(k); ++j) {
-      const VecI<Dim> c = lattice_coord<Dim>(j, dims);
-      const int i = stress.offset(k) + j;
-      for (int axis : {a, b}) {
-        if (grid.periodic(axis)) continue;
-        int side = -1;
-        if (c[axis] == 0) side = 0;
-        if (c[axis] == grid.cells()[axis]) side = 1;
-        if (side < 0) continue;
-        if (boundary[2 * axis + side] == BoundaryType::wall)
-          w[i] *= 0.5;
-        else
-          w[i] = 0.0;
+    for (int axis : {a, b}) {
+      if (grid.periodic(axis)) continue;
+      for (int side = 0; side < 2; ++side) {
+        const int layer = side == 0 ? 0 : grid.cells()[axis];
+        if (layer >= dims[axis]) continue;
+        const bool wall = boundary[2 * axis + side] == BoundaryType::wall;
+        VecI<Dim> layer_dims = dims;
+        layer_dims[axis] = 1;
+        const int count = layer_dims.prod();
+        for (int j = 0; j < count; ++j) {
+          VecI<Dim> c = lattice_coord<Dim>(j, layer_dims);
+          c[axis] = layer;
+          const int i = stress.offset(k) + lattice_index<Dim>(c, dims);
+          if (wall)
+            w[i] *= 0.5;
+          else
+            w[i] = 0.0;
+        }
       }
     }
   }

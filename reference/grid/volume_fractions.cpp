@@ -200,38 +200,116 @@ inline void for_slab(VecI<Dim> c, const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&&
 }  // namespace
 
 template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> negative_point_box(const SampleLattice<Dim>& lattice,
+                                                   const VectorX& phi) {
+  const int nx = lattice.dims[0];
+  VecI<Dim> row_dims = lattice.dims;
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+  VecI<Dim> lo = lattice.dims, hi = -VecI<Dim>::Ones();
+#pragma omp parallel num_threads(process_threads())
+  {
+    VecI<Dim> tlo = lattice.dims, thi = -VecI<Dim>::Ones();
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const double* row = phi.data() + static_cast<std::size_t>(q) * nx;
+      // a count first (no branch per point), the ends only in rows that hold a negative
+      int negatives = 0;
+      for (int x = 0; x < nx; ++x) negatives += row[x] < 0.0;
+      if (negatives == 0) continue;
+      int first = 0, last = nx - 1;
+      while (!(row[first] < 0.0)) ++first;
+      while (!(row[last] < 0.0)) --last;
+      VecI<Dim> a = lattice_coord<Dim>(q, row_dims), b = a;
+      a[0] = first;
+      b[0] = last;
+      tlo = tlo.cwiseMin(a);
+      thi = thi.cwiseMax(b);
+    }
+    // min / max: the same box for any thread count
+#pragma omp critical(monolith_negative_point_box)
+    {
+      lo = lo.cwiseMin(tlo);
+      hi = hi.cwiseMax(thi);
+    }
+  }
+  return {lo, hi};
+}
+
+template <int Dim>
 void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& phi, LatticeSigns<Dim>& signs) {
+  const auto [lo, hi] = negative_point_box(lattice, phi);
+  classify_lattice_cells_in_box(grid, lattice, phi, lo, hi, signs);
+}
+
+template <int Dim>
+void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                   const VectorX& phi, const VecI<Dim>& point_lo,
+                                   const VecI<Dim>& point_hi, LatticeSigns<Dim>& signs) {
   using Signs = LatticeSigns<Dim>;
   constexpr int kCorners = 1 << Dim;
   constexpr int kRows = 1 << (Dim - 1);  // point rows along x that hold a row of cells' corners
-  signs.cells = 2 * grid.cells();
-  const std::size_t n = static_cast<std::size_t>(signs.cells.prod());
-  if (signs.cls.size() != n) signs.cls.assign(n, Signs::kPositive);
+  const VecI<Dim> cells = 2 * grid.cells();
+  const std::size_t n = static_cast<std::size_t>(cells.prod());
+  if (signs.cls.size() != n || signs.cells != cells) {
+    signs.cells = cells;
+    signs.cls.assign(n, Signs::kPositive);
+    signs.written_lo = VecI<Dim>::Zero();
+    signs.written_hi = -VecI<Dim>::Ones();
+  }
   VecI<Dim> pstride, cstride;
   pstride[0] = cstride[0] = 1;
   for (int a = 1; a < Dim; ++a) {
     pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
     cstride[a] = cstride[a - 1] * signs.cells[a - 1];
   }
+  // the last call's classes back to kPositive (only its box can hold others)
+  if ((signs.written_lo.array() <= signs.written_hi.array()).all()) {
+    const VecI<Dim> wlo = signs.written_lo, whi = signs.written_hi;
+    VecI<Dim> row_dims = whi - wlo + VecI<Dim>::Ones();
+    row_dims[0] = 1;
+    const int rows = row_dims.prod();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c = wlo + lattice_coord<Dim>(q, row_dims);
+      std::uint8_t* out = signs.cls.data() + c.dot(cstride);
+      std::fill(out, out + (whi[0] - wlo[0] + 1), Signs::kPositive);
+    }
+  }
+  // the lattice cells with a corner in the point box: cell l spans points l and l + 1
+  VecI<Dim> from, to;
+  for (int a = 0; a < Dim; ++a) {
+    from[a] = std::max(point_lo[a] - 1, 0);
+    to[a] = std::min(point_hi[a], signs.cells[a] - 1);
+  }
+  signs.written_lo = from;
+  signs.written_hi = to;
+  VecI<Dim> lo = signs.cells, hi = -VecI<Dim>::Ones();
+  if ((from.array() > to.array()).any()) {
+    signs.written_lo = VecI<Dim>::Zero();
+    signs.written_hi = -VecI<Dim>::Ones();
+    signs.lo = lo;
+    signs.hi = hi;
+    return;
+  }
   // row r of a cell row: point offset of bit b of r along axis b + 1
   std::array<int, kRows> row{};
   for (int r = 0; r < kRows; ++r)
     for (int b = 0; b + 1 < Dim; ++b)
       if ((r >> b) & 1) row[r] += pstride[b + 1];
-  const int nx = signs.cells[0];
-  // cell rows: every cell coordinate but x, x = 0
-  VecI<Dim> row_dims = signs.cells;
+  const int x0 = from[0], nx = to[0] - from[0] + 1;
+  // cell rows of the box: every cell coordinate but x, x = from[0]
+  VecI<Dim> row_dims = to - from + VecI<Dim>::Ones();
   row_dims[0] = 1;
   const int rows = row_dims.prod();
-  VecI<Dim> lo = signs.cells, hi = -VecI<Dim>::Ones();
 #pragma omp parallel num_threads(process_threads())
   {
     VecI<Dim> tlo = signs.cells, thi = -VecI<Dim>::Ones();
     std::vector<int> column(nx + 1);
 #pragma omp for schedule(static)
     for (int q = 0; q < rows; ++q) {
-      const VecI<Dim> c0 = lattice_coord<Dim>(q, row_dims);
+      const VecI<Dim> c0 = from + lattice_coord<Dim>(q, row_dims);
       const int base = c0.dot(pstride);
       // negative corners per point column (the 2^(Dim-1) rows at one x), then per cell the sum
       // of its two columns: the count of its 2^Dim corners where phi < 0
@@ -255,8 +333,8 @@ void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
       }
       if (first >= 0) {
         VecI<Dim> a = c0, b = c0;
-        a[0] = first;
-        b[0] = last;
+        a[0] = x0 + first;
+        b[0] = x0 + last;
         tlo = tlo.cwiseMin(a);
         thi = thi.cwiseMax(b);
       }
@@ -472,6 +550,20 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
   return phi;
 }
 
+template <int Dim>
+void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
+                                      const VectorX& solid_phi, double reach,
+                                      const VecI<Dim>& solid_lo, const VecI<Dim>& solid_hi,
+                                      VectorX& phi) {
+  phi = liquid_phi;  // no allocation when phi already has the size
+  if (solid_phi.size() != liquid_phi.size()) return;
+  const double dx = grid.dx();
+  // outside the box no point is inside a solid: the liquid's own value
+  for_each_lattice_point_in_box<Dim>(half_lattice(grid), solid_lo, solid_hi, [&](int k) {
+    phi[k] = liquid_extended_into_solid(liquid_phi[k], solid_phi[k], reach, dx);
+  });
+}
+
 #define MONOLITH_INSTANTIATE(D)                                                                   \
   template double lattice_cell_negative_fraction<D>(const std::array<double, (1 << D)>&);         \
   template double lattice_cube_negative_fraction<D>(const MacGrid<D>&, const SampleLattice<D>&,   \
@@ -495,8 +587,16 @@ VectorX extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liqui
                                                 const VectorX&, double);                          \
   template void extend_liquid_into_solids<D>(const MacGrid<D>&, const VectorX&, const VectorX&,   \
                                              double, VectorX&);                                   \
+  template void extend_liquid_into_solids_in_box<D>(const MacGrid<D>&, const VectorX&,            \
+                                                    const VectorX&, double, const VecI<D>&,       \
+                                                    const VecI<D>&, VectorX&);                    \
   template void classify_lattice_cells<D>(const MacGrid<D>&, const SampleLattice<D>&,             \
                                           const VectorX&, LatticeSigns<D>&);                      \
+  template std::pair<VecI<D>, VecI<D>> negative_point_box<D>(const SampleLattice<D>&,             \
+                                                             const VectorX&);                     \
+  template void classify_lattice_cells_in_box<D>(const MacGrid<D>&, const SampleLattice<D>&,      \
+                                                 const VectorX&, const VecI<D>&, const VecI<D>&,  \
+                                                 LatticeSigns<D>&);                               \
   template void control_volume_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,  \
                                                      const VectorX&, const LatticeSigns<D>&,      \
                                                      const VecI<D>&, const VecI<D>&, double*);    \

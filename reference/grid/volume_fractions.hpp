@@ -16,9 +16,11 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
@@ -76,13 +78,33 @@ struct LatticeSigns {
   /// Inclusive bounding box of the lattice cells of class != kPositive (lo > hi: none).
   VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones();
   bool any_negative() const { return (lo.array() <= hi.array()).all(); }
+  /// Inclusive box of the lattice cells the last classification wrote (lo > hi: none); every
+  /// class outside it is kPositive. The next classification resets only this box (issue 20: a
+  /// buffer kept across steps is rewritten in the band, not over the whole lattice).
+  VecI<Dim> written_lo = VecI<Dim>::Zero(), written_hi = -VecI<Dim>::Ones();
 };
 
-/// Fills `signs` from phi on the half lattice of grid (one pass over the lattice cells; the
-/// class buffer is reused when it has the right size).
+/// Inclusive box [lo, hi] of the lattice points where phi < 0 (lo > hi: none; NaN counts as not
+/// negative). One read of phi, a comparison per point.
+template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> negative_point_box(const SampleLattice<Dim>& lattice,
+                                                   const VectorX& phi);
+
+/// Fills `signs` from phi on the half lattice of grid: negative_point_box, then
+/// classify_lattice_cells_in_box (the class buffer is reused when it has the right size).
 template <int Dim>
 void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& phi, LatticeSigns<Dim>& signs);
+
+/// The same classes when the caller knows a box of lattice points [point_lo, point_hi]
+/// (inclusive, clamped to the lattice) outside which phi is nowhere < 0: only the lattice cells
+/// with a corner in it are classified (every other one is kPositive), and of the buffer only the
+/// last call's written box and this one are touched. Same classes and box as a classification
+/// of every lattice cell, provided the promise holds.
+template <int Dim>
+void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                   const VectorX& phi, const VecI<Dim>& point_lo,
+                                   const VecI<Dim>& point_hi, LatticeSigns<Dim>& signs);
 
 /// The fraction where phi < 0 of the control volumes c in [0, dims) (x fastest) whose cube of
 /// 2^Dim lattice cells has lower corner 2 c + lower_offset (lower_offset 0 on cell-centred axes,
@@ -190,5 +212,33 @@ inline double liquid_extended_into_solid(double liquid_phi, double solid_phi, do
 template <int Dim>
 void extend_liquid_into_solids(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
                                const VectorX& solid_phi, double reach, VectorX& out);
+/// The same when the caller knows a box of lattice points [solid_lo, solid_hi] (inclusive)
+/// outside which solid_phi is nowhere < 0: out is liquid_phi there (a copy), the rule runs in
+/// the box only. Same values.
+template <int Dim>
+void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& liquid_phi,
+                                      const VectorX& solid_phi, double reach,
+                                      const VecI<Dim>& solid_lo, const VecI<Dim>& solid_hi,
+                                      VectorX& out);
+
+/// fn(k) for the index k of every point of the lattice box [lo, hi] (inclusive, clamped to the
+/// lattice), rows along x on several threads (fn of distinct points must be independent).
+template <int Dim, class Fn>
+void for_each_lattice_point_in_box(const SampleLattice<Dim>& lattice, VecI<Dim> lo, VecI<Dim> hi,
+                                   Fn&& fn) {
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = std::max(lo[a], 0);
+    hi[a] = std::min(hi[a], lattice.dims[a] - 1);
+    if (lo[a] > hi[a]) return;
+  }
+  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int q = 0; q < rows; ++q) {
+    const int start = lattice.index(lo + lattice_coord<Dim>(q, row_dims));
+    for (int x = 0; x <= hi[0] - lo[0]; ++x) fn(start + x);
+  }
+}
 
 }  // namespace monolith

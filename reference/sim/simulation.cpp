@@ -9,6 +9,7 @@
 #include "reference/core/parallel.hpp"
 
 #include <algorithm>
+#include <tuple>
 #include <cstdint>
 #include <cmath>
 #include <limits>
@@ -154,6 +155,8 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
   // W_F^u from the solid level set shrunk by zeta (section 4.4.6)
   solid_phi_ =
       solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
+  std::tie(solid_lo_, solid_hi_) = negative_point_box(lattice_, solid_phi_);
+  find_faces_in_solids();
   weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
   // moving bodies: the rigid world; next to a liquid they enter the weights of every step
   // (W_F^u, W_F^s from their pose) and the particles never start inside them
@@ -225,10 +228,12 @@ void Simulation<Dim>::update_liquid_weights() {
   // (buffers kept across steps; the fractions visit only the band where phi changes sign)
   const bool solids = !solid_shapes_.empty() || coupled_;
   if (solids)
-    extend_liquid_into_solids(grid_, liquid_phi_, solid_phi_, kLiquidSolidReach * grid_.dx(),
-                              extended_phi_);
+    extend_liquid_into_solids_in_box(grid_, liquid_phi_, solid_phi_, kLiquidSolidReach * grid_.dx(),
+                                     solid_lo_, solid_hi_, extended_phi_);
   const VectorX& phi = solids ? extended_phi_ : liquid_phi_;
   classify_lattice_cells(grid_, lattice_, phi, liquid_signs_);
+  // the points where the extended level set is negative (the box of its non-positive cells)
+  const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
   cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
   face_negative_fractions(grid_, lattice_, phi, liquid_signs_, raw_liquid_face_);
   weights_.liquid_face = raw_liquid_face_;
@@ -260,16 +265,34 @@ void Simulation<Dim>::update_liquid_weights() {
   // images and the extension reach into them)
   // (in the extended level set's buffer, which the weights no longer read: no new lattice-sized
   // vector)
+  // max(phi_L, -phi_S) <= 0 only where phi_L < 0, where the extended level set (<= phi_L) is
+  // negative too: it is written in that box and one point around it (the corners of every
+  // lattice cell the classes and fractions read; the rest of the buffer keeps the extended level
+  // set's values, >= 0 there), and classified in the box
   if (solids) {
-    extended_phi_ = liquid_phi_.cwiseMax(-solid_phi_);
+    VecI<Dim> lo = liquid_lo, hi = liquid_hi;
+    if (liquid_signs_.any_negative())
+      for (int a = 0; a < Dim; ++a) {
+        lo[a] = std::max(lo[a] - 1, 0);
+        hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
+      }
+    for_each_lattice_point_in_box<Dim>(lattice_, lo, hi, [&](int k) {
+      extended_phi_[k] = std::max(liquid_phi_[k], -solid_phi_[k]);
+    });
     const VectorX& fluid_phi = extended_phi_;
-    classify_lattice_cells(grid_, lattice_, fluid_phi, liquid_signs_);
+    classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
+                                  liquid_signs_);
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
   // the extended level set is read by the weights above only: its lattice-sized buffer goes
   // back to the heap for the solve
   extended_phi_ = VectorX();
+  // with moving bodies the solids' level set is made again with the next weights
+  // (update_moving_solids always runs before this) and read by nothing else (the velocity
+  // constraints use the faces in solids found with it): its buffer goes back to the heap too
+  // (541 MB at the paper's 256x128x256 grid)
+  if (coupled_) solid_phi_ = VectorX();
 }
 
 template <int Dim>
@@ -455,15 +478,31 @@ template <int Dim>
 void Simulation<Dim>::apply_wall_and_solid_velocities() {
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   // zero the normal velocity on walls, give fully solid faces their solid's velocity (zero for
-  // static solids), then remove the inflow into solids
-  for (int f = 0; f < grid_.num_faces(); ++f) {
+  // static solids), then remove the inflow into solids. The fully solid faces are found by
+  // their weight alone (a compare per face), the walls by their layers of faces.
+  const int nf = grid_.num_faces();
+  const auto wall = [&](int axis, const VecI<Dim>& coord) {
+    return grid_.is_boundary_face(axis, coord) &&
+           boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
+  };
+  for (int f = 0; f < nf; ++f) {
+    if (weights_.fluid_face[f] != 0.0) continue;
     const auto [axis, coord] = grid_.face_coord(f);
-    const bool wall = grid_.is_boundary_face(axis, coord) &&
-                      boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
-    if (wall)
-      u_[f] = 0.0;
-    else if (weights_.fluid_face[f] == 0.0)
-      u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
+    if (wall(axis, coord)) continue;
+    u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
+  }
+  for (int axis = 0; axis < Dim; ++axis) {
+    if (grid_.periodic(axis)) continue;
+    for (int side = 0; side < 2; ++side) {
+      if (boundary_[2 * axis + side] != BoundaryType::wall) continue;
+      VecI<Dim> layer = grid_.face_dims(axis);
+      layer[axis] = 1;
+      for (int j = 0; j < layer.prod(); ++j) {
+        VecI<Dim> coord = lattice_coord<Dim>(j, layer);
+        coord[axis] = side == 0 ? 0 : grid_.cells()[axis];
+        u_[grid_.face_index(axis, coord)] = 0.0;
+      }
+    }
   }
   constrain_velocity_in_solids();
 }
@@ -549,6 +588,7 @@ void Simulation<Dim>::update_moving_solids() {
   SolidWeights<Dim>& solids = coupled_in_.solids;
   if (solid_scratch_.fixed.empty())
     for (const auto& b : rigid_->bodies()) solid_scratch_.fixed.push_back(!b.moves());
+  solid_scratch_.parts = false;  // W_S^u and its static share: read by nothing here
   // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
@@ -556,6 +596,15 @@ void Simulation<Dim>::update_moving_solids() {
   solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
                      scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
   solid_phi_.swap(solids.lattice_phi);
+  // its negative points lie in the box of its non-positive lattice cells (of the union's classes)
+  if (solid_scratch_.signs.any_negative()) {
+    solid_lo_ = solid_scratch_.signs.lo;
+    solid_hi_ = solid_scratch_.signs.hi + VecI<Dim>::Ones();
+  } else {
+    solid_lo_ = VecI<Dim>::Zero();
+    solid_hi_ = -VecI<Dim>::Ones();
+  }
+  find_faces_in_solids();
   // W_F^u moves to weights_ the same way (solid_weights overwrites every entry of its
   // fluid_face, so the old buffer it gets back needs no values): coupled_in_.solids.fluid_face
   // is stale from here on, W_F^u is weights_.fluid_face (in the solve:
@@ -829,25 +878,54 @@ void Simulation<Dim>::note_unconverged(const std::string& what, long iterations,
 }
 
 template <int Dim>
+void Simulation<Dim>::find_faces_in_solids() {
+  // the faces whose centre lies in a solid: the centre is lattice point 2 f + 1 - e_axis of the
+  // half lattice, so only the faces of the box of the solids' negative points are tested (a
+  // loose range; the test decides), axis by axis in face order
+  std::vector<int>& faces = solid_faces_;
+  faces.clear();
+  if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
+  for (int axis = 0; axis < Dim; ++axis) {
+    const VecI<Dim> fdims = grid_.face_dims(axis);
+    VecI<Dim> lo, hi;
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = std::max(solid_lo_[a] / 2 - 1, 0);
+      hi[a] = std::min(solid_hi_[a] / 2 + 1, fdims[a] - 1);
+    }
+    if ((lo.array() > hi.array()).any()) continue;
+    const VecI<Dim> box = hi - lo + VecI<Dim>::Ones();
+    for (int j = 0; j < box.prod(); ++j) {
+      const VecI<Dim> coord = lo + lattice_coord<Dim>(j, box);
+      VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
+      k[axis] -= 1;
+      if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
+      if (solid_phi_[lattice_.index(k)] < 0.0) faces.push_back(grid_.face_index(axis, coord));
+    }
+  }
+}
+
+template <int Dim>
 void Simulation<Dim>::constrain_velocity_in_solids() {
   if (solids_.empty()) return;
-  u_scratch_ = u_;  // (a buffer kept across steps)
-  const VectorX& u_old = u_scratch_;
-#pragma omp parallel for schedule(static) num_threads(team_threads(grid_.num_faces()))
-  for (int f = 0; f < grid_.num_faces(); ++f) {
+  // every new value from the velocity before this stage, then all written (instead of a copy
+  // of the whole velocity to read from); the faces in solids are those of the last
+  // find_faces_in_solids (the solids have not moved since)
+  const std::vector<int>& faces = solid_faces_;
+  std::vector<double>& values = solid_values_;
+  values.resize(faces.size());
+  const int count = static_cast<int>(faces.size());
+#pragma omp parallel for schedule(static) num_threads(team_threads(count))
+  for (int j = 0; j < count; ++j) {
+    const int f = faces[j];
     const auto [axis, coord] = grid_.face_coord(f);
-    // the face centre is lattice point 2 f + 1 - e_axis of the half lattice
-    VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
-    k[axis] -= 1;
-    if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
-    if (!(solid_phi_[lattice_.index(k)] < 0.0)) continue;
     const Vec<Dim> x = grid_.face_center(axis, coord);
     const Vec<Dim> n = solids_.gradient(x);
-    Vec<Dim> v = grid_.interpolate_velocity(u_old, x);
+    Vec<Dim> v = grid_.interpolate_velocity(u_, x);
     const double vn = (v - (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero())).dot(n);
     if (vn < 0.0) v -= vn * n;
-    u_[f] = v[axis];
+    values[j] = v[axis];
   }
+  for (int j = 0; j < count; ++j) u_[faces[j]] = values[j];
 }
 
 template <int Dim>

@@ -248,6 +248,9 @@ class Simulation : public AnySimulation {
   /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
   /// particles near a solid are not carried into it.
   void constrain_velocity_in_solids();
+  /// The faces whose centre lies in a solid (solid_phi_ < 0 there) into solid_faces_, from the
+  /// box of the solids' negative points: wherever solid_phi_ is made.
+  void find_faces_in_solids();
   /// Sections 3.1.2, 4.4.6 with moving bodies: W_F^u, W_F^s and the solid level set from every
   /// body at its current pose (fixed bodies included, as one-way bodies), shrunk by zeta, and the
   /// SolidField of the particles (static shapes and posed bodies).
@@ -296,7 +299,11 @@ class Simulation : public AnySimulation {
   // the solid level set on the half lattice, rebuilt at every pose when bodies move
   std::vector<ShapePtr<Dim>> solid_shapes_;
   SolidField<Dim> solids_;
+  /// (empty outside update_step_weights in coupled scenes: made again at every pose)
   VectorX solid_phi_;
+  /// Inclusive box of the lattice points where solid_phi_ may be < 0 (lo > hi: none); set
+  /// wherever solid_phi_ is: the velocity constraints in the solids visit only its faces.
+  VecI<Dim> solid_lo_ = VecI<Dim>::Zero(), solid_hi_ = -VecI<Dim>::Ones();
   // moving bodies with contact (scenes with dynamic or kinematic bodies)
   std::unique_ptr<RigidWorld<Dim>> rigid_;
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
@@ -318,9 +325,11 @@ class Simulation : public AnySimulation {
   VectorX extended_phi_, volume_cells_;
   LatticeSigns<Dim> liquid_signs_;
   // per-step buffers of the velocity stages: face flags (faces that carry mass, trusted faces)
-  // and the velocity before constrain_velocity_in_solids
+  // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
+  // constrain_velocity_in_solids
   std::vector<char> face_flags_;
-  VectorX u_scratch_;
+  std::vector<int> solid_faces_;
+  std::vector<double> solid_values_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF

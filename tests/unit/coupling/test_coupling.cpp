@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -487,4 +488,65 @@ TEST_CASE("Buoyancy torque about an off-centre centre of mass", "[unit][validati
     CHECK(f[5] == Approx(-d * f[1]).epsilon(1e-9));
     CHECK(f[5] == Approx(-d * rho * g * 4.0 / 3.0 * M_PI * std::pow(0.25, 3)).epsilon(1e-2));
   }
+}
+
+namespace {
+
+template <int Dim>
+void check_solid_weights_band(int n) {
+  // The union's level set is every body's SDF + zeta within 2 dx of its bounds and the distance
+  // to its bounds + zeta farther out (SolidWeights::lattice_phi), bit for bit; W_F^s equals the
+  // one from a classification of every lattice cell; a scratch that reuses its buffers across
+  // calls (the bodies moved in between), or that drops static_face and solid_face (parts =
+  // false), gives the same bits as a fresh call.
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+  boundary[2 * (Dim - 1) + 1] = BoundaryType::open;
+  const double zeta = 0.01 * grid.dx(), far = 2.0 * grid.dx();
+  SolidWeights<Dim> reused;
+  SolidWeightsScratch<Dim> scratch;
+  scratch.parts = false;
+  int config = 0;
+  for (const auto& bodies : configurations<Dim>()) {
+    INFO("config " << config++);
+    const SolidWeights<Dim> w = solid_weights<Dim>(grid, bodies, {}, boundary, zeta);
+    int differ = 0;
+    for (int k = 0; k < lattice.size(); ++k) {
+      const Vec<Dim> x = lattice.position(lattice.coord(k));
+      double expected = std::numeric_limits<double>::infinity();
+      for (const auto& body : bodies) {
+        const Box<Dim> box = body.shape->bounds();
+        const double outside = (x - x.cwiseMax(box.min()).cwiseMin(box.max())).norm();
+        const double v = (outside > far ? outside : body.shape->distance(x)) + zeta;
+        expected = std::min(expected, v);
+      }
+      differ += w.lattice_phi[k] != expected;
+    }
+    CHECK(differ == 0);
+    const VectorX fluid_stress =
+        stress_fluid_weights<Dim>(StressGrid<Dim>(grid), lattice, w.lattice_phi, boundary);
+    CHECK((w.fluid_stress.array() == fluid_stress.array()).all());
+    solid_weights<Dim>(grid, bodies, {}, boundary, zeta, reused, scratch);
+    CHECK(reused.static_face.size() == 0);
+    CHECK(reused.solid_face.size() == 0);
+    CHECK((reused.fluid_face.array() == w.fluid_face.array()).all());
+    CHECK((reused.fluid_stress.array() == w.fluid_stress.array()).all());
+    CHECK((reused.lattice_phi.array() == w.lattice_phi.array()).all());
+    REQUIRE(reused.body_face.size() == w.body_face.size());
+    for (std::size_t i = 0; i < w.body_face.size(); ++i)
+      CHECK((reused.body_face[i].array() == w.body_face[i].array()).all());
+  }
+}
+
+}  // namespace
+
+TEST_CASE("solid weights in the bodies' band: lattice phi, W_F^s, reused buffers (2D)",
+          "[unit][coupling]") {
+  check_solid_weights_band<2>(24);
+}
+
+TEST_CASE("solid weights in the bodies' band: lattice phi, W_F^s, reused buffers (3D)",
+          "[unit][coupling]") {
+  check_solid_weights_band<3>(12);
 }

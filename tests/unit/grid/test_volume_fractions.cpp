@@ -278,3 +278,88 @@ TEMPLATE_TEST_CASE_SIG("band fractions equal every control volume's cube fractio
     }
   }
 }
+
+TEMPLATE_TEST_CASE_SIG("lattice-cell classes in a box: one buffer across level sets equals a fresh "
+                       "classification of every cell",
+                       "[unit][property]", ((int Dim), Dim), 2, 3) {
+  // One LatticeSigns reused for a sequence of level sets whose negative regions move, grow,
+  // shrink and vanish (as the simulation's buffers are across steps): after each call every
+  // class equals the count of its negative corners, the box is that of the non-positive cells,
+  // negative_point_box is the box of the negative points, and a classification in a larger box
+  // given by the caller gives the same classes. NaN counts as not negative.
+  const int n = Dim == 2 ? 16 : 8;
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  std::vector<VectorX> cases;
+  for (double cx : {0.2, 0.8, 0.5})
+    for (double r : {0.05, 0.3}) {
+      Vec<Dim> c = Vec<Dim>::Constant(0.45);
+      c[0] = cx;
+      cases.push_back(sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return (x - c).norm() - r; }));
+    }
+  cases.push_back(VectorX::Constant(lattice.size(), 1.0));   // nothing negative
+  cases.push_back(VectorX::Constant(lattice.size(), -1.0));  // everything
+  VectorX point = VectorX::Constant(lattice.size(), 0.5);    // one negative point, one NaN
+  point[lattice.index(VecI<Dim>::Constant(3))] = -0.1;
+  point[lattice.index(VecI<Dim>::Constant(9))] = std::nan("");
+  cases.push_back(point);
+  cases.push_back(cases[1]);
+  const VecI<Dim> cells = 2 * grid.cells();
+  LatticeSigns<Dim> reused, boxed;
+  for (std::size_t k = 0; k < cases.size(); ++k) {
+    INFO("case " << k);
+    const VectorX& phi = cases[k];
+    // the reference: every cell's corners counted, every negative point boxed
+    std::vector<std::uint8_t> expected(cells.prod());
+    VecI<Dim> clo = cells, chi = -VecI<Dim>::Ones(), plo = lattice.dims, phi_hi = -VecI<Dim>::Ones();
+    for (int l = 0; l < cells.prod(); ++l) {
+      const VecI<Dim> lc = lattice_coord<Dim>(l, cells);
+      int negatives = 0;
+      for (int corner = 0; corner < (1 << Dim); ++corner) {
+        VecI<Dim> p = lc;
+        for (int a = 0; a < Dim; ++a) p[a] += (corner >> a) & 1;
+        negatives += phi[lattice.index(p)] < 0.0;
+      }
+      expected[l] = negatives == 0 ? 0 : negatives == (1 << Dim) ? 1 : 2;
+      if (expected[l] != 0) clo = clo.cwiseMin(lc), chi = chi.cwiseMax(lc);
+    }
+    for (int p = 0; p < lattice.size(); ++p)
+      if (phi[p] < 0.0) plo = plo.cwiseMin(lattice.coord(p)), phi_hi = phi_hi.cwiseMax(lattice.coord(p));
+    const auto [lo, hi] = negative_point_box(lattice, phi);
+    CHECK(lo == plo);
+    CHECK(hi == phi_hi);
+    classify_lattice_cells(grid, lattice, phi, reused);
+    CHECK(reused.cls == expected);
+    CHECK(reused.lo == clo);
+    CHECK(reused.hi == chi);
+    // a box two points larger than the negative points (clamped by the call)
+    const VecI<Dim> box_lo = plo - 2 * VecI<Dim>::Ones(), box_hi = phi_hi + 2 * VecI<Dim>::Ones();
+    classify_lattice_cells_in_box(grid, lattice, phi, box_lo, box_hi, boxed);
+    CHECK(boxed.cls == expected);
+    CHECK(boxed.lo == clo);
+    CHECK(boxed.hi == chi);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("liquid extended into solids in the solids' box equals the whole-lattice rule",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  const int n = Dim == 2 ? 16 : 8;
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  Vec<Dim> c = Vec<Dim>::Constant(0.5);
+  const VectorX liquid = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return (x - c).norm() - 0.3; });
+  c[0] = 0.75;
+  const VectorX solid = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return (x - c).norm() - 0.15; });
+  VectorX whole, boxed = VectorX::Constant(3, 7.0);  // a buffer of another size
+  extend_liquid_into_solids(grid, liquid, solid, grid.dx(), whole);
+  const auto [lo, hi] = negative_point_box(lattice, solid);
+  REQUIRE((lo.array() <= hi.array()).all());
+  extend_liquid_into_solids_in_box(grid, liquid, solid, grid.dx(), lo, hi, boxed);
+  int differ = 0, extended = 0;
+  for (int k = 0; k < whole.size(); ++k) {
+    differ += boxed[k] != whole[k];
+    extended += whole[k] != liquid[k];
+  }
+  CHECK(differ == 0);
+  CHECK(extended > 0);  // the rule changed some points
+}
