@@ -49,6 +49,9 @@ constexpr double kProjectionTolerance = 1e-4;
 /// level set; there the density projection corrects an excess of particle volume only
 /// (project_particle_density, docs/particles.md "Still water").
 constexpr double kProjectionAirSide = 0.5;
+/// Cells with T_c at or above this are full (not of the surface band) for the measurement switch
+/// surface_deficits of project_particle_density.
+constexpr double kProjectionFullCell = 0.999;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
 /// Lattice points per axis of one particle's splat box held in a stack table (liquid_phi_on_lattice;
@@ -532,16 +535,19 @@ template <int Dim>
 void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                   const VectorX& phi, const VectorX& fluid_face,
                                   const std::vector<char>& trusted,
-                                  const std::vector<char>& valid, int layers, VectorX& u) {
+                                  const std::vector<char>& valid, int layers,
+                                  double liquid_reach, VectorX& u) {
   const int nc = grid.num_cells();
   const double dx = grid.dx();
   const double reach = layers * dx;
-  // the air cells of the band, nearest the liquid first (ties in cell order)
+  // the air cells of the band (and the liquid's surface cells within liquid_reach), nearest the
+  // liquid first (ties in cell order)
+  const double lowest = liquid_reach > 0.0 ? -liquid_reach * dx : 0.0;
   std::vector<std::pair<double, int>> band;
   for (int c = 0; c < nc; ++c) {
     const VecI<Dim> ci = grid.cell_coord(c);
     const double p = phi[lattice.index(2 * ci + VecI<Dim>::Ones())];
-    if (p > 0.0 && p < reach) band.emplace_back(p, c);
+    if (p > lowest && p < reach) band.emplace_back(p, c);
   }
   std::sort(band.begin(), band.end());
   for (const auto& [p, c] : band) {
@@ -1127,7 +1133,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
                                             const SampleLattice<Dim>& lattice,
                                             const VectorX& fluid_face,
                                             const SolidField<Dim>& solids,
-                                            const std::array<BoundaryType, 2 * Dim>& boundary) {
+                                            const std::array<BoundaryType, 2 * Dim>& boundary,
+                                            bool surface_deficits) {
   DensityProjectionStats stats;
   const long np = static_cast<long>(particles.size());
   if (np == 0) return stats;
@@ -1362,7 +1369,10 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // Next to a solid a low T_c can come from the solid filling part of the cell, not from a
     // free surface, so with solids the air side is read from the level set extended into them.
     double e = *rho.find(ci) - v[kTarget];
-    if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide) e = std::max(e, 0.0);
+    if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide)
+      e = std::max(e, 0.0);
+    else if (!surface_deficits && v[kTarget] < kProjectionFullCell)
+      e = std::max(e, 0.0);
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
   }
@@ -1441,11 +1451,11 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
                                                 const VectorX& fluid_face,
                                                 const SolidField<Dim>& solids,
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
-                                                int iterations) {
+                                                int iterations, bool surface_deficits) {
   DensityProjectionStats total;
   for (int it = 0; it < iterations; ++it) {
-    const DensityProjectionStats one =
-        project_density_once(particles, grid, lattice, fluid_face, solids, boundary);
+    const DensityProjectionStats one = project_density_once(particles, grid, lattice, fluid_face,
+                                                            solids, boundary, surface_deficits);
     if (it == 0)
       total = one;
     else {
@@ -1815,14 +1825,14 @@ double max_particle_speed(const Particles<Dim>& particles) {
   template void divergence_free_air_velocity(const MacGrid<D>&, const SampleLattice<D>&,          \
                                             const VectorX&, const VectorX&,                       \
                                             const std::vector<char>&,                             \
-                                            const std::vector<char>&, int, VectorX&);             \
+                                            const std::vector<char>&, int, double, VectorX&);     \
   template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,         \
                                  const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);    \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
                                   const std::array<BoundaryType, 2 * D>&);                         \
   template DensityProjectionStats project_particle_density(                                        \
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
-      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int);                          \
+      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, bool);                    \
   template void liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                     \
                                        const SampleLattice<D>&,                                    \
                                        const std::array<BoundaryType, 2 * D>&,                     \

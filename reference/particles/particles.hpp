@@ -65,12 +65,16 @@ void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
 /// the level set's largest gradient component, towards larger phi) is set so that the cell's
 /// divergence vanishes, unless that face is trusted (trusted[f] != 0), a wall or cut by a solid.
 /// Cells with a face cut by a solid (0 < fluid_face < 1) or a fluid face the extrapolation did
-/// not reach (valid[f] == 0) are left as they are.
+/// not reach (valid[f] == 0) are left as they are. With liquid_reach > 0 the liquid cells of the
+/// surface (-liquid_reach dx < phi <= 0 at the centre) are treated first in the same way: their
+/// outer face, when it is not trusted (the solve's weight W_F^u W_L^u below the trusted fraction,
+/// so its solved value was replaced by the extrapolation), closes the cell's divergence.
 template <int Dim>
 void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                   const VectorX& phi, const VectorX& fluid_face,
                                   const std::vector<char>& trusted,
-                                  const std::vector<char>& valid, int layers, VectorX& u);
+                                  const std::vector<char>& valid, int layers,
+                                  double liquid_reach, VectorX& u);
 
 /// Extends u from faces with valid[f] != 0 into the others, `layers` rings deep (averaging valid
 /// neighbours of the same component); marks the filled faces valid.
@@ -118,13 +122,15 @@ struct DensityProjectionStats {
 /// corrected, so water at rest is a fixed point (docs/particles.md, "Still water"). `iterations` repeats the whole (reconstruction, solve, move); the stats are
 /// those of the first iteration (error_before) and the sums over all (iterations, max_move the
 /// largest). Respects solids, walls and periodicity; deterministic for any thread count.
+/// `surface_deficits` false (a measurement switch, docs/particles.md "Sloshing"): on the liquid
+/// side of the surface band too (1/2 <= T_c < kProjectionFullCell) only an excess is corrected.
 template <int Dim>
 DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                                 const SampleLattice<Dim>& lattice,
                                                 const VectorX& fluid_face,
                                                 const SolidField<Dim>& solids,
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
-                                                int iterations = 1);
+                                                int iterations = 1, bool surface_deficits = true);
 
 /// Iterations of project_particle_density applied to freshly seeded particles (the simulation
 /// does this once before frame 0, so the particle volume and the level set's agree from the

@@ -200,7 +200,8 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
   // the seeded particles spread so that their volume and the level set's agree from frame 0
   if (scene.particles.position_correction && switches_.density_projection)
     project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
-                             kSeedProjectionIterations);
+                             kSeedProjectionIterations,
+                             switches_.density_projection_surface_deficits);
   // frame 0: the seeded state on the grid (no pressure yet)
   particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
   update_liquid_weights();
@@ -471,7 +472,8 @@ void Simulation<Dim>::divergence_free_air() {
   std::vector<char> trusted;
   trusted_faces(trusted);
   divergence_free_air_velocity(grid_, lattice_, liquid_phi_, weights_.fluid_face, trusted,
-                               face_flags_, layers, u_);
+                               face_flags_, layers,
+                               switches_.divergence_free_surface_cells ? 1.0 : 0.0, u_);
 }
 
 template <int Dim>
@@ -573,8 +575,9 @@ void Simulation<Dim>::correct_volume(double dt) {
   ScopedTimer timer(stats_.timing[FramePhase::particles]);
   if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
   account(frame_ledger_.position_correction, [&] { return liquid_potential_energy(); });
-  if (switches_.density_projection)
-    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_);
+  if (switches_.density_projection && switches_.density_projection_in_steps)
+    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
+                             1, switches_.density_projection_surface_deficits);
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
 }
 

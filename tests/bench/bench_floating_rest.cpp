@@ -41,6 +41,15 @@ std::vector<Variant> variants() {
       {"no-projection", [](StageSwitches& s) { s.density_projection = false; }},
       {"no-line-15", [](StageSwitches& s) { s.position_correction = s.density_projection = false; }},
       {"pic", [](StageSwitches& s) { s.apic = false; }},
+      // the extrapolated velocity made divergence-free in the air and surface cells
+      // (docs/particles.md, "Sloshing")
+      {"divergence-free-surface",
+       [](StageSwitches& s) { s.divergence_free_air = s.divergence_free_surface_cells = true; }},
+      {"divergence-free-surface-no-projection",
+       [](StageSwitches& s) {
+         s.divergence_free_air = s.divergence_free_surface_cells = true;
+         s.density_projection = false;
+       }},
   };
 }
 

@@ -6,7 +6,8 @@
 //
 //   bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] [--every K] [--backend NAME]
 //                  [--no-projection] [--no-correction] [--max-dt DT] [--split-drift]
-//                  [--divergence-free-air]
+//                  [--divergence-free-air] [--divergence-free-surface] [--no-step-projection]
+//                  [--no-surface-deficits] [--seed N]
 //
 // Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
 // line before: which stage of the step changed the energy.
@@ -30,7 +31,9 @@ int main(int argc, char** argv) {
   double seconds = 10.0, slope = 0.1;
   std::string backend = "matrixfree";
   bool no_projection = false, no_correction = false, split_drift = false, divfree_air = false;
+  bool divfree_surface = false, no_step_projection = false, no_surface_deficits = false;
   double max_dt = 0.02;
+  int seed = 0;
   bench::BenchArgs args(argc, argv);
   while (args.next()) {
     const std::string& a = args.flag();
@@ -45,6 +48,10 @@ int main(int argc, char** argv) {
     else if (a == "--no-correction") no_correction = true;
     else if (a == "--split-drift") split_drift = true;
     else if (a == "--divergence-free-air") divfree_air = true;
+    else if (a == "--divergence-free-surface") divfree_air = divfree_surface = true;
+    else if (a == "--no-step-projection") no_step_projection = true;
+    else if (a == "--no-surface-deficits") no_surface_deficits = true;
+    else if (a == "--seed") seed = std::atoi(args.value().c_str());
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
                    "[--every K] [--backend NAME]\n";
@@ -62,8 +69,12 @@ int main(int argc, char** argv) {
   if (no_correction) switches.position_correction = false;
   if (split_drift) switches.split_advection = true;
   if (divfree_air) switches.divergence_free_air = true;
+  if (divfree_surface) switches.divergence_free_surface_cells = true;
+  if (no_step_projection) switches.density_projection_in_steps = false;
+  if (no_surface_deficits) switches.density_projection_surface_deficits = false;
   nlohmann::json scene = tank(dim, cells, seconds, backend, slope);
   scene["time"]["max_dt"] = max_dt;
+  if (seed > 0) scene["particles"]["seed"] = seed;
   const auto sim = make_simulation(parse_scene(scene, "sloshing.json", "."), switches);
   const FrameStats s0 = sim->current_stats();
   const double e0 = total_energy(s0);

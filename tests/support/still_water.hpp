@@ -120,6 +120,8 @@ struct SloshResult {
   double available = 0.0;  ///< potential energy of the tilt above a flat surface (J)
   double max_rise = 0.0;   ///< largest E(t) - E(0) over the run (J)
   double end_change = 0.0;  ///< E(end) - E(0) (J)
+  /// with StageSwitches::energy_ledger: the potential energy the density projection added (J)
+  double projection = 0.0;
   bool converged = true;
 };
 
@@ -144,6 +146,7 @@ inline SloshResult run_slosh(int dim, int cells, double seconds, const std::stri
     r.converged = r.converged && s.solver.converged;
     e = total_energy(s);
     r.max_rise = std::max(r.max_rise, e - e0);
+    r.projection += sim->energy_ledger().density_projection;
   }
   r.end_change = e - e0;
   return r;
