@@ -12,18 +12,6 @@ namespace monolith {
 
 namespace {
 
-/// Global index of the face normal to `axis` at coordinate f, wrapped along periodic axes, or -1
-/// where it lies outside the domain.
-template <int Dim>
-int face_index_or_outside(const MacGrid<Dim>& grid, int axis, VecI<Dim> f) {
-  const VecI<Dim> dims = grid.face_dims(axis);
-  for (int b = 0; b < Dim; ++b) {
-    if (grid.periodic(b)) f[b] = ((f[b] % dims[b]) + dims[b]) % dims[b];
-    if (f[b] < 0 || f[b] >= dims[b]) return -1;
-  }
-  return grid.face_index(axis, f);
-}
-
 template <int Dim>
 bool in_group(const CouplingBody<Dim>& body, BodyGroup group) {
   return body.two_way == (group == BodyGroup::two_way);
@@ -397,7 +385,7 @@ std::vector<std::pair<int, double>> deformation_rate_row(const StressGrid<Dim>& 
   std::vector<std::pair<int, double>> row;
   bool all = true;
   auto add = [&](int axis, const VecI<Dim>& f, double coef) {
-    const int index = face_index_or_outside(grid, axis, f);
+    const int index = grid.face_index_or_outside(axis, f);
     if (index < 0) {
       all = false;
       return;
@@ -479,8 +467,8 @@ bool BodyCouplingOperator<Dim>::pressure_column(int body, int cell, Block& colum
   // (the cell is its minus side, G = -1/dx)
   std::array<int, 2 * Dim> faces;
   for (int a = 0; a < Dim; ++a) {
-    faces[2 * a] = face_index_or_outside(grid_, a, c);
-    faces[2 * a + 1] = face_index_or_outside(grid_, a, VecI<Dim>(c + unit_offset<Dim>(a)));
+    faces[2 * a] = grid_.face_index_or_outside(a, c);
+    faces[2 * a + 1] = grid_.face_index_or_outside(a, VecI<Dim>(c + unit_offset<Dim>(a)));
   }
   // cancellation: equal body weight on every face (inside the body or outside it)
   bool uniform = true;

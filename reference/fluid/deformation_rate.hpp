@@ -27,6 +27,34 @@ namespace monolith {
 template <int Dim>
 SparseMatrix deformation_rate_matrix(const StressGrid<Dim>& stress);
 
+/// The entries of row `row` of D (eq. (8)), as the stencil above states them: visit(face, value)
+/// for each face inside the domain, in the order deformation_rate_matrix inserts them (two faces
+/// for a diagonal row, four for an off-diagonal one; on a periodic axis of two cells two of them
+/// can be the same face, which the matrix sums). The one spelling of D's stencil, also used where
+/// D is applied without being assembled (deformation_rate_transpose_product).
+template <int Dim, class Visit>
+void for_each_deformation_rate_entry(const StressGrid<Dim>& stress, int row, Visit&& visit) {
+  const MacGrid<Dim>& grid = stress.grid();
+  const double inv_dx = 1.0 / grid.dx();
+  auto add = [&](int axis, const VecI<Dim>& f, double w) {
+    const int col = grid.face_index_or_outside(axis, f);
+    if (col >= 0) visit(col, w);  // faces outside: zero velocity
+  };
+  const auto [k, c] = stress.coord(row);
+  const auto [a, b] = StressGrid<Dim>::component_axes(k);
+  if (a == b) {
+    // diagonal: du_a/da across the cell
+    add(a, c + unit_offset<Dim>(a), inv_dx);
+    add(a, c, -inv_dx);
+  } else {
+    // off-diagonal: 1/2 (du_a/db + du_b/da) from the four faces around the node/edge
+    add(a, c, 0.5 * inv_dx);
+    add(a, c - unit_offset<Dim>(b), -0.5 * inv_dx);
+    add(b, c, 0.5 * inv_dx);
+    add(b, c - unit_offset<Dim>(a), -0.5 * inv_dx);
+  }
+}
+
 /// The same D for the stress layout of grid (StressGrid(grid)).
 template <int Dim>
 SparseMatrix deformation_rate_matrix(const MacGrid<Dim>& grid);

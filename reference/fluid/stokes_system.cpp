@@ -827,21 +827,6 @@ double MatrixFreeStokesOperator<Dim>::bytes_per_apply() const {
 
 // --- update, scatter, energy, solve ---------------------------------------------------------
 
-namespace {
-
-/// Index of the face of `axis` at f after periodic wrapping, -1 outside the domain (as
-/// deformation_rate_matrix drops such faces).
-template <int Dim>
-int wrapped_face_or_outside(const MacGrid<Dim>& grid, int axis, VecI<Dim> f) {
-  const VecI<Dim> dims = grid.face_dims(axis);
-  for (int a = 0; a < Dim; ++a) {
-    if (grid.periodic(a)) f[a] = ((f[a] % dims[a]) + dims[a]) % dims[a];
-    if (f[a] < 0 || f[a] >= dims[a]) return -1;
-  }
-  return grid.face_index(axis, f);
-}
-
-}  // namespace
 
 /// D^T (M W_L^s tau) on every face without assembling D (deformation_rate_matrix over the whole
 /// grid cost about 0.15 s per step at 64^3, more than the rest of the update): the rows of D
@@ -853,29 +838,14 @@ int wrapped_face_or_outside(const MacGrid<Dim>& grid, int axis, VecI<Dim> f) {
 template <int Dim>
 VectorX deformation_rate_transpose_product(const StressGrid<Dim>& stress, const VectorX& liquid_stress,
                                            const VectorX& tau_full) {
-  const MacGrid<Dim>& grid = stress.grid();
-  const double inv_dx = 1.0 / grid.dx();
-  VectorX y = VectorX::Zero(grid.num_faces());
+  VectorX y = VectorX::Zero(stress.grid().num_faces());
   for (int row = 0; row < stress.num_dofs(); ++row) {
-    const auto [k, c] = stress.coord(row);
+    const int k = stress.coord(row).first;
     const double s = StressGrid<Dim>::multiplicity(k) * liquid_stress[row] * tau_full[row];
     if (s == 0.0) continue;
     std::array<std::pair<int, double>, 4> e;
     int m = 0;
-    auto add = [&](int axis, const VecI<Dim>& f, double v) {
-      const int col = wrapped_face_or_outside(grid, axis, f);
-      if (col >= 0) e[m++] = {col, v};
-    };
-    const auto [a, b] = StressGrid<Dim>::component_axes(k);
-    if (a == b) {
-      add(a, c + unit_offset<Dim>(a), inv_dx);
-      add(a, c, -inv_dx);
-    } else {
-      add(a, c, 0.5 * inv_dx);
-      add(a, c - unit_offset<Dim>(b), -0.5 * inv_dx);
-      add(b, c, 0.5 * inv_dx);
-      add(b, c - unit_offset<Dim>(a), -0.5 * inv_dx);
-    }
+    for_each_deformation_rate_entry(stress, row, [&](int col, double v) { e[m++] = {col, v}; });
     // the stored row: sorted by face, duplicates summed in insertion order (stable sort)
     std::stable_sort(e.begin(), e.begin() + m, [](const auto& p, const auto& q) { return p.first < q.first; });
     for (int i = 0; i < m;) {

@@ -78,6 +78,9 @@ class MacGrid {
   int num_faces() const { return face_offset_[Dim]; }
   int face_offset(int axis) const { return face_offset_[axis]; }
   int face_index(int axis, const VecI<Dim>& f) const;
+  /// Index of the face normal to `axis` at f after periodic wrapping (face_dims(axis) per axis),
+  /// or -1 if it lies outside the domain.
+  int face_index_or_outside(int axis, VecI<Dim> f) const;
   /// (axis, coordinate) of a global face index.
   std::pair<int, VecI<Dim>> face_coord(int index) const;
   Vec<Dim> face_center(int axis, const VecI<Dim>& f) const;
@@ -157,6 +160,16 @@ inline int MacGrid<Dim>::cell_index_or_outside(const VecI<Dim>& c) const {
 template <int Dim>
 inline int MacGrid<Dim>::face_index(int axis, const VecI<Dim>& f) const {
   return face_offset_[axis] + lattice_index<Dim>(f, face_dims_[axis]);
+}
+
+template <int Dim>
+inline int MacGrid<Dim>::face_index_or_outside(int axis, VecI<Dim> f) const {
+  const VecI<Dim>& dims = face_dims_[axis];
+  for (int a = 0; a < Dim; ++a) {
+    if (periodic_[a]) f[a] = ((f[a] % dims[a]) + dims[a]) % dims[a];
+    if (f[a] < 0 || f[a] >= dims[a]) return -1;
+  }
+  return face_index(axis, f);
 }
 
 template <int Dim>
