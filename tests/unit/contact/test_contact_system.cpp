@@ -153,6 +153,24 @@ ContactParameters test_parameters() {
   return p;
 }
 
+/// A sphere of radius 0.1 (density 500) centred at (0.5, 0.1[, 0.5]) and its contact with the
+/// floor (wall face 2, normal +y, at the sphere's lowest point); the caller sets phi and the
+/// body's velocity.
+template <int Dim>
+std::pair<std::vector<RigidBody<Dim>>, Contact<Dim>> sphere_on_floor() {
+  Vec<Dim> c = Vec<Dim>::Constant(0.5);
+  c[1] = 0.1;
+  json bodies = json::array();
+  bodies.push_back({{"density", 500}, {"shape", {{"type", "sphere"}, {"center", vec_json<Dim>(c)}, {"radius", 0.1}}}});
+  Contact<Dim> k;
+  k.body_a = 0;
+  k.body_b = -1;
+  k.wall_face = 2;
+  k.normal = Vec<Dim>::Unit(1);
+  k.point = c - 0.1 * Vec<Dim>::Unit(1);
+  return {make_bodies<Dim>(scene_with(Dim, bodies)), k};
+}
+
 }  // namespace
 
 TEMPLATE_TEST_CASE_SIG("J_lambda and J_z rows are the relative contact velocities (finite differences of positions)",
@@ -225,19 +243,11 @@ TEMPLATE_TEST_CASE_SIG("A33 and A44 of eq. (24) are symmetric positive semi-defi
 
 TEMPLATE_TEST_CASE_SIG("b3 of eq. (16): zero at rest at phi = -epsilon, negative when separating, Baumgarte when deeper",
                        "[unit]", ((int Dim), Dim), 2, 3) {
-  Vec<Dim> c = Vec<Dim>::Constant(0.5);
-  c[1] = 0.1;
-  json bodies = json::array();
-  bodies.push_back({{"density", 500}, {"shape", {{"type", "sphere"}, {"center", vec_json<Dim>(c)}, {"radius", 0.1}}}});
-  std::vector<RigidBody<Dim>> b = make_bodies<Dim>(scene_with(Dim, bodies));
+  auto setup = sphere_on_floor<Dim>();
+  std::vector<RigidBody<Dim>>& b = setup.first;
+  Contact<Dim>& k = setup.second;
   const ContactParameters p = test_parameters<Dim>();
   const double eps = p.margin_cells * p.dx;
-  Contact<Dim> k;
-  k.body_a = 0;
-  k.body_b = -1;
-  k.wall_face = 2;
-  k.normal = Vec<Dim>::Unit(1);
-  k.point = c - 0.1 * Vec<Dim>::Unit(1);
   // resting: zero velocity, phi = -epsilon
   b[0].velocity.setZero();
   k.phi = -eps;
@@ -276,20 +286,12 @@ TEMPLATE_TEST_CASE_SIG("b3 of eq. (16): zero at rest at phi = -epsilon, negative
 
 TEMPLATE_TEST_CASE_SIG("eq. (16) with the recovery cap: the push-out speed stops growing as dt shrinks",
                        "[unit]", ((int Dim), Dim), 2, 3) {
-  Vec<Dim> c = Vec<Dim>::Constant(0.5);
-  c[1] = 0.1;
-  json bodies = json::array();
-  bodies.push_back({{"density", 500}, {"shape", {{"type", "sphere"}, {"center", vec_json<Dim>(c)}, {"radius", 0.1}}}});
-  std::vector<RigidBody<Dim>> b = make_bodies<Dim>(scene_with(Dim, bodies));
+  auto setup = sphere_on_floor<Dim>();
+  std::vector<RigidBody<Dim>>& b = setup.first;
+  Contact<Dim>& k = setup.second;
   b[0].velocity.setZero();
   const ContactParameters p = test_parameters<Dim>();
   const double eps = p.margin_cells * p.dx;
-  Contact<Dim> k;
-  k.body_a = 0;
-  k.body_b = -1;
-  k.wall_face = 2;
-  k.normal = Vec<Dim>::Unit(1);
-  k.point = c - 0.1 * Vec<Dim>::Unit(1);
   k.phi = -eps - 0.004;  // 4 mm beyond the margin, at rest
   // the speed after the solve of the contact alone (the push-out speed of eq. (16))
   auto push_out = [&](const ContactParameters& q) {
