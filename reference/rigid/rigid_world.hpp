@@ -25,7 +25,8 @@ struct RigidWorldSettings {
   double dx = 1.0;  ///< cell width: margin epsilon = margin_cells dx, alpha = 1/dx^Dim
   double baumgarte = SolverSpec{}.baumgarte;            ///< beta of eq. (16)
   /// Cap on eq. (16)'s recovery speed (m/s; ContactParameters::max_recovery_speed). Infinite
-  /// unless set; from_scene: solver.max_recovery_speed, or beta dx / time.max_dt without it.
+  /// unless set; from_scene: solver.max_recovery_speed, or without it beta dx / dt_max with
+  /// dt_max = min(time.max_dt, 1 / time.fps), the scene's largest step.
   double max_recovery_speed = std::numeric_limits<double>::infinity();
   double margin_cells = SolverSpec{}.contact_margin;    ///< epsilon / dx (solver.contact_margin)
   double diagonal_boost = SolverSpec{}.diagonal_boost;  ///< gamma of section 4.4.5

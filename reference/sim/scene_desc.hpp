@@ -82,8 +82,8 @@ struct SolverSpec {
   double baumgarte = 0.2;
   /// `solver.max_recovery_speed` (m/s): the cap on eq. (16)'s recovery speed -beta phi / dt
   /// (ContactParameters::max_recovery_speed); 0 (the key absent) = the default rule
-  /// beta dx / time.max_dt, the speed eq. (16) gives a penetration of one cell at the scene's
-  /// largest step (RigidWorldSettings::from_scene).
+  /// beta dx / min(time.max_dt, 1 / time.fps), the speed eq. (16) gives a penetration of one
+  /// cell at the scene's largest step (RigidWorldSettings::from_scene).
   double max_recovery_speed = 0.0;
   double contact_margin = 0.1;  ///< epsilon of section 3.2.4, in units of dx
   double shrink = 0.01;         ///< zeta of section 4.4.6, in units of dx
