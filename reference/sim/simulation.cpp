@@ -123,6 +123,36 @@ constexpr double kBodyCellFraction = 0.5;
 /// divergence one face.
 constexpr int kAirVelocityLayers = 2;
 
+/// stress_viscosity(stress, particles, values) without the particle splat when the values make
+/// it a constant, else `fallback()`. Every value 0: each reached DOF divides a sum of zeros by
+/// its mass, every fill averages zeros and the liquid's mean is zero, so the field is +0
+/// everywhere. Every value 1 (the indicator of the only liquid, liquid_stress_fractions): each
+/// product w m 1 is w m, so a reached DOF divides its mass by itself, every fill averages ones
+/// and the liquid's mean is its mass over itself, so the field is 1 everywhere (0 without
+/// particle mass). The same bits as the splat, for a fraction of a step's weights
+/// (docs/particles.md, "Speed").
+template <int Dim, class Fallback>
+VectorX stress_viscosity_constant_or(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
+                                     const std::vector<double>& values, Fallback&& fallback) {
+  const auto all = [&](double v) {
+    return !values.empty() &&
+           std::all_of(values.begin(), values.end(), [v](double e) { return e == v; });
+  };
+  const int nv = static_cast<int>(values.size());
+  const bool indices_in_range = std::all_of(particles.liquid.begin(), particles.liquid.end(),
+                                            [nv](int l) { return l >= 0 && l < nv; });
+  const bool masses = std::all_of(particles.mass.begin(), particles.mass.end(),
+                                  [](double m) { return std::isfinite(m) && m >= 0.0; });
+  if (!indices_in_range || !masses) return fallback();
+  if (all(0.0)) return VectorX::Zero(stress.num_dofs());
+  if (all(1.0)) {
+    const bool mass = std::any_of(particles.mass.begin(), particles.mass.end(),
+                                  [](double m) { return m > 0.0; });
+    return VectorX::Constant(stress.num_dofs(), mass ? 1.0 : 0.0);
+  }
+  return fallback();
+}
+
 }  // namespace
 
 template <int Dim>
@@ -242,10 +272,19 @@ void Simulation<Dim>::update_liquid_weights() {
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
     stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
-    stress_eta_ = stress_viscosity(stress_grid_, particles_, liquid_eta_);
+    // (a non-Newtonian liquid's eta here is 0, and the only liquid's fractions are 1: constants
+    // without the splat, the same bits)
+    stress_eta_ = stress_viscosity_constant_or(stress_grid_, particles_, liquid_eta_, [&] {
+      return stress_viscosity(stress_grid_, particles_, liquid_eta_);
+    });
     if (non_newtonian_) {
-      mixture_.fractions = liquid_stress_fractions(stress_grid_, particles_,
-                                                   static_cast<int>(mixture_.models.size()));
+      const int liquids = static_cast<int>(mixture_.models.size());
+      if (liquids == 1)
+        mixture_.fractions = {stress_viscosity_constant_or(
+            stress_grid_, particles_, std::vector<double>{1.0},
+            [&] { return liquid_stress_fractions(stress_grid_, particles_, 1).front(); })};
+      else
+        mixture_.fractions = liquid_stress_fractions(stress_grid_, particles_, liquids);
       // n = 1, tau0 = 0 for all: the Newtonian path's eta per DOF (bit for bit the same run)
       if (mixture_.is_newtonian()) {
         std::vector<double> k;
