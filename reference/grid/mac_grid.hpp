@@ -14,7 +14,9 @@
 /// The stress DOFs (stress_grid.hpp: cell centres for diagonal components, nodes in 2D / edges in
 /// 3D for off-diagonal ones) extend this numbering in the same way.
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <utility>
 
 #include "reference/core/common.hpp"
@@ -114,6 +116,16 @@ class MacGrid {
   static Vec<Dim> face_shift(int axis);
 
  private:
+  /// One axis of stencil(): the two sample indices, their linear weights and the weights'
+  /// derivatives at the lattice coordinate s = (x - origin) / dx - shift on an axis of n samples.
+  struct AxisStencil {
+    std::array<int, 2> index;
+    std::array<double, 2> weight, slope;
+  };
+  AxisStencil axis_stencil(int axis, double s, int n) const;
+  /// Component `axis` of u from the grid coordinates q = (x - origin) / dx of a wrapped point.
+  double interpolate_face_at(const VectorX& u, int axis, const Vec<Dim>& q) const;
+
   Vec<Dim> origin_ = Vec<Dim>::Zero();
   double dx_ = 1.0;
   VecI<Dim> cells_ = VecI<Dim>::Ones();
@@ -206,6 +218,124 @@ inline Vec<Dim> MacGrid<Dim>::face_shift(int axis) {
   Vec<Dim> s = Vec<Dim>::Constant(0.5);
   s[axis] = 0.0;
   return s;
+}
+
+// --- positions and interpolation, inline: advection, the transfers and the viscosity samples
+// call these per particle (the out-of-line stencil was 4 % of a 64^3 drop's profile)
+
+template <int Dim>
+inline Vec<Dim> MacGrid<Dim>::wrap_position(Vec<Dim> x) const {
+  for (int a = 0; a < Dim; ++a) {
+    if (!periodic_[a]) continue;
+    const double length = cells_[a] * dx_;
+    x[a] = origin_[a] + std::fmod(std::fmod(x[a] - origin_[a], length) + length, length);
+    if (x[a] >= origin_[a] + length) x[a] = origin_[a];  // fmod round-off at the upper end
+  }
+  return x;
+}
+
+template <int Dim>
+inline typename MacGrid<Dim>::AxisStencil MacGrid<Dim>::axis_stencil(int a, double s,
+                                                                     int n) const {
+  AxisStencil st;
+  if (periodic_[a]) {
+    const int i0 = static_cast<int>(std::floor(s));
+    const double t = s - i0;
+    st.index = {((i0 % n) + n) % n, (((i0 + 1) % n) + n) % n};
+    st.weight = {1.0 - t, t};
+    st.slope = {-1.0 / dx_, 1.0 / dx_};
+  } else if (n == 1) {
+    st.index = {0, 0};
+    st.weight = {1.0, 0.0};
+    st.slope = {0.0, 0.0};
+  } else {
+    // constant extrapolation beyond the outermost samples
+    const double sc = std::clamp(s, 0.0, static_cast<double>(n - 1));
+    const int i0 = std::min(static_cast<int>(std::floor(sc)), n - 2);
+    const double t = sc - i0;
+    const bool inside = s > 0.0 && s < n - 1;
+    st.index = {i0, i0 + 1};
+    st.weight = {1.0 - t, t};
+    st.slope = inside ? std::array<double, 2>{-1.0 / dx_, 1.0 / dx_}
+                      : std::array<double, 2>{0.0, 0.0};
+  }
+  return st;
+}
+
+template <int Dim>
+inline void MacGrid<Dim>::stencil(const Vec<Dim>& x, const Vec<Dim>& shift, const VecI<Dim>& dims,
+                                  std::array<int, (1 << Dim)>& idx,
+                                  std::array<double, (1 << Dim)>& w,
+                                  std::array<Vec<Dim>, (1 << Dim)>* grad) const {
+  // per axis: the two sample indices and the linear weights (and their derivatives)
+  std::array<AxisStencil, Dim> st;
+  for (int a = 0; a < Dim; ++a) st[a] = axis_stencil(a, (x[a] - origin_[a]) / dx_ - shift[a], dims[a]);
+  for (int corner = 0; corner < (1 << Dim); ++corner) {
+    int index = 0;
+    double weight = 1.0;
+    for (int a = Dim - 1; a >= 0; --a) index = index * dims[a] + st[a].index[(corner >> a) & 1];
+    for (int a = 0; a < Dim; ++a) weight *= st[a].weight[(corner >> a) & 1];
+    idx[corner] = index;
+    w[corner] = weight;
+    if (grad) {
+      Vec<Dim> g;
+      for (int a = 0; a < Dim; ++a) {
+        double ga = st[a].slope[(corner >> a) & 1];
+        for (int b = 0; b < Dim; ++b)
+          if (b != a) ga *= st[b].weight[(corner >> b) & 1];
+        g[a] = ga;
+      }
+      (*grad)[corner] = g;
+    }
+  }
+}
+
+template <int Dim>
+inline double MacGrid<Dim>::interpolate_face_at(const VectorX& u, int axis,
+                                                const Vec<Dim>& q) const {
+  // stencil() at the face lattice of `axis` (shift 0.5 but 0 along axis), summed as it would be
+  const VecI<Dim>& dims = face_dims_[axis];
+  std::array<AxisStencil, Dim> st;
+  for (int a = 0; a < Dim; ++a) st[a] = axis_stencil(a, q[a] - (a == axis ? 0.0 : 0.5), dims[a]);
+  const double* base = u.data() + face_offset_[axis];
+  double value = 0.0;
+  for (int corner = 0; corner < (1 << Dim); ++corner) {
+    int index = 0;
+    double weight = 1.0;
+    for (int a = Dim - 1; a >= 0; --a) index = index * dims[a] + st[a].index[(corner >> a) & 1];
+    for (int a = 0; a < Dim; ++a) weight *= st[a].weight[(corner >> a) & 1];
+    value += weight * base[index];
+  }
+  return value;
+}
+
+template <int Dim>
+inline double MacGrid<Dim>::interpolate_face(const VectorX& u, int axis, const Vec<Dim>& x) const {
+  const Vec<Dim> xw = wrap_position(x);
+  Vec<Dim> q;
+  for (int a = 0; a < Dim; ++a) q[a] = (xw[a] - origin_[a]) / dx_;
+  return interpolate_face_at(u, axis, q);
+}
+
+template <int Dim>
+inline Vec<Dim> MacGrid<Dim>::interpolate_velocity(const VectorX& u, const Vec<Dim>& x) const {
+  // one wrap and one division per axis for the Dim components
+  const Vec<Dim> xw = wrap_position(x);
+  Vec<Dim> q;
+  for (int a = 0; a < Dim; ++a) q[a] = (xw[a] - origin_[a]) / dx_;
+  Vec<Dim> v;
+  for (int a = 0; a < Dim; ++a) v[a] = interpolate_face_at(u, a, q);
+  return v;
+}
+
+template <int Dim>
+inline double MacGrid<Dim>::interpolate_cell(const VectorX& q, const Vec<Dim>& x) const {
+  std::array<int, (1 << Dim)> idx;
+  std::array<double, (1 << Dim)> w;
+  stencil(wrap_position(x), Vec<Dim>::Constant(0.5), cells_, idx, w);
+  double value = 0.0;
+  for (int k = 0; k < (1 << Dim); ++k) value += w[k] * q[idx[k]];
+  return value;
 }
 
 /// A regular lattice of sample points origin + index * spacing, index in [0, dims) (x fastest).
