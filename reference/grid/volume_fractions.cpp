@@ -197,6 +197,68 @@ inline void for_slab(VecI<Dim> c, const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&&
   }
 }
 
+/// LatticeSigns' table of the mixed cells' fractions, from its classes and box: a count per
+/// row, the rows' starts, then the fractions, each row on one thread (fixed rows, each value
+/// independent: the same table for any thread count).
+template <int Dim>
+void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
+                          LatticeSigns<Dim>& signs) {
+  using Signs = LatticeSigns<Dim>;
+  constexpr int kCorners = 1 << Dim;
+  signs.phi_data = phi.data();
+  signs.phi_size = static_cast<long>(phi.size());
+  signs.mixed_x.clear();
+  signs.mixed_fraction.clear();
+  if (!signs.any_negative()) {
+    signs.row_start.assign(1, 0);
+    return;
+  }
+  const VecI<Dim> lo = signs.lo, hi = signs.hi;
+  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+  VecI<Dim> pstride, cstride;
+  pstride[0] = cstride[0] = 1;
+  for (int a = 1; a < Dim; ++a) {
+    pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
+    cstride[a] = cstride[a - 1] * signs.cells[a - 1];
+  }
+  // corner k of a lattice cell: point offset of its bits
+  std::array<int, kCorners> corner_offset;
+  for (int k = 0; k < kCorners; ++k) {
+    corner_offset[k] = 0;
+    for (int a = 0; a < Dim; ++a) corner_offset[k] += ((k >> a) & 1) * pstride[a];
+  }
+  signs.row_start.assign(rows + 1, 0);
+  const int nx = hi[0] - lo[0] + 1;
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int q = 0; q < rows; ++q) {
+    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+    const std::uint8_t* cls = signs.cls.data() + c.dot(cstride);
+    int count = 0;
+    for (int x = 0; x < nx; ++x) count += cls[x] == Signs::kMixed;
+    signs.row_start[q + 1] = count;
+  }
+  for (int q = 0; q < rows; ++q) signs.row_start[q + 1] += signs.row_start[q];
+  signs.mixed_x.resize(signs.row_start[rows]);
+  signs.mixed_fraction.resize(signs.row_start[rows]);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int q = 0; q < rows; ++q) {
+    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+    const std::uint8_t* cls = signs.cls.data() + c.dot(cstride);
+    const int point = c.dot(pstride);
+    int slot = signs.row_start[q];
+    for (int x = 0; x < nx; ++x) {
+      if (cls[x] != Signs::kMixed) continue;
+      std::array<double, kCorners> corners;
+      for (int k = 0; k < kCorners; ++k) corners[k] = phi[point + x + corner_offset[k]];
+      signs.mixed_x[slot] = lo[0] + x;
+      signs.mixed_fraction[slot] = lattice_cell_negative_fraction<Dim>(corners);
+      ++slot;
+    }
+  }
+}
+
 }  // namespace
 
 template <int Dim>
@@ -291,6 +353,7 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
     signs.written_hi = -VecI<Dim>::Ones();
     signs.lo = lo;
     signs.hi = hi;
+    mixed_cell_fractions(lattice, phi, signs);
     return;
   }
   // row r of a cell row: point offset of bit b of r along axis b + 1
@@ -348,6 +411,7 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
   }
   signs.lo = lo;
   signs.hi = hi;
+  mixed_cell_fractions(lattice, phi, signs);
 }
 
 template <int Dim>
@@ -359,6 +423,8 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
   constexpr int kCorners = 1 << Dim;
   std::fill(out, out + dims.prod(), 0.0);
   if (!signs.any_negative()) return;
+  // the mixed lattice cells' fractions made with the classes (when made from this level set)
+  const bool memo = signs.phi_data == phi.data() && signs.phi_size == static_cast<long>(phi.size());
   // control volumes c whose lattice cells 2 c + off + {0, 1} (mirrored at walls: at most one
   // lattice cell inwards) can reach the box [lo, hi]; every c on a periodic axis
   VecI<Dim> from, to;
@@ -412,6 +478,10 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
           sum += 0.0;
         } else if (cl == Signs::kNegative) {
           sum += 1.0;
+        } else if (memo) {
+          VecI<Dim> cell;
+          for (int a = 0; a < Dim; ++a) cell[a] = l[a][(sub >> a) & 1];
+          sum += signs.mixed_fraction_of(cell);
         } else {
           std::array<double, kCorners> corners;
           for (int k = 0; k < kCorners; ++k) {

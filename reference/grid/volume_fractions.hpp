@@ -82,6 +82,24 @@ struct LatticeSigns {
   /// class outside it is kPositive. The next classification resets only this box (issue 20: a
   /// buffer kept across steps is rewritten in the band, not over the whole lattice).
   VecI<Dim> written_lo = VecI<Dim>::Zero(), written_hi = -VecI<Dim>::Ones();
+  /// The fraction of every kMixed lattice cell (lattice_cell_negative_fraction of its corners),
+  /// made once with the classes: a mixed cell is shared by up to 2 + 3 Dim control volumes (a
+  /// cell, Dim faces, the stress DOFs), which read it from here instead of splitting it again.
+  /// Per row of lattice cells along x in the box [lo, hi] (rows numbered x-less, axis 1
+  /// fastest), the mixed cells' x in ascending order and their fractions, entries
+  /// [row_start[r], row_start[r + 1]). Made from the level set at `phi_data` (size phi_size);
+  /// a fraction call with another level set computes them itself.
+  std::vector<int> row_start, mixed_x;
+  std::vector<double> mixed_fraction;
+  const double* phi_data = nullptr;
+  long phi_size = -1;
+  /// The stored fraction of mixed lattice cell l (in the box, class kMixed).
+  double mixed_fraction_of(const VecI<Dim>& l) const {
+    int row = 0;
+    for (int a = Dim - 1; a >= 1; --a) row = row * (hi[a] - lo[a] + 1) + (l[a] - lo[a]);
+    const auto first = mixed_x.begin() + row_start[row], last = mixed_x.begin() + row_start[row + 1];
+    return mixed_fraction[std::lower_bound(first, last, l[0]) - mixed_x.begin()];
+  }
 };
 
 /// Inclusive box [lo, hi] of the lattice points where phi < 0 (lo > hi: none; NaN counts as not
