@@ -8,7 +8,8 @@
 /// grid one lattice-sized vector of doubles is 541 MB).
 ///
 /// Each point holds `Stride` values of type T side by side (for example the Dim + 2 sums of a
-/// particle splat: weight, radius, position). Tiles are made serially (touch_box, at); once made,
+/// particle splat: weight, radius, position). Tiles are made serially (touch_box, at) or from
+/// flags marked on several threads (mark_box, make_tiles); once made,
 /// find() / point() of distinct points may run on several threads at once (no tile is made
 /// there). Tiles are ordered by tile index, points in a tile as the lattice orders them
 /// (lattice_index: axis 0 fastest), so for_each_point visits the points in a fixed order.
@@ -79,6 +80,50 @@ class TiledLattice {
       }
       if (a == Dim) return;
     }
+  }
+
+  /// Tile flags for making tiles on several threads: mark_box sets the flag of every tile
+  /// holding a point of the box [lo, hi] (clamped; flags: one per tile slot, made by
+  /// tile_flags()), and may run on several threads at once; make_tiles then makes the flagged
+  /// tiles, filling them in parallel. The same tiles as touch_box of every box.
+  std::vector<unsigned char> tile_flags() const {
+    return std::vector<unsigned char>(tiles_.size(), 0);
+  }
+  void mark_box(VecI<Dim> lo, VecI<Dim> hi, std::vector<unsigned char>& flags) const {
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = std::max(lo[a], 0);
+      hi[a] = std::min(hi[a], dims_[a] - 1);
+      if (lo[a] > hi[a]) return;
+      lo[a] /= kTile;
+      hi[a] /= kTile;
+    }
+    VecI<Dim> t = lo;
+    while (true) {
+      unsigned char& flag = flags[lattice_index<Dim>(t, tile_dims_)];
+      // the same value from any thread (an integer store, no float atomics)
+#pragma omp atomic write
+      flag = 1;
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++t[a] <= hi[a]) break;
+        t[a] = lo[a];
+      }
+      if (a == Dim) return;
+    }
+  }
+  void make_tiles(const std::vector<unsigned char>& flags, int threads) {
+    const int slots = num_tile_slots();
+    int made = 0;
+#pragma omp parallel for schedule(static) reduction(+ : made) num_threads(threads)
+    for (int tile = 0; tile < slots; ++tile) {
+      if (!flags[tile] || tiles_[tile]) continue;
+      std::unique_ptr<T[]>& data = tiles_[tile];
+      data.reset(new T[static_cast<std::size_t>(kTilePoints) * Stride]);
+      std::fill(data.get(), data.get() + static_cast<std::size_t>(kTilePoints) * Stride,
+                background_);
+      ++made;
+    }
+    num_tiles_ += made;
   }
 
   /// The Stride values of point c, making its tile if needed. Serial (it may make a tile).

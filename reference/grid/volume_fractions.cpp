@@ -421,7 +421,7 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
                                        double* out) {
   using Signs = LatticeSigns<Dim>;
   constexpr int kCorners = 1 << Dim;
-  std::fill(out, out + dims.prod(), 0.0);
+  fill_in_parallel(out, dims.prod(), 0.0);
   if (!signs.any_negative()) return;
   // the mixed lattice cells' fractions made with the classes (when made from this level set)
   const bool memo = signs.phi_data == phi.data() && signs.phi_size == static_cast<long>(phi.size());

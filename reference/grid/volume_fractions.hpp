@@ -239,6 +239,16 @@ void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& l
                                       const VecI<Dim>& solid_lo, const VecI<Dim>& solid_hi,
                                       VectorX& out);
 
+/// out[0 .. n) = value on several threads (fixed blocks): the zero or background fill of a
+/// grid- or lattice-sized output, which on one thread is a serial pass over the whole vector.
+inline void fill_in_parallel(double* out, long n, double value) {
+  constexpr long kBlock = 1L << 15;
+  const long blocks = (n + kBlock - 1) / kBlock;
+#pragma omp parallel for schedule(static) num_threads(process_threads()) if (blocks > 1)
+  for (long b = 0; b < blocks; ++b)
+    std::fill(out + b * kBlock, out + std::min(n, (b + 1) * kBlock), value);
+}
+
 /// fn(k) for the index k of every point of the lattice box [lo, hi] (inclusive, clamped to the
 /// lattice), rows along x on several threads (fn of distinct points must be independent).
 template <int Dim, class Fn>

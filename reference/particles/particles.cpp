@@ -327,21 +327,22 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   const int nf = grid.num_faces();
   const long np = static_cast<long>(particles.size());
   // the three accumulators live in the outputs (setZero keeps the storage of a same-size vector)
-  u.setZero(nf);
-  face_mass.setZero(nf);
-  face_density.setZero(nf);
+  for (VectorX* v : {&u, &face_mass, &face_density}) {
+    v->resize(nf);
+    fill_in_parallel(v->data(), nf, 0.0);
+  }
   const int layers = grid.cells()[kLast];
   const bool wrap_last = grid.periodic(kLast);
   // each particle's cell layer along the last axis (clamped): its stencils reach face layers
   // layer - 1 .. layer + 1 of every component's lattice (wrapped on a periodic axis)
   std::vector<int> layer_of(np);
   std::vector<long> per_layer(layers + 1, 0);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     const double s = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / grid.dx();
-    const int c = std::clamp(static_cast<int>(std::floor(s)), 0, layers - 1);
-    layer_of[p] = c;
-    ++per_layer[c + 1];
+    layer_of[p] = std::clamp(static_cast<int>(std::floor(s)), 0, layers - 1);
   }
+  for (long p = 0; p < np; ++p) ++per_layer[layer_of[p] + 1];
   for (int c = 0; c < layers; ++c) per_layer[c + 1] += per_layer[c];
   const int threads = std::max(1, std::min(process_threads(), layers));
   // slab t owns the face layers [first[t], first[t + 1]); the face lattices along the last axis
@@ -1558,7 +1559,9 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
     solid_image.assign(np, Vec<Dim>::Constant(std::numeric_limits<double>::quiet_NaN()));
 
   // splat one particle (with its periodic and wall images) onto the lattice; with `make_tiles`
-  // it only makes the tiles under every box the splat visits (serial, before the splat)
+  // it only flags the tiles under every box the splat visits (before the splat, which then
+  // makes no tile)
+  std::vector<unsigned char> acc_flags = acc.tile_flags(), solid_flags = solid_distance.tile_flags();
   auto splat = [&](int p, bool make_tiles) {
     const Vec<Dim> xp = particles.x[p];
     const double R = support[p];
@@ -1612,7 +1615,7 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
             offset[a][j - i0[a]] = (lattice.origin[a] + static_cast<double>(j) * h) - xi[a];
       }
       const double rp = radius[p];
-      if (make_tiles) acc.touch_box(i0, i1);
+      if (make_tiles) acc.mark_box(i0, i1, acc_flags);
       VecI<Dim> i = i0;
       // the sums of point i, found once per run of points along axis 0 within one tile (the
       // points of a tile row are consecutive in it), null until needed
@@ -1672,8 +1675,8 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
       if (j0[a] > j1[a]) return;
     }
     if (make_tiles) {
-      acc.touch_box(j0, j1);
-      solid_distance.touch_box(j0, j1);
+      acc.mark_box(j0, j1, acc_flags);
+      solid_distance.mark_box(j0, j1, solid_flags);
       return;
     }
     const double inv_reach2 = 0.25 * inv_r2;
@@ -1706,8 +1709,8 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   };
 
   // each particle's image across the nearest solid surface within its support (independent per
-  // particle, in parallel), then the tiles under every box a particle or an image reaches, made
-  // serially before the splat
+  // particle, in parallel), then the tiles under every box a particle or an image reaches,
+  // flagged in parallel and made before the splat
   if (!solids.empty()) {
 #pragma omp parallel for schedule(static) num_threads(process_threads())
     for (long p = 0; p < np; ++p) {
@@ -1720,7 +1723,10 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
       solid_image[p] = xp - (2.0 * d / len) * n;
     }
   }
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true);
+  acc.make_tiles(acc_flags, process_threads());
+  solid_distance.make_tiles(solid_flags, process_threads());
 
   // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
   const bool wrap_last = grid.periodic(kLast);
@@ -1766,8 +1772,9 @@ void liquid_phi_tiles(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // the level set in the splat's tiles, the kernel support everywhere else
   phi.reset(lattice.dims, max_support);
   const int slots = acc.num_tile_slots();
-  for (int tile = 0; tile < slots; ++tile)
-    if (acc.has_tile(tile)) phi.touch_box(acc.tile_origin(tile), acc.tile_origin(tile));
+  std::vector<unsigned char> made = phi.tile_flags();
+  for (int tile = 0; tile < slots; ++tile) made[tile] = acc.has_tile(tile);
+  phi.make_tiles(made, process_threads());
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int tile = 0; tile < slots; ++tile) {
     acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
@@ -1792,7 +1799,8 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   const double max_support = surface_sums(particles, grid, lattice, boundary, solids, acc);
   // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
   // (every point outside the tiles)
-  phi.setConstant(nl, max_support);
+  phi.resize(nl);
+  fill_in_parallel(phi.data(), nl, max_support);
   const int slots = acc.num_tile_slots();
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int tile = 0; tile < slots; ++tile) {
