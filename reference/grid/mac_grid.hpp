@@ -115,14 +115,17 @@ class MacGrid {
   /// shift vector of the faces normal to `axis` (0.5 everywhere but 0 along axis).
   static Vec<Dim> face_shift(int axis);
 
- private:
   /// One axis of stencil(): the two sample indices, their linear weights and the weights'
   /// derivatives at the lattice coordinate s = (x - origin) / dx - shift on an axis of n samples.
+  /// stencil()'s corner k takes entry bit a of k on axis a; its weight is the product of the
+  /// axes' weights in axis order (1.0 times axis 0's, times axis 1's, ...).
   struct AxisStencil {
     std::array<int, 2> index;
     std::array<double, 2> weight, slope;
   };
   AxisStencil axis_stencil(int axis, double s, int n) const;
+
+ private:
   /// Component `axis` of u from the grid coordinates q = (x - origin) / dx of a wrapped point.
   double interpolate_face_at(const VectorX& u, int axis, const Vec<Dim>& q) const;
 

@@ -373,8 +373,8 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
         }
         return false;
       };
-      std::array<int, kCorners> idx;
-      std::array<double, kCorners> w;
+      const Vec<Dim>& origin = grid.origin();
+      const double dx = grid.dx();
       for (long p = 0; p < np; ++p) {
         if (!reaches(layer_of[p])) continue;
         const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
@@ -383,19 +383,31 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
           const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
           const VecI<Dim> dims = grid.face_dims(a);
           const int offset = grid.face_offset(a);
-          int stride = 1;  // of the last axis in face lattice a
-          for (int b = 0; b < kLast; ++b) stride *= dims[b];
-          grid.stencil(xp, shift, dims, idx, w);
+          // grid.stencil() per axis: the corners' indices, weights and, per axis, the face
+          // sample's coordinate minus the particle's (face_center's arithmetic per component)
+          std::array<typename MacGrid<Dim>::AxisStencil, Dim> st;
+          std::array<std::array<double, 2>, Dim> rel;
+          for (int b = 0; b < Dim; ++b) {
+            st[b] = grid.axis_stencil(b, (xp[b] - origin[b]) / dx - shift[b], dims[b]);
+            for (int bit = 0; bit < 2; ++bit)
+              rel[b][bit] =
+                  (origin[b] + (static_cast<double>(st[b].index[bit]) + shift[b]) * dx) - xp[b];
+          }
           for (int k = 0; k < kCorners; ++k) {
-            if (w[k] == 0.0 || !owned(idx[k] / stride)) continue;
+            double weight = 1.0;
+            for (int b = 0; b < Dim; ++b) weight *= st[b].weight[(k >> b) & 1];
+            if (weight == 0.0 || !owned(st[kLast].index[(k >> kLast) & 1])) continue;
+            int index = 0;
+            for (int b = Dim - 1; b >= 0; --b) index = index * dims[b] + st[b].index[(k >> b) & 1];
             // affine velocity at the face sample (minimum image on periodic axes)
-            const Vec<Dim> xf = grid.face_center(a, lattice_coord<Dim>(idx[k], dims));
-            const Vec<Dim> d = periodic_difference(grid, Vec<Dim>(xf - xp));
+            Vec<Dim> rel_k;
+            for (int b = 0; b < Dim; ++b) rel_k[b] = rel[b][(k >> b) & 1];
+            const Vec<Dim> d = periodic_difference(grid, rel_k);
             const double vel = particles.v[p][a] + particles.c[p].row(a).dot(d);
-            const int f = offset + idx[k];
-            face_mass[f] += w[k] * mp;
-            u[f] += w[k] * mp * vel;
-            face_density[f] += w[k] * mp * particles.density[p];
+            const int f = offset + index;
+            face_mass[f] += weight * mp;
+            u[f] += weight * mp * vel;
+            face_density[f] += weight * mp * particles.density[p];
           }
         }
       }
