@@ -819,6 +819,10 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
 #pragma omp parallel reduction(+ : compressed) num_threads(team)
   {
     std::vector<int> near, cells, cand;
+    // the candidates' positions by axis (contiguous, for the distances of a whole run at once)
+    // and a particle's squared distances to them
+    std::array<std::vector<double>, Dim> cand_x;
+    std::vector<double> cand_r2;
     std::vector<int>& buffer = neighbour_slots[omp_get_thread_num()];
     const int thread = omp_get_thread_num();
 #pragma omp for schedule(dynamic, 16)
@@ -827,6 +831,12 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
       cand.clear();
       for (int r : near)
         for (int q = run_start[r]; q < run_start[r + 1]; ++q) cand.push_back(q);
+      const int m = static_cast<int>(cand.size());
+      for (int a = 0; a < Dim; ++a) {
+        cand_x[a].resize(m);
+        for (int i = 0; i < m; ++i) cand_x[a][i] = xs[cand[i]][a];
+      }
+      cand_r2.resize(m);
       for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot) {
         const int p = order[slot];
         const double h = support[p];
@@ -841,10 +851,28 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         const double h2 = h * h;
         bool close = false;
         const int first = static_cast<int>(buffer.size());
-        for (int q : cand) {
-          Vec<Dim> d = xp - xs[q];
-          if (any_periodic) d = periodic_difference(grid, d);
-          const double r2 = d.squaredNorm();
+        // squared distances as squaredNorm() sums them (axis order), axis by axis over the
+        // contiguous candidates; on a periodic axis through the minimum image
+        if (any_periodic) {
+          for (int i = 0; i < m; ++i)
+            cand_r2[i] = periodic_difference(grid, Vec<Dim>(xp - xs[cand[i]])).squaredNorm();
+        } else {
+          const double* x0 = cand_x[0].data();
+          for (int i = 0; i < m; ++i) {
+            const double d = xp[0] - x0[i];
+            cand_r2[i] = d * d;
+          }
+          for (int a = 1; a < Dim; ++a) {
+            const double* xa = cand_x[a].data();
+            for (int i = 0; i < m; ++i) {
+              const double d = xp[a] - xa[i];
+              cand_r2[i] += d * d;
+            }
+          }
+        }
+        for (int i = 0; i < m; ++i) {
+          const int q = cand[i];
+          const double r2 = cand_r2[i];
           if (!(r2 < h2) || q == slot) continue;
           buffer.push_back(q);
           close = close || r2 < min_distance2;
@@ -1247,7 +1275,19 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
           cell[a][k] = c;
         }
       }
-      std::array<int, Dim> k{};
+      // only the candidates of nonzero weight per axis (a zero weight makes the product 0, which
+      // is never added): the same additions in the same order
+      std::array<int, Dim> k_lo, k_hi;
+      bool none = false;
+      for (int a = 0; a < Dim; ++a) {
+        k_lo[a] = 0;
+        k_hi[a] = 4;
+        while (k_lo[a] <= 4 && weight[a][k_lo[a]] == 0.0) ++k_lo[a];
+        while (k_hi[a] >= k_lo[a] && weight[a][k_hi[a]] == 0.0) --k_hi[a];
+        none = none || k_lo[a] > k_hi[a];
+      }
+      if (none) continue;
+      std::array<int, Dim> k = k_lo;
       while (true) {
         double w = volume / cell_volume;
         VecI<Dim> ci;
@@ -1258,8 +1298,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
         if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) *rho.find(ci) += w;
         int a = 0;
         for (; a < Dim; ++a) {
-          if (++k[a] < 5) break;
-          k[a] = 0;
+          if (++k[a] <= k_hi[a]) break;
+          k[a] = k_lo[a];
         }
         if (a == Dim) break;
       }
@@ -1403,7 +1443,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
   // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell
   // if that is an unknown, else its plus cell.
-  VectorX move = VectorX::Zero(nf);
+  VectorX move(nf);
+  fill_in_parallel(move.data(), nf, 0.0);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int r = 0; r < n; ++r) {
     const VecI<Dim> ci = grid.cell_coord(cells[r]);
