@@ -99,3 +99,33 @@ TEST_CASE("tiled lattice stores only the tiles a band touches", "[grid][tiled]")
   REQUIRE(t.value(VecI<3>(60, 60, 60)) == -2.0);
   REQUIRE_THROWS_AS(t.reset(VecI<3>(0, 4, 4), 0.0), std::invalid_argument);
 }
+
+TEST_CASE("TiledLattice: tiles flagged on several threads (mark_box, make_tiles) are those of "
+          "touch_box",
+          "[unit]") {
+  std::mt19937 rng(5);
+  const VecI<3> dims(37, 20, 29);
+  TiledLattice<3, double, 2> serial(dims, -1.0), flagged(dims, -1.0);
+  std::vector<std::pair<VecI<3>, VecI<3>>> boxes;
+  for (int n = 0; n < 60; ++n) {
+    const VecI<3> lo = random_coord<3>(rng, dims) - VecI<3>::Constant(3);
+    boxes.push_back({lo, lo + VecI<3>(2, 5, 1)});  // some stick out of the lattice (clamped)
+  }
+  for (const auto& [lo, hi] : boxes) serial.touch_box(lo, hi);
+  std::vector<unsigned char> flags = flagged.tile_flags();
+#pragma omp parallel for num_threads(2)
+  for (int n = 0; n < static_cast<int>(boxes.size()); ++n)
+    flagged.mark_box(boxes[n].first, boxes[n].second, flags);
+  flagged.make_tiles(flags, 2);
+  CHECK(flagged.num_tiles() == serial.num_tiles());
+  CHECK(flagged.num_tiles() > 0);
+  int differ = 0;
+  for (int t = 0; t < serial.num_tile_slots(); ++t) differ += serial.has_tile(t) != flagged.has_tile(t);
+  CHECK(differ == 0);
+  // made tiles hold the background
+  flagged.for_each_point([&](const VecI<3>&, const double* v) { differ += v[0] != -1.0 || v[1] != -1.0; });
+  CHECK(differ == 0);
+  // flags already made are left alone: a second make_tiles makes nothing
+  flagged.make_tiles(flags, 2);
+  CHECK(flagged.num_tiles() == serial.num_tiles());
+}

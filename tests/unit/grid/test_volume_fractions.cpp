@@ -363,3 +363,49 @@ TEMPLATE_TEST_CASE_SIG("liquid extended into solids in the solids' box equals th
   CHECK(differ == 0);
   CHECK(extended > 0);  // the rule changed some points
 }
+
+TEMPLATE_TEST_CASE_SIG("the mixed lattice cells' fractions made with the classes are each cell's "
+                       "Kuhn split, and a level set other than the classified one is not read "
+                       "from them",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  const int n = Dim == 2 ? 16 : 8;
+  const MacGrid<Dim> grid = unit_grid<Dim>(n, true);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  Vec<Dim> c = Vec<Dim>::Constant(0.41);
+  c[0] = 0.93;  // across the periodic seam
+  const VectorX phi =
+      sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return (x - c).norm() - 0.27; });
+  LatticeSigns<Dim> signs;
+  classify_lattice_cells(grid, lattice, phi, signs);
+  REQUIRE(signs.any_negative());
+  // every mixed cell is in the table with its own fraction, and only those
+  int mixed = 0, differ = 0;
+  for (int l = 0; l < static_cast<int>(signs.cls.size()); ++l) {
+    if (signs.cls[l] != LatticeSigns<Dim>::kMixed) continue;
+    ++mixed;
+    const VecI<Dim> lc = lattice_coord<Dim>(l, signs.cells);
+    std::array<double, (1 << Dim)> corners;
+    for (int k = 0; k < (1 << Dim); ++k) {
+      VecI<Dim> p = lc;
+      for (int a = 0; a < Dim; ++a) p[a] += (k >> a) & 1;
+      corners[k] = phi[lattice.index(p)];
+    }
+    differ += signs.mixed_fraction_of(lc) != lattice_cell_negative_fraction<Dim>(corners);
+  }
+  CHECK(mixed > 0);
+  CHECK(static_cast<int>(signs.mixed_fraction.size()) == mixed);
+  CHECK(differ == 0);
+  // the same classes with another vector of the same signs but other values (phi^3): its
+  // fractions come from its own corners, not from the table of phi
+  const VectorX scaled = phi.array().cube().matrix();
+  VectorX cells_scaled;
+  cell_negative_fractions(grid, lattice, scaled, signs, cells_scaled);
+  int other = 0;
+  for (int i = 0; i < grid.num_cells(); ++i)
+    other += cells_scaled[i] !=
+             lattice_cube_negative_fraction<Dim>(grid, lattice, 2 * grid.cell_coord(i), scaled);
+  CHECK(other == 0);
+  VectorX cells_phi;
+  cell_negative_fractions(grid, lattice, phi, signs, cells_phi);
+  CHECK(cells_phi != cells_scaled);  // the check above can tell the two apart
+}

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <random>
 
+#include "reference/fluid/viscosity_field.hpp"
+#include "reference/grid/stress_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/particles/particles.hpp"
 #include "tests/support/test_helpers.hpp"
@@ -957,4 +959,33 @@ TEST_CASE("density projection: the same moves after a shift across the band's ti
   // (3D across the periodic seam the two give 889 and 888 unknowns and moves 0.014 dx apart,
   // with the band and with the former pass over the whole grid alike: the shifted positions
   // differ by rounding, and the unknowns, cut off sharply at rho~ > 0 or T > 0, by one cell)
+}
+
+TEMPLATE_TEST_CASE_SIG("stress_viscosity of all zeros is +0 and of the only liquid's indicator is "
+                       "1 at every DOF, bit for bit (the simulation takes both as constants)",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  const MacGrid<Dim> grid = monolith::testing::unit_grid<Dim>(Dim == 2 ? 16 : 8);
+  const StressGrid<Dim> stress(grid);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.2, 0.6);
+  Particles<Dim> p;
+  for (int i = 0; i < 300; ++i) {
+    Vec<Dim> x;
+    for (int a = 0; a < Dim; ++a) x[a] = u(rng);
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back(0.1 + 0.37 * u(rng));  // unequal masses: the ratios are not trivially 1
+    p.density.push_back(1000.0);
+    p.liquid.push_back(0);
+  }
+  const VectorX ones = stress_viscosity(stress, p, {1.0});
+  const VectorX zeros = stress_viscosity(stress, p, {0.0});
+  int differ = 0;
+  for (int i = 0; i < stress.num_dofs(); ++i) {
+    differ += ones[i] != 1.0;
+    differ += zeros[i] != 0.0 || std::signbit(zeros[i]);
+  }
+  CHECK(differ == 0);
+  CHECK(liquid_stress_fractions(stress, p, 1).front() == ones);
 }
