@@ -185,6 +185,26 @@ Vec<Dim> periodic_difference(const MacGrid<Dim>& grid, Vec<Dim> d) {
 }
 
 
+/// emit(i, out) for every i in [0, n) on several threads, each thread over a fixed contiguous
+/// block into its own list, the lists joined in block order: the list of the serial loop.
+template <class T, class Emit>
+std::vector<T> gather_in_order(int n, Emit&& emit) {
+  const int blocks = std::max(1, std::min(process_threads(), n / 4096 + 1));
+  std::vector<std::vector<T>> part(blocks);
+#pragma omp parallel for schedule(static, 1) num_threads(blocks)
+  for (int b = 0; b < blocks; ++b) {
+    const int lo = static_cast<int>(static_cast<long>(n) * b / blocks);
+    const int hi = static_cast<int>(static_cast<long>(n) * (b + 1) / blocks);
+    for (int i = lo; i < hi; ++i) emit(i, part[b]);
+  }
+  std::vector<T> out;
+  std::size_t total = 0;
+  for (const auto& v : part) total += v.size();
+  out.reserve(total);
+  for (const auto& v : part) out.insert(out.end(), v.begin(), v.end());
+  return out;
+}
+
 }  // namespace
 
 // --- particles container -------------------------------------------------------------------------
@@ -505,23 +525,21 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
   // the invalid neighbours of `faces` (sorted, each once): the candidates of a layer
   std::vector<int> candidates;
   auto candidates_beside = [&](const std::vector<int>& faces) {
-    candidates.clear();
-    std::array<int, 2 * Dim> nb;
-    for (int f : faces) {
-      neighbours(f, nb);
-      for (int g : nb)
-        if (g >= 0 && !valid[g]) candidates.push_back(g);
-    }
+    // gathered on several threads (sorted below: the same list for any split)
+    candidates = gather_in_order<int>(static_cast<int>(faces.size()),
+                                      [&](int i, std::vector<int>& out) {
+                                        std::array<int, 2 * Dim> nb;
+                                        neighbours(faces[i], nb);
+                                        for (int g : nb)
+                                          if (g >= 0 && !valid[g]) out.push_back(g);
+                                      });
     std::sort(candidates.begin(), candidates.end());
     candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
   };
   // the first layer's: beside any valid face
-  {
-    std::vector<int> given;
-    for (int f = 0; f < nf; ++f)
-      if (valid[f]) given.push_back(f);
-    candidates_beside(given);
-  }
+  candidates_beside(gather_in_order<int>(nf, [&](int f, std::vector<int>& out) {
+    if (valid[f]) out.push_back(f);
+  }));
   std::vector<double> value;
   std::vector<char> filled;
   for (int layer = 0; layer < layers && !candidates.empty(); ++layer) {
@@ -556,12 +574,12 @@ void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<
   // the air cells of the band (and the liquid's surface cells within liquid_reach), nearest the
   // liquid first (ties in cell order)
   const double lowest = liquid_reach > 0.0 ? -liquid_reach * dx : 0.0;
-  std::vector<std::pair<double, int>> band;
-  for (int c = 0; c < nc; ++c) {
-    const VecI<Dim> ci = grid.cell_coord(c);
-    const double p = phi[lattice.index(2 * ci + VecI<Dim>::Ones())];
-    if (p > lowest && p < reach) band.emplace_back(p, c);
-  }
+  std::vector<std::pair<double, int>> band = gather_in_order<std::pair<double, int>>(
+      nc, [&](int c, std::vector<std::pair<double, int>>& out) {
+        const VecI<Dim> ci = grid.cell_coord(c);
+        const double p = phi[lattice.index(2 * ci + VecI<Dim>::Ones())];
+        if (p > lowest && p < reach) out.emplace_back(p, c);
+      });
   std::sort(band.begin(), band.end());
   for (const auto& [p, c] : band) {
     (void)p;

@@ -347,9 +347,13 @@ double Simulation<Dim>::cfl_dt() const {
   double grid_speed = 0.0;
   const auto faces = static_cast<Eigen::Index>(grid_.num_faces());
   if (u_.size() == faces && raw_liquid_face_.size() == faces && weights_.fluid_face.size() == faces &&
-      weights_.liquid_face.size() == faces && face_mass_.size() == faces)
-    for (int f = 0; f < grid_.num_faces(); ++f)
+      weights_.liquid_face.size() == faces && face_mass_.size() == faces) {
+    // (a maximum: the same for any split of the faces)
+    const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) reduction(max : grid_speed) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f)
       if (trusted_face(f)) grid_speed = std::max(grid_speed, std::abs(u_[f]));
+  }
   const double speed = std::max(max_particle_speed(particles_), grid_speed);
   const double max_dt = scene_.time.max_dt;
   double dt = speed > 0.0 ? std::min(max_dt, scene_.time.cfl * grid_.dx() / speed) : max_dt;
@@ -421,7 +425,10 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });
   restart_ledger([&] { return grid_and_body_kinetic_energy(); });
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
-  for (int f = 0; f < grid_.num_faces(); ++f)
+  // (per face, on several threads: each face written once)
+  const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f)
     if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
   if (coupled_) rigid_->apply_gravity(dt, gravity_);
 }
@@ -455,8 +462,10 @@ void Simulation<Dim>::extrapolate_into_air() {
   if (!switches_.air_velocity) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   std::vector<char>& carried = face_flags_;
-  carried.assign(grid_.num_faces(), 0);
-  for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
+  carried.resize(grid_.num_faces());
+  const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) carried[f] = face_mass_[f] > 0.0;
   extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
 }
 
@@ -479,8 +488,10 @@ void Simulation<Dim>::trusted_faces(std::vector<char>& trusted) const {
   // faces with fluid whose weight W_F^u W_L^u (W_L^u before the clamp) reaches
   // kTrustedLiquidFaceFraction, and faces that carry mass outside the liquid's weights (the
   // stage switches, for diagnosis only, can drop the second kind or trust every liquid face)
-  trusted.assign(grid_.num_faces(), 0);
-  for (int f = 0; f < grid_.num_faces(); ++f) trusted[f] = trusted_face(f);
+  trusted.resize(grid_.num_faces());
+  const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) trusted[f] = trusted_face(f);
 }
 
 template <int Dim>
