@@ -181,7 +181,9 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
     deformation_rate_ = std::make_shared<const SparseMatrix>(deformation_rate_matrix(stress_grid_));
   if (sequence_ != SolveSequence::pressure)
     stress_fluid_ = stress_fluid_weights(stress_grid_, lattice_, solid_phi_, boundary_);
-  stress_ = VectorX::Zero(stress_grid_.num_dofs());
+  // the last solve's stress (warm-start data): none without stress solves (an inviscid liquid
+  // or a P.. scheme has no stress field; it was a zero vector of 400 MB at 256x128x256)
+  if (sequence_ != SolveSequence::pressure) stress_ = VectorX::Zero(stress_grid_.num_dofs());
   if (coupled_) update_moving_solids();
 
   // liquids: particles seeded in each liquid's shape
@@ -615,6 +617,10 @@ void Simulation<Dim>::update_moving_solids() {
   // (stress_fluid_ is the uncoupled solve's: freed here)
   weights_.fluid_face.swap(solids.fluid_face);
   stress_fluid_ = VectorX();
+  // without stress solves nothing reads W_F^s (solve_coupled passes inviscid weights without
+  // stress vectors, lean_coupled_weights): released here, so that it is not alive in the solve
+  // (solid_weights makes it again at the next pose, from the heap's free memory)
+  if (lean_coupled_weights()) solids.fluid_stress = VectorX();
   rebuild_solid_field();
 }
 
@@ -649,7 +655,6 @@ void Simulation<Dim>::solve_coupled(double dt) {
   CoupledStepInput<Dim>& in = coupled_in_;
   in.grid = grid_;
   in.dt = dt;
-  in.u_star = u_;
   in.bodies = rigid_->bodies();
   // (6) contacts at the step's start pose, with the pair's friction and restitution
   RigidStepStats contact_stats;
@@ -662,19 +667,42 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // The grid-sized vectors are swapped into the input for the solve and back after it (copies
   // of them were 1.2 GB at the paper's 256x128x256 grid); the zero vectors of the P.. C
   // schemes are made once and stay zero (the solve reads its input only)
+  //
+  // Without stress solves the weights are inviscid ones without stress vectors
+  // (StokesWeights::inviscid; lean_coupled_weights), except for a step whose system goes to the
+  // oracle's export, which reads them all.
+  //
+  // u* is lent as well: u_'s storage becomes in.u_star for the solve, and the solve writes the
+  // new u into the storage of the previous step's u* (coupled_out_.u, given the storage that
+  // in.u_star held), so two face-sized velocity vectors live across steps instead of three.
+  // Nothing reads u_ during the solve; if the solve throws, u* goes back into u_.
   const bool stress = sequence_ != SolveSequence::pressure;
+  const bool lean = lean_coupled_weights();
   auto lend = [&] {
     std::swap(in.weights.pressure, weights_);
-    in.weights.fluid_stress.swap(in.solids.fluid_stress);
+    if (!lean) in.weights.fluid_stress.swap(in.solids.fluid_stress);
     if (stress) {
       in.weights.liquid_stress.swap(stress_liquid_);
       in.weights.viscosity.swap(stress_eta_);
     }
   };
-  if (!stress && in.weights.viscosity.size() != stress_grid_.num_dofs()) {
+  if (lean) {
+    in.weights.fluid_stress = VectorX();
+    in.weights.liquid_stress = VectorX();
+    in.weights.viscosity = VectorX();
+  } else if (!stress && in.weights.viscosity.size() != stress_grid_.num_dofs()) {
     in.weights.liquid_stress.setZero(stress_grid_.num_dofs());
     in.weights.viscosity.setZero(stress_grid_.num_dofs());
   }
+  in.u_star.swap(u_);
+  coupled_out_.u.swap(u_);
+  struct GiveBackVelocity {
+    VectorX& u;
+    VectorX& u_star;
+    ~GiveBackVelocity() {
+      if (u.size() == 0) u.swap(u_star);
+    }
+  } give_back_velocity{u_, in.u_star};
   lend();
   struct GiveBack {
     std::function<void()> f;
@@ -1089,8 +1117,11 @@ void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
   if (particles_.v.size() != n || particles_.c.size() != n || particles_.mass.size() != n ||
       particles_.density.size() != n || particles_.liquid.size() != n ||
       u_.size() != grid_.num_faces() || pressure_.size() != grid_.num_cells() ||
-      stress_.size() != stress_grid_.num_dofs())
+      (stress_.size() != stress_grid_.num_dofs() &&
+       !(stress_.size() == 0 && sequence_ == SolveSequence::pressure)))
     r.fail("sizes that do not match the scene's grid or particles");
+  // (checkpoints written before the stress field was dropped without stress solves hold zeros)
+  if (sequence_ == SolveSequence::pressure) stress_ = VectorX();
   // what is derived from the state: the solids at the bodies' pose and the liquid weights, as
   // advance_frame leaves them at a frame's end (a step that needs them fresh recomputes them);
   // their wall time is not the restored frame's, so the frame's timing is kept as saved

@@ -374,6 +374,11 @@ class Simulation : public AnySimulation {
   /// eta_max dt / (rho dx^2) (choose_preconditioner); the choice and the stiffness are booked in
   /// the frame's solver stats.
   StokesSolveOptions stokes_options(const VectorX& eta, double dt);
+  /// The coupled solve's weights carry no stress vectors (StokesWeights::inviscid) and W_F^s is
+  /// not kept: the scene has no stress solves and no system export is requested.
+  bool lean_coupled_weights() const {
+    return sequence_ == SolveSequence::pressure && !export_sink_;
+  }
   /// The smallest density of the scene's liquids (kg/m^3; 0 without liquids): the one of the
   /// largest stiffness eta dt / (rho dx^2), which the automatic preconditioner choice reads.
   double smallest_liquid_density() const;
