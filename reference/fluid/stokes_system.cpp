@@ -279,7 +279,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       num_cells_(grid.num_cells()),
       has_pressure_(dofs.num_pressure() > 0),
       face_coefficient_(stokes_face_coefficients(w.pressure, dt)),
-      fluid_face_(w.pressure.fluid_face),
+      fluid_face_(&w.pressure.fluid_face),
       null_space_(dofs.null_space) {
   const StressGrid<Dim>& stress = layout.grid();
   const double inv_dx = 1.0 / grid.dx();
@@ -318,11 +318,13 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   for (int field = num_stress_ > 0 ? Dim : kCellField; field < kFields; ++field)
     for (const Term& t : terms_[field]) terms_[t.field].push_back({field, t.axis, -t.delta, t.coef});
 
-  // grid -> unknown maps, per unknown weights and 1/2 N^-1 W^s
-  const VectorX m = stress_multiplicity(stress);
-  auto half_n_inv_ws = [&](int d) {
-    return 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d];
+  // grid -> unknown maps, per unknown weights and 1/2 N^-1 W^s; M per DOF from its component
+  // (stress_multiplicity's values without its stress-sized vector)
+  auto m_of = [&](int d) { return StressGrid<Dim>::multiplicity(stress.coord(d).first); };
+  auto half_n_inv_ws_m = [&](int d, double m) {
+    return 0.5 * m * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d];
   };
+  auto half_n_inv_ws = [&](int d) { return half_n_inv_ws_m(d, m_of(d)); };
   // (the StressGrid-sized maps and scratch only with stress unknowns: an inviscid operator
   // keeps none, and its weights may come without stress vectors, StokesWeights)
   if (num_stress_ > 0) unknown_of_dof_.assign(num_stress_dofs_, -1);
@@ -335,7 +337,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     const int k = stress.coord(d).first;
     unknown_of_dof_[d] = i;
     location_[i] = d;
-    weight_[i] = m[d] * w.liquid_stress[d];
+    weight_[i] = StressGrid<Dim>::multiplicity(k) * w.liquid_stress[d];
     self_[i] = half_n_inv_ws(d);
     // reduced form: E adds the eliminated DOF of the cell with sign -1 (sign^2 = 1 here)
     if (eliminated_ >= 0 && StressGrid<Dim>::is_diagonal(k))
@@ -352,10 +354,11 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     // unknowns of the cell through E^T N^-1 E) its 1/2 N^-1 W^s
     eliminated_weight_.resize(num_cells_);
     if constexpr (Dim == 3) eliminated_coupling_.resize(num_cells_);
+    const double m = StressGrid<Dim>::multiplicity(eliminated_);
     for (int c = 0; c < num_cells_; ++c) {
       const int d = stress.offset(eliminated_) + c;
-      eliminated_weight_[c] = -m[d] * w.liquid_stress[d];
-      if constexpr (Dim == 3) eliminated_coupling_[c] = half_n_inv_ws(d);
+      eliminated_weight_[c] = -m * w.liquid_stress[d];
+      if constexpr (Dim == 3) eliminated_coupling_[c] = half_n_inv_ws_m(d, m);
     }
   }
   // diagonal: 1/2 N^-1 W^s plus sum_f C_f B_fi^2 over the merged column of B
@@ -826,7 +829,7 @@ VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
   double* v = face_scratch_.data();
   double* s = stress_scratch_.data();
   double* q = cell_scratch_.data();
-  const double* wf = fluid_face_.data();
+  const double* wf = fluid_face_->data();
   const double* u = u_star.data();
 #pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
   {
@@ -845,7 +848,7 @@ VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
 template <int Dim>
 std::size_t MatrixFreeStokesOperator<Dim>::memory_bytes() const {
   const std::size_t d = sizeof(double), i = sizeof(int);
-  std::size_t bytes = d * (face_coefficient_.size() + fluid_face_.size() + weight_.size() +
+  std::size_t bytes = d * (face_coefficient_.size() + weight_.size() +
                            self_.size() + diagonal_.size() + eliminated_weight_.size() +
                            eliminated_coupling_.size() + stress_scratch_.size() +
                            cell_scratch_.size() + face_scratch_.size()) +

@@ -145,7 +145,9 @@ class MatrixFreeStokesOperator : public LinearOperator {
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                       const std::vector<char>* active = nullptr) const override;
   const std::vector<VectorX>& null_space() const override { return null_space_; }
-  /// b = B^T W_F^u u* (= (b1, b2) of eq. (24)) by the same stencils.
+  /// b = B^T W_F^u u* (= (b1, b2) of eq. (24)) by the same stencils. Reads W_F^u from the
+  /// weights given to the constructor, which must still exist (every caller keeps them for the
+  /// operator's life: MonolithicSystem shares them, solve_stokes holds them).
   VectorX rhs(const VectorX& u_star) const;
   /// The face coefficient C_f = dt W_F^u / (rho W_L^u) (0 where the face carries no fluid).
   const VectorX& face_coefficients() const { return face_coefficient_; }
@@ -225,7 +227,9 @@ class MatrixFreeStokesOperator : public LinearOperator {
   int num_cells_ = 0;
   bool has_pressure_ = false;
   VectorX face_coefficient_;
-  VectorX fluid_face_;
+  /// W_F^u of the weights given to the constructor, read by rhs (not copied: a face-sized
+  /// vector, 200 MB at 256x128x256)
+  const VectorX* fluid_face_ = nullptr;
   std::vector<int> unknown_of_dof_;   ///< per StressGrid DOF: unknown or -1
   std::vector<int> unknown_of_cell_;  ///< per cell: pressure unknown or -1
   std::vector<int> location_;         ///< per unknown: StressGrid DOF or cell

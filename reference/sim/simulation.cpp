@@ -8,9 +8,12 @@
 #include "reference/sim/simulation.hpp"
 #include "reference/core/parallel.hpp"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <tuple>
 #include <cstdint>
+#include <cstring>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -54,6 +57,49 @@ std::vector<double> to_std(const Vec<Dim>& x) {
 
 bool all_finite(const VectorX& v) {
   return v.allFinite();
+}
+
+/// phi[k] = value(k) for every point k of the lattice box [lo, hi] (inclusive, clamped), on
+/// several threads (rows along x shared statically); every point whose bits change is listed
+/// with its old value in `undo` (one list per thread, cleared first), so that restore_points
+/// gives phi back exactly. The lists hold the changed points only: the level sets are changed
+/// in a band (issue 20: no second lattice-sized vector for a modified copy).
+template <int Dim, class Value>
+void overwrite_in_box(const SampleLattice<Dim>& lattice, VecI<Dim> lo, VecI<Dim> hi,
+                      VectorX& phi, Value&& value,
+                      std::vector<std::vector<std::pair<int, double>>>& undo) {
+  const int threads = process_threads();
+  if (static_cast<int>(undo.size()) < threads) undo.resize(threads);
+  for (auto& list : undo) list.clear();
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = std::max(lo[a], 0);
+    hi[a] = std::min(hi[a], lattice.dims[a] - 1);
+    if (lo[a] > hi[a]) return;
+  }
+  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+#pragma omp parallel num_threads(threads)
+  {
+    std::vector<std::pair<int, double>>& list = undo[omp_get_thread_num()];
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const int start = lattice.index(lo + lattice_coord<Dim>(q, row_dims));
+      for (int k = start; k <= start + hi[0] - lo[0]; ++k) {
+        const double old = phi[k], v = value(k);
+        if (std::memcmp(&old, &v, sizeof(double)) == 0) continue;
+        list.emplace_back(k, old);
+        phi[k] = v;
+      }
+    }
+  }
+}
+
+/// Undoes overwrite_in_box (each point is listed once, so the order does not matter).
+inline void restore_points(VectorX& phi,
+                           const std::vector<std::vector<std::pair<int, double>>>& undo) {
+  for (const auto& list : undo)
+    for (const auto& [k, old] : list) phi[k] = old;
 }
 
 /// A shape's signed distance where it matters: farther than `far` from its bounds box, the
@@ -204,8 +250,10 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
     project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
                              kSeedProjectionIterations,
                              switches_.density_projection_surface_deficits);
-  // frame 0: the seeded state on the grid (no pressure yet)
-  particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  // frame 0: the seeded state on the grid (no pressure yet); the faces' densities become the
+  // diagonal of P in place (as in every step, update_step_weights)
+  particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+  density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
   update_liquid_weights();
   liquid_weights_current_ = true;
   pressure_ = VectorX::Zero(grid_.num_cells());
@@ -229,17 +277,26 @@ void Simulation<Dim>::update_liquid_weights() {
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
   // (buffers kept across steps; the fractions visit only the band where phi changes sign)
+  // The extension is written into liquid_phi_ itself, in the solids' box, and undone after the
+  // weights (the points it changes are listed: the solids' part of the liquid's band), so no
+  // lattice-sized copy is made (541 MB at the paper's 256x128x256 grid); the values the weights
+  // read are those of extend_liquid_into_solids_in_box
   const bool solids = !solid_shapes_.empty() || coupled_;
-  if (solids)
-    extend_liquid_into_solids_in_box(grid_, liquid_phi_, solid_phi_, kLiquidSolidReach * grid_.dx(),
-                                     solid_lo_, solid_hi_, extended_phi_);
-  const VectorX& phi = solids ? extended_phi_ : liquid_phi_;
+  const bool extend = solids && solid_phi_.size() == liquid_phi_.size();
+  if (extend) {
+    const double reach = kLiquidSolidReach * grid_.dx(), dx = grid_.dx();
+    overwrite_in_box<Dim>(lattice_, solid_lo_, solid_hi_, liquid_phi_, [&](int k) {
+      return liquid_extended_into_solid(liquid_phi_[k], solid_phi_[k], reach, dx);
+    }, phi_undo_);
+  }
+  const VectorX& phi = liquid_phi_;
   classify_lattice_cells(grid_, lattice_, phi, liquid_signs_);
   // the points where the extended level set is negative (the box of its non-positive cells)
   const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
   cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
-  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, raw_liquid_face_);
-  weights_.liquid_face = raw_liquid_face_;
+  // W_L^u clamped in place: the trust test of trusted_face reads it instead of the unclamped
+  // fractions (the same faces, kept no longer in a face-sized vector of their own)
+  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_face);
   clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
@@ -272,6 +329,10 @@ void Simulation<Dim>::update_liquid_weights() {
   // negative too: it is written in that box and one point around it (the corners of every
   // lattice cell the classes and fractions read; the rest of the buffer keeps the extended level
   // set's values, >= 0 there), and classified in the box
+  // (in liquid_phi_ again, the extension undone first: the fluid level set is written in that
+  // box and one point around it and undone after its fractions. Outside, liquid_phi_ has the
+  // signs the extended level set had there, >= 0, and no value of it is read)
+  if (extend) restore_points(liquid_phi_, phi_undo_);
   if (solids) {
     VecI<Dim> lo = liquid_lo, hi = liquid_hi;
     if (liquid_signs_.any_negative())
@@ -279,18 +340,17 @@ void Simulation<Dim>::update_liquid_weights() {
         lo[a] = std::max(lo[a] - 1, 0);
         hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
       }
-    for_each_lattice_point_in_box<Dim>(lattice_, lo, hi, [&](int k) {
-      extended_phi_[k] = std::max(liquid_phi_[k], -solid_phi_[k]);
-    });
-    const VectorX& fluid_phi = extended_phi_;
+    if (extend)
+      overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
+        return std::max(liquid_phi_[k], -solid_phi_[k]);
+      }, phi_undo_);
+    const VectorX& fluid_phi = liquid_phi_;
     classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
                                   liquid_signs_);
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
+    if (extend) restore_points(liquid_phi_, phi_undo_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
-  // the extended level set is read by the weights above only: its lattice-sized buffer goes
-  // back to the heap for the solve
-  extended_phi_ = VectorX();
   // with moving bodies the solids' level set is made again with the next weights
   // (update_moving_solids always runs before this) and read by nothing else (the velocity
   // constraints use the faces in solids found with it): its buffer goes back to the heap too
@@ -309,7 +369,7 @@ double Simulation<Dim>::cfl_dt() const {
   // frame 9 at dt = 6e-28 s).
   double grid_speed = 0.0;
   const auto faces = static_cast<Eigen::Index>(grid_.num_faces());
-  if (u_.size() == faces && raw_liquid_face_.size() == faces && weights_.fluid_face.size() == faces &&
+  if (u_.size() == faces && weights_.fluid_face.size() == faces &&
       weights_.liquid_face.size() == faces && face_mass_.size() == faces)
     for (int f = 0; f < grid_.num_faces(); ++f)
       if (trusted_face(f)) grid_speed = std::max(grid_speed, std::abs(u_[f]));
@@ -379,7 +439,9 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   // (1) map velocity from particles to grid (APIC)
   {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
-    particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+    // the faces' densities into P's own storage (P of the last step is read by nothing from
+    // here on; update_step_weights turns them into this step's P in place)
+    particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
   }
   account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });
   restart_ledger([&] { return grid_and_body_kinetic_energy(); });
@@ -402,7 +464,7 @@ void Simulation<Dim>::update_step_weights() {
   liquid_weights_current_ = false;
   {
     ScopedTimer timer(stats_.timing[FramePhase::weights]);
-    weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+    density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
   }
 }
 
@@ -448,8 +510,13 @@ void Simulation<Dim>::trusted_faces(std::vector<char>& trusted) const {
 
 template <int Dim>
 bool Simulation<Dim>::trusted_face(int f) const {
+  // W_F^u W_L^u with the clamped W_L^u: the clamp raises a fraction below
+  // kMinLiquidFaceFraction to it, and W_F^u <= 1, so such a face stays below
+  // kTrustedLiquidFaceFraction (1e-4 < 0.1) as it was before the clamp: the same faces
+  static_assert(kMinLiquidFaceFraction < kTrustedLiquidFaceFraction,
+                "the trust test reads the clamped W_L^u");
   return weights_.fluid_face[f] > 0.0 &&
-         (weights_.fluid_face[f] * raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
+         (weights_.fluid_face[f] * weights_.liquid_face[f] >= kTrustedLiquidFaceFraction ||
           (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
            face_mass_[f] > 0.0) ||
           (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
@@ -598,6 +665,11 @@ void Simulation<Dim>::update_moving_solids() {
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
   solids.lattice_phi.swap(solid_phi_);
+  // W_F^u likewise: weights_.fluid_face's buffer is lent as the output (solid_weights overwrites
+  // every entry) and comes back below, so one face-sized vector holds it (solids.fluid_face is
+  // left empty: read by nothing after this)
+  solids.fluid_face.swap(weights_.fluid_face);
+  weights_.fluid_face = VectorX();
   solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
                      scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
   solid_phi_.swap(solids.lattice_phi);
@@ -609,13 +681,12 @@ void Simulation<Dim>::update_moving_solids() {
     solid_lo_ = VecI<Dim>::Zero();
     solid_hi_ = -VecI<Dim>::Ones();
   }
-  find_faces_in_solids();
-  // W_F^u moves to weights_ the same way (solid_weights overwrites every entry of its
-  // fluid_face, so the old buffer it gets back needs no values): coupled_in_.solids.fluid_face
-  // is stale from here on, W_F^u is weights_.fluid_face (in the solve:
-  // in.weights.pressure.fluid_face). W_F^s stays in solids, where solve_coupled reads it
+  // W_F^u goes back to weights_ (in the solve: in.weights.pressure.fluid_face);
+  // coupled_in_.solids.fluid_face stays empty. W_F^s stays in solids, where solve_coupled reads it
   // (stress_fluid_ is the uncoupled solve's: freed here)
   weights_.fluid_face.swap(solids.fluid_face);
+  solids.fluid_face = VectorX();
+  find_faces_in_solids();
   stress_fluid_ = VectorX();
   // without stress solves nothing reads W_F^s (solve_coupled passes inviscid weights without
   // stress vectors, lean_coupled_weights): released here, so that it is not alive in the solve

@@ -334,11 +334,13 @@ class Simulation : public AnySimulation {
   SolidWeightsScratch<Dim> solid_scratch_;  ///< solid_weights' buffers
   // the weights of eq. (8): W_F^u, W_L^p, W_L^u, P (weights_), W_F^s, W_L^s
   PressureWeights weights_;
-  VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
   // buffers of update_liquid_weights kept across steps (no grid-sized allocation per step): the
-  // liquid level set extended into the solids, its lattice-cell sign classes, the cell fractions
-  // of the unextended level set (the reported volume)
-  VectorX extended_phi_, volume_cells_;
+  // cell fractions of the unextended level set (the reported volume), the lattice-cell sign
+  // classes (the liquid level set is extended into the solids in place, see phi_undo_)
+  VectorX volume_cells_;
+  /// the points of liquid_phi_ that update_liquid_weights overwrites in place (the extension
+  /// into the solids, then the reported volume's level set) with their values, per thread
+  std::vector<std::vector<std::pair<int, double>>> phi_undo_;
   LatticeSigns<Dim> liquid_signs_;
   // per-step buffers of the velocity stages: face flags (faces that carry mass, trusted faces)
   // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
@@ -367,7 +369,8 @@ class Simulation : public AnySimulation {
   Particles<Dim> particles_;
   VectorX liquid_phi_;
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
-  VectorX u_, face_mass_, face_density_, pressure_, stress_;
+  /// (the faces' densities of particles_to_grid go straight into weights_.face_density)
+  VectorX u_, face_mass_, pressure_, stress_;
   PcgSettings pcg_settings_;
   /// The preconditioner and initial guess of a solve_stokes call with viscosities eta and time
   /// step dt: solver.preconditioner, "auto" resolved by the solve's stiffness
