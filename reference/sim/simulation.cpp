@@ -253,6 +253,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
   // frame 0: the seeded state on the grid (no pressure yet); the faces' densities become the
   // diagonal of P in place (as in every step, update_step_weights)
   particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+  mark_faces_with_mass();
   density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
   update_liquid_weights();
   liquid_weights_current_ = true;
@@ -370,7 +371,7 @@ double Simulation<Dim>::cfl_dt() const {
   double grid_speed = 0.0;
   const auto faces = static_cast<Eigen::Index>(grid_.num_faces());
   if (u_.size() == faces && weights_.fluid_face.size() == faces &&
-      weights_.liquid_face.size() == faces && face_mass_.size() == faces)
+      weights_.liquid_face.size() == faces && mass_faces_.size() == static_cast<std::size_t>(grid_.num_faces()))
     for (int f = 0; f < grid_.num_faces(); ++f)
       if (trusted_face(f)) grid_speed = std::max(grid_speed, std::abs(u_[f]));
   const double speed = std::max(max_particle_speed(particles_), grid_speed);
@@ -435,6 +436,17 @@ double Simulation<Dim>::grid_and_body_kinetic_energy() const {
 }
 
 template <int Dim>
+void Simulation<Dim>::mark_faces_with_mass() {
+  mass_faces_.resize(grid_.num_faces());
+  for (int f = 0; f < grid_.num_faces(); ++f) mass_faces_[f] = face_mass_[f] > 0.0;
+}
+
+template <int Dim>
+bool Simulation<Dim>::masses_read_after_solve() const {
+  return switches_.energy_ledger;
+}
+
+template <int Dim>
 void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   // (1) map velocity from particles to grid (APIC)
   {
@@ -442,12 +454,13 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
     // the faces' densities into P's own storage (P of the last step is read by nothing from
     // here on; update_step_weights turns them into this step's P in place)
     particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+    mark_faces_with_mass();
   }
   account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });
   restart_ledger([&] { return grid_and_body_kinetic_energy(); });
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   for (int f = 0; f < grid_.num_faces(); ++f)
-    if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+    if (mass_faces_[f]) u_[f] += dt * gravity_[grid_.face_coord(f).first];
   if (coupled_) rigid_->apply_gravity(dt, gravity_);
 }
 
@@ -480,8 +493,7 @@ void Simulation<Dim>::extrapolate_into_air() {
   if (!switches_.air_velocity) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   std::vector<char>& carried = face_flags_;
-  carried.assign(grid_.num_faces(), 0);
-  for (int f = 0; f < grid_.num_faces(); ++f) carried[f] = face_mass_[f] > 0.0;
+  carried = mass_faces_;
   extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
 }
 
@@ -518,7 +530,7 @@ bool Simulation<Dim>::trusted_face(int f) const {
   return weights_.fluid_face[f] > 0.0 &&
          (weights_.fluid_face[f] * weights_.liquid_face[f] >= kTrustedLiquidFaceFraction ||
           (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
-           face_mass_[f] > 0.0) ||
+           mass_faces_[f]) ||
           (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
 }
 
@@ -765,8 +777,16 @@ void Simulation<Dim>::solve_coupled(double dt) {
     in.weights.liquid_stress.setZero(stress_grid_.num_dofs());
     in.weights.viscosity.setZero(stress_grid_.num_dofs());
   }
+  // The face masses are read by nothing after the step's gravity and extrapolation (the faces
+  // that carry mass are kept as flags, mass_faces_) unless the energy ledger measures the grid's
+  // kinetic energy: then the new u goes into their storage, and they take the storage of u*
+  // after the solve (their values stale until the next particles_to_grid): u_, face_mass_, u*
+  // and the new u share two face-sized vectors. The pressure likewise: nothing reads pressure_
+  // during the coupled solve, so the new pressure is written into its storage.
   in.u_star.swap(u_);
-  coupled_out_.u.swap(u_);
+  const bool masses_free = !masses_read_after_solve();
+  coupled_out_.u.swap(masses_free ? face_mass_ : u_);
+  coupled_out_.pressure.swap(pressure_);
   struct GiveBackVelocity {
     VectorX& u;
     VectorX& u_star;
@@ -819,6 +839,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
     if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
   }
   u_.swap(r.u);
+  if (masses_free) face_mass_.swap(in.u_star);
   pressure_.swap(r.pressure);
   stress_.swap(r.stress);
   // (12) the bodies' velocities (eq. (21))

@@ -371,6 +371,13 @@ class Simulation : public AnySimulation {
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
   /// (the faces' densities of particles_to_grid go straight into weights_.face_density)
   VectorX u_, face_mass_, pressure_, stress_;
+  /// face_mass_ > 0 per face, marked after every particles_to_grid: the trust test
+  /// (trusted_face), gravity and the extrapolation into air read these flags, so the masses
+  /// themselves are dead after them (masses_read_after_solve) and their storage is reused
+  std::vector<char> mass_faces_;
+  void mark_faces_with_mass();
+  /// Something reads face_mass_ after the solve: the energy ledger's grid kinetic energy.
+  bool masses_read_after_solve() const;
   PcgSettings pcg_settings_;
   /// The preconditioner and initial guess of a solve_stokes call with viscosities eta and time
   /// step dt: solver.preconditioner, "auto" resolved by the solve's stiffness
