@@ -676,7 +676,11 @@ void Simulation<Dim>::update_moving_solids() {
   // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
-  solids.lattice_phi.swap(solid_phi_);
+  // When the union's last buffer is gone (update_liquid_weights releases it), the storage of
+  // the liquid level set is lent instead: update_liquid_weights always follows this call and
+  // makes that level set anew (nothing reads it in between), so while the solids' weights are
+  // made only one lattice-sized vector is alive (541 MB at the paper's 256x128x256 grid)
+  solids.lattice_phi.swap(solid_phi_.size() > 0 ? solid_phi_ : liquid_phi_);
   // W_F^u likewise: weights_.fluid_face's buffer is lent as the output (solid_weights overwrites
   // every entry) and comes back below, so one face-sized vector holds it (solids.fluid_face is
   // left empty: read by nothing after this)
