@@ -148,7 +148,8 @@ SolidField<Dim> make_solid_field(const std::vector<ShapePtr<Dim>>& shapes, doubl
 }
 
 /// Faces whose weight W_F^u W_L^u in the energy of eq. (8) (W_L^u the geometric liquid fraction,
-/// before the clamp) is below this keep their solved velocity out of the particles: it is
+/// before the clamp; the clamped value selects the same faces, see trusted_face) is below this
+/// keep their solved velocity out of the particles: it is
 /// replaced by extrapolation from the faces above it (a departure from the paper). The
 /// projection bounds the weighted energy, sum_f rho W_F^u_f W_L^u_f u_f^2 dx^Dim / 2 <= that of
 /// u*, so a face's speed is bounded only in proportion to 1 / sqrt(W_F^u W_L^u): the minimisation
