@@ -157,6 +157,10 @@ class Simulation : public AnySimulation {
   void request_system_export(int step, std::function<void(const SystemExport&)> sink) override {
     export_step_ = step;
     export_sink_ = std::move(sink);
+    // the export reads W_F^s, which coupled steps without stress solves do not keep
+    // (lean_coupled_weights): the weights of the current state are made again by the next
+    // step (the same values), this time with it
+    if (coupled_ && coupled_in_.solids.fluid_stress.size() == 0) liquid_weights_current_ = false;
   }
   std::vector<char> save_state() const override;
   void load_state(const std::vector<char>& bytes) override;
