@@ -124,10 +124,14 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   // all stress DOFs and cells
   VectorX body_stress = VectorX::Zero(stress_.num_dofs());
   VectorX body_cells = VectorX::Zero(grid.num_cells());
-  subtract_body_stress_rhs<Dim>(two, grid, w.liquid_stress, contacts.v_star, body_stress);
+  // (inviscid weights may come without W_L^s: zeros then)
+  VectorX zeros;
+  if (w.liquid_stress.size() == 0) zeros.setZero(stress_.num_dofs());
+  const VectorX& liquid_stress = w.liquid_stress.size() > 0 ? w.liquid_stress : zeros;
+  subtract_body_stress_rhs<Dim>(two, grid, liquid_stress, contacts.v_star, body_stress);
   subtract_body_pressure_rhs<Dim>(two, grid, w.pressure.liquid_cell, contacts.v_star, body_cells);
   if (one.num_rows() > 0) {
-    subtract_body_stress_rhs<Dim>(one, grid, w.liquid_stress, v_one, body_stress);
+    subtract_body_stress_rhs<Dim>(one, grid, liquid_stress, v_one, body_stress);
     subtract_body_pressure_rhs<Dim>(one, grid, w.pressure.liquid_cell, v_one, body_cells);
   }
 
@@ -529,6 +533,11 @@ void MonolithicSystem<Dim>::stress_full_into(const VectorX& x_fluid, VectorX& ou
   // in increasing order (component blocks in order), so the eliminated component is
   // 0 - tau_xx - tau_yy (3D) in the order StressLayout::expand sums it; the inactive unknowns
   // it skips are +0 there, and 0 - 0 = +0, so the bits are expand's.
+  // inviscid weights (StokesWeights::inviscid): no stress field at all, `out` left empty
+  if (w_.inviscid()) {
+    out.resize(0);
+    return;
+  }
   out.setZero(stress_.num_dofs());
   const int ns = num_stress();
   if (ns == 0) return;
@@ -553,19 +562,24 @@ VectorX MonolithicSystem<Dim>::fluid_velocities(const VectorX& x_fluid) const {
 
 template <int Dim>
 void MonolithicSystem<Dim>::fluid_velocities_into(const VectorX& x_fluid, VectorX& u) const {
-  u = u_star_;
   if (!matrix_free_) {
+    u = u_star_;
     apply_stokes_update<Dim>(grid_, layout_, w_, dt_, pressure_cells(x_fluid), stress_full(x_fluid), u);
     return;
   }
-  // the face force B x = G W_L^p p + D^T M W_L^s tau by the stencils, then the update of
-  // apply_stokes_update on faces with W_F^u W_L^u > 0
-  const VectorX force = matrix_free_stokes_->face_force(x_fluid);
+  // the face force B x = G W_L^p p + D^T M W_L^s tau by the stencils, written into u's own
+  // storage (no face-sized temporary), then per face the update of apply_stokes_update on faces
+  // with W_F^u W_L^u > 0 (u* - dt force / (rho W_L^u), the same expression) and u* elsewhere
+  if (u.size() != grid_.num_faces()) u.resize(grid_.num_faces());
+  matrix_free_stokes_->face_force_into(x_fluid, u.data());
   const PressureWeights& pw = w_.pressure;
+  const VectorX& u_star = u_star_;
 #pragma omp parallel for schedule(static) num_threads(team_threads(grid_.num_faces()))
   for (int f = 0; f < grid_.num_faces(); ++f) {
-    if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0)) continue;
-    u[f] -= dt_ * force[f] / (pw.face_density[f] * pw.liquid_face[f]);
+    if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0))
+      u[f] = u_star[f];
+    else
+      u[f] = u_star[f] - dt_ * u[f] / (pw.face_density[f] * pw.liquid_face[f]);
   }
 }
 

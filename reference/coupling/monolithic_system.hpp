@@ -183,8 +183,9 @@ class MonolithicSystem {
   VectorX stress_full(const VectorX& x_fluid) const;
   /// The same three into `out` (resized only when its size differs, so a buffer kept across
   /// steps is reused); the same values bit for bit. stress_full_into of a system without stress
-  /// unknowns (an inviscid solve) only zeroes `out`. fluid_velocities_into still allocates one
-  /// face-sized temporary under matrixfree (MatrixFreeStokesOperator::face_force).
+  /// unknowns only zeroes `out`, and leaves it empty when the weights are inviscid
+  /// (StokesWeights::inviscid: no stress vectors). fluid_velocities_into writes the face force
+  /// into `out` first (MatrixFreeStokesOperator::face_force_into): no face-sized temporary.
   void fluid_velocities_into(const VectorX& x_fluid, VectorX& out) const;
   void pressure_cells_into(const VectorX& x_fluid, VectorX& out) const;
   void stress_full_into(const VectorX& x_fluid, VectorX& out) const;

@@ -86,44 +86,51 @@ inline void shift_stencil(int x, int n0, bool periodic0, int cell,
 template <int Dim>
 VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
                          double fallback_density) {
+  VectorX rho = face_density;
+  density_diagonal_in_place(grid, rho, fallback_density);
+  return rho;
+}
+
+template <int Dim>
+void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density) {
   const int nf = grid.num_faces();
   // a face without a density whose cells have no face with one gets the fallback: that is every
   // such face except those next to the faces with a density, which are collected from those
-  // (work in proportion to the liquid, not the box: issue 20)
-  VectorX rho(nf);
+  // (work in proportion to the liquid, not the box: issue 20). The means are taken from the
+  // input values before any face is written (the faces near the liquid have none themselves),
+  // so writing in place gives the values of a separate output.
   std::vector<int> near;
   for (int f = 0; f < nf; ++f) {
-    if (face_density[f] > 0.0) {
-      rho[f] = face_density[f];
-      const auto [axis, coord] = grid.face_coord(f);
-      for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
-        if (cell < 0) continue;
-        for (int g : cell_faces<Dim>(grid, cell).face)
-          if (!(face_density[g] > 0.0)) near.push_back(g);
-      }
-    } else {
-      rho[f] = fallback_density;
+    if (!(rho[f] > 0.0)) continue;
+    const auto [axis, coord] = grid.face_coord(f);
+    for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
+      if (cell < 0) continue;
+      for (int g : cell_faces<Dim>(grid, cell).face)
+        if (!(rho[g] > 0.0)) near.push_back(g);
     }
   }
   std::sort(near.begin(), near.end());
   near.erase(std::unique(near.begin(), near.end()), near.end());
-  for (int f : near) {
-    // mean of the known densities on the faces of the two cells beside f
-    const auto [axis, coord] = grid.face_coord(f);
+  std::vector<double> near_rho(near.size());
+  for (std::size_t n = 0; n < near.size(); ++n) {
+    // mean of the known densities on the faces of the two cells beside the face
+    const auto [axis, coord] = grid.face_coord(near[n]);
     double sum = 0.0;
     int count = 0;
     for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
       if (cell < 0) continue;
       const auto cf = cell_faces<Dim>(grid, cell);
       for (int g : cf.face)
-        if (face_density[g] > 0.0) {
-          sum += face_density[g];
+        if (rho[g] > 0.0) {
+          sum += rho[g];
           ++count;
         }
     }
-    rho[f] = count > 0 ? sum / count : fallback_density;
+    near_rho[n] = count > 0 ? sum / count : fallback_density;
   }
-  return rho;
+  for (int f = 0; f < nf; ++f)
+    if (!(rho[f] > 0.0)) rho[f] = fallback_density;
+  for (std::size_t n = 0; n < near.size(); ++n) rho[near[n]] = near_rho[n];
 }
 
 template <int Dim>
@@ -558,6 +565,7 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
 
 #define MONOLITH_INSTANTIATE(D)                                                                  \
   template VectorX density_diagonal<D>(const MacGrid<D>&, const VectorX&, double);               \
+  template void density_diagonal_in_place<D>(const MacGrid<D>&, VectorX&, double);               \
   template PressureDofs select_pressure_dofs<D>(const MacGrid<D>&, const PressureWeights&,       \
                                                 double);                                         \
   template ExplicitPressureSystem assemble_explicit_pressure<D>(                                 \

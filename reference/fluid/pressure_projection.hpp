@@ -39,6 +39,10 @@ struct PressureWeights {
 template <int Dim>
 VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
                          double fallback_density);
+/// The same in place: `rho` enters as the faces' densities and leaves as the diagonal of P (the
+/// same values; no second face-sized vector).
+template <int Dim>
+void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density);
 
 /// Active pressure DOFs (Algorithm 1, line 7) and the null space of A.
 struct PressureDofs {

@@ -40,6 +40,14 @@ int expansion_column(const StressLayout<Dim>& layout, int unknown, std::array<in
   return 2;
 }
 
+/// `v`, or when it is empty (the stress vectors of inviscid weights, StokesWeights) zeros of
+/// size n in `zeros`.
+const VectorX& or_zeros(const VectorX& v, int n, VectorX& zeros) {
+  if (v.size() > 0) return v;
+  zeros.setZero(n);
+  return zeros;
+}
+
 }  // namespace
 
 // --- DOF selection --------------------------------------------------------------------------
@@ -48,9 +56,10 @@ template <int Dim>
 StokesDofs select_stokes_dofs(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
                               const StokesWeights& w, double dt, StokesUnknowns unknowns) {
   StokesDofs dofs;
-  // stress: W^s > 0 and eta > 0 on every StressGrid DOF the unknown stands for
-  dofs.dof_of_unknown.assign(layout.num_unknowns(), -1);
-  for (int i = 0; i < layout.num_unknowns(); ++i) {
+  // stress: W^s > 0 and eta > 0 on every StressGrid DOF the unknown stands for (none when the
+  // weights are inviscid: eta = 0 everywhere)
+  if (!w.inviscid()) dofs.dof_of_unknown.assign(layout.num_unknowns(), -1);
+  for (int i = 0; i < layout.num_unknowns() && !w.inviscid(); ++i) {
     std::array<int, 2> dof;
     std::array<double, 2> sign;
     const int count = expansion_column(layout, i, dof, sign);
@@ -63,6 +72,8 @@ StokesDofs select_stokes_dofs(const MacGrid<Dim>& grid, const StressLayout<Dim>&
     dofs.dof_of_unknown[i] = dofs.num_stress();
     dofs.unknown_of_dof.push_back(i);
   }
+  // without active stress DOFs the map is all -1: not kept (its readers visit stress unknowns)
+  if (dofs.num_stress() == 0) std::vector<int>().swap(dofs.dof_of_unknown);
   // pressure: the DOFs of the pressure solve
   if (unknowns == StokesUnknowns::pressure_and_stress)
     dofs.pressure = select_pressure_dofs(grid, w.pressure, dt);
@@ -83,18 +94,23 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
                                               const StokesWeights& w, const StokesDofs& dofs,
                                               double dt, const VectorX& u_star) {
   const StressGrid<Dim>& stress = layout.grid();
+  // inviscid weights may come without their stress vectors: zeros here
+  VectorX zeros_f, zeros_l, zeros_eta;
+  const VectorX& fluid_stress = or_zeros(w.fluid_stress, stress.num_dofs(), zeros_f);
+  const VectorX& liquid_stress = or_zeros(w.liquid_stress, stress.num_dofs(), zeros_l);
+  const VectorX& viscosity = or_zeros(w.viscosity, stress.num_dofs(), zeros_eta);
   ExplicitStokesSystem sys;
   // the named matrices of eq. (8)
   sys.G = gradient_matrix(grid);
   sys.D = deformation_rate_matrix(stress);
   sys.M = sparse_diagonal(stress_multiplicity(stress));
-  sys.N_inv = inverse_viscosity_matrix(layout, w.viscosity);
+  sys.N_inv = inverse_viscosity_matrix(layout, viscosity);
   sys.W_F_u = sparse_diagonal(w.pressure.fluid_face);
   sys.W_L_u_inv = sparse_diagonal(w.pressure.liquid_face.unaryExpr(&reciprocal_or_zero));
   sys.P_inv = sparse_diagonal(w.pressure.face_density.unaryExpr(&reciprocal_or_zero));
   sys.W_L_p = sparse_diagonal(w.pressure.liquid_cell);
-  sys.W_F_s = sparse_diagonal(w.fluid_stress);
-  sys.W_L_s = sparse_diagonal(w.liquid_stress);
+  sys.W_F_s = sparse_diagonal(fluid_stress);
+  sys.W_L_s = sparse_diagonal(liquid_stress);
   sys.E = layout.expansion();
   // selections of the active DOFs
   std::vector<Triplet> t;
@@ -108,7 +124,7 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
   // K = W_F^u P^-1 (W_L^u)^-1 and the full-layout N^-1 = M diag(1/eta)
   const SparseMatrix K = sys.W_F_u * sys.P_inv * sys.W_L_u_inv;
   const SparseMatrix N_full_inv =
-      sys.M * sparse_diagonal(w.viscosity.unaryExpr(&reciprocal_or_zero));
+      sys.M * sparse_diagonal(viscosity.unaryExpr(&reciprocal_or_zero));
   const SparseMatrix W_s = sys.W_F_s * sys.W_L_s;
   const SparseMatrix Dt = sys.D.transpose();
   const SparseMatrix St_tau = sys.S_tau.transpose();
@@ -263,7 +279,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       num_cells_(grid.num_cells()),
       has_pressure_(dofs.num_pressure() > 0),
       face_coefficient_(stokes_face_coefficients(w.pressure, dt)),
-      fluid_face_(w.pressure.fluid_face),
+      fluid_face_(&w.pressure.fluid_face),
       null_space_(dofs.null_space) {
   const StressGrid<Dim>& stress = layout.grid();
   const double inv_dx = 1.0 / grid.dx();
@@ -295,16 +311,23 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       terms_[kCellField].push_back({a, a, 1, -inv_dx});
     }
   // B per face: the transpose of those stencils (a DOF at c reaching face c + delta e_axis is
-  // reached from the face at -delta), the same entries on every boundary and periodic axis
-  for (int field = Dim; field < kFields; ++field)
+  // reached from the face at -delta), the same entries on every boundary and periodic axis.
+  // Without stress unknowns the stress terms are left out: s is zero there, and its terms come
+  // first in every face's sum, so they only added signed zeros to the sum's +0 start (no bit of
+  // B x changes), and the operator then keeps no stress-sized vector at all
+  for (int field = num_stress_ > 0 ? Dim : kCellField; field < kFields; ++field)
     for (const Term& t : terms_[field]) terms_[t.field].push_back({field, t.axis, -t.delta, t.coef});
 
-  // grid -> unknown maps, per unknown weights and 1/2 N^-1 W^s
-  const VectorX m = stress_multiplicity(stress);
-  auto half_n_inv_ws = [&](int d) {
-    return 0.5 * m[d] * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d];
+  // grid -> unknown maps, per unknown weights and 1/2 N^-1 W^s; M per DOF from its component
+  // (stress_multiplicity's values without its stress-sized vector)
+  auto m_of = [&](int d) { return StressGrid<Dim>::multiplicity(stress.coord(d).first); };
+  auto half_n_inv_ws_m = [&](int d, double m) {
+    return 0.5 * m * reciprocal_or_zero(w.viscosity[d]) * w.fluid_stress[d] * w.liquid_stress[d];
   };
-  unknown_of_dof_.assign(num_stress_dofs_, -1);
+  auto half_n_inv_ws = [&](int d) { return half_n_inv_ws_m(d, m_of(d)); };
+  // (the StressGrid-sized maps and scratch only with stress unknowns: an inviscid operator
+  // keeps none, and its weights may come without stress vectors, StokesWeights)
+  if (num_stress_ > 0) unknown_of_dof_.assign(num_stress_dofs_, -1);
   unknown_of_cell_.assign(num_cells_, -1);
   location_.resize(size_);
   weight_.resize(size_);
@@ -314,7 +337,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     const int k = stress.coord(d).first;
     unknown_of_dof_[d] = i;
     location_[i] = d;
-    weight_[i] = m[d] * w.liquid_stress[d];
+    weight_[i] = StressGrid<Dim>::multiplicity(k) * w.liquid_stress[d];
     self_[i] = half_n_inv_ws(d);
     // reduced form: E adds the eliminated DOF of the cell with sign -1 (sign^2 = 1 here)
     if (eliminated_ >= 0 && StressGrid<Dim>::is_diagonal(k))
@@ -326,15 +349,16 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     location_[i] = cell;
     weight_[i] = w.pressure.liquid_cell[cell];
   }
-  if (eliminated_ >= 0) {
+  if (eliminated_ >= 0 && num_stress_ > 0) {
     // the eliminated DOF of each cell: its -M W_L^s and (3D, where it couples the two diagonal
     // unknowns of the cell through E^T N^-1 E) its 1/2 N^-1 W^s
     eliminated_weight_.resize(num_cells_);
     if constexpr (Dim == 3) eliminated_coupling_.resize(num_cells_);
+    const double m = StressGrid<Dim>::multiplicity(eliminated_);
     for (int c = 0; c < num_cells_; ++c) {
       const int d = stress.offset(eliminated_) + c;
-      eliminated_weight_[c] = -m[d] * w.liquid_stress[d];
-      if constexpr (Dim == 3) eliminated_coupling_[c] = half_n_inv_ws(d);
+      eliminated_weight_[c] = -m * w.liquid_stress[d];
+      if constexpr (Dim == 3) eliminated_coupling_[c] = half_n_inv_ws_m(d, m);
     }
   }
   // diagonal: 1/2 N^-1 W^s plus sum_f C_f B_fi^2 over the merged column of B
@@ -347,6 +371,8 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       colouring_valid_ = false;
   // the rows the loops visit: face rows with fluid, stress and cell rows with unknowns
   for (int field = 0; field < kFields; ++field) {
+    // (stress rows only with stress unknowns)
+    if (num_stress_ == 0 && field >= Dim && field < kCellField) continue;
     const Field& f = fields_[field];
     const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
     for (int r = 0; r < rows; ++r) {
@@ -369,7 +395,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   }
   for (int field = 0; field < kFields; ++field)
     active_work_ += static_cast<long>(active_rows_[field].size()) * fields_[field].dims[0];
-  stress_scratch_.setZero(num_stress_dofs_);
+  if (num_stress_ > 0) stress_scratch_.setZero(num_stress_dofs_);
   cell_scratch_.setZero(num_cells_);
   face_scratch_.setZero(num_faces_);
 }
@@ -739,14 +765,23 @@ void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& 
 
 template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::face_force(const VectorX& x) const {
-  VectorX s = VectorX::Zero(num_stress_dofs_), q = VectorX::Zero(num_cells_), force(num_faces_);
+  VectorX force(num_faces_);
+  face_force_into(x, force.data());
+  return force;
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::face_force_into(const VectorX& x, double* force) const {
+  // s and q in the scratch vectors: scatter writes the rows with unknowns, which apply
+  // overwrites too, and leaves the others at zero (as the zero-filled temporaries were there)
+  double* s = stress_scratch_.data();
+  double* q = cell_scratch_.data();
 #pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
   {
-    scatter(x, s.data(), q.data());
+    scatter(x, s, q);
 #pragma omp barrier
-    faces_from_grid(s.data(), q.data(), force.data(), false, true);
+    faces_from_grid(s, q, force, false, true);
   }
-  return force;
 }
 
 template <int Dim>
@@ -786,14 +821,26 @@ std::vector<std::pair<int, double>> MatrixFreeStokesOperator<Dim>::stencil(int i
 
 template <int Dim>
 VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
-  // b = B^T W_F^u u*: the gather of apply without C and the N part
-  const VectorX v = fluid_face_.cwiseProduct(u_star);
-  VectorX s(num_stress_dofs_), q(num_cells_), b(size_);
+  // b = B^T W_F^u u*: the gather of apply without C and the N part, in the scratch vectors
+  // (grid_from_faces writes the stress and cell rows apply writes); v = W_F^u u* fills every
+  // face, and apply relies on zeros in the face rows it does not write, so the face scratch is
+  // zeroed again afterwards
+  VectorX b(size_);
+  double* v = face_scratch_.data();
+  double* s = stress_scratch_.data();
+  double* q = cell_scratch_.data();
+  const double* wf = fluid_face_->data();
+  const double* u = u_star.data();
 #pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
   {
-    grid_from_faces(v.data(), s.data(), q.data());
+#pragma omp for schedule(static)
+    for (int f = 0; f < num_faces_; ++f) v[f] = wf[f] * u[f];
+    grid_from_faces(v, s, q);
 #pragma omp barrier
-    gather(s.data(), q.data(), nullptr, b);
+    gather(s, q, nullptr, b);
+#pragma omp barrier
+#pragma omp for schedule(static) nowait
+    for (int f = 0; f < num_faces_; ++f) v[f] = 0.0;
   }
   return b;
 }
@@ -801,7 +848,7 @@ VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
 template <int Dim>
 std::size_t MatrixFreeStokesOperator<Dim>::memory_bytes() const {
   const std::size_t d = sizeof(double), i = sizeof(int);
-  std::size_t bytes = d * (face_coefficient_.size() + fluid_face_.size() + weight_.size() +
+  std::size_t bytes = d * (face_coefficient_.size() + weight_.size() +
                            self_.size() + diagonal_.size() + eliminated_weight_.size() +
                            eliminated_coupling_.size() + stress_scratch_.size() +
                            cell_scratch_.size() + face_scratch_.size()) +
@@ -896,6 +943,17 @@ double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
                      const StokesWeights& w, const StokesDofs& dofs, double dt,
                      const VectorX& u_star, const VectorX& x) {
   const StressGrid<Dim>& stress = layout.grid();
+  if (w.inviscid()) {
+    // no stress unknowns and no stress part (the stress vectors may be empty)
+    VectorX u = u_star;
+    apply_stokes_update(grid, layout, w, dt, scatter_stokes_pressure(dofs, x, grid.num_cells()),
+                        VectorX(), u);
+    const PressureWeights& pw = w.pressure;
+    double kinetic = 0.0;
+    for (int f = 0; f < grid.num_faces(); ++f)
+      kinetic += pw.face_density[f] * pw.fluid_face[f] * pw.liquid_face[f] * u[f] * u[f];
+    return 0.5 * kinetic;
+  }
   const VectorX tau = scatter_stress(layout, dofs, x);
   const VectorX p = scatter_stokes_pressure(dofs, x, grid.num_cells());
   VectorX u = u_star;

@@ -38,11 +38,18 @@
 namespace monolith {
 
 /// Everything eq. (8) is built from, per DOF (diagonal matrices stored as their diagonals).
+/// Inviscid weights may leave the three stress vectors empty: an empty `viscosity` is eta = 0 on
+/// every StressGrid DOF (no stress unknowns), and `fluid_stress` and `liquid_stress` are then
+/// read by nothing, so they may be empty too. Every function of this header accepts that (the
+/// explicit back end and stokes_energy read zeros there), and so do MonolithicSystem and the
+/// coupled schemes: at the paper's 256x128x256 grid the three are 1.2 GB of zeros.
 struct StokesWeights {
   PressureWeights pressure;  ///< W_F^u, W_L^p, W_L^u, P (pressure_projection.hpp)
-  VectorX fluid_stress;      ///< W_F^s per StressGrid DOF (all components)
-  VectorX liquid_stress;     ///< W_L^s per StressGrid DOF
-  VectorX viscosity;         ///< eta per StressGrid DOF, Pa s (0 = inviscid there)
+  VectorX fluid_stress;      ///< W_F^s per StressGrid DOF (all components; may be empty if inviscid)
+  VectorX liquid_stress;     ///< W_L^s per StressGrid DOF (may be empty if inviscid)
+  VectorX viscosity;         ///< eta per StressGrid DOF, Pa s (0 = inviscid there; empty: 0 everywhere)
+  /// No stress unknowns whatever the other weights: eta is 0 everywhere (given as empty).
+  bool inviscid() const { return viscosity.size() == 0; }
 };
 
 /// The weights of eq. (8) (section 3.1.2) from level sets on half_lattice(grid): solid where
@@ -65,7 +72,9 @@ enum class StokesUnknowns { pressure_and_stress, stress_only };
 struct StokesDofs {
   PressureDofs pressure;                 ///< empty for stress_only
   std::vector<int> unknown_of_dof;       ///< active stress DOF k -> StressLayout unknown
-  std::vector<int> dof_of_unknown;       ///< StressLayout unknown -> active stress DOF, -1 inactive
+  /// StressLayout unknown -> active stress DOF, -1 inactive; empty when there is no active
+  /// stress DOF (num_stress() == 0: an int per layout unknown of -1 only, 170 MB at 256x128x256)
+  std::vector<int> dof_of_unknown;
   std::vector<VectorX> null_space;       ///< of the whole (tau, p) system, orthonormal
   int num_stress() const { return static_cast<int>(unknown_of_dof.size()); }
   int num_pressure() const { return pressure.size(); }
@@ -136,7 +145,9 @@ class MatrixFreeStokesOperator : public LinearOperator {
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                       const std::vector<char>* active = nullptr) const override;
   const std::vector<VectorX>& null_space() const override { return null_space_; }
-  /// b = B^T W_F^u u* (= (b1, b2) of eq. (24)) by the same stencils.
+  /// b = B^T W_F^u u* (= (b1, b2) of eq. (24)) by the same stencils. Reads W_F^u from the
+  /// weights given to the constructor, which must still exist (every caller keeps them for the
+  /// operator's life: MonolithicSystem shares them, solve_stokes holds them).
   VectorX rhs(const VectorX& u_star) const;
   /// The face coefficient C_f = dt W_F^u / (rho W_L^u) (0 where the face carries no fluid).
   const VectorX& face_coefficients() const { return face_coefficient_; }
@@ -144,6 +155,8 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// (num_faces). The velocity update is u* - dt P^-1 (W_L^u)^-1 B x; the rigid-body terms of
   /// eq. (24) aggregate the same force (J_s = -Q W_S^u D^T M, J_p = -Q W_S^u G, section 4.4.1; reference/coupling/coupling.hpp).
   VectorX face_force(const VectorX& x) const;
+  /// The same into force[0 .. num_faces) (the caller's storage; no grid-sized temporary).
+  void face_force_into(const VectorX& x, double* force) const;
   /// Column i of B: the faces unknown i acts on and the coefficients B_fi, as (face, B_fi) pairs.
   std::vector<std::pair<int, double>> stencil(int i) const;
 
@@ -214,7 +227,9 @@ class MatrixFreeStokesOperator : public LinearOperator {
   int num_cells_ = 0;
   bool has_pressure_ = false;
   VectorX face_coefficient_;
-  VectorX fluid_face_;
+  /// W_F^u of the weights given to the constructor, read by rhs (not copied: a face-sized
+  /// vector, 200 MB at 256x128x256)
+  const VectorX* fluid_face_ = nullptr;
   std::vector<int> unknown_of_dof_;   ///< per StressGrid DOF: unknown or -1
   std::vector<int> unknown_of_cell_;  ///< per cell: pressure unknown or -1
   std::vector<int> location_;         ///< per unknown: StressGrid DOF or cell

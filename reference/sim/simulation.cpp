@@ -8,9 +8,12 @@
 #include "reference/sim/simulation.hpp"
 #include "reference/core/parallel.hpp"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <tuple>
 #include <cstdint>
+#include <cstring>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -54,6 +57,49 @@ std::vector<double> to_std(const Vec<Dim>& x) {
 
 bool all_finite(const VectorX& v) {
   return v.allFinite();
+}
+
+/// phi[k] = value(k) for every point k of the lattice box [lo, hi] (inclusive, clamped), on
+/// several threads (rows along x shared statically); every point whose bits change is listed
+/// with its old value in `undo` (one list per thread, cleared first), so that restore_points
+/// gives phi back exactly. The lists hold the changed points only: the level sets are changed
+/// in a band (issue 20: no second lattice-sized vector for a modified copy).
+template <int Dim, class Value>
+void overwrite_in_box(const SampleLattice<Dim>& lattice, VecI<Dim> lo, VecI<Dim> hi,
+                      VectorX& phi, Value&& value,
+                      std::vector<std::vector<std::pair<int, double>>>& undo) {
+  const int threads = process_threads();
+  if (static_cast<int>(undo.size()) < threads) undo.resize(threads);
+  for (auto& list : undo) list.clear();
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = std::max(lo[a], 0);
+    hi[a] = std::min(hi[a], lattice.dims[a] - 1);
+    if (lo[a] > hi[a]) return;
+  }
+  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+#pragma omp parallel num_threads(threads)
+  {
+    std::vector<std::pair<int, double>>& list = undo[omp_get_thread_num()];
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const int start = lattice.index(lo + lattice_coord<Dim>(q, row_dims));
+      for (int k = start; k <= start + hi[0] - lo[0]; ++k) {
+        const double old = phi[k], v = value(k);
+        if (std::memcmp(&old, &v, sizeof(double)) == 0) continue;
+        list.emplace_back(k, old);
+        phi[k] = v;
+      }
+    }
+  }
+}
+
+/// Undoes overwrite_in_box (each point is listed once, so the order does not matter).
+inline void restore_points(VectorX& phi,
+                           const std::vector<std::vector<std::pair<int, double>>>& undo) {
+  for (const auto& list : undo)
+    for (const auto& [k, old] : list) phi[k] = old;
 }
 
 /// A shape's signed distance where it matters: farther than `far` from its bounds box, the
@@ -102,7 +148,8 @@ SolidField<Dim> make_solid_field(const std::vector<ShapePtr<Dim>>& shapes, doubl
 }
 
 /// Faces whose weight W_F^u W_L^u in the energy of eq. (8) (W_L^u the geometric liquid fraction,
-/// before the clamp) is below this keep their solved velocity out of the particles: it is
+/// before the clamp; the clamped value selects the same faces, see trusted_face) is below this
+/// keep their solved velocity out of the particles: it is
 /// replaced by extrapolation from the faces above it (a departure from the paper). The
 /// projection bounds the weighted energy, sum_f rho W_F^u_f W_L^u_f u_f^2 dx^Dim / 2 <= that of
 /// u*, so a face's speed is bounded only in proportion to 1 / sqrt(W_F^u W_L^u): the minimisation
@@ -211,7 +258,9 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
     deformation_rate_ = std::make_shared<const SparseMatrix>(deformation_rate_matrix(stress_grid_));
   if (sequence_ != SolveSequence::pressure)
     stress_fluid_ = stress_fluid_weights(stress_grid_, lattice_, solid_phi_, boundary_);
-  stress_ = VectorX::Zero(stress_grid_.num_dofs());
+  // the last solve's stress (warm-start data): none without stress solves (an inviscid liquid
+  // or a P.. scheme has no stress field; it was a zero vector of 400 MB at 256x128x256)
+  if (sequence_ != SolveSequence::pressure) stress_ = VectorX::Zero(stress_grid_.num_dofs());
   if (coupled_) update_moving_solids();
 
   // liquids: particles seeded in each liquid's shape
@@ -232,8 +281,11 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
     project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
                              kSeedProjectionIterations,
                              switches_.density_projection_surface_deficits);
-  // frame 0: the seeded state on the grid (no pressure yet)
-  particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+  // frame 0: the seeded state on the grid (no pressure yet); the faces' densities become the
+  // diagonal of P in place (as in every step, update_step_weights)
+  particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+  mark_faces_with_mass();
+  density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
   update_liquid_weights();
   liquid_weights_current_ = true;
   pressure_ = VectorX::Zero(grid_.num_cells());
@@ -257,17 +309,26 @@ void Simulation<Dim>::update_liquid_weights() {
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
   // (buffers kept across steps; the fractions visit only the band where phi changes sign)
+  // The extension is written into liquid_phi_ itself, in the solids' box, and undone after the
+  // weights (the points it changes are listed: the solids' part of the liquid's band), so no
+  // lattice-sized copy is made (541 MB at the paper's 256x128x256 grid); the values the weights
+  // read are those of extend_liquid_into_solids_in_box
   const bool solids = !solid_shapes_.empty() || coupled_;
-  if (solids)
-    extend_liquid_into_solids_in_box(grid_, liquid_phi_, solid_phi_, kLiquidSolidReach * grid_.dx(),
-                                     solid_lo_, solid_hi_, extended_phi_);
-  const VectorX& phi = solids ? extended_phi_ : liquid_phi_;
+  const bool extend = solids && solid_phi_.size() == liquid_phi_.size();
+  if (extend) {
+    const double reach = kLiquidSolidReach * grid_.dx(), dx = grid_.dx();
+    overwrite_in_box<Dim>(lattice_, solid_lo_, solid_hi_, liquid_phi_, [&](int k) {
+      return liquid_extended_into_solid(liquid_phi_[k], solid_phi_[k], reach, dx);
+    }, phi_undo_);
+  }
+  const VectorX& phi = liquid_phi_;
   classify_lattice_cells(grid_, lattice_, phi, liquid_signs_);
   // the points where the extended level set is negative (the box of its non-positive cells)
   const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
   cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
-  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, raw_liquid_face_);
-  weights_.liquid_face = raw_liquid_face_;
+  // W_L^u clamped in place: the trust test of trusted_face reads it instead of the unclamped
+  // fractions (the same faces, kept no longer in a face-sized vector of their own)
+  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_face);
   clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
@@ -309,6 +370,10 @@ void Simulation<Dim>::update_liquid_weights() {
   // negative too: it is written in that box and one point around it (the corners of every
   // lattice cell the classes and fractions read; the rest of the buffer keeps the extended level
   // set's values, >= 0 there), and classified in the box
+  // (in liquid_phi_ again, the extension undone first: the fluid level set is written in that
+  // box and one point around it and undone after its fractions. Outside, liquid_phi_ has the
+  // signs the extended level set had there, >= 0, and no value of it is read)
+  if (extend) restore_points(liquid_phi_, phi_undo_);
   if (solids) {
     VecI<Dim> lo = liquid_lo, hi = liquid_hi;
     if (liquid_signs_.any_negative())
@@ -316,18 +381,17 @@ void Simulation<Dim>::update_liquid_weights() {
         lo[a] = std::max(lo[a] - 1, 0);
         hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
       }
-    for_each_lattice_point_in_box<Dim>(lattice_, lo, hi, [&](int k) {
-      extended_phi_[k] = std::max(liquid_phi_[k], -solid_phi_[k]);
-    });
-    const VectorX& fluid_phi = extended_phi_;
+    if (extend)
+      overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
+        return std::max(liquid_phi_[k], -solid_phi_[k]);
+      }, phi_undo_);
+    const VectorX& fluid_phi = liquid_phi_;
     classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
                                   liquid_signs_);
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
+    if (extend) restore_points(liquid_phi_, phi_undo_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
-  // the extended level set is read by the weights above only: its lattice-sized buffer goes
-  // back to the heap for the solve
-  extended_phi_ = VectorX();
   // with moving bodies the solids' level set is made again with the next weights
   // (update_moving_solids always runs before this) and read by nothing else (the velocity
   // constraints use the faces in solids found with it): its buffer goes back to the heap too
@@ -346,8 +410,9 @@ double Simulation<Dim>::cfl_dt() const {
   // frame 9 at dt = 6e-28 s).
   double grid_speed = 0.0;
   const auto faces = static_cast<Eigen::Index>(grid_.num_faces());
-  if (u_.size() == faces && raw_liquid_face_.size() == faces && weights_.fluid_face.size() == faces &&
-      weights_.liquid_face.size() == faces && face_mass_.size() == faces) {
+  if (u_.size() == faces && weights_.fluid_face.size() == faces &&
+      weights_.liquid_face.size() == faces &&
+      mass_faces_.size() == static_cast<std::size_t>(grid_.num_faces())) {
     // (a maximum: the same for any split of the faces)
     const int nf = grid_.num_faces();
 #pragma omp parallel for schedule(static) reduction(max : grid_speed) num_threads(process_threads())
@@ -416,11 +481,27 @@ double Simulation<Dim>::grid_and_body_kinetic_energy() const {
 }
 
 template <int Dim>
+void Simulation<Dim>::mark_faces_with_mass() {
+  mass_faces_.resize(grid_.num_faces());
+  const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) mass_faces_[f] = face_mass_[f] > 0.0;
+}
+
+template <int Dim>
+bool Simulation<Dim>::masses_read_after_solve() const {
+  return switches_.energy_ledger;
+}
+
+template <int Dim>
 void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   // (1) map velocity from particles to grid (APIC)
   {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
-    particles_to_grid(particles_, grid_, u_, face_mass_, face_density_);
+    // the faces' densities into P's own storage (P of the last step is read by nothing from
+    // here on; update_step_weights turns them into this step's P in place)
+    particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+    mark_faces_with_mass();
   }
   account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });
   restart_ledger([&] { return grid_and_body_kinetic_energy(); });
@@ -429,7 +510,7 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   const int nf = grid_.num_faces();
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f)
-    if (face_mass_[f] > 0.0) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+    if (mass_faces_[f]) u_[f] += dt * gravity_[grid_.face_coord(f).first];
   if (coupled_) rigid_->apply_gravity(dt, gravity_);
 }
 
@@ -446,7 +527,7 @@ void Simulation<Dim>::update_step_weights() {
   liquid_weights_current_ = false;
   {
     ScopedTimer timer(stats_.timing[FramePhase::weights]);
-    weights_.face_density = density_diagonal(grid_, face_density_, reference_density_);
+    density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
   }
 }
 
@@ -462,10 +543,7 @@ void Simulation<Dim>::extrapolate_into_air() {
   if (!switches_.air_velocity) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   std::vector<char>& carried = face_flags_;
-  carried.resize(grid_.num_faces());
-  const int nf = grid_.num_faces();
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f) carried[f] = face_mass_[f] > 0.0;
+  carried = mass_faces_;
   extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
 }
 
@@ -496,10 +574,15 @@ void Simulation<Dim>::trusted_faces(std::vector<char>& trusted) const {
 
 template <int Dim>
 bool Simulation<Dim>::trusted_face(int f) const {
+  // W_F^u W_L^u with the clamped W_L^u: the clamp raises a fraction below
+  // kMinLiquidFaceFraction to it, and W_F^u <= 1, so such a face stays below
+  // kTrustedLiquidFaceFraction (1e-4 < 0.1) as it was before the clamp: the same faces
+  static_assert(kMinLiquidFaceFraction < kTrustedLiquidFaceFraction,
+                "the trust test reads the clamped W_L^u");
   return weights_.fluid_face[f] > 0.0 &&
-         (weights_.fluid_face[f] * raw_liquid_face_[f] >= kTrustedLiquidFaceFraction ||
+         (weights_.fluid_face[f] * weights_.liquid_face[f] >= kTrustedLiquidFaceFraction ||
           (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
-           face_mass_[f] > 0.0) ||
+           mass_faces_[f]) ||
           (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
 }
 
@@ -645,7 +728,16 @@ void Simulation<Dim>::update_moving_solids() {
   // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
-  solids.lattice_phi.swap(solid_phi_);
+  // When the union's last buffer is gone (update_liquid_weights releases it), the storage of
+  // the liquid level set is lent instead: update_liquid_weights always follows this call and
+  // makes that level set anew (nothing reads it in between), so while the solids' weights are
+  // made only one lattice-sized vector is alive (541 MB at the paper's 256x128x256 grid)
+  solids.lattice_phi.swap(solid_phi_.size() > 0 ? solid_phi_ : liquid_phi_);
+  // W_F^u likewise: weights_.fluid_face's buffer is lent as the output (solid_weights overwrites
+  // every entry) and comes back below, so one face-sized vector holds it (solids.fluid_face is
+  // left empty: read by nothing after this)
+  solids.fluid_face.swap(weights_.fluid_face);
+  weights_.fluid_face = VectorX();
   solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
                      scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
   solid_phi_.swap(solids.lattice_phi);
@@ -657,14 +749,17 @@ void Simulation<Dim>::update_moving_solids() {
     solid_lo_ = VecI<Dim>::Zero();
     solid_hi_ = -VecI<Dim>::Ones();
   }
-  find_faces_in_solids();
-  // W_F^u moves to weights_ the same way (solid_weights overwrites every entry of its
-  // fluid_face, so the old buffer it gets back needs no values): coupled_in_.solids.fluid_face
-  // is stale from here on, W_F^u is weights_.fluid_face (in the solve:
-  // in.weights.pressure.fluid_face). W_F^s stays in solids, where solve_coupled reads it
+  // W_F^u goes back to weights_ (in the solve: in.weights.pressure.fluid_face);
+  // coupled_in_.solids.fluid_face stays empty. W_F^s stays in solids, where solve_coupled reads it
   // (stress_fluid_ is the uncoupled solve's: freed here)
   weights_.fluid_face.swap(solids.fluid_face);
+  solids.fluid_face = VectorX();
+  find_faces_in_solids();
   stress_fluid_ = VectorX();
+  // without stress solves nothing reads W_F^s (solve_coupled passes inviscid weights without
+  // stress vectors, lean_coupled_weights): released here, so that it is not alive in the solve
+  // (solid_weights makes it again at the next pose, from the heap's free memory)
+  if (lean_coupled_weights()) solids.fluid_stress = VectorX();
   rebuild_solid_field();
 }
 
@@ -699,7 +794,6 @@ void Simulation<Dim>::solve_coupled(double dt) {
   CoupledStepInput<Dim>& in = coupled_in_;
   in.grid = grid_;
   in.dt = dt;
-  in.u_star = u_;
   in.bodies = rigid_->bodies();
   // (6) contacts at the step's start pose, with the pair's friction and restitution
   RigidStepStats contact_stats;
@@ -712,19 +806,50 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // The grid-sized vectors are swapped into the input for the solve and back after it (copies
   // of them were 1.2 GB at the paper's 256x128x256 grid); the zero vectors of the P.. C
   // schemes are made once and stay zero (the solve reads its input only)
+  //
+  // Without stress solves the weights are inviscid ones without stress vectors
+  // (StokesWeights::inviscid; lean_coupled_weights), except for a step whose system goes to the
+  // oracle's export, which reads them all.
+  //
+  // u* is lent as well: u_'s storage becomes in.u_star for the solve, and the solve writes the
+  // new u into the storage of the previous step's u* (coupled_out_.u, given the storage that
+  // in.u_star held), so two face-sized velocity vectors live across steps instead of three.
+  // Nothing reads u_ during the solve; if the solve throws, u* goes back into u_.
   const bool stress = sequence_ != SolveSequence::pressure;
+  const bool lean = lean_coupled_weights();
   auto lend = [&] {
     std::swap(in.weights.pressure, weights_);
-    in.weights.fluid_stress.swap(in.solids.fluid_stress);
+    if (!lean) in.weights.fluid_stress.swap(in.solids.fluid_stress);
     if (stress) {
       in.weights.liquid_stress.swap(stress_liquid_);
       in.weights.viscosity.swap(stress_eta_);
     }
   };
-  if (!stress && in.weights.viscosity.size() != stress_grid_.num_dofs()) {
+  if (lean) {
+    in.weights.fluid_stress = VectorX();
+    in.weights.liquid_stress = VectorX();
+    in.weights.viscosity = VectorX();
+  } else if (!stress && in.weights.viscosity.size() != stress_grid_.num_dofs()) {
     in.weights.liquid_stress.setZero(stress_grid_.num_dofs());
     in.weights.viscosity.setZero(stress_grid_.num_dofs());
   }
+  // The face masses are read by nothing after the step's gravity and extrapolation (the faces
+  // that carry mass are kept as flags, mass_faces_) unless the energy ledger measures the grid's
+  // kinetic energy: then the new u goes into their storage, and they take the storage of u*
+  // after the solve (their values stale until the next particles_to_grid): u_, face_mass_, u*
+  // and the new u share two face-sized vectors. The pressure likewise: nothing reads pressure_
+  // during the coupled solve, so the new pressure is written into its storage.
+  in.u_star.swap(u_);
+  const bool masses_free = !masses_read_after_solve();
+  coupled_out_.u.swap(masses_free ? face_mass_ : u_);
+  coupled_out_.pressure.swap(pressure_);
+  struct GiveBackVelocity {
+    VectorX& u;
+    VectorX& u_star;
+    ~GiveBackVelocity() {
+      if (u.size() == 0) u.swap(u_star);
+    }
+  } give_back_velocity{u_, in.u_star};
   lend();
   struct GiveBack {
     std::function<void()> f;
@@ -770,6 +895,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
     if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
   }
   u_.swap(r.u);
+  if (masses_free) face_mass_.swap(in.u_star);
   pressure_.swap(r.pressure);
   stress_.swap(r.stress);
   // (12) the bodies' velocities (eq. (21))
@@ -1139,8 +1265,11 @@ void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
   if (particles_.v.size() != n || particles_.c.size() != n || particles_.mass.size() != n ||
       particles_.density.size() != n || particles_.liquid.size() != n ||
       u_.size() != grid_.num_faces() || pressure_.size() != grid_.num_cells() ||
-      stress_.size() != stress_grid_.num_dofs())
+      (stress_.size() != stress_grid_.num_dofs() &&
+       !(stress_.size() == 0 && sequence_ == SolveSequence::pressure)))
     r.fail("sizes that do not match the scene's grid or particles");
+  // (checkpoints written before the stress field was dropped without stress solves hold zeros)
+  if (sequence_ == SolveSequence::pressure) stress_ = VectorX();
   // what is derived from the state: the solids at the bodies' pose and the liquid weights, as
   // advance_frame leaves them at a frame's end (a step that needs them fresh recomputes them);
   // their wall time is not the restored frame's, so the frame's timing is kept as saved

@@ -157,6 +157,10 @@ class Simulation : public AnySimulation {
   void request_system_export(int step, std::function<void(const SystemExport&)> sink) override {
     export_step_ = step;
     export_sink_ = std::move(sink);
+    // the export reads W_F^s, which coupled steps without stress solves do not keep
+    // (lean_coupled_weights): the weights of the current state are made again by the next
+    // step (the same values), this time with it
+    if (coupled_ && coupled_in_.solids.fluid_stress.size() == 0) liquid_weights_current_ = false;
   }
   std::vector<char> save_state() const override;
   void load_state(const std::vector<char>& bytes) override;
@@ -334,11 +338,13 @@ class Simulation : public AnySimulation {
   SolidWeightsScratch<Dim> solid_scratch_;  ///< solid_weights' buffers
   // the weights of eq. (8): W_F^u, W_L^p, W_L^u, P (weights_), W_F^s, W_L^s
   PressureWeights weights_;
-  VectorX raw_liquid_face_;  ///< W_L^u before the clamp of kMinLiquidFaceFraction
   // buffers of update_liquid_weights kept across steps (no grid-sized allocation per step): the
-  // liquid level set extended into the solids, its lattice-cell sign classes, the cell fractions
-  // of the unextended level set (the reported volume)
-  VectorX extended_phi_, volume_cells_;
+  // cell fractions of the unextended level set (the reported volume), the lattice-cell sign
+  // classes (the liquid level set is extended into the solids in place, see phi_undo_)
+  VectorX volume_cells_;
+  /// the points of liquid_phi_ that update_liquid_weights overwrites in place (the extension
+  /// into the solids, then the reported volume's level set) with their values, per thread
+  std::vector<std::vector<std::pair<int, double>>> phi_undo_;
   LatticeSigns<Dim> liquid_signs_;
   // per-step buffers of the velocity stages: face flags (faces that carry mass, trusted faces)
   // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
@@ -367,13 +373,26 @@ class Simulation : public AnySimulation {
   Particles<Dim> particles_;
   VectorX liquid_phi_;
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
-  VectorX u_, face_mass_, face_density_, pressure_, stress_;
+  /// (the faces' densities of particles_to_grid go straight into weights_.face_density)
+  VectorX u_, face_mass_, pressure_, stress_;
+  /// face_mass_ > 0 per face, marked after every particles_to_grid: the trust test
+  /// (trusted_face), gravity and the extrapolation into air read these flags, so the masses
+  /// themselves are dead after them (masses_read_after_solve) and their storage is reused
+  std::vector<char> mass_faces_;
+  void mark_faces_with_mass();
+  /// Something reads face_mass_ after the solve: the energy ledger's grid kinetic energy.
+  bool masses_read_after_solve() const;
   PcgSettings pcg_settings_;
   /// The preconditioner and initial guess of a solve_stokes call with viscosities eta and time
   /// step dt: solver.preconditioner, "auto" resolved by the solve's stiffness
   /// eta_max dt / (rho dx^2) (choose_preconditioner); the choice and the stiffness are booked in
   /// the frame's solver stats.
   StokesSolveOptions stokes_options(const VectorX& eta, double dt);
+  /// The coupled solve's weights carry no stress vectors (StokesWeights::inviscid) and W_F^s is
+  /// not kept: the scene has no stress solves and no system export is requested.
+  bool lean_coupled_weights() const {
+    return sequence_ == SolveSequence::pressure && !export_sink_;
+  }
   /// The smallest density of the scene's liquids (kg/m^3; 0 without liquids): the one of the
   /// largest stiffness eta dt / (rho dx^2), which the automatic preconditioner choice reads.
   double smallest_liquid_density() const;

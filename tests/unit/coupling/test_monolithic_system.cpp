@@ -606,3 +606,68 @@ TEST_CASE("matrixfree: the bodies' right-hand side over their surface and the ou
   SECTION("3D full") { check_surface_rhs_and_outputs<3>(8, StressForm::full); }
   SECTION("3D reduced") { check_surface_rhs_and_outputs<3>(8, StressForm::reduced); }
 }
+
+namespace {
+
+/// The two-group scene with an inviscid liquid: its weights as coupled_stokes_weights makes
+/// them (stress vectors of zeros) and the same without stress vectors (StokesWeights::inviscid,
+/// what the simulator passes without stress solves) give the same system bit for bit.
+template <int Dim>
+void check_inviscid_weights_without_stress_vectors(int n, Backend backend) {
+  Scene<Dim> s = two_group_scene<Dim>(n);
+  const StressGrid<Dim> stress(s.grid);
+  s.w.viscosity.setZero(stress.num_dofs());
+  StokesWeights lean = s.w;
+  lean.fluid_stress = VectorX();
+  lean.liquid_stress = VectorX();
+  lean.viscosity = VectorX();
+  REQUIRE(lean.inviscid());
+  REQUIRE_FALSE(s.w.inviscid());
+  const MonolithicSystem<Dim> full(s.grid, StressForm::reduced, s.w, s.dt, s.u_star, s.bodies,
+                                   s.solids, s.contacts, backend);
+  const MonolithicSystem<Dim> sys(s.grid, StressForm::reduced, lean, s.dt, s.u_star, s.bodies,
+                                  s.solids, s.contacts, backend);
+  REQUIRE(full.num_stress() == 0);
+  REQUIRE(sys.num_stress() == 0);
+  REQUIRE(sys.num_pressure() == full.num_pressure());
+  REQUIRE(sys.num_pressure() > 0);
+  CHECK(sys.dofs().pressure.cell_of_dof == full.dofs().pressure.cell_of_dof);
+  // without stress unknowns the map of the layout's unknowns is not kept
+  CHECK(sys.dofs().dof_of_unknown.empty());
+  CHECK(same_bits(sys.b2(), full.b2()));
+  CHECK(sys.b2().cwiseAbs().maxCoeff() > 0.0);
+  VectorX x(sys.num_fluid());
+  for (int i = 0; i < x.size(); ++i) x[i] = std::cos(0.3 + 0.71 * i) * (i % 5 == 2 ? -2.0 : 1.0);
+  VectorX y_full, y;
+  full.stokes_operator().apply(x, y_full);
+  sys.stokes_operator().apply(x, y);
+  CHECK(same_bits(y, y_full));
+  CHECK(same_bits(sys.stokes_operator().diagonal(), full.stokes_operator().diagonal()));
+  // SSOR sweeps from x and from zero
+  VectorX z_full = x, z = x;
+  full.stokes_operator().forward_sweep(y_full, z_full, 1.2);
+  sys.stokes_operator().forward_sweep(y, z, 1.2);
+  full.stokes_operator().backward_sweep(y_full, z_full, 1.2);
+  sys.stokes_operator().backward_sweep(y, z, 1.2);
+  CHECK(same_bits(z, z_full));
+  CHECK(same_bits(sys.fluid_velocities(x), full.fluid_velocities(x)));
+  CHECK(same_bits(sys.pressure_cells(x), full.pressure_cells(x)));
+  CHECK((sys.fluid_velocities(x) - s.u_star).cwiseAbs().maxCoeff() > 0.0);
+  CHECK(same_bits(sys.body_velocities(x, VectorX(), VectorX()),
+                  full.body_velocities(x, VectorX(), VectorX())));
+  // the stress field: zeros of the grid's size from the full weights, none from inviscid ones
+  CHECK(full.stress_full(x).size() == stress.num_dofs());
+  CHECK(full.stress_full(x).cwiseAbs().maxCoeff() == 0.0);
+  CHECK(sys.stress_full(x).size() == 0);
+}
+
+}  // namespace
+
+TEST_CASE("inviscid weights without stress vectors give the system of zero stress weights bit "
+          "for bit",
+          "[unit]") {
+  SECTION("2D matrixfree") { check_inviscid_weights_without_stress_vectors<2>(16, Backend::matrix_free); }
+  SECTION("2D explicit") { check_inviscid_weights_without_stress_vectors<2>(16, Backend::explicit_matrices); }
+  SECTION("3D matrixfree") { check_inviscid_weights_without_stress_vectors<3>(8, Backend::matrix_free); }
+  SECTION("3D explicit") { check_inviscid_weights_without_stress_vectors<3>(8, Backend::explicit_matrices); }
+}

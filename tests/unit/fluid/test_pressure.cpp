@@ -306,5 +306,10 @@ TEMPLATE_TEST_CASE_SIG(
     }
     CHECK(means > 0);
     CHECK(fallbacks > 0);
+    // in place (the simulator's P over the faces' densities): the same values
+    VectorX in_place = rho;
+    density_diagonal_in_place(grid, in_place, fallback);
+    REQUIRE(in_place.size() == got.size());
+    for (int f = 0; f < grid.num_faces(); ++f) CHECK(in_place[f] == got[f]);
   }
 }
