@@ -357,7 +357,7 @@ void Simulation<Dim>::step(double dt) {
   solve_step(dt);                     // (6)-(12)
   check_finite("the pressure/viscosity/contact solve");
   account(frame_ledger_.forces_and_solve, [&] { return grid_and_body_kinetic_energy(); });
-  extrapolate_from_trusted_faces();   // the solved velocity into air and solid
+  extrapolate_from_trusted_faces(dt); // the solved velocity into air and solid
   apply_wall_and_solid_velocities();
   divergence_free_air();
   account(frame_ledger_.velocity_extension, [&] { return grid_and_body_kinetic_energy(); });
@@ -454,13 +454,37 @@ bool Simulation<Dim>::trusted_face(int f) const {
 }
 
 template <int Dim>
-void Simulation<Dim>::extrapolate_from_trusted_faces() {
+int Simulation<Dim>::extrapolation_layers(double dt) const {
+  // ceil(cfl) + 2: as far as the particles may travel in a step (cfl cells) and two more for the
+  // stencils. The step's own velocity usually carries them much less far (a scene with cfl 100
+  // extrapolated 102 layers, the whole container, every step), so the layers are cut to its
+  // reach. Every face a particle reads after the solve (grid_to_particles, the RK2 stages of
+  // advect_particles) holds a trusted value, an extrapolated average of trusted values, a
+  // body's point velocity (apply_wall_and_solid_velocities), or a velocity interpolated there
+  // with its inflow removed (constrain_velocity_in_solids), so |u_f| <= sqrt(Dim + 1) S with S
+  // the largest |u_f| of a trusted face and the bodies' largest point speed; interpolation is a
+  // convex combination, so a particle moves at most sqrt(Dim + 1) S dt along each axis, Dim
+  // times that in faces of the extrapolation (a layer steps one face along one axis), and two
+  // layers more cover its stencils, as before. Where the cfl bound is the smaller one it stays.
+  // The drift of the next step (split_advection) and divergence_free_air (whose band is these
+  // layers) keep the cfl bound: diagnosis switches, not worth a second bound
+  const int cfl_layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
+  if (switches_.extrapolate_cfl_layers || split_drift() || switches_.divergence_free_air)
+    return cfl_layers;
+  double speed = rigid_ ? rigid_->max_point_speed() : 0.0;
+  for (int f = 0; f < grid_.num_faces(); ++f)
+    if (face_flags_[f]) speed = std::max(speed, std::abs(u_[f]));
+  const double reach = Dim * std::sqrt(Dim + 1.0) * speed * dt / grid_.dx();
+  if (!(reach < cfl_layers)) return cfl_layers;  // also a non-finite speed
+  return std::min(cfl_layers, static_cast<int>(std::ceil(reach)) + 2);
+}
+
+template <int Dim>
+void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   if (!switches_.extrapolate_after_solve) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
-  // as far as the particles travel in a step (cfl cells) and two more for the stencils
-  const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
   trusted_faces(face_flags_);
-  extrapolate_velocity(grid_, u_, face_flags_, layers);
+  extrapolate_velocity(grid_, u_, face_flags_, extrapolation_layers(dt));
 }
 
 template <int Dim>
