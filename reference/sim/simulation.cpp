@@ -465,7 +465,7 @@ void Simulation<Dim>::step(double dt) {
   solve_step(dt);                     // (6)-(12)
   check_finite("the pressure/viscosity/contact solve");
   account(frame_ledger_.forces_and_solve, [&] { return grid_and_body_kinetic_energy(); });
-  extrapolate_from_trusted_faces();   // the solved velocity into air and solid
+  extrapolate_from_trusted_faces(dt); // the solved velocity into air and solid
   apply_wall_and_solid_velocities();
   divergence_free_air();
   account(frame_ledger_.velocity_extension, [&] { return grid_and_body_kinetic_energy(); });
@@ -587,13 +587,42 @@ bool Simulation<Dim>::trusted_face(int f) const {
 }
 
 template <int Dim>
-void Simulation<Dim>::extrapolate_from_trusted_faces() {
+int Simulation<Dim>::extrapolation_layers(double dt) const {
+  // ceil(cfl) + 2: as far as the particles may travel in a step (cfl cells) and two more for the
+  // stencils. The step's own velocity usually carries them much less far (a scene with cfl 100
+  // extrapolated 102 layers, the whole container, every step), so the layers are cut to its
+  // reach (docs/particles.md, "Velocity extrapolation"). Every face a particle reads after the
+  // solve holds a trusted value, an extrapolated average of trusted values, zero (walls, static
+  // solids) or, in a solid, a velocity interpolated there with its inflow removed
+  // (constrain_velocity_in_solids), so |u_f| <= c = sqrt(Dim + 1) S with S the largest |u_f| of
+  // a trusted face; interpolation is a convex combination, so an RK2 substep of
+  // advect_particles moves a particle by at most c h per axis, Dim c h in faces of the
+  // extrapolation (a layer steps one face along one axis). Pushed out of a static solid it
+  // moves at most as far again (its depth, the solid's distance being 1-Lipschitz) plus 0.05 dx
+  // per substep (substeps of at most half a cell). Hence (2 Dim + 1) c dt / dx layers, one more
+  // for the 0.05 dx, and two for the interpolation stencils around the particles' starting
+  // cells, as before; never more than the cfl bound. Scenes with moving bodies (whose motion
+  // and push-out the bound does not cover: measured, bunnies-onto-pool-2d differed at frame 10),
+  // the drift of the next step (split_advection) and divergence_free_air (whose band is these
+  // layers) keep the cfl bound
+  const int cfl_layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
+  if (switches_.extrapolate_cfl_layers || coupled_ || rigid_ || split_drift() ||
+      switches_.divergence_free_air)
+    return cfl_layers;
+  double speed = 0.0;
+  for (int f = 0; f < grid_.num_faces(); ++f)
+    if (face_flags_[f]) speed = std::max(speed, std::abs(u_[f]));
+  const double reach = (2 * Dim + 1) * std::sqrt(Dim + 1.0) * speed * dt / grid_.dx();
+  if (!(reach < cfl_layers)) return cfl_layers;  // also a non-finite speed
+  return std::min(cfl_layers, static_cast<int>(std::ceil(reach)) + 3);
+}
+
+template <int Dim>
+void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   if (!switches_.extrapolate_after_solve) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
-  // as far as the particles travel in a step (cfl cells) and two more for the stencils
-  const int layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
   trusted_faces(face_flags_);
-  extrapolate_velocity(grid_, u_, face_flags_, layers);
+  extrapolate_velocity(grid_, u_, face_flags_, extrapolation_layers(dt));
 }
 
 template <int Dim>

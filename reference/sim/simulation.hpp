@@ -51,6 +51,11 @@ struct StageSwitches {
   /// The velocity is extrapolated from the trusted faces after the solve (false: every other
   /// face keeps what the solve, or the extrapolation before it, left there)
   bool extrapolate_after_solve = true;
+  /// The extrapolation after the solve reaches ceil(cfl) + 2 layers whatever the step's speed
+  /// (false, the default: in scenes without moving bodies as far as the step's fastest velocity
+  /// can carry a particle, see Simulation::extrapolation_layers; the same particles bit for bit,
+  /// only the far air differs)
+  bool extrapolate_cfl_layers = false;
   /// The particles drift half a step with the last step's velocity before the solve and half a
   /// step with the new one after it (drift-kick-drift, second order in time); false (the
   /// default): the whole step's drift after the solve (symplectic Euler). Off by default since
@@ -213,8 +218,12 @@ class Simulation : public AnySimulation {
   void trusted_faces(std::vector<char>& trusted) const;
   /// One face of trusted_faces (weights of the step's start).
   bool trusted_face(int f) const;
-  /// The solved velocity extrapolated from the trusted faces, ceil(cfl) + 2 layers.
-  void extrapolate_from_trusted_faces();
+  /// Layers of the extrapolation after a step of dt: the reach of the step's fastest velocity in
+  /// faces (docs/particles.md "Velocity extrapolation"), at most ceil(cfl) + 2 (always that with
+  /// moving bodies).
+  int extrapolation_layers(double dt) const;
+  /// The solved velocity extrapolated from the trusted faces, extrapolation_layers(dt) deep.
+  void extrapolate_from_trusted_faces(double dt);
   /// Walls: zero normal velocity; fully solid faces: the solid's velocity; then
   /// constrain_velocity_in_solids.
   void apply_wall_and_solid_velocities();
