@@ -24,15 +24,33 @@
 /// free set is blkdiag(Q, D_c restricted to the free contacts), which is M^-1 applied to the
 /// free gradient and then masked (mprgp.hpp, MprgpSettings::preconditioner).
 ///
+/// In face (apply_in_face, MPRGP on the MLCP (26)) the contact rows are eliminated exactly
+/// instead: M = [Q^-1 A_f3; A_3f A33'] (A33' = A33 (1 + gamma on its diagonal); A with Q^-1 in
+/// the fluid block's place), whose principal submatrix on a free set F (all fluid rows and the
+/// free contacts) is inverted by block elimination with the contact Schur complement
+///
+///   S_c = A33' - A_3f Q A_f3 = J (W^-1 + B_f U)^-1 J^T + gamma diag(A33)     (J = J_lambda)
+///
+/// (A_f3 = B_f^T W J^T, so with (P4) the Schur complement is the bodies' Delassus operator
+/// with M_r / (dt alpha) augmented by B_f P B_f^T, the fluid's response through P: nc x nc,
+/// dense, from the set-up's small matrices; its free principal submatrix is factored when the
+/// free set changes). SPD as M is (S_c is); the same cost per application as the Jacobi rows
+/// (one P). docs/preconditioners.md section 17, docs/mprgp.md.
+///
 /// SPD whenever P is; apply allocates nothing and is deterministic for any thread count (P's
 /// applications are, the body correction runs over rows in fixed order).
 
+#include <functional>
 #include <memory>
 #include <string>
+#include <vector>
+
+#include <Eigen/Cholesky>
 
 #include "reference/core/common.hpp"
 #include "reference/coupling/monolithic_system.hpp"
 #include "reference/fluid/stokes_preconditioner.hpp"
+#include "reference/solvers/mprgp.hpp"
 #include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
@@ -46,13 +64,17 @@ struct CoupledPreconditionerOptions {
   int max_body_dofs = 96;
   /// The fluid part's preconditioner.
   StokesPreconditionerOptions fluid;
+  /// apply_in_face eliminates the contact rows exactly (the Schur complement S_c of the file
+  /// comment) when there are at most this many contacts and S_c is available (the Woodbury term
+  /// on, or no body touching the liquid); otherwise, and with 0, the Jacobi rows.
+  int max_exact_contacts = 256;
 };
 
 /// M^-1 of the file comment over (tau, p) (with_contacts false: the FluidBodyOperator's unknowns)
 /// or (tau, p, lambda) (the MonolithicOperator's). Holds a reference to the system, which must
 /// outlive it; one object must not run two applications at once.
 template <int Dim>
-class CoupledPreconditioner : public Preconditioner {
+class CoupledPreconditioner : public Preconditioner, public FacePreconditioner {
  public:
   /// contact_diagonal: the diagonal of the contact rows of the operator (size nc; ignored and may
   /// be empty when with_contacts is false); a non-positive entry gets the identity.
@@ -62,6 +84,13 @@ class CoupledPreconditioner : public Preconditioner {
   int size() const override { return n_; }
   void apply(const VectorX& r, VectorX& z) const override;
   std::string name() const override { return "coupled-block"; }
+  /// z_F = M_FF^-1 g_F with the exact contact elimination (file comment), zero off F; with the
+  /// Jacobi contact rows (has_exact_contacts() false) apply() masked to F, the same map.
+  void apply_in_face(const VectorX& g, const std::vector<char>& free, VectorX& z) const override;
+  /// Whether apply_in_face eliminates the contact rows with S_c.
+  bool has_exact_contacts() const { return exact_contacts_; }
+  /// S_c (nc x nc; empty without exact contacts).
+  const Eigen::MatrixXd& contact_schur() const { return schur_; }
 
   /// The fluid part P.
   const StokesPreconditioner<Dim>& fluid() const { return *fluid_; }
@@ -70,6 +99,10 @@ class CoupledPreconditioner : public Preconditioner {
   bool body_correction() const { return nd_ > 0; }
 
  private:
+  void setup_exact_contacts(const VectorX& contact_diagonal, const Eigen::MatrixXd& w,
+                            const Eigen::MatrixXd& w_effective,
+                            const CoupledPreconditionerOptions& options);
+
   const MonolithicSystem<Dim>& s_;
   int n_ = 0, nf_ = 0, nc_ = 0, nd_ = 0;
   std::unique_ptr<StokesPreconditioner<Dim>> fluid_;
@@ -77,6 +110,38 @@ class CoupledPreconditioner : public Preconditioner {
   Eigen::MatrixXd small_inv_;   ///< (W^-1 + B_f U)^-1, nd x nd
   VectorX contact_inverse_;     ///< 1 / D_c
   mutable VectorX rf_, zf_, force_, coeff_;
+  // exact contact elimination (apply_in_face)
+  bool exact_contacts_ = false;
+  Eigen::MatrixXd bu_;          ///< B_f U (nd x nd)
+  Eigen::MatrixXd jw_;          ///< J W (nc x nd)
+  Eigen::MatrixXd back_;        ///< (I - (W^-1 + B_f U)^-1 B_f U) W J^T (nd x nc): Q A_f3 = U back_
+  Eigen::MatrixXd schur_;       ///< S_c
+  mutable std::vector<char> factored_free_;  ///< the contact free set S_c was last factored on
+  mutable Eigen::MatrixXd masked_;           ///< S_c with the active rows/columns identity
+  mutable Eigen::LLT<Eigen::MatrixXd> schur_factor_;
+  mutable VectorX yc_, rc_, bq_, t_;
+};
+
+/// The coupled preconditioner in face for MPRGP on the Jacobi-scaled MLCP (S A S): built on its
+/// first application by `make` (the multigrid set-up costs seconds at 64^3), applied as
+/// z = S^-1 M_FF^-1 S^-1 g (a diagonal scaling keeps the free set). Holds a reference to the
+/// scale.
+template <int Dim>
+class LazyCoupledFacePreconditioner : public FacePreconditioner {
+ public:
+  using Factory = std::function<std::unique_ptr<CoupledPreconditioner<Dim>>()>;
+  /// scale: S (nullptr: none).
+  LazyCoupledFacePreconditioner(int n, Factory make, const VectorX* scale)
+      : n_(n), make_(std::move(make)), scale_(scale) {}
+  int size() const override { return n_; }
+  void apply_in_face(const VectorX& g, const std::vector<char>& free, VectorX& z) const override;
+
+ private:
+  int n_;
+  Factory make_;
+  const VectorX* scale_;
+  mutable std::unique_ptr<CoupledPreconditioner<Dim>> built_;
+  mutable VectorX g_, z_;
 };
 
 /// A preconditioner of the Jacobi-scaled operator S A S (JacobiScaledOperator) from one of A:

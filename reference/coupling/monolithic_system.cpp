@@ -882,27 +882,29 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   r.z = VectorX::Zero(nz);
   // ||A|| once per operator for all the staggered solves (each would estimate it again)
   MprgpSettings mlcp_settings = with_norm_estimate(op, settings.mprgp);
-  // the block preconditioner (built on its first application, shared by the staggered solves),
-  // seen through the Jacobi scaling when MPRGP runs on S A S
-  std::unique_ptr<LazyPreconditioner> block;
-  std::unique_ptr<ScaledPreconditioner> scaled_block;
+  // the block preconditioner in face (built on its first application, shared by the staggered
+  // solves), seen through the Jacobi scaling when MPRGP runs on S A S
+  std::unique_ptr<LazyCoupledFacePreconditioner<Dim>> block;
   if (options.preconditioner == PreconditionerKind::multigrid && nf > 0 && settings.mprgp.precondition) {
     const VectorX contact_diagonal = unscaled.diagonal().tail(nc);
     const bool body_correction = options.body_correction;
-    block = std::make_unique<LazyPreconditioner>(
-        nf + nc, "coupled-block", [&system, contact_diagonal, body_correction]() -> std::unique_ptr<Preconditioner> {
+    const int max_exact_contacts = options.exact_contacts ? CoupledPreconditionerOptions().max_exact_contacts : 0;
+    block = std::make_unique<LazyCoupledFacePreconditioner<Dim>>(
+        nf + nc,
+        [&system, contact_diagonal, body_correction, max_exact_contacts]() {
           CoupledPreconditionerOptions o;
           o.body_correction = body_correction;
+          o.max_exact_contacts = max_exact_contacts;
           return std::make_unique<CoupledPreconditioner<Dim>>(system, true, contact_diagonal, o);
-        });
-    mlcp_settings.preconditioner = block.get();
-    if (options.jacobi_scaling) {
-      scaled_block = std::make_unique<ScaledPreconditioner>(*block, scaled.scale());
-      mlcp_settings.preconditioner = scaled_block.get();
-    }
+        },
+        options.jacobi_scaling ? &scaled.scale() : nullptr);
+    mlcp_settings.face_preconditioner = block.get();
   }
   auto record = [&r](const MprgpResult& m) {
     r.mprgp_iterations += m.iterations;
+    r.cg_steps += m.cg_steps;
+    r.expansion_steps += m.expansion_steps;
+    r.proportioning_steps += m.proportioning_steps;
     r.converged = r.converged && m.converged;
     r.max_relative_residual = std::max(r.max_relative_residual, m.relative_residual);
     if (m.breakdown && !r.breakdown) {

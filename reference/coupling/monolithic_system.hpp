@@ -410,6 +410,10 @@ struct PvcUnifiedOptions {
   PreconditionerKind preconditioner = PreconditionerKind::ssor;
   /// multigrid: CoupledPreconditionerOptions::body_correction.
   bool body_correction = true;
+  /// multigrid: the contact rows eliminated exactly in face with the contact Schur complement
+  /// (CoupledPreconditioner::apply_in_face; docs/preconditioners.md section 17); false: the
+  /// Jacobi contact rows of section 13.
+  bool exact_contacts = true;
 };
 
 struct PvcUnifiedResult {
@@ -422,6 +426,8 @@ struct PvcUnifiedResult {
   VectorX body_velocity;  ///< two-way bodies' (v, omega), ContactSystem order (eq. (21))
   int staggered_iterations = 0;  ///< MLCP (26) solves
   long mprgp_iterations = 0;     ///< summed over all MPRGP solves
+  /// mprgp_iterations by kind (MprgpResult): CG, expansion and proportioning steps
+  long cg_steps = 0, expansion_steps = 0, proportioning_steps = 0;
   bool converged = true;         ///< every MPRGP solve converged
   double last_change = 0.0;      ///< relative change of lambda in the last staggered iteration
   double max_relative_residual = 0.0;  ///< largest MPRGP relative residual at exit

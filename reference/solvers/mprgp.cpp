@@ -124,6 +124,8 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
     if (!(lower[i] <= upper[i])) throw std::invalid_argument("mprgp_solve: lower > upper (or NaN bound)");
   if (settings.preconditioner && settings.preconditioner->size() != n)
     throw std::invalid_argument("mprgp_solve: preconditioner of the wrong size");
+  if (settings.face_preconditioner && settings.face_preconditioner->size() != n)
+    throw std::invalid_argument("mprgp_solve: face preconditioner of the wrong size");
 
   // null space of A: only on unbounded variables, projected out of b, x and z (as in pcg_solve)
   const std::vector<VectorX>& null_space = a.null_space();
@@ -179,7 +181,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   std::vector<char> jacobi_row;
   VectorX a_diagonal;
   int num_jacobi_rows = 0;
-  if (settings.precondition && !settings.preconditioner) {
+  if (settings.precondition && !settings.preconditioner && !settings.face_preconditioner) {
     a_diagonal = a.diagonal();
     num_jacobi_rows = sweep_diagonal_mismatch(a, jacobi_row);
   }
@@ -189,6 +191,11 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   auto precondition = [&]() {
     if (!settings.precondition) {
       z = phi;
+    } else if (settings.face_preconditioner) {
+      // z_F = M_FF^-1 g_F, zero off F (phi is g on F)
+      settings.face_preconditioner->apply_in_face(phi, mask, z);
+      for (int i = 0; i < n; ++i)
+        if (!mask[i]) z[i] = 0.0;
     } else if (settings.preconditioner) {
       // M block diagonal with a diagonal block on every bounded row: M^-1 phi masked to F is
       // M_FF^-1 g_F

@@ -19,6 +19,19 @@
 
 namespace monolith {
 
+/// A preconditioner applied in face with the free set known: z_F = M_FF^-1 g_F (M_FF the
+/// principal submatrix on the free set F of one fixed SPD matrix M), z = 0 off F. Unlike
+/// MprgpSettings::preconditioner, M need not be block diagonal between bounded and unbounded
+/// rows: the implementation solves with M_FF itself (e.g. CoupledPreconditioner's block
+/// elimination over the free contact rows, coupled_preconditioner.hpp; docs/mprgp.md).
+class FacePreconditioner {
+ public:
+  virtual ~FacePreconditioner() = default;
+  virtual int size() const = 0;
+  /// g: the gradient (read on F only); free: 1 on F; z resized to size().
+  virtual void apply_in_face(const VectorX& g, const std::vector<char>& free, VectorX& z) const = 0;
+};
+
 struct MprgpSettings {
   double tolerance = 1e-6;     ///< stop when ||g^P||_inf <= tolerance * ||b||_inf (projected gradient)
   int max_iterations = 2000;   ///< limit on CG + expansion + proportioning steps
@@ -40,6 +53,9 @@ struct MprgpSettings {
   /// application is exactly M_FF^-1 on every free set, i.e. preconditioning in face
   /// (docs/mprgp.md). Not owned; nullptr: SSOR.
   const Preconditioner* preconditioner = nullptr;
+  /// With precondition: z = M_FF^-1 g_F by the face-aware map (takes precedence over
+  /// `preconditioner`). Not owned; nullptr: not used.
+  const FacePreconditioner* face_preconditioner = nullptr;
 };
 
 struct MprgpResult {

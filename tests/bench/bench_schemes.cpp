@@ -10,14 +10,29 @@
 // eq. (24), which every scheme shares).
 //
 // Run: OMP_NUM_THREADS=1 build/bench/bench_schemes [2d|3d|all (default all)] [small|large|both]
+//
+// Second mode, `bench_schemes grid [eta (default 5000)] [n ...]`: the 3D bowl scene's PVC-unified
+// system with the block preconditioner (coupled_preconditioner.hpp) at growing grids, with its
+// parts switched off one at a time, to see which part's iterations grow with the grid
+// (docs/preconditioners.md, section 17): the MLCP (26) by MPRGP (bodies, contacts; CG,
+// expansion and proportioning steps) with the contact rows eliminated by their Schur complement
+// (the default) and with the Jacobi contact rows, the latter without the Woodbury body term, the
+// fluid-body block A_ff without the contact rows by PCG and by MPRGP (no bound: the two must
+// agree within one step), and the fluid block F alone (the bodies' weights kept as static
+// solids, no body unknowns) by PCG with P. Matrix-free back end, tolerance 1e-6, x0 = 0.
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "reference/contact/collision.hpp"
+#include "reference/coupling/coupled_preconditioner.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
+#include "reference/coupling/monolithic_system.hpp"
+#include "reference/solvers/pcg.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -139,9 +154,84 @@ void run(int n) {
               t_pc_it / t_pc_un, t_pc_cold / t_pc_un, t_pvc_it / t_pvc_un, t_pvc_cold / t_pvc_un);
 }
 
+/// Mode `grid`: one row per (grid, part) of the bowl scene's PVC-unified system.
+void run_grid(int n, double eta) {
+  constexpr int Dim = 3;
+  using Clock = std::chrono::steady_clock;
+  auto seconds_since = [](Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+  };
+  StaggeredSettings settings;
+  settings.max_iterations = 1;  // no friction in this scene: one MLCP solve
+  settings.mprgp.tolerance = 1e-6;
+  settings.mprgp.max_iterations = 20000;
+  const CoupledStepInput<Dim> in = bowl_scene<Dim>(n, eta);
+  const double stiffness = eta * kDt / (kRho * in.grid.dx() * in.grid.dx());
+  auto system = [&](bool bodies, bool contacts) {
+    const std::vector<RigidBody<Dim>> b = bodies ? in.bodies : std::vector<RigidBody<Dim>>();
+    const ContactSystem<Dim> c(b, contacts ? in.contacts : std::vector<Contact<Dim>>(),
+                               in.contact_params);
+    return std::make_unique<MonolithicSystem<Dim>>(in.grid, StressForm::reduced, in.weights, in.dt,
+                                                   in.u_star, b, in.solids, c,
+                                                   Backend::matrix_free);
+  };
+  auto mlcp_row = [&](const char* part, const MonolithicSystem<Dim>& s, bool body_correction,
+                      bool exact_contacts = true) {
+    PvcUnifiedOptions o;
+    o.exact_contacts = exact_contacts;
+    o.jacobi_scaling = true;
+    o.compute_updates = false;
+    o.preconditioner = PreconditionerKind::multigrid;
+    o.body_correction = body_correction;
+    const auto t0 = Clock::now();
+    const PvcUnifiedResult r = solve_pvc_unified(s, settings, o);
+    std::printf("| %d | %.0f | %s | %d | %d | MPRGP %ld (%ld / %ld / %ld) | %.2e | %s | %.2f |\n", n,
+                stiffness, part, s.num_fluid(), s.num_contacts(), r.mprgp_iterations, r.cg_steps,
+                r.expansion_steps, r.proportioning_steps, r.max_relative_residual,
+                r.converged ? "yes" : "no", seconds_since(t0));
+    std::fflush(stdout);
+  };
+  auto pcg_row = [&](const char* part, const MonolithicSystem<Dim>& s) {
+    const FluidBodyOperator<Dim> op(s);
+    const auto t0 = Clock::now();
+    const CoupledPreconditioner<Dim> m(s, false, VectorX());
+    VectorX x = VectorX::Zero(s.num_fluid());
+    PcgSettings pcg;
+    pcg.tolerance = settings.mprgp.tolerance;
+    pcg.max_iterations = settings.mprgp.max_iterations;
+    const PcgResult r = pcg_solve(op, s.fluid_rhs(VectorX::Zero(s.num_contacts()),
+                                                  VectorX::Zero(s.num_friction())),
+                                  x, pcg, m);
+    std::printf("| %d | %.0f | %s | %d | 0 | PCG %d | %.2e | %s | %.2f |\n", n, stiffness, part,
+                s.num_fluid(), r.iterations, r.relative_residual, r.converged ? "yes" : "no",
+                seconds_since(t0));
+    std::fflush(stdout);
+  };
+  const auto full = system(true, true);
+  mlcp_row("(26): bodies, contacts, Woodbury term, contacts by S_c", *full, true);
+  mlcp_row("(26): bodies, contacts, Woodbury term, Jacobi contact rows", *full, true, false);
+  mlcp_row("(26): bodies, contacts, Q = P, Jacobi contact rows", *full, false, false);
+  const auto no_contacts = system(true, false);
+  pcg_row("A_ff: bodies, no contacts", *no_contacts);
+  mlcp_row("A_ff: bodies, no contacts", *no_contacts, true);
+  const auto fluid = system(false, false);
+  pcg_row("F: no bodies (static solids), P only", *fluid);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc > 1 && std::strcmp(argv[1], "grid") == 0) {
+    const double eta = argc > 2 ? std::atof(argv[2]) : 5000.0;
+    std::vector<int> grids;
+    for (int k = 3; k < argc; ++k) grids.push_back(std::atoi(argv[k]));
+    if (grids.empty()) grids = {16, 24, 32};
+    std::printf("bowl scene 3D, PVC-unified system, eta %g, block preconditioner, matrix-free\n", eta);
+    std::printf("| n | stiffness | part | fluid rows | contacts | iterations (CG / expansion / proportioning) | residual | converged | s |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|\n");
+    for (int n : grids) run_grid(n, eta);
+    return 0;
+  }
   const std::string dims = argc > 1 ? argv[1] : "all";
   const std::string sizes = argc > 2 ? argv[2] : "both";
   const bool small = sizes != "large", large = sizes != "small";

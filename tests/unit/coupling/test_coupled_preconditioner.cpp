@@ -2,7 +2,9 @@
 // coupled_preconditioner.hpp): SPD on small 2D and 3D cases with bodies, walls, a free surface
 // and several viscosities; its body correction is the Woodbury identity; PCG on A_ff with it
 // gives the dense solution and the SSOR solution; MPRGP on (26) with it preconditioning in face
-// reaches the same KKT point as with SSOR; both back ends agree; 1 and 2 threads are bitwise
+// reaches the same KKT point as with SSOR (with the contact rows eliminated exactly in face and
+// with the Jacobi contact rows); the exact elimination is M_FF^-1 of A with Q^-1 in the fluid
+// block's place; both back ends agree; 1 and 2 threads are bitwise
 // identical; solve_coupled_step with "multigrid" equals the SSOR step to tolerance (PVC-unified,
 // PV-C, C-PV, PC-VC-PC-unified).
 #include <omp.h>
@@ -221,11 +223,15 @@ void check_mprgp(int n, double eta) {
     StaggeredSettings settings;
     settings.mprgp.tolerance = 1e-9;
     settings.mprgp.max_iterations = 50000;
-    PvcUnifiedOptions ssor, block;
-    ssor.jacobi_scaling = block.jacobi_scaling = true;
-    block.preconditioner = PreconditionerKind::multigrid;
+    PvcUnifiedOptions ssor, block, jacobi;
+    ssor.jacobi_scaling = block.jacobi_scaling = jacobi.jacobi_scaling = true;
+    block.preconditioner = jacobi.preconditioner = PreconditionerKind::multigrid;
+    jacobi.exact_contacts = false;
     const PvcUnifiedResult rs = solve_pvc_unified(s, settings, ssor);
     const PvcUnifiedResult rb = solve_pvc_unified(s, settings, block);
+    const PvcUnifiedResult rj = solve_pvc_unified(s, settings, jacobi);
+    CHECK(rj.converged);
+    CHECK((rj.x - rs.x).cwiseAbs().maxCoeff() < 1e-5 * rs.x.cwiseAbs().maxCoeff());
     CHECK(rs.converged);
     CHECK(rb.converged);
     CHECK(!rb.breakdown);
@@ -244,13 +250,95 @@ void check_mprgp(int n, double eta) {
     CHECK(rb.lambda.maxCoeff() > 0.0);
     if (eta >= 100.0) CHECK(2 * rb.mprgp_iterations < rs.mprgp_iterations);
     std::printf("MPRGP (26) %dD n=%d eta %g %s: %d unknowns, %d contacts, SSOR %ld iterations, "
-                "block %ld; KKT violation %.1e / %.1e\n", Dim, n, eta, enum_name(backend).c_str(),
-                op.size(), s.num_contacts(), rs.mprgp_iterations, rb.mprgp_iterations, kkt_s, kkt_b);
+                "block %ld (Jacobi contact rows %ld); KKT violation %.1e / %.1e\n", Dim, n, eta,
+                enum_name(backend).c_str(), op.size(), s.num_contacts(), rs.mprgp_iterations,
+                rb.mprgp_iterations, rj.mprgp_iterations, kkt_s, kkt_b);
   }
   std::printf("  largest relative difference block vs SSOR %.1e\n", worst_diff);
 }
 
+/// The exact contact elimination in face (CoupledPreconditioner::apply_in_face): S_c is the
+/// Schur complement A33' - A_3f Q A_f3 of M = [Q^-1 A_f3; A_3f A33'] (Q the fluid-body block's
+/// preconditioner, densely), apply_in_face equals M_FF^-1 on free sets with some contacts
+/// active, the map is SPD on the face, and 1 and 2 threads give the same bits.
+template <int Dim>
+void check_exact_contacts(int n, double eta) {
+  INFO(Dim << "D n=" << n << " eta " << eta);
+  const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
+  const MonolithicSystem<Dim> s = make_system(in, Backend::matrix_free);
+  const int nf = s.num_fluid(), nc = s.num_contacts(), nt = nf + nc;
+  REQUIRE(nc >= 1);
+  const MonolithicOperator<Dim> op(s, 1e-4);
+  const Eigen::MatrixXd a = op.dense_matrix();
+  const VectorX contact_diagonal = op.diagonal().tail(nc);
+  const CoupledPreconditioner<Dim> m(s, true, contact_diagonal);
+  REQUIRE(m.body_correction());
+  REQUIRE(m.has_exact_contacts());
+  const CoupledPreconditioner<Dim> q(s, false, VectorX());
+  const Eigen::MatrixXd qd = dense(q);
+  // M = A with Q^-1 in the fluid block's place
+  Eigen::MatrixXd md = a;
+  md.topLeftCorner(nf, nf) = (0.5 * (qd + qd.transpose())).inverse();
+  const Eigen::MatrixXd schur = a.bottomRightCorner(nc, nc) -
+                                a.bottomLeftCorner(nc, nf) * qd * a.topRightCorner(nf, nc);
+  const double serr = (m.contact_schur() - schur).norm() / schur.norm();
+  CHECK(serr < 1e-8);
+  // free sets: every contact, none, every other one (the same as none with one contact)
+  double worst = 0.0;
+  for (int pattern = 0; pattern < 3; ++pattern) {
+    std::vector<char> free(nt, 1);
+    for (int i = 0; i < nc; ++i)
+      free[nf + i] = pattern == 0 ? 1 : pattern == 1 ? 0 : static_cast<char>(i % 2);
+    std::vector<int> f;
+    for (int i = 0; i < nt; ++i)
+      if (free[i]) f.push_back(i);
+    const int k = static_cast<int>(f.size());
+    Eigen::MatrixXd mff(k, k), zd(k, k);
+    for (int r = 0; r < k; ++r)
+      for (int c = 0; c < k; ++c) mff(r, c) = md(f[r], f[c]);
+    VectorX e = VectorX::Zero(nt), z;
+    for (int c = 0; c < k; ++c) {
+      e.setZero();
+      e[f[c]] = 1.0;
+      m.apply_in_face(e, free, z);
+      for (int i = 0; i < nt; ++i)
+        if (!free[i]) CHECK(z[i] == 0.0);
+      for (int r = 0; r < k; ++r) zd(r, c) = z[f[r]];
+    }
+    const Eigen::MatrixXd expected = mff.inverse();
+    const double err = (zd - expected).norm() / expected.norm();
+    worst = std::max(worst, err);
+    CHECK(err < 1e-6);
+    const double asym = (zd - zd.transpose()).norm() / zd.norm();
+    CHECK(asym < 1e-9);
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (zd + zd.transpose()),
+                                                            Eigen::EigenvaluesOnly);
+    CHECK(es.eigenvalues().minCoeff() > 0.0);
+  }
+  // 1 vs 2 threads: bitwise
+  std::vector<char> free(nt, 1);
+  free[nf] = 0;
+  const VectorX r = testing::random_vector(nt, 5);
+  VectorX z1, z2;
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const CoupledPreconditioner<Dim> m1(s, true, contact_diagonal);
+  m1.apply_in_face(r, free, z1);
+  omp_set_num_threads(2);
+  const CoupledPreconditioner<Dim> m2(s, true, contact_diagonal);
+  m2.apply_in_face(r, free, z2);
+  omp_set_num_threads(threads);
+  CHECK((z1 - z2).cwiseAbs().maxCoeff() == 0.0);
+  std::printf("exact contacts %dD n=%d eta %g: %d fluid rows, %d contacts, S_c error %.1e, "
+              "M_FF^-1 error %.1e\n", Dim, n, eta, nf, nc, serr, worst);
+}
+
 }  // namespace
+
+TEST_CASE("the contact rows eliminated exactly in face: M_FF^-1 of A with Q^-1 in the fluid block", "[coupled_preconditioner]") {
+  for (double eta : {0.1, 1000.0}) check_exact_contacts<2>(10, eta);
+  check_exact_contacts<3>(6, 1000.0);
+}
 
 TEST_CASE("the coupled block preconditioner is SPD and its body correction is Woodbury", "[coupled_preconditioner]") {
   for (double eta : {0.1, 10.0, 1000.0}) check_spd<2>(10, eta);
