@@ -115,12 +115,13 @@ struct DensityProjectionStats {
 /// What the density projection does with a deficit of particle volume (rho~_c < T_c) on the
 /// liquid side of the surface band (1/2 <= T_c < 0.999, docs/particles.md "Sloshing").
 enum class SurfaceDeficits {
-  /// Corrected only in the share of a volume feedback with a dead band: none while the level set
-  /// encloses at most 0.3 % more than the particle volume (the level set's response to the
-  /// disorder of particles under a smooth surface), all from 0.6 % on (thin sheets, splashes)
-  beyond_dead_band,
-  all,   ///< always (a measurement switch: the rule before)
+  all,   ///< always corrected (the default)
   none,  ///< never, only an excess as on the air side (a measurement switch)
+  /// A measurement switch: corrected only in the share of a volume feedback with a dead band:
+  /// none while the level set encloses at most 0.3 % more than the particle volume (the level
+  /// set's response to the disorder of particles under a smooth surface), all from 0.6 % on (thin
+  /// sheets, splashes)
+  beyond_dead_band,
 };
 
 /// Grid-based implicit density projection after Kugelstadt, Bender, Fernandez-Fernandez, Jeske,
@@ -138,8 +139,8 @@ enum class SurfaceDeficits {
 /// those of the first iteration (error_before) and the sums over all (iterations, max_move the
 /// largest). Respects solids, walls and periodicity; deterministic for any thread count.
 /// `surface_deficits`: on the liquid side of the surface band (1/2 <= T_c < 0.999) a deficit is
-/// corrected in the share SurfaceDeficits says (by default only beyond a dead band of the level
-/// set's volume over the particles', docs/particles.md "Sloshing").
+/// corrected in the share SurfaceDeficits says (by default always; the other rules are
+/// measurement switches, docs/particles.md "Sloshing").
 template <int Dim>
 DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                                 const SampleLattice<Dim>& lattice,
@@ -148,7 +149,7 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
                                                 int iterations = 1,
                                                 SurfaceDeficits surface_deficits =
-                                                    SurfaceDeficits::beyond_dead_band);
+                                                    SurfaceDeficits::all);
 
 /// Iterations of project_particle_density applied to freshly seeded particles (the simulation
 /// does this once before frame 0, so the particle volume and the level set's agree from the

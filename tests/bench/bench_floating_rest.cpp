@@ -41,12 +41,23 @@ std::vector<Variant> variants() {
       {"no-projection", [](StageSwitches& s) { s.density_projection = false; }},
       {"no-line-15", [](StageSwitches& s) { s.position_correction = s.density_projection = false; }},
       {"pic", [](StageSwitches& s) { s.apic = false; }},
-      // the extrapolated velocity as it is in the air and surface cells (the default before
-      // physics6 made them divergence-free; docs/particles.md, "Sloshing")
-      {"extrapolated-air", [](StageSwitches& s) { s.divergence_free_air = false; }},
-      // every deficit of the surface band corrected (the rule before the dead band)
-      {"all-surface-deficits",
-       [](StageSwitches& s) { s.density_projection_surface_deficits = SurfaceDeficits::all; }},
+      // the extrapolated velocity made divergence-free in the air and surface cells
+      // (docs/particles.md, "Sloshing")
+      {"divergence-free-surface",
+       [](StageSwitches& s) { s.divergence_free_air = s.divergence_free_surface_cells = true; }},
+      {"divergence-free-surface-no-projection",
+       [](StageSwitches& s) {
+         s.divergence_free_air = s.divergence_free_surface_cells = true;
+         s.density_projection = false;
+       }},
+      // the 2D sloshing tank's passing configuration (docs/particles.md, "Sloshing", physics6):
+      // divergence-free air and surface cells, the surface band's deficits beyond a dead band
+      // (the box is a moving body: its scene keeps the whole drift)
+      {"dead-band",
+       [](StageSwitches& s) {
+         s.divergence_free_air = s.divergence_free_surface_cells = true;
+         s.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
+       }},
   };
 }
 

@@ -5,14 +5,12 @@
 // of the available energy and ends below its start.
 //
 //   bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] [--every K] [--backend NAME]
-//                  [--no-projection] [--no-correction] [--max-dt DT] [--whole-drift]
-//                  [--extrapolated-air] [--divergence-free-air-only] [--no-step-projection]
-//                  [--no-surface-deficits] [--all-surface-deficits] [--seed N]
+//                  [--no-projection] [--no-correction] [--max-dt DT] [--split-drift]
+//                  [--divergence-free-air] [--divergence-free-surface] [--no-step-projection]
+//                  [--no-surface-deficits] [--dead-band-deficits] [--seed N]
 //
-// The defaults are the simulator's (drift-kick-drift, divergence-free air and surface cells, the
-// surface band's deficits beyond a dead band); --whole-drift: symplectic Euler; --extrapolated-air:
-// the extrapolated velocity as it is in the air and surface cells; --divergence-free-air-only: the
-// air cells divergence-free, the surface cells not.
+// --dead-band-deficits: the surface band's deficits corrected only beyond a dead band of the level
+// set's volume over the particles' (SurfaceDeficits::beyond_dead_band, a measurement switch).
 //
 // Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
 // line before: which stage of the step changed the energy.
@@ -35,9 +33,9 @@ int main(int argc, char** argv) {
   int dim = 2, cells = 0, every = 25;
   double seconds = 10.0, slope = 0.1;
   std::string backend = "matrixfree";
-  bool no_projection = false, no_correction = false, whole_drift = false, extrapolated = false;
-  bool air_only = false, no_step_projection = false, no_surface_deficits = false;
-  bool all_surface_deficits = false;
+  bool no_projection = false, no_correction = false, split_drift = false, divfree_air = false;
+  bool divfree_surface = false, no_step_projection = false, no_surface_deficits = false;
+  bool dead_band = false;
   double max_dt = 0.02;
   int seed = 0;
   bench::BenchArgs args(argc, argv);
@@ -52,12 +50,12 @@ int main(int argc, char** argv) {
     else if (a == "--no-projection") no_projection = true;
     else if (a == "--max-dt") max_dt = std::atof(args.value().c_str());
     else if (a == "--no-correction") no_correction = true;
-    else if (a == "--whole-drift") whole_drift = true;
-    else if (a == "--extrapolated-air") extrapolated = true;
-    else if (a == "--divergence-free-air-only") air_only = true;
+    else if (a == "--split-drift") split_drift = true;
+    else if (a == "--divergence-free-air") divfree_air = true;
+    else if (a == "--divergence-free-surface") divfree_air = divfree_surface = true;
     else if (a == "--no-step-projection") no_step_projection = true;
     else if (a == "--no-surface-deficits") no_surface_deficits = true;
-    else if (a == "--all-surface-deficits") all_surface_deficits = true;
+    else if (a == "--dead-band-deficits") dead_band = true;
     else if (a == "--seed") seed = std::atoi(args.value().c_str());
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
@@ -74,12 +72,13 @@ int main(int argc, char** argv) {
   switches.energy_ledger = true;
   if (no_projection) switches.density_projection = false;
   if (no_correction) switches.position_correction = false;
-  if (whole_drift) switches.split_advection = false;
-  if (extrapolated) switches.divergence_free_air = false;
-  if (air_only) switches.divergence_free_surface_cells = false;
+  if (split_drift) switches.split_advection = true;
+  if (divfree_air) switches.divergence_free_air = true;
+  if (divfree_surface) switches.divergence_free_surface_cells = true;
   if (no_step_projection) switches.density_projection_in_steps = false;
   if (no_surface_deficits) switches.density_projection_surface_deficits = SurfaceDeficits::none;
-  if (all_surface_deficits) switches.density_projection_surface_deficits = SurfaceDeficits::all;
+  if (dead_band)
+    switches.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
   nlohmann::json scene = tank(dim, cells, seconds, backend, slope);
   scene["time"]["max_dt"] = max_dt;
   if (seed > 0) scene["particles"]["seed"] = seed;
