@@ -1130,11 +1130,6 @@ void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int 
   });
 }
 
-/// One (reconstruction, solve, move) of project_particle_density. Its grid work visits only the
-/// band of cells within reach of a particle (tiles of 8^Dim cells): outside it no particle
-/// splats volume and the level set has no liquid, so rho~ = T = 0 there and no cell is an
-/// unknown; the values in the band, the rows (in cell order) and the moves are those of a pass
-/// over the whole grid, bit for bit.
 /// The share of a deficit on the liquid side of the surface band that the density projection
 /// corrects, given how much more the level set encloses than the particles (`mismatch`, relative):
 /// SurfaceDeficits::beyond_dead_band ramps from 0 at kDeficitDeadBand to 1 at kDeficitFullShare,
@@ -1166,6 +1161,11 @@ double level_set_volume_mismatch(const MacGrid<Dim>& grid, const std::vector<int
   return particle > 0.0 ? level_set / particle - 1.0 : 0.0;
 }
 
+/// One (reconstruction, solve, move) of project_particle_density. Its grid work visits only the
+/// band of cells within reach of a particle (tiles of 8^Dim cells): outside it no particle
+/// splats volume and the level set has no liquid, so rho~ = T = 0 there and no cell is an
+/// unknown; the values in the band, the rows (in cell order) and the moves are those of a pass
+/// over the whole grid, bit for bit.
 template <int Dim>
 DensityProjectionStats project_density_once(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                             const SampleLattice<Dim>& lattice,
@@ -1370,9 +1370,12 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   stats.cells = n;
   if (n == 0) return stats;
 
-  // how much more the level set encloses than the particles, over the band (both sums see the
-  // walls and solids alike), and the share of the surface band's deficits corrected at that
-  const double mismatch = level_set_volume_mismatch(grid, cells, rho, values);
+  // with the dead band: how much more the level set encloses than the particles, over the band
+  // (both sums see the walls and solids alike), and the share of the surface band's deficits
+  // corrected at that (the other rules need no sums)
+  const double mismatch = surface_deficits == SurfaceDeficits::beyond_dead_band
+                              ? level_set_volume_mismatch(grid, cells, rho, values)
+                              : 0.0;
   const double deficit_share = surface_deficit_share(surface_deficits, mismatch);
   stats.volume_mismatch = mismatch;
   stats.deficit_share = deficit_share;
@@ -1414,9 +1417,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // Next to a solid a low T_c can come from the solid filling part of the cell, not from a
     // free surface, so with solids the air side is read from the level set extended into them.
     // On the liquid side of the surface band (1/2 <= T_c < kProjectionFullCell) a deficit is
-    // corrected by deficit_share only: below the dead band it is the level set's response to the
-    // disorder of the particles under a smooth surface, and filling it every step raised a
-    // sloshing tank's energy by 10 % of what sloshes in 10 s (docs/particles.md, "Sloshing").
+    // corrected by deficit_share (1 by default; the measurement switches: 0, or the dead band's
+    // share, docs/particles.md "Sloshing").
     double e = *rho.find(ci) - v[kTarget];
     if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide)
       e = std::max(e, 0.0);

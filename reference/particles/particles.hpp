@@ -106,8 +106,9 @@ struct DensityProjectionStats {
   int iterations = 0;         ///< conjugate gradient iterations
   double error_before = 0.0;  ///< sum_c |e_c| dx^Dim before the move (m^Dim), e_c as in particles.cpp
   double max_move = 0.0;      ///< largest particle displacement (m)
-  /// sum_c T_c / sum_c rho~_c - 1 over the unknowns: how much more the level set encloses than
-  /// the particles (relative), and the share of the surface band's deficits corrected at that
+  /// With SurfaceDeficits::beyond_dead_band (else 0): sum_c T_c / sum_c rho~_c - 1 over the
+  /// unknowns, how much more the level set encloses than the particles (relative); and the share
+  /// of the surface band's deficits corrected
   double volume_mismatch = 0.0;
   double deficit_share = 1.0;
 };
