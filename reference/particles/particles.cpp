@@ -49,9 +49,16 @@ constexpr double kProjectionTolerance = 1e-4;
 /// level set; there the density projection corrects an excess of particle volume only
 /// (project_particle_density, docs/particles.md "Still water").
 constexpr double kProjectionAirSide = 0.5;
-/// Cells with T_c at or above this are full (not of the surface band) for the measurement switch
-/// surface_deficits of project_particle_density.
+/// Cells with T_c at or above this are full (not of the surface band) for the rule of the surface
+/// band's deficits (SurfaceDeficits of project_particle_density).
 constexpr double kProjectionFullCell = 0.999;
+/// SurfaceDeficits::beyond_dead_band: the deficits of the surface band's liquid side are left alone
+/// while the level set encloses at most kDeficitDeadBand more than the particle volume (relative),
+/// corrected in full from kDeficitFullShare on, in proportion between (docs/particles.md,
+/// "Sloshing"). In a sloshing tank the level set of the disordered surface settles at +0.2 % over
+/// the particles when these deficits are not corrected; a splash's thin sheets take it past 1 %.
+constexpr double kDeficitDeadBand = 0.003;
+constexpr double kDeficitFullShare = 0.006;
 /// Zhu & Bridson surface: kernel support in units of the particle spacing.
 constexpr double kSurfaceSupport = 2.0;
 /// Lattice points per axis of one particle's splat box held in a stack table (liquid_phi_on_lattice;
@@ -1182,6 +1189,37 @@ void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int 
   });
 }
 
+/// The share of a deficit on the liquid side of the surface band that the density projection
+/// corrects, given how much more the level set encloses than the particles (`mismatch`, relative):
+/// SurfaceDeficits::beyond_dead_band ramps from 0 at kDeficitDeadBand to 1 at kDeficitFullShare,
+/// a volume feedback with a dead band (in the spirit of Losasso et al. 2008's volume control).
+double surface_deficit_share(SurfaceDeficits rule, double mismatch) {
+  switch (rule) {
+    case SurfaceDeficits::all:
+      return 1.0;
+    case SurfaceDeficits::none:
+      return 0.0;
+    case SurfaceDeficits::beyond_dead_band:
+      break;
+  }
+  return std::clamp((mismatch - kDeficitDeadBand) / (kDeficitFullShare - kDeficitDeadBand), 0.0,
+                    1.0);
+}
+
+/// sum_c T_c / sum_c rho~_c - 1 over the projection's unknowns (cells in order): how much more
+/// the level set encloses than the particles' splat (0 without particle volume).
+template <int Dim, class Values, class Rho>
+double level_set_volume_mismatch(const MacGrid<Dim>& grid, const std::vector<int>& cells,
+                                 const Rho& rho, const Values& values) {
+  double particle = 0.0, level_set = 0.0;
+  for (int c : cells) {
+    const VecI<Dim> ci = grid.cell_coord(c);
+    particle += *rho.find(ci);
+    level_set += values.find(ci)[kTarget];
+  }
+  return particle > 0.0 ? level_set / particle - 1.0 : 0.0;
+}
+
 /// One (reconstruction, solve, move) of project_particle_density. Its grid work visits only the
 /// band of cells within reach of a particle (tiles of 8^Dim cells): outside it no particle
 /// splats volume and the level set has no liquid, so rho~ = T = 0 there and no cell is an
@@ -1193,7 +1231,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
                                             const VectorX& fluid_face,
                                             const SolidField<Dim>& solids,
                                             const std::array<BoundaryType, 2 * Dim>& boundary,
-                                            bool surface_deficits) {
+                                            SurfaceDeficits surface_deficits) {
   DensityProjectionStats stats;
   const long np = static_cast<long>(particles.size());
   if (np == 0) return stats;
@@ -1403,6 +1441,16 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   stats.cells = n;
   if (n == 0) return stats;
 
+  // with the dead band: how much more the level set encloses than the particles, over the band
+  // (both sums see the walls and solids alike), and the share of the surface band's deficits
+  // corrected at that (the other rules need no sums)
+  const double mismatch = surface_deficits == SurfaceDeficits::beyond_dead_band
+                              ? level_set_volume_mismatch(grid, cells, rho, values)
+                              : 0.0;
+  const double deficit_share = surface_deficit_share(surface_deficits, mismatch);
+  stats.volume_mismatch = mismatch;
+  stats.deficit_share = deficit_share;
+
   // with q = -psi dx^2: (-L dx^2) psi = e (rows in cell order), and the move is grad q
   std::vector<Triplet> triplets;
   triplets.reserve(static_cast<std::size_t>(n) * (2 * Dim + 1));
@@ -1439,11 +1487,14 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // An excess there (particles outside the level set: drops, thin sheets) is still spread.
     // Next to a solid a low T_c can come from the solid filling part of the cell, not from a
     // free surface, so with solids the air side is read from the level set extended into them.
+    // On the liquid side of the surface band (1/2 <= T_c < kProjectionFullCell) a deficit is
+    // corrected by deficit_share (1 by default; the measurement switches: 0, or the dead band's
+    // share, docs/particles.md "Sloshing").
     double e = *rho.find(ci) - v[kTarget];
     if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide)
       e = std::max(e, 0.0);
-    else if (!surface_deficits && v[kTarget] < kProjectionFullCell)
-      e = std::max(e, 0.0);
+    else if (v[kTarget] < kProjectionFullCell && e < 0.0)
+      e *= deficit_share;
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
   }
@@ -1510,7 +1561,9 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
 ///   rho~_c = dx^-Dim sum_p V_p w_cp     (V_p = m_p / rho_p, w_cp the hat of cell c averaged over
 ///                                        the box of side s_p = V_p^(1/Dim) around x_p)
 ///   T_c    = dx^-Dim int hat_c(x) H(-phi(x)) dx           (the same kernel on the level set)
-///   e_c    = rho~_c - T_c, or max(0, rho~_c - T_c) where T_c < 1/2 (the air side of the surface)
+///   e_c    = rho~_c - T_c, or max(0, rho~_c - T_c) where T_c < 1/2 (the air side of the surface),
+///            a deficit times s(M) where 1/2 <= T_c < 0.999 (the surface band's liquid side), with
+///            M = sum T / sum rho~ - 1 and s the dead-band share of surface_deficit_share
 ///   L q = e on S = {c : rho~_c > 0 or T_c > 0},  (L q)_c = sum_f W_F^u_f (q_nb - q_c) / dx^2,
 ///         q = 0 outside S (air), no flux through faces with W_F^u = 0 (walls, solids);
 ///   x_p <- x_p + omega grad q (x_p),  grad q on the faces, interpolated like a velocity.
@@ -1523,7 +1576,8 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
                                                 const VectorX& fluid_face,
                                                 const SolidField<Dim>& solids,
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
-                                                int iterations, bool surface_deficits) {
+                                                int iterations,
+                                                SurfaceDeficits surface_deficits) {
   DensityProjectionStats total;
   for (int it = 0; it < iterations; ++it) {
     const DensityProjectionStats one = project_density_once(particles, grid, lattice, fluid_face,
@@ -1911,7 +1965,7 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                   const std::array<BoundaryType, 2 * D>&);                         \
   template DensityProjectionStats project_particle_density(                                        \
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
-      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, bool);                    \
+      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, SurfaceDeficits);         \
   template void liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                     \
                                        const SampleLattice<D>&,                                    \
                                        const std::array<BoundaryType, 2 * D>&,                     \

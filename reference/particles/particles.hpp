@@ -106,6 +106,23 @@ struct DensityProjectionStats {
   int iterations = 0;         ///< conjugate gradient iterations
   double error_before = 0.0;  ///< sum_c |e_c| dx^Dim before the move (m^Dim), e_c as in particles.cpp
   double max_move = 0.0;      ///< largest particle displacement (m)
+  /// With SurfaceDeficits::beyond_dead_band (else 0): sum_c T_c / sum_c rho~_c - 1 over the
+  /// unknowns, how much more the level set encloses than the particles (relative); and the share
+  /// of the surface band's deficits corrected
+  double volume_mismatch = 0.0;
+  double deficit_share = 1.0;
+};
+
+/// What the density projection does with a deficit of particle volume (rho~_c < T_c) on the
+/// liquid side of the surface band (1/2 <= T_c < 0.999, docs/particles.md "Sloshing").
+enum class SurfaceDeficits {
+  all,   ///< always corrected (the default)
+  none,  ///< never, only an excess as on the air side (a measurement switch)
+  /// A measurement switch: corrected only in the share of a volume feedback with a dead band:
+  /// none while the level set encloses at most 0.3 % more than the particle volume (the level
+  /// set's response to the disorder of particles under a smooth surface), all from 0.6 % on (thin
+  /// sheets, splashes)
+  beyond_dead_band,
 };
 
 /// Grid-based implicit density projection after Kugelstadt, Bender, Fernandez-Fernandez, Jeske,
@@ -122,15 +139,18 @@ struct DensityProjectionStats {
 /// corrected, so water at rest is a fixed point (docs/particles.md, "Still water"). `iterations` repeats the whole (reconstruction, solve, move); the stats are
 /// those of the first iteration (error_before) and the sums over all (iterations, max_move the
 /// largest). Respects solids, walls and periodicity; deterministic for any thread count.
-/// `surface_deficits` false (a measurement switch, docs/particles.md "Sloshing"): on the liquid
-/// side of the surface band too (1/2 <= T_c < kProjectionFullCell) only an excess is corrected.
+/// `surface_deficits`: on the liquid side of the surface band (1/2 <= T_c < 0.999) a deficit is
+/// corrected in the share SurfaceDeficits says (by default always; the other rules are
+/// measurement switches, docs/particles.md "Sloshing").
 template <int Dim>
 DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                                 const SampleLattice<Dim>& lattice,
                                                 const VectorX& fluid_face,
                                                 const SolidField<Dim>& solids,
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
-                                                int iterations = 1, bool surface_deficits = true);
+                                                int iterations = 1,
+                                                SurfaceDeficits surface_deficits =
+                                                    SurfaceDeficits::all);
 
 /// Iterations of project_particle_density applied to freshly seeded particles (the simulation
 /// does this once before frame 0, so the particle volume and the level set's agree from the

@@ -77,12 +77,12 @@ struct StageSwitches {
   /// false: the density projection runs on the seeded particles only (before frame 0), not in
   /// the steps (line 15). A measurement switch (docs/particles.md "Sloshing").
   bool density_projection_in_steps = true;
-  /// false: in the density projection (of the seeded particles and in the steps), the liquid
-  /// side of the surface band (1/2 <= T_c < 0.999) corrects an excess of particle volume only,
-  /// as the air side does (the
-  /// surface_deficits argument of project_particle_density). A measurement switch
-  /// (docs/particles.md "Sloshing").
-  bool density_projection_surface_deficits = true;
+  /// What the density projection (of the seeded particles and in the steps) does with a deficit
+  /// on the liquid side of the surface band (1/2 <= T_c < 0.999): by default (`all`) corrects it;
+  /// `none` and `beyond_dead_band` are measurement switches (docs/particles.md "Sloshing": the
+  /// dead band passes the 2D sloshing tank with split_advection and the divergence-free surface
+  /// cells, but still water and the floating box then move more than their bounds allow).
+  SurfaceDeficits density_projection_surface_deficits = SurfaceDeficits::all;
   /// Measure the energy change of every stage (energy_ledger()): several extra sweeps over the
   /// faces and particles per step, so off unless a diagnosis asks for it.
   bool energy_ledger = false;

@@ -50,6 +50,14 @@ std::vector<Variant> variants() {
          s.divergence_free_air = s.divergence_free_surface_cells = true;
          s.density_projection = false;
        }},
+      // the 2D sloshing tank's passing configuration (docs/particles.md, "Sloshing", physics6):
+      // divergence-free air and surface cells, the surface band's deficits beyond a dead band
+      // (the box is a moving body: its scene keeps the whole drift)
+      {"dead-band",
+       [](StageSwitches& s) {
+         s.divergence_free_air = s.divergence_free_surface_cells = true;
+         s.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
+       }},
   };
 }
 

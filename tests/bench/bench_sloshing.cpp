@@ -7,7 +7,10 @@
 //   bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] [--every K] [--backend NAME]
 //                  [--no-projection] [--no-correction] [--max-dt DT] [--split-drift]
 //                  [--divergence-free-air] [--divergence-free-surface] [--no-step-projection]
-//                  [--no-surface-deficits] [--seed N]
+//                  [--no-surface-deficits] [--dead-band-deficits] [--seed N]
+//
+// --dead-band-deficits: the surface band's deficits corrected only beyond a dead band of the level
+// set's volume over the particles' (SurfaceDeficits::beyond_dead_band, a measurement switch).
 //
 // Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
 // line before: which stage of the step changed the energy.
@@ -32,6 +35,7 @@ int main(int argc, char** argv) {
   std::string backend = "matrixfree";
   bool no_projection = false, no_correction = false, split_drift = false, divfree_air = false;
   bool divfree_surface = false, no_step_projection = false, no_surface_deficits = false;
+  bool dead_band = false;
   double max_dt = 0.02;
   int seed = 0;
   bench::BenchArgs args(argc, argv);
@@ -51,6 +55,7 @@ int main(int argc, char** argv) {
     else if (a == "--divergence-free-surface") divfree_air = divfree_surface = true;
     else if (a == "--no-step-projection") no_step_projection = true;
     else if (a == "--no-surface-deficits") no_surface_deficits = true;
+    else if (a == "--dead-band-deficits") dead_band = true;
     else if (a == "--seed") seed = std::atoi(args.value().c_str());
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
@@ -71,7 +76,9 @@ int main(int argc, char** argv) {
   if (divfree_air) switches.divergence_free_air = true;
   if (divfree_surface) switches.divergence_free_surface_cells = true;
   if (no_step_projection) switches.density_projection_in_steps = false;
-  if (no_surface_deficits) switches.density_projection_surface_deficits = false;
+  if (no_surface_deficits) switches.density_projection_surface_deficits = SurfaceDeficits::none;
+  if (dead_band)
+    switches.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
   nlohmann::json scene = tank(dim, cells, seconds, backend, slope);
   scene["time"]["max_dt"] = max_dt;
   if (seed > 0) scene["particles"]["seed"] = seed;

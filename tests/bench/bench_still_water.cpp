@@ -95,6 +95,15 @@ std::vector<Variant> variants() {
        [](StageSwitches& s) { s.unreached_faces_keep_u_star = false; }},
       {"no-extrapolation", "no extrapolation after the solve",
        [](StageSwitches& s) { s.extrapolate_after_solve = false; }},
+      {"split-divergence-free", "drift-kick-drift, divergence-free air and surface cells",
+       [](StageSwitches& s) {
+         s.split_advection = s.divergence_free_air = s.divergence_free_surface_cells = true;
+       }},
+      {"dead-band", "the same and the surface band's deficits beyond a dead band (physics6)",
+       [](StageSwitches& s) {
+         s.split_advection = s.divergence_free_air = s.divergence_free_surface_cells = true;
+         s.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
+       }},
   };
 }
 
