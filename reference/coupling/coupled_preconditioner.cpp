@@ -135,20 +135,26 @@ void CoupledPreconditioner<Dim>::apply(const VectorX& r, VectorX& z) const {
       // z_f = P r - U (W^-1 + B_f U)^-1 B_f P r
       s_.fluid_body_force_into(zf_, force_);
       coeff_.noalias() = small_inv_ * force_;
-      const int nd = nd_;
-      const double* c = coeff_.data();
-      double* zf = zf_.data();
-      const Eigen::MatrixXd& u = u_;
-#pragma omp parallel for schedule(static) if (nf_ > kParallelRows) num_threads(process_threads())
-      for (int i = 0; i < nf_; ++i) {
-        double s = 0.0;
-        for (int k = 0; k < nd; ++k) s += u(i, k) * c[k];
-        zf[i] -= s;
-      }
+      subtract_body_columns();
     }
     z.head(nf_) = zf_;
   }
   for (int i = 0; i < nc_; ++i) z[nf_ + i] = contact_inverse_[i] * r[nf_ + i];
+}
+
+template <int Dim>
+void CoupledPreconditioner<Dim>::subtract_body_columns() const {
+  // zf_ -= U coeff_, row by row (each row's sum over the body columns in column order)
+  const int nd = nd_;
+  const double* c = coeff_.data();
+  double* zf = zf_.data();
+  const Eigen::MatrixXd& u = u_;
+#pragma omp parallel for schedule(static) if (nf_ > kParallelRows) num_threads(process_threads())
+  for (int i = 0; i < nf_; ++i) {
+    double s = 0.0;
+    for (int k = 0; k < nd; ++k) s += u(i, k) * c[k];
+    zf[i] -= s;
+  }
 }
 
 template <int Dim>
@@ -196,15 +202,7 @@ void CoupledPreconditioner<Dim>::apply_in_face(const VectorX& g, const std::vect
   if (nd > 0) {
     t_.noalias() = back_ * yc_;
     coeff_ += t_;
-    const double* c = coeff_.data();
-    double* zf = zf_.data();
-    const Eigen::MatrixXd& u = u_;
-#pragma omp parallel for schedule(static) if (nf_ > kParallelRows) num_threads(process_threads())
-    for (int i = 0; i < nf_; ++i) {
-      double s = 0.0;
-      for (int k = 0; k < nd; ++k) s += u(i, k) * c[k];
-      zf[i] -= s;
-    }
+    subtract_body_columns();
   }
   z.head(nf_) = zf_;
 }

@@ -110,6 +110,8 @@ class CoupledPreconditioner : public Preconditioner, public FacePreconditioner {
   Eigen::MatrixXd small_inv_;   ///< (W^-1 + B_f U)^-1, nd x nd
   VectorX contact_inverse_;     ///< 1 / D_c
   mutable VectorX rf_, zf_, force_, coeff_;
+  /// zf_ -= U coeff_ (the Woodbury body columns U times their coefficients).
+  void subtract_body_columns() const;
   // exact contact elimination (apply_in_face)
   bool exact_contacts_ = false;
   Eigen::MatrixXd bu_;          ///< B_f U (nd x nd)

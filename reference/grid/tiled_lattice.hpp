@@ -63,23 +63,7 @@ class TiledLattice {
   /// Makes every tile that holds a point of the box [lo, hi] (point coordinates, clamped to the
   /// lattice; an empty box makes none), its values the background. Serial.
   void touch_box(VecI<Dim> lo, VecI<Dim> hi) {
-    for (int a = 0; a < Dim; ++a) {
-      lo[a] = std::max(lo[a], 0);
-      hi[a] = std::min(hi[a], dims_[a] - 1);
-      if (lo[a] > hi[a]) return;
-      lo[a] /= kTile;
-      hi[a] /= kTile;
-    }
-    VecI<Dim> t = lo;
-    while (true) {
-      make_tile(lattice_index<Dim>(t, tile_dims_));
-      int a = 0;
-      for (; a < Dim; ++a) {
-        if (++t[a] <= hi[a]) break;
-        t[a] = lo[a];
-      }
-      if (a == Dim) return;
-    }
+    for_each_tile_in_box(lo, hi, [&](int tile) { make_tile(tile); });
   }
 
   /// Tile flags for making tiles on several threads: mark_box sets the flag of every tile
@@ -90,26 +74,12 @@ class TiledLattice {
     return std::vector<unsigned char>(tiles_.size(), 0);
   }
   void mark_box(VecI<Dim> lo, VecI<Dim> hi, std::vector<unsigned char>& flags) const {
-    for (int a = 0; a < Dim; ++a) {
-      lo[a] = std::max(lo[a], 0);
-      hi[a] = std::min(hi[a], dims_[a] - 1);
-      if (lo[a] > hi[a]) return;
-      lo[a] /= kTile;
-      hi[a] /= kTile;
-    }
-    VecI<Dim> t = lo;
-    while (true) {
-      unsigned char& flag = flags[lattice_index<Dim>(t, tile_dims_)];
+    for_each_tile_in_box(lo, hi, [&](int tile) {
+      unsigned char& flag = flags[tile];
       // the same value from any thread (an integer store, no float atomics)
 #pragma omp atomic write
       flag = 1;
-      int a = 0;
-      for (; a < Dim; ++a) {
-        if (++t[a] <= hi[a]) break;
-        t[a] = lo[a];
-      }
-      if (a == Dim) return;
-    }
+    });
   }
   void make_tiles(const std::vector<unsigned char>& flags, int threads) {
     const int slots = num_tile_slots();
@@ -196,6 +166,29 @@ class TiledLattice {
   }
 
  private:
+  /// fn(tile slot) for every tile holding a point of the box [lo, hi] (point coordinates,
+  /// clamped to the lattice; an empty box visits none), x fastest.
+  template <class Fn>
+  void for_each_tile_in_box(VecI<Dim> lo, VecI<Dim> hi, Fn&& fn) const {
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = std::max(lo[a], 0);
+      hi[a] = std::min(hi[a], dims_[a] - 1);
+      if (lo[a] > hi[a]) return;
+      lo[a] /= kTile;
+      hi[a] /= kTile;
+    }
+    VecI<Dim> t = lo;
+    while (true) {
+      fn(lattice_index<Dim>(t, tile_dims_));
+      int a = 0;
+      for (; a < Dim; ++a) {
+        if (++t[a] <= hi[a]) break;
+        t[a] = lo[a];
+      }
+      if (a == Dim) return;
+    }
+  }
+
   std::pair<int, int> locate(const VecI<Dim>& c) const {
     VecI<Dim> t, l;
     for (int a = 0; a < Dim; ++a) {

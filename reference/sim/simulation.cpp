@@ -71,28 +71,13 @@ void overwrite_in_box(const SampleLattice<Dim>& lattice, VecI<Dim> lo, VecI<Dim>
   const int threads = process_threads();
   if (static_cast<int>(undo.size()) < threads) undo.resize(threads);
   for (auto& list : undo) list.clear();
-  for (int a = 0; a < Dim; ++a) {
-    lo[a] = std::max(lo[a], 0);
-    hi[a] = std::min(hi[a], lattice.dims[a] - 1);
-    if (lo[a] > hi[a]) return;
-  }
-  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
-  row_dims[0] = 1;
-  const int rows = row_dims.prod();
-#pragma omp parallel num_threads(threads)
-  {
-    std::vector<std::pair<int, double>>& list = undo[omp_get_thread_num()];
-#pragma omp for schedule(static)
-    for (int q = 0; q < rows; ++q) {
-      const int start = lattice.index(lo + lattice_coord<Dim>(q, row_dims));
-      for (int k = start; k <= start + hi[0] - lo[0]; ++k) {
-        const double old = phi[k], v = value(k);
-        if (std::memcmp(&old, &v, sizeof(double)) == 0) continue;
-        list.emplace_back(k, old);
-        phi[k] = v;
-      }
-    }
-  }
+  // (rows on several threads, each thread listing the points it changed)
+  for_each_lattice_point_in_box(lattice, lo, hi, [&](int k) {
+    const double old = phi[k], v = value(k);
+    if (std::memcmp(&old, &v, sizeof(double)) == 0) return;
+    undo[omp_get_thread_num()].emplace_back(k, old);
+    phi[k] = v;
+  });
 }
 
 /// Undoes overwrite_in_box (each point is listed once, so the order does not matter).
