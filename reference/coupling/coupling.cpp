@@ -317,8 +317,11 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     classify_lattice_cells_in_box(grid, lattice, union_phi, union_lo, union_hi, scratch.signs);
   else
     classify_lattice_cells(grid, lattice, union_phi, scratch.signs);
-  stress_fluid_weights(StressGrid<Dim>(grid), lattice, union_phi, scratch.signs, boundary,
-                       w.fluid_stress);
+  if (scratch.stress)
+    stress_fluid_weights(StressGrid<Dim>(grid), lattice, union_phi, scratch.signs, boundary,
+                         w.fluid_stress);
+  else
+    w.fluid_stress = VectorX();
 }
 
 template <int Dim>

@@ -104,6 +104,10 @@ struct SolidWeightsScratch {
   /// static solids those two face-sized vectors are then left empty (at the paper's
   /// 256x128x256 grid 200 MB each).
   bool parts = true;
+  /// Set by the caller: false when it reads no SolidWeights::fluid_stress (W_F^s), which is then
+  /// left empty (the simulation's inviscid coupled steps: at the paper's 256x128x256 grid 400 MB
+  /// made and dropped every step). The union's lattice-cell classes (signs) are made either way.
+  bool stress = true;
 };
 
 /// The same into `w`, whose vectors (and the scratch buffers) are reused when they have the

@@ -739,6 +739,9 @@ void Simulation<Dim>::update_moving_solids() {
   if (solid_scratch_.fixed.empty())
     for (const auto& b : rigid_->bodies()) solid_scratch_.fixed.push_back(!b.moves());
   solid_scratch_.parts = false;  // W_S^u and its static share: read by nothing here
+  // W_F^s only where a solve reads it: without stress solves (and no export of this step's
+  // system) solve_coupled passes inviscid weights (lean_coupled_weights), so it is not made
+  solid_scratch_.stress = !lean_coupled_weights();
   // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
@@ -770,10 +773,7 @@ void Simulation<Dim>::update_moving_solids() {
   solids.fluid_face = VectorX();
   find_faces_in_solids();
   stress_fluid_ = VectorX();
-  // without stress solves nothing reads W_F^s (solve_coupled passes inviscid weights without
-  // stress vectors, lean_coupled_weights): released here, so that it is not alive in the solve
-  // (solid_weights makes it again at the next pose, from the heap's free memory)
-  if (lean_coupled_weights()) solids.fluid_stress = VectorX();
+  // (without stress solves W_F^s was not made: solids.fluid_stress is empty, see above)
   rebuild_solid_field();
 }
 
