@@ -5,6 +5,8 @@
 
 #include <array>
 
+#include "reference/core/parallel.hpp"
+
 namespace monolith {
 
 std::vector<double> liquid_viscosities(const std::vector<LiquidSpec>& liquids) {
@@ -110,7 +112,11 @@ template <int Dim>
 VectorX stress_viscosity(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
                          const std::vector<double>& liquid_eta) {
   VectorX eta(stress.num_dofs());
-  for (int k = 0; k < StressGrid<Dim>::num_components(); ++k)
+  // the components on several threads, each made whole by one thread (serially, as above), into
+  // its own segment: the same bits for any team size
+  constexpr int components = StressGrid<Dim>::num_components();
+#pragma omp parallel for schedule(dynamic, 1) num_threads(team_threads(static_cast<long>(particles.size()) * components))
+  for (int k = 0; k < components; ++k)
     eta.segment(stress.offset(k), stress.num_dofs(k)) =
         sample_viscosity(stress.grid(), StressGrid<Dim>::shift(k), stress.dims(k), particles,
                          liquid_eta);
