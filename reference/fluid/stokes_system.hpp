@@ -131,7 +131,8 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 /// date as unknowns change, and unknowns of one group share no face, so each group is relaxed in
 /// parallel (serially, in grid order, when an odd periodic axis breaks the colouring). Scratch
 /// vectors are sized at construction: apply and the sweeps allocate nothing, and one operator
-/// must not run two of them at once from different threads.
+/// must not run two of them at once from different threads. The operator keeps a reference to
+/// the weights it is built with (W_F^u, read by rhs): they must outlive it.
 template <int Dim>
 class MatrixFreeStokesOperator : public LinearOperator {
  public:
