@@ -99,26 +99,17 @@ void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fa
   // (work in proportion to the liquid, not the box: issue 20). The means are taken from the
   // input values before any face is written (the faces near the liquid have none themselves),
   // so writing in place gives the values of a separate output.
-  // (on several threads: each thread lists the candidates of its block of faces; the sorted,
-  // unique list and every value are the same for any team size)
-  const int threads = team_threads(nf);
-  std::vector<std::vector<int>> found(threads);
-#pragma omp parallel num_threads(threads)
-  {
-    std::vector<int>& mine = found[omp_get_thread_num()];
-#pragma omp for schedule(static)
-    for (int f = 0; f < nf; ++f) {
-      if (!(rho[f] > 0.0)) continue;
-      const auto [axis, coord] = grid.face_coord(f);
-      for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
-        if (cell < 0) continue;
-        for (int g : cell_faces<Dim>(grid, cell).face)
-          if (!(rho[g] > 0.0)) mine.push_back(g);
-      }
+  // (on several threads in blocks of faces: the sorted, unique list and every value are the same
+  // for any team size)
+  std::vector<int> near = gather_in_order<int>(nf, [&](int f, std::vector<int>& out) {
+    if (!(rho[f] > 0.0)) return;
+    const auto [axis, coord] = grid.face_coord(f);
+    for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
+      if (cell < 0) continue;
+      for (int g : cell_faces<Dim>(grid, cell).face)
+        if (!(rho[g] > 0.0)) out.push_back(g);
     }
-  }
-  std::vector<int> near;
-  for (const auto& list : found) near.insert(near.end(), list.begin(), list.end());
+  });
   std::sort(near.begin(), near.end());
   near.erase(std::unique(near.begin(), near.end()), near.end());
   const int nn = static_cast<int>(near.size());
@@ -140,7 +131,7 @@ void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fa
     }
     near_rho[n] = count > 0 ? sum / count : fallback_density;
   }
-#pragma omp parallel for schedule(static) num_threads(threads)
+#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
   for (int f = 0; f < nf; ++f)
     if (!(rho[f] > 0.0)) rho[f] = fallback_density;
   for (int n = 0; n < nn; ++n) rho[near[n]] = near_rho[n];

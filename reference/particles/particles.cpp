@@ -192,25 +192,6 @@ Vec<Dim> periodic_difference(const MacGrid<Dim>& grid, Vec<Dim> d) {
 }
 
 
-/// emit(i, out) for every i in [0, n) on several threads, each thread over a fixed contiguous
-/// block into its own list, the lists joined in block order: the list of the serial loop.
-template <class T, class Emit>
-std::vector<T> gather_in_order(int n, Emit&& emit) {
-  const int blocks = std::max(1, std::min(process_threads(), n / 4096 + 1));
-  std::vector<std::vector<T>> part(blocks);
-#pragma omp parallel for schedule(static, 1) num_threads(blocks)
-  for (int b = 0; b < blocks; ++b) {
-    const int lo = static_cast<int>(static_cast<long>(n) * b / blocks);
-    const int hi = static_cast<int>(static_cast<long>(n) * (b + 1) / blocks);
-    for (int i = lo; i < hi; ++i) emit(i, part[b]);
-  }
-  std::vector<T> out;
-  std::size_t total = 0;
-  for (const auto& v : part) total += v.size();
-  out.reserve(total);
-  for (const auto& v : part) out.insert(out.end(), v.begin(), v.end());
-  return out;
-}
 
 }  // namespace
 
