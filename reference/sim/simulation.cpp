@@ -594,8 +594,11 @@ int Simulation<Dim>::extrapolation_layers(double dt) const {
   if (switches_.extrapolate_cfl_layers || coupled_ || rigid_ || split_drift() ||
       switches_.divergence_free_air)
     return cfl_layers;
+  // the largest trusted speed (a maximum: the same for any split of the faces)
   double speed = 0.0;
-  for (int f = 0; f < grid_.num_faces(); ++f)
+  const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) reduction(max : speed) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f)
     if (face_flags_[f]) speed = std::max(speed, std::abs(u_[f]));
   const double reach = (2 * Dim + 1) * std::sqrt(Dim + 1.0) * speed * dt / grid_.dx();
   if (!(reach < cfl_layers)) return cfl_layers;  // also a non-finite speed
