@@ -83,6 +83,9 @@ json frame_stats_json(const FrameStats& s) {
     j["solver"]["preconditioner"] = {{"multigrid", s.solver.stokes_solves_multigrid},
                                      {"ssor", s.solver.stokes_solves_ssor},
                                      {"max_stiffness", number(s.solver.max_stokes_stiffness)}};
+  // the multigrid solves redone with SSOR (left out when there were none)
+  if (s.solver.preconditioner_fallbacks > 0)
+    j["solver"]["preconditioner"]["fallbacks"] = s.solver.preconditioner_fallbacks;
   // timing
   j["timing"] = json::object();
   for (const FramePhase phase : enum_values<FramePhase>())

@@ -96,6 +96,33 @@ long fluid_solve(const MonolithicSystem<Dim>& s, const FluidBodyOperator<Dim>& o
   return p.iterations;
 }
 
+/// fluid_solve with the block preconditioner m, given multigrid_attempt_budget iterations; if
+/// that does not converge (or breaks down), the solve again with SSOR, from the attempt's
+/// iterate (from x's start after a breakdown), counted in r.fallbacks (docs/preconditioners.md
+/// section 20). Returns the CG iterations of both attempts.
+template <int Dim>
+long fluid_solve_with_fallback(const MonolithicSystem<Dim>& s, const FluidBodyOperator<Dim>& op,
+                               const StaggeredSettings& settings, Unknowns& x,
+                               CoupledSolveResult& r, const Preconditioner& m) {
+  StaggeredSettings attempt = settings;
+  attempt.mprgp.max_iterations = multigrid_attempt_budget(settings.mprgp.max_iterations);
+  const VectorX start = x.x_fluid;
+  CoupledSolveResult trial;
+  long iterations = 0;
+  try {
+    iterations = fluid_solve(s, op, attempt, x, trial, &m);
+  } catch (const SimulationError&) {
+    trial.converged = false;
+    x.x_fluid = start;
+  }
+  if (trial.converged) {
+    r.max_relative_residual = std::max(r.max_relative_residual, trial.max_relative_residual);
+    return iterations;
+  }
+  ++r.fallbacks;
+  return iterations + fluid_solve(s, op, settings, x, r);
+}
+
 /// The contact solve of the partitioned schemes for a fixed x_f: the normal QP
 /// A33 lambda = b3 - A31 tau - A32 p - A34 z, lambda >= 0 (eq. (24) row 3) and, with friction,
 /// the friction QP (25), in the staggered rounds of staggered_rounds (friction first, normal
@@ -154,14 +181,15 @@ template <int Dim>
 Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& settings,
                        CoupledSolveResult& r, long& iterations,
                        PreconditionerKind kind = PreconditionerKind::ssor,
-                       bool body_correction = true) {
+                       bool body_correction = true, bool fallback = false) {
   Unknowns x = zero_unknowns(s);
   const bool multigrid = kind == PreconditionerKind::multigrid;
   if (s.num_contacts() == 0) {
     const FluidBodyOperator<Dim> op(s);
     const std::unique_ptr<LazyPreconditioner> m =
         multigrid ? fluid_body_preconditioner(s, body_correction) : nullptr;
-    iterations += fluid_solve(s, op, settings, x, r, m.get());
+    iterations += m && fallback ? fluid_solve_with_fallback(s, op, settings, x, r, *m)
+                                : fluid_solve(s, op, settings, x, r, m.get());
     r.staggered_iterations += 1;
     return x;
   }
@@ -172,7 +200,24 @@ Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& 
   options.compute_updates = false;  // finish() updates from the unknowns
   options.preconditioner = kind;
   options.body_correction = body_correction;
-  const PvcUnifiedResult u = solve_pvc_unified(s, settings, options);
+  PvcUnifiedResult u;
+  if (multigrid && fallback) {
+    // the block preconditioner in face for multigrid_attempt_budget iterations per MLCP solve,
+    // then, unless that converged, the whole solve again with the paper's SSOR from zero
+    // (docs/preconditioners.md section 20)
+    StaggeredSettings attempt = settings;
+    attempt.mprgp.max_iterations = multigrid_attempt_budget(settings.mprgp.max_iterations);
+    u = solve_pvc_unified(s, attempt, options);
+    if (!u.converged || u.breakdown) {
+      ++r.fallbacks;
+      iterations += u.mprgp_iterations;
+      r.staggered_iterations += u.staggered_iterations;
+      options.preconditioner = PreconditionerKind::ssor;
+      u = solve_pvc_unified(s, settings, options);
+    }
+  } else {
+    u = solve_pvc_unified(s, settings, options);
+  }
   if (u.breakdown) throw SimulationError("unified solve: MPRGP broke down: " + u.message);
   r.converged = r.converged && u.converged;
   r.max_relative_residual = std::max(r.max_relative_residual, u.max_relative_residual);
@@ -235,7 +280,9 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
   Unknowns x = zero_unknowns(s);
   auto run_fluid = [&]() {
     const Stopwatch t0;
-    r.fluid_iterations += fluid_solve(s, fluid, settings, x, r, m.get());
+    r.fluid_iterations += m && options.preconditioner == PreconditionerChoice::automatic
+                              ? fluid_solve_with_fallback(s, fluid, settings, x, r, *m)
+                              : fluid_solve(s, fluid, settings, x, r, m.get());
     r.fluid_seconds += t0.seconds();
   };
   auto run_contact = [&](int rounds, bool cold = false) {
@@ -423,9 +470,12 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
     if (unified) {
       const Stopwatch t0;
       const PreconditionerKind kind = coupled_preconditioner_kind(sys, options, r);
+      // "auto" falls back to SSOR where the block preconditioner does not converge
+      const bool fallback = kind == PreconditionerKind::multigrid &&
+                            options.preconditioner == PreconditionerChoice::automatic;
       out.x = unified_solve(sys, settings, r,
                             viscosity_stage ? r.viscosity_coupled_iterations : r.coupled_iterations,
-                            kind, options.body_correction);
+                            kind, options.body_correction, fallback);
       const double seconds = t0.seconds();
       r.coupled_seconds += seconds;
       if (viscosity_stage) r.viscosity_coupled_seconds += seconds;

@@ -104,6 +104,10 @@ struct CoupledSolveResult {
   /// their fluid rows, and the largest stiffness eta_max dt / (rho dx^2) among them
   /// (CoupledSchemeOptions::preconditioner).
   long multigrid_systems = 0, ssor_systems = 0;
+  /// Solves under "auto" whose block preconditioner did not converge within
+  /// multigrid_attempt_budget and that were solved again with SSOR (docs/preconditioners.md
+  /// section 20).
+  long fallbacks = 0;
   double max_stiffness = 0.0;
   /// Largest relative residual of the inner solves (PCG: ||r||_inf / ||b||_inf; MPRGP: projected
   /// gradient).

@@ -73,7 +73,22 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
                                              static_cast<const MatrixFreeStokesOperator<Dim>&>(a), floor);
       return std::make_unique<StokesPreconditioner<Dim>>(grid, a, std::move(f), mg);
     });
-    result.pcg = pcg_solve(*op, b, x, settings, m);
+    PcgSettings attempt = settings;
+    VectorX start;
+    if (options.fallback_to_ssor) {
+      attempt.max_iterations = multigrid_attempt_budget(settings.max_iterations);
+      start = x;
+    }
+    result.pcg = pcg_solve(*op, b, x, attempt, m);
+    if (options.fallback_to_ssor && !result.pcg.converged) {
+      // the fallback (docs/preconditioners.md section 20): SSOR from the last iterate, or from
+      // the start if the attempt broke down (its iterate may not be finite)
+      if (result.pcg.breakdown) x = start;
+      const int spent = result.pcg.iterations;
+      result.pcg = pcg_solve(*op, b, x, settings);
+      result.pcg.iterations += spent;
+      result.fell_back = true;
+    }
   }
   // line 11: velocity update
   result.stress = scatter_stress(layout, dofs, x);

@@ -280,8 +280,11 @@ double stokes_energy(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
 struct StokesSolveResult {
   VectorX pressure;  ///< cell field, Pa
   VectorX stress;    ///< tau, all components, StressGrid numbering, Pa
-  PcgResult pcg;
+  PcgResult pcg;  ///< with a fallback: the SSOR solve's result, iterations of both attempts summed
   int pressure_dofs = 0, stress_dofs = 0;
+  /// The multigrid attempt stopped unconverged at multigrid_attempt_budget and the solve was
+  /// done again with SSOR (StokesSolveOptions::fallback_to_ssor).
+  bool fell_back = false;
 };
 
 struct StokesPreconditionerOptions;  // reference/fluid/stokes_preconditioner.hpp
@@ -298,6 +301,10 @@ struct StokesSolveOptions {
   /// The solve still stops at settings.tolerance; only the starting residual changes.
   const VectorX* initial_stress = nullptr;
   const VectorX* initial_pressure = nullptr;
+  /// With the multigrid preconditioner: give it multigrid_attempt_budget(max_iterations)
+  /// iterations and, if it has not converged by then, solve again with the paper's SSOR from
+  /// its last iterate (solver.preconditioner "auto"; an explicit "multigrid" keeps its result).
+  bool fallback_to_ssor = false;
 };
 
 /// Lines 7-11 of Algorithm 1 for the Stokes problem: select DOFs, build (assembled matrices or

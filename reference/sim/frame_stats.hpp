@@ -89,6 +89,10 @@ struct SolverStats {
   /// eta_max dt / (rho dx^2) among them. All 0 (and left out of the JSON) without such solves.
   long stokes_solves_multigrid = 0, stokes_solves_ssor = 0;
   double max_stokes_stiffness = 0.0;
+  /// Of the multigrid solves, those that did not converge within multigrid_attempt_budget and
+  /// were solved again with SSOR (solver.preconditioner "auto"; docs/preconditioners.md
+  /// section 20). Written to stats.jsonl only when not 0.
+  long preconditioner_fallbacks = 0;
 
   /// Books one solve (or one step's solves): iterations and staggered rounds summed, the
   /// largest relative residual, convergence of all.

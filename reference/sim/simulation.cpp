@@ -937,6 +937,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // the stats rows of the paper's baseline exactly)
   for (long k = 0; k < r.multigrid_systems; ++k)
     st.add_stokes_preconditioner(PreconditionerKind::multigrid, r.max_stiffness);
+  st.preconditioner_fallbacks += r.fallbacks;
   if (!r.converged)
     note_unconverged("coupled " + enum_name(scene_.solver.scheme),
                      r.fluid_iterations + r.contact_iterations + r.coupled_iterations,
@@ -958,6 +959,7 @@ StokesSolveOptions Simulation<Dim>::stokes_options(const VectorX& eta, double dt
   const double stiffness = rho > 0.0 ? solve_stiffness(eta_max, dt, rho, grid_.dx()) : 0.0;
   StokesSolveOptions o;
   o.preconditioner = choose_preconditioner(scene_.solver.preconditioner, Dim, stiffness);
+  o.fallback_to_ssor = scene_.solver.preconditioner == PreconditionerChoice::automatic;
   stats_.solver.add_stokes_preconditioner(o.preconditioner, stiffness);
   if (o.preconditioner != PreconditionerKind::ssor && scene_.solver.stokes_warm_start) {
     o.initial_stress = &stress_;
@@ -995,6 +997,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
                      backend, pcg_settings_, out.u, stokes_options(w.viscosity, dt));
     record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
+    if (solve.fell_back) ++stats_.solver.preconditioner_fallbacks;
     out.pressure = solve.pressure;
     out.stress = solve.stress;
     return out;
@@ -1008,6 +1011,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
                                                  StressForm::full, backend, pcg_settings_, out.u,
                                                  stokes_options(w.viscosity, dt));
     record_solve(solve.pcg, 0, solve.stress_dofs, "viscosity");
+    if (solve.fell_back) ++stats_.solver.preconditioner_fallbacks;
     out.stress = solve.stress;
     return out;
   };
