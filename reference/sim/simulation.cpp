@@ -17,6 +17,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <optional>
 #include <utility>
 
 #include "reference/core/errors.hpp"
@@ -163,9 +164,11 @@ constexpr int kAirVelocityLayers = 2;
 /// and the liquid's mean is its mass over itself, so the field is 1 everywhere (0 without
 /// particle mass). The same bits as the splat, for a fraction of a step's weights
 /// (docs/particles.md, "Speed").
-template <int Dim, class Fallback>
-VectorX stress_viscosity_constant_or(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
-                                     const std::vector<double>& values, Fallback&& fallback) {
+/// (The same holds for the cells' samples of cell_viscosity, also a sample_viscosity splat:
+/// constant_viscosity gives that constant, or nothing when the splat is needed.)
+template <int Dim>
+std::optional<double> constant_viscosity(const Particles<Dim>& particles,
+                                         const std::vector<double>& values) {
   const auto all = [&](double v) {
     return !values.empty() &&
            std::all_of(values.begin(), values.end(), [v](double e) { return e == v; });
@@ -175,13 +178,21 @@ VectorX stress_viscosity_constant_or(const StressGrid<Dim>& stress, const Partic
                                             [nv](int l) { return l >= 0 && l < nv; });
   const bool masses = std::all_of(particles.mass.begin(), particles.mass.end(),
                                   [](double m) { return std::isfinite(m) && m >= 0.0; });
-  if (!indices_in_range || !masses) return fallback();
-  if (all(0.0)) return VectorX::Zero(stress.num_dofs());
+  if (!indices_in_range || !masses) return std::nullopt;
+  if (all(0.0)) return 0.0;
   if (all(1.0)) {
     const bool mass = std::any_of(particles.mass.begin(), particles.mass.end(),
                                   [](double m) { return m > 0.0; });
-    return VectorX::Constant(stress.num_dofs(), mass ? 1.0 : 0.0);
+    return mass ? 1.0 : 0.0;
   }
+  return std::nullopt;
+}
+
+template <int Dim, class Fallback>
+VectorX stress_viscosity_constant_or(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
+                                     const std::vector<double>& values, Fallback&& fallback) {
+  if (const auto c = constant_viscosity(particles, values))
+    return VectorX::Constant(stress.num_dofs(), *c);
   return fallback();
 }
 
@@ -340,7 +351,18 @@ void Simulation<Dim>::update_liquid_weights() {
     }
   }
   if (!non_newtonian_) {
-    cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
+    // eta per cell (the render's colour and the checkpoint). A constant field (every liquid
+    // inviscid: +0) is written into the kept vector: the splat made three cell-sized vectors and
+    // two cell-sized byte arrays per step (256 MiB at the paper's 256x128x256 grid, alive at the
+    // step's memory peak, so first touched by the kernel)
+    if (const auto c = constant_viscosity(particles_, liquid_eta_)) {
+      if (cell_eta_.size() == grid_.num_cells())
+        cell_eta_.setConstant(*c);
+      else
+        cell_eta_ = VectorX::Constant(grid_.num_cells(), *c);
+    } else {
+      cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
+    }
   } else if (cell_eta_.size() != grid_.num_cells()) {
     // before the first solve: each liquid at rest, the limiting viscosity eta0 of eq. (27)
     std::vector<double> eta0;
