@@ -217,12 +217,11 @@ void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
   VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
   row_dims[0] = 1;
   const int rows = row_dims.prod();
-  VecI<Dim> pstride, cstride;
-  pstride[0] = cstride[0] = 1;
-  for (int a = 1; a < Dim; ++a) {
-    pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
-    cstride[a] = cstride[a - 1] * signs.cells[a - 1];
-  }
+  VecI<Dim> pstride;
+  pstride[0] = 1;
+  for (int a = 1; a < Dim; ++a) pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
+  // the classes are stored over the written box, which holds [lo, hi]
+  const VecI<Dim> cstride = signs.box_strides(), wlo = signs.written_lo;
   // corner k of a lattice cell: point offset of its bits
   std::array<int, kCorners> corner_offset;
   for (int k = 0; k < kCorners; ++k) {
@@ -234,7 +233,7 @@ void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int q = 0; q < rows; ++q) {
     const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
-    const std::uint8_t* cls = signs.cls.data() + c.dot(cstride);
+    const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
     int count = 0;
     for (int x = 0; x < nx; ++x) count += cls[x] == Signs::kMixed;
     signs.row_start[q + 1] = count;
@@ -245,7 +244,7 @@ void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int q = 0; q < rows; ++q) {
     const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
-    const std::uint8_t* cls = signs.cls.data() + c.dot(cstride);
+    const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
     const int point = c.dot(pstride);
     int slot = signs.row_start[q];
     for (int x = 0; x < nx; ++x) {
@@ -313,32 +312,10 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
   constexpr int kCorners = 1 << Dim;
   constexpr int kRows = 1 << (Dim - 1);  // point rows along x that hold a row of cells' corners
   const VecI<Dim> cells = 2 * grid.cells();
-  const std::size_t n = static_cast<std::size_t>(cells.prod());
-  if (signs.cls.size() != n || signs.cells != cells) {
-    signs.cells = cells;
-    signs.cls.assign(n, Signs::kPositive);
-    signs.written_lo = VecI<Dim>::Zero();
-    signs.written_hi = -VecI<Dim>::Ones();
-  }
-  VecI<Dim> pstride, cstride;
-  pstride[0] = cstride[0] = 1;
-  for (int a = 1; a < Dim; ++a) {
-    pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
-    cstride[a] = cstride[a - 1] * signs.cells[a - 1];
-  }
-  // the last call's classes back to kPositive (only its box can hold others)
-  if ((signs.written_lo.array() <= signs.written_hi.array()).all()) {
-    const VecI<Dim> wlo = signs.written_lo, whi = signs.written_hi;
-    VecI<Dim> row_dims = whi - wlo + VecI<Dim>::Ones();
-    row_dims[0] = 1;
-    const int rows = row_dims.prod();
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (int q = 0; q < rows; ++q) {
-      const VecI<Dim> c = wlo + lattice_coord<Dim>(q, row_dims);
-      std::uint8_t* out = signs.cls.data() + c.dot(cstride);
-      std::fill(out, out + (whi[0] - wlo[0] + 1), Signs::kPositive);
-    }
-  }
+  signs.cells = cells;
+  VecI<Dim> pstride;
+  pstride[0] = 1;
+  for (int a = 1; a < Dim; ++a) pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
   // the lattice cells with a corner in the point box: cell l spans points l and l + 1
   VecI<Dim> from, to;
   for (int a = 0; a < Dim; ++a) {
@@ -351,6 +328,7 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
   if ((from.array() > to.array()).any()) {
     signs.written_lo = VecI<Dim>::Zero();
     signs.written_hi = -VecI<Dim>::Ones();
+    signs.cls.clear();
     signs.lo = lo;
     signs.hi = hi;
     mixed_cell_fractions(lattice, phi, signs);
@@ -362,6 +340,11 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
     for (int b = 0; b + 1 < Dim; ++b)
       if ((r >> b) & 1) row[r] += pstride[b + 1];
   const int x0 = from[0], nx = to[0] - from[0] + 1;
+  // the box's classes (every one written below); the vector keeps its capacity across calls
+  const std::size_t box_cells = static_cast<std::size_t>((to - from + VecI<Dim>::Ones()).prod());
+  if (box_cells > signs.cls.capacity()) signs.cls = std::vector<std::uint8_t>();
+  signs.cls.resize(box_cells);
+  const VecI<Dim> cstride = signs.box_strides();
   // cell rows of the box: every cell coordinate but x, x = from[0]
   VecI<Dim> row_dims = to - from + VecI<Dim>::Ones();
   row_dims[0] = 1;
@@ -381,7 +364,7 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
         for (int r = 0; r < kRows; ++r) negatives += phi[base + row[r] + x] < 0.0;
         column[x] = negatives;
       }
-      std::uint8_t* out = signs.cls.data() + c0.dot(cstride);
+      std::uint8_t* out = signs.cls.data() + (c0 - from).dot(cstride);
       int first = -1, last = -1;
       for (int x = 0; x < nx; ++x) {
         const int negatives = column[x] + column[x + 1];
@@ -436,13 +419,15 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
     to[a] = std::min(to[a], floor_half(signs.hi[a] - lower_offset[a] + 1));
     if (from[a] > to[a]) return;
   }
-  VecI<Dim> pstride, cstride, ostride;
-  pstride[0] = cstride[0] = ostride[0] = 1;
+  VecI<Dim> pstride, ostride;
+  pstride[0] = ostride[0] = 1;
   for (int a = 1; a < Dim; ++a) {
     pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
-    cstride[a] = cstride[a - 1] * signs.cells[a - 1];
     ostride[a] = ostride[a - 1] * dims[a - 1];
   }
+  // the classes of the written box (kPositive outside it)
+  const VecI<Dim> cstride = signs.box_strides(), wlo = signs.written_lo,
+                  wext = signs.written_hi - signs.written_lo;
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int t = from[Dim - 1]; t <= to[Dim - 1]; ++t) {
     VecI<Dim> start = from;
@@ -454,13 +439,18 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
         for (int s = 0; s < 2; ++s)
           l[a][s] = map_lattice_cell(2 * c[a] + lower_offset[a] + s, signs.cells[a],
                                      grid.periodic(a));
-      std::array<int, kCorners> sub_cell;
+      std::array<std::uint8_t, kCorners> sub_class;
       int negative = 0, positive = 0;
       for (int sub = 0; sub < kCorners; ++sub) {
         int index = 0;
-        for (int a = 0; a < Dim; ++a) index += l[a][(sub >> a) & 1] * cstride[a];
-        sub_cell[sub] = index;
-        const std::uint8_t cl = signs.cls[index];
+        bool inside = true;
+        for (int a = 0; a < Dim; ++a) {
+          const int offset = l[a][(sub >> a) & 1] - wlo[a];
+          inside = inside && offset >= 0 && offset <= wext[a];
+          index += offset * cstride[a];
+        }
+        const std::uint8_t cl = inside ? signs.cls[index] : Signs::kPositive;
+        sub_class[sub] = cl;
         negative += cl == Signs::kNegative;
         positive += cl == Signs::kPositive;
       }
@@ -473,7 +463,7 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
       // as lattice_cube_negative_fraction: the sub-cubes' fractions in order, over 2^Dim
       double sum = 0.0;
       for (int sub = 0; sub < kCorners; ++sub) {
-        const std::uint8_t cl = signs.cls[sub_cell[sub]];
+        const std::uint8_t cl = sub_class[sub];
         if (cl == Signs::kPositive) {
           sum += 0.0;
         } else if (cl == Signs::kNegative) {

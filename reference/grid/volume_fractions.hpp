@@ -74,14 +74,37 @@ template <int Dim>
 struct LatticeSigns {
   static constexpr std::uint8_t kPositive = 0, kNegative = 1, kMixed = 2;
   VecI<Dim> cells = VecI<Dim>::Zero();  ///< lattice cells per axis (2 x grid cells)
-  std::vector<std::uint8_t> cls;        ///< class per lattice cell, x fastest
+  /// Inclusive box of the lattice cells the last classification wrote (lo > hi: none); every
+  /// class outside it is kPositive.
+  VecI<Dim> written_lo = VecI<Dim>::Zero(), written_hi = -VecI<Dim>::Ones();
+  /// The class of every lattice cell of the written box, x fastest, indexed by the offset from
+  /// written_lo (box_strides): only the band the classification visited is stored (issue 20:
+  /// a byte per lattice cell of the whole lattice was 64 MiB at the paper's 256x128x256 grid,
+  /// first touched by the kernel, for a liquid in a small part of it). The vector is kept
+  /// across calls (its capacity that of the largest box so far).
+  std::vector<std::uint8_t> cls;
   /// Inclusive bounding box of the lattice cells of class != kPositive (lo > hi: none).
   VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones();
   bool any_negative() const { return (lo.array() <= hi.array()).all(); }
-  /// Inclusive box of the lattice cells the last classification wrote (lo > hi: none); every
-  /// class outside it is kPositive. The next classification resets only this box (issue 20: a
-  /// buffer kept across steps is rewritten in the band, not over the whole lattice).
-  VecI<Dim> written_lo = VecI<Dim>::Zero(), written_hi = -VecI<Dim>::Ones();
+  /// Strides of cls along each axis (the written box's extents).
+  VecI<Dim> box_strides() const {
+    VecI<Dim> s;
+    s[0] = 1;
+    for (int a = 1; a < Dim; ++a) s[a] = s[a - 1] * (written_hi[a - 1] - written_lo[a - 1] + 1);
+    return s;
+  }
+  /// The class of lattice cell l (0 <= l < cells): kPositive outside the written box.
+  std::uint8_t class_of(const VecI<Dim>& l) const {
+    if ((l.array() < written_lo.array()).any() || (l.array() > written_hi.array()).any())
+      return kPositive;
+    return cls[(l - written_lo).dot(box_strides())];
+  }
+  /// Every lattice cell's class, x fastest (tests: the whole lattice as one vector).
+  std::vector<std::uint8_t> all_classes() const {
+    std::vector<std::uint8_t> out(static_cast<std::size_t>(cells.prod()), kPositive);
+    for (int l = 0; l < cells.prod(); ++l) out[l] = class_of(lattice_coord<Dim>(l, cells));
+    return out;
+  }
   /// The fraction of every kMixed lattice cell (lattice_cell_negative_fraction of its corners),
   /// made once with the classes: a mixed cell is shared by up to 2 + 3 Dim control volumes (a
   /// cell, Dim faces, the stress DOFs), which read it from here instead of splitting it again.

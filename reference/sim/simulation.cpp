@@ -17,6 +17,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <optional>
 #include <utility>
 
 #include "reference/core/errors.hpp"
@@ -163,9 +164,11 @@ constexpr int kAirVelocityLayers = 2;
 /// and the liquid's mean is its mass over itself, so the field is 1 everywhere (0 without
 /// particle mass). The same bits as the splat, for a fraction of a step's weights
 /// (docs/particles.md, "Speed").
-template <int Dim, class Fallback>
-VectorX stress_viscosity_constant_or(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
-                                     const std::vector<double>& values, Fallback&& fallback) {
+/// (The same holds for the cells' samples of cell_viscosity, also a sample_viscosity splat:
+/// constant_viscosity gives that constant, or nothing when the splat is needed.)
+template <int Dim>
+std::optional<double> constant_viscosity(const Particles<Dim>& particles,
+                                         const std::vector<double>& values) {
   const auto all = [&](double v) {
     return !values.empty() &&
            std::all_of(values.begin(), values.end(), [v](double e) { return e == v; });
@@ -175,13 +178,21 @@ VectorX stress_viscosity_constant_or(const StressGrid<Dim>& stress, const Partic
                                             [nv](int l) { return l >= 0 && l < nv; });
   const bool masses = std::all_of(particles.mass.begin(), particles.mass.end(),
                                   [](double m) { return std::isfinite(m) && m >= 0.0; });
-  if (!indices_in_range || !masses) return fallback();
-  if (all(0.0)) return VectorX::Zero(stress.num_dofs());
+  if (!indices_in_range || !masses) return std::nullopt;
+  if (all(0.0)) return 0.0;
   if (all(1.0)) {
     const bool mass = std::any_of(particles.mass.begin(), particles.mass.end(),
                                   [](double m) { return m > 0.0; });
-    return VectorX::Constant(stress.num_dofs(), mass ? 1.0 : 0.0);
+    return mass ? 1.0 : 0.0;
   }
+  return std::nullopt;
+}
+
+template <int Dim, class Fallback>
+VectorX stress_viscosity_constant_or(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
+                                     const std::vector<double>& values, Fallback&& fallback) {
+  if (const auto c = constant_viscosity(particles, values))
+    return VectorX::Constant(stress.num_dofs(), *c);
   return fallback();
 }
 
@@ -340,7 +351,18 @@ void Simulation<Dim>::update_liquid_weights() {
     }
   }
   if (!non_newtonian_) {
-    cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
+    // eta per cell (the render's colour and the checkpoint). A constant field (every liquid
+    // inviscid: +0) is written into the kept vector: the splat made three cell-sized vectors and
+    // two cell-sized byte arrays per step (256 MiB at the paper's 256x128x256 grid, alive at the
+    // step's memory peak, so first touched by the kernel)
+    if (const auto c = constant_viscosity(particles_, liquid_eta_)) {
+      if (cell_eta_.size() == grid_.num_cells())
+        cell_eta_.setConstant(*c);
+      else
+        cell_eta_ = VectorX::Constant(grid_.num_cells(), *c);
+    } else {
+      cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
+    }
   } else if (cell_eta_.size() != grid_.num_cells()) {
     // before the first solve: each liquid at rest, the limiting viscosity eta0 of eq. (27)
     std::vector<double> eta0;
@@ -976,19 +998,20 @@ void Simulation<Dim>::solve_liquid(double dt) {
   };
   const Backend backend = scene_.solver.backend;
   // eq. (8) without stress
+  // the weights of the solves: the simulation's own vectors, lent to w for the sequence below
+  // and given back after it (also when a solve throws), instead of copies of four face-, one
+  // cell- and two stress-sized vectors per step (a viscous 128^3 scene: about 0.4 GB alive
+  // during the solves). Every stage reads them from w.
+  StokesWeights w;
   auto pressure = [&](const State& from, SolveStage stage) {
     State out = from;
     const PressureSolveResult solve =
-        solve_pressure(grid_, weights_, dt, backend, pcg_settings_, out.u,
+        solve_pressure(grid_, w.pressure, dt, backend, pcg_settings_, out.u,
                        scene_.solver.pressure_preconditioner);
     record_solve(solve.pcg, solve.dofs, 0, solve_stage_name(stage));
     out.pressure = solve.pressure;
     return out;
   };
-  StokesWeights w;
-  w.pressure = weights_;
-  w.fluid_stress = stress_fluid_;
-  w.liquid_stress = stress_liquid_;
   // PVC without bodies: eq. (8) in (tau, p) at once, reduced stress (section 4.4.2)
   auto unified = [&](const State& from, const VectorX* eta) {
     w.viscosity = eta ? *eta : stress_eta_;
@@ -1024,15 +1047,32 @@ void Simulation<Dim>::solve_liquid(double dt) {
     model = std::make_unique<NonNewtonianViscosity<Dim>>(non_newtonian_model());
     viscosity.rounds = std::max(1, scene_.solver.staggered_iterations);
     viscosity.initial = [&](const VectorX& u) {
-      return model->initial_viscosity(weights_.fluid_face, u, previous_shear_rate_);
+      return model->initial_viscosity(w.pressure.fluid_face, u, previous_shear_rate_);
     };
     viscosity.update = [&](const VectorX& tau, const VectorX& used) {
       eta = model->update(tau, used);
       return eta;
     };
   }
+  // (the model above copied W_F^s and W_L^s before they are lent)
+  struct Lend {
+    Simulation& sim;
+    StokesWeights& w;
+    bool lent = false;
+    void swap() {
+      std::swap(w.pressure, sim.weights_);
+      w.fluid_stress.swap(sim.stress_fluid_);
+      w.liquid_stress.swap(sim.stress_liquid_);
+      lent = !lent;
+    }
+    ~Lend() {
+      if (lent) swap();
+    }
+  } lend{*this, w};
+  lend.swap();
   const State end = run_solve_sequence(sequence_, State{u_, pressure_, stress_}, viscosity,
                                        pressure, unified, viscous);
+  lend.swap();
   u_ = end.u;
   pressure_ = end.pressure;
   stress_ = end.stress;

@@ -6,6 +6,7 @@
 #include "reference/app/scene_file.hpp"
 #include "reference/core/errors.hpp"
 #include "reference/fluid/pressure_projection.hpp"
+#include "reference/fluid/viscosity_field.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/sim/simulation.hpp"
 #include "tests/support/test_helpers.hpp"
@@ -336,5 +337,58 @@ TEST_CASE("the extrapolation after the solve reaches as far as the step's veloci
     }
     INFO("dim " << dim << ": grid velocities that differ (far air) over the frames: " << far_faces);
     CHECK(far_faces > 0);
+  }
+}
+
+TEST_CASE("eta per cell equals the particles' splat bit for bit, also where the simulation skips "
+          "the splat (every liquid inviscid)",
+          "[regression]") {
+  // cell_eta() is the render's colour and part of a checkpoint. With every liquid's eta 0 (or
+  // every one 1) the simulation writes the constant into its kept vector instead of splatting
+  // (constant_viscosity in simulation.cpp). It must equal cell_viscosity of the particles, bit
+  // for bit (and +0, not -0, where inviscid). Both fields are constant wherever the particles
+  // are, so the particles having moved since the step's weights does not matter.
+  for (double eta : {0.0, 1.0}) {
+    for (int dim : {2, 3}) {
+      const int n = dim == 2 ? 24 : 10;
+      nlohmann::json j;
+      j["format"] = "monolith-scene/1";
+      j["dim"] = dim;
+      j["domain"]["lower"] = std::vector<double>(dim, 0.0);
+      j["domain"]["upper"] = std::vector<double>(dim, 1.0);
+      j["domain"]["cells"] = std::vector<int>(dim, n);
+      j["time"] = {{"fps", 30}, {"frames", 2}, {"cfl", 3.0}, {"max_dt", 0.02}};
+      std::vector<double> centre(dim, 0.5);
+      nlohmann::json liquid = {{"name", "drop"},
+                               {"shape", {{"type", "sphere"}, {"center", centre}, {"radius", 0.2}}},
+                               {"density", 1000.0}};
+      if (eta > 0.0) liquid["viscosity"] = {{"model", "newtonian"}, {"eta", eta}};
+      j["liquids"] = {liquid};
+      j["render"] = {{"enabled", false}};
+      const SceneDesc scene = parse_scene(j, "drop", ".");
+      INFO("dim " << dim << " eta " << eta);
+      const auto check = [&](auto& sim) {
+        sim.advance_frame();
+        const VectorX splat =
+            cell_viscosity(sim.grid(), sim.particles(), liquid_viscosities(scene.liquids));
+        REQUIRE(sim.cell_eta().size() == splat.size());
+        long differ = 0, negative_zero = 0, nonzero = 0;
+        for (Eigen::Index i = 0; i < splat.size(); ++i) {
+          differ += sim.cell_eta()[i] != splat[i];
+          negative_zero += sim.cell_eta()[i] == 0.0 && std::signbit(sim.cell_eta()[i]);
+          nonzero += sim.cell_eta()[i] != 0.0;
+        }
+        CHECK(differ == 0);
+        CHECK(negative_zero == 0);
+        CHECK((nonzero > 0) == (eta > 0.0));
+      };
+      if (dim == 2) {
+        Simulation<2> sim(scene);
+        check(sim);
+      } else {
+        Simulation<3> sim(scene);
+        check(sim);
+      }
+    }
   }
 }
