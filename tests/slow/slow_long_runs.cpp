@@ -120,7 +120,6 @@ void run_three_times(const std::string& name) {
       unconverged << u.solve << " at t = " << u.time << " s: " << u.iterations
                   << " iterations, relative residual " << u.relative_residual << "; ";
     INFO("unconverged: " << unconverged.str());
-    WARN("DBG frame " << f << " it " << s.solver.iterations << " steps " << s.steps << " E " << s.kinetic_energy_liquid);
     REQUIRE(s.solver.converged);
     const std::string bad = first_non_finite(s);
     INFO("non-finite: " << bad);
