@@ -265,14 +265,14 @@ void StokesPreconditioner<Dim>::apply(const VectorX& r, VectorX& z) const {
   // symmetric two-level composition: SOR sweeps of A, the two-term inverse on the residual,
   // the adjoint sweeps
   z.setZero(n_);
-  for (int s = 0; s < sweeps; ++s) a_.forward_sweep(r, z, options_.omega);
+  a_.forward_sweeps(r, z, options_.omega, sweeps);
   correct_cut(r, z);
   a_.apply(z, az_);
   res_ = r - az_;
   apply_two_term(res_, d_);
   z += d_;
   correct_cut(r, z);
-  for (int s = 0; s < sweeps; ++s) a_.backward_sweep(r, z, options_.omega);
+  a_.backward_sweeps(r, z, options_.omega, sweeps);
 }
 
 template <int Dim>
