@@ -214,8 +214,8 @@ void run_case(const Config& cfg, int n, double eta) {
       }
       VectorX rr = VectorX::Ones(m.size()), zz;
       auto t0 = Clock::now();
-      for (int k = 0; k < 5; ++k) m.apply(rr, zz);
-      std::printf("   preconditioner apply %.2f ms\n", seconds_since(t0) / 5 * 1e3);
+      for (int k = 0; k < 40; ++k) m.apply(rr, zz);
+      std::printf("   preconditioner apply %.2f ms\n", seconds_since(t0) / 40 * 1e3);
       t0 = Clock::now();
       for (int k = 0; k < 5; ++k) op->apply(rr, zz);
       std::printf("   A apply %.2f ms\n", seconds_since(t0) / 5 * 1e3);
