@@ -48,6 +48,12 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     a22.makeCompressed();
   }
   pressure_only_ = ns_ == 0;
+  // the cycles rule (StokesPreconditionerOptions::stiffness; docs/preconditioners.md section 18)
+  if (np_ > 0 && options.stiffness > 0.0 && options.extra_cycle_threshold > 0.0) {
+    int surface = 0;
+    for (int k = 0; k < np_; ++k) surface += f_.pressure_liquid[k] < 1.0;
+    if (options.stiffness * surface >= options.extra_cycle_threshold * np_) options_.velocity_cycles += 1;
+  }
   if (pressure_only_) {
     if (np_ > 0) pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, a22, mg);
   } else {
@@ -265,14 +271,14 @@ void StokesPreconditioner<Dim>::apply(const VectorX& r, VectorX& z) const {
   // symmetric two-level composition: SOR sweeps of A, the two-term inverse on the residual,
   // the adjoint sweeps
   z.setZero(n_);
-  for (int s = 0; s < sweeps; ++s) a_.forward_sweep(r, z, options_.omega);
+  a_.forward_sweeps(r, z, options_.omega, sweeps);
   correct_cut(r, z);
   a_.apply(z, az_);
   res_ = r - az_;
   apply_two_term(res_, d_);
   z += d_;
   correct_cut(r, z);
-  for (int s = 0; s < sweeps; ++s) a_.backward_sweep(r, z, options_.omega);
+  a_.backward_sweeps(r, z, options_.omega, sweeps);
 }
 
 template <int Dim>

@@ -719,22 +719,25 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
 
 template <int Dim>
 void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, VectorX& x,
-                                          double omega, const std::vector<char>* active) const {
-  // the face force B x of the starting x (zero at the start of an SSOR application)
+                                          double omega, const std::vector<char>* active,
+                                          bool force_current) const {
+  // the face force B x of the starting x (zero at the start of an SSOR application; kept from
+  // the previous sweep when `force_current`)
   double* force = face_scratch_.data();
-  bool zero = true;
+  bool zero = !force_current;
   for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
   if (zero) std::fill(force, force + num_faces_, 0.0);
+  const bool recompute = !zero && !force_current;
   // the whole sweep in one parallel region (one fork and join per sweep, a barrier per colour
   // group), only with a valid colouring (otherwise the sweep is serial) and enough work; the
   // team size measured per call (AdaptiveTeam; separate sites for a start from zero, as in
   // SSOR's forward sweep, and from a given x, which costs an extra pass)
   const int blocks = static_cast<int>(layout_field_.size()) + (has_pressure_ ? 1 : 0);
   static AdaptiveTeam site_from_zero, site_from_x;
-  TeamScope team(zero ? site_from_zero : site_from_x, colouring_valid_ ? active_work_ : 0);
+  TeamScope team(recompute ? site_from_x : site_from_zero, colouring_valid_ ? active_work_ : 0);
 #pragma omp parallel num_threads(team.threads()) if (team.parallel())
   {
-    if (!zero) {
+    if (recompute) {
       scatter(x, stress_scratch_.data(), cell_scratch_.data());
 #pragma omp barrier
       faces_from_grid(stress_scratch_.data(), cell_scratch_.data(), force, false, false);
@@ -761,6 +764,20 @@ template <int Dim>
 void MatrixFreeStokesOperator<Dim>::backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                                                    const std::vector<char>* active) const {
   sweep(true, rhs, x, omega, active);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::forward_sweeps(const VectorX& rhs, VectorX& x, double omega,
+                                                   int count) const {
+  // every sweep leaves B x of its result in the face scratch (rows with C_f = 0 excepted, which
+  // no sweep reads), so the next one starts from it
+  for (int s = 0; s < count; ++s) sweep(false, rhs, x, omega, nullptr, s > 0);
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::backward_sweeps(const VectorX& rhs, VectorX& x, double omega,
+                                                    int count) const {
+  for (int s = 0; s < count; ++s) sweep(true, rhs, x, omega, nullptr, s > 0);
 }
 
 template <int Dim>

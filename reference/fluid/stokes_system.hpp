@@ -145,6 +145,12 @@ class MatrixFreeStokesOperator : public LinearOperator {
                      const std::vector<char>* active = nullptr) const override;
   void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                       const std::vector<char>* active = nullptr) const override;
+  /// Consecutive sweeps: the second and later ones start from the face force B x the previous
+  /// sweep kept up to date (one scatter and face pass less per sweep; the force differs from
+  /// one recomputed from x by round-off, so the results differ from `count` single sweeps in
+  /// the last bits).
+  void forward_sweeps(const VectorX& rhs, VectorX& x, double omega, int count) const override;
+  void backward_sweeps(const VectorX& rhs, VectorX& x, double omega, int count) const override;
   const std::vector<VectorX>& null_space() const override { return null_space_; }
   /// b = B^T W_F^u u* (= (b1, b2) of eq. (24)) by the same stencils. Reads W_F^u from the
   /// weights given to the constructor, which must still exist (every caller keeps them for the
@@ -205,8 +211,10 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// SSOR sweep, keeping the face force B x in the face scratch current.
   void sweep_block(int field, bool reverse, const VectorX& rhs, VectorX& x, double omega,
                    const std::vector<char>* active) const;
+  /// One sweep; `force_current`: the face scratch holds B x of this x already (left there by
+  /// the previous sweep with nothing in between), so it is not recomputed.
   void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
-             const std::vector<char>* active) const;
+             const std::vector<char>* active, bool force_current = false) const;
 
   std::array<bool, Dim> periodic_{};
   std::array<Field, kFields> fields_{};

@@ -36,6 +36,16 @@ class LinearOperator {
   /// The same sweep in the reverse order (so forward then backward is symmetric SOR).
   virtual void backward_sweep(const VectorX& rhs, VectorX& x, double omega,
                               const std::vector<char>* active = nullptr) const = 0;
+  /// `count` forward sweeps one after the other: what `count` calls of forward_sweep do, except
+  /// that an operator may carry what one sweep computed into the next instead of recomputing it
+  /// from x (MatrixFreeStokesOperator keeps its face force B x: the same sweeps up to round-off).
+  virtual void forward_sweeps(const VectorX& rhs, VectorX& x, double omega, int count) const {
+    for (int s = 0; s < count; ++s) forward_sweep(rhs, x, omega);
+  }
+  /// `count` backward sweeps one after the other (as forward_sweeps).
+  virtual void backward_sweeps(const VectorX& rhs, VectorX& x, double omega, int count) const {
+    for (int s = 0; s < count; ++s) backward_sweep(rhs, x, omega);
+  }
   /// Orthonormal basis of the null space of A (empty when A is definite). Solvers project it out
   /// of the right-hand side and of every iterate.
   virtual const std::vector<VectorX>& null_space() const { return no_null_space_; }

@@ -674,3 +674,42 @@ TEMPLATE_TEST_CASE_SIG("the cut block keeps the preconditioner symmetric positiv
     CHECK(es.eigenvalues().minCoeff() > 0.0);
   }
 }
+
+TEMPLATE_TEST_CASE_SIG("the cycles rule: one V-cycle more where the stiffness times the free-surface share is large",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // weights_stiffness is the simulator's eta_max dt / (rho dx^2) (uniform rho and eta here; with
+  // varying ones the largest eta over the smallest rho)
+  CaseOptions o;
+  o.n = Dim == 2 ? 16 : 8;
+  o.eta = 50.0;
+  o.vary = false;
+  double share[2] = {0.0, 0.0};
+  for (bool blob : {false, true}) {
+    o.blob = blob;
+    const auto sc = make_case<Dim>(o);
+    const double dx = sc.grid.dx();
+    CHECK(weights_stiffness(sc.w, sc.dt, dx) == Approx(50.0 * 0.01 / (1000.0 * dx * dx)).epsilon(1e-12));
+    const auto s = make_system(sc);
+    const StokesFactors f = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf);
+    int surface = 0;
+    for (int k = 0; k < f.num_pressure; ++k) surface += f.pressure_liquid[k] < 1.0;
+    REQUIRE(f.num_pressure > 0);
+    share[blob] = static_cast<double>(surface) / f.num_pressure;
+    REQUIRE(share[blob] > 0.0);
+    StokesPreconditionerOptions po = small_options();
+    po.velocity_cycles = 2;
+    REQUIRE(po.extra_cycle_threshold == 70.0);
+    auto cycles = [&](double stiffness) {
+      po.stiffness = stiffness;
+      return StokesPreconditioner<Dim>(sc.grid, *s.mf, f, po).velocity_cycles();
+    };
+    INFO("blob " << blob << ", share of free-surface cells " << share[blob]);
+    CHECK(cycles(0.0) == 2);                               // stiffness unknown: as given
+    CHECK(cycles(0.99 * 70.0 / share[blob]) == 2);         // below the threshold
+    CHECK(cycles(1.01 * 70.0 / share[blob]) == 3);         // at and above it
+    po.extra_cycle_threshold = 0.0;
+    CHECK(cycles(1e6) == 2);                               // rule off
+  }
+  // the share sees the free surface: a ball in the air has more of it than a pool
+  CHECK(share[1] > share[0]);
+}

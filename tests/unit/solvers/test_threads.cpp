@@ -25,9 +25,10 @@ using monolith::testing::random_vector;
 
 namespace {
 
-/// apply, SSOR from zero, a forward and a backward sweep from a non-zero x: per thread count.
+/// apply, SSOR from zero, a forward and a backward sweep from a non-zero x, and three
+/// consecutive sweeps each way (forward_sweeps / backward_sweeps): per thread count.
 struct Outputs {
-  VectorX y, z, forward, backward;
+  VectorX y, z, forward, backward, forward3, backward3;
 };
 
 Outputs run_kernels(const LinearOperator& op, const VectorX& x, const VectorX& b, int threads) {
@@ -44,6 +45,10 @@ Outputs run_kernels(const LinearOperator& op, const VectorX& x, const VectorX& b
   op.forward_sweep(b, o.forward, 1.3);
   o.backward = x;
   op.backward_sweep(b, o.backward, 0.8);
+  o.forward3 = x;
+  op.forward_sweeps(b, o.forward3, 1.3, 3);
+  o.backward3 = x;
+  op.backward_sweeps(b, o.backward3, 0.8, 3);
   omp_set_num_threads(saved);
   set_adaptive_teams(adaptive);
   set_core_monitor(monitor);
@@ -60,10 +65,21 @@ void check_same_on_any_thread_count(const LinearOperator& op, unsigned seed) {
     CHECK((one.z - many.z).cwiseAbs().maxCoeff() == 0.0);
     CHECK((one.forward - many.forward).cwiseAbs().maxCoeff() == 0.0);
     CHECK((one.backward - many.backward).cwiseAbs().maxCoeff() == 0.0);
+    CHECK((one.forward3 - many.forward3).cwiseAbs().maxCoeff() == 0.0);
+    CHECK((one.backward3 - many.backward3).cwiseAbs().maxCoeff() == 0.0);
   }
   // the sweeps did something (not a vacuous comparison)
   CHECK((one.forward - x).norm() > 0.0);
   CHECK(one.z.norm() > 0.0);
+  // consecutive sweeps are the single sweeps one after the other (an operator may carry its
+  // state from one to the next, as the matrix-free Stokes operator does its face force B x:
+  // equal up to round-off)
+  VectorX forward = x, backward = x;
+  for (int s = 0; s < 3; ++s) op.forward_sweep(b, forward, 1.3);
+  for (int s = 0; s < 3; ++s) op.backward_sweep(b, backward, 0.8);
+  CHECK((one.forward3 - forward).norm() <= 1e-12 * forward.norm());
+  CHECK((one.backward3 - backward).norm() <= 1e-12 * backward.norm());
+  CHECK((one.forward3 - one.forward).norm() > 1e-6 * forward.norm());  // the later sweeps counted
 }
 
 /// Liquid below a flat surface at height h in a walled box open at the top, a fixed ball.
