@@ -298,6 +298,9 @@ struct StokesSolveOptions {
   /// The solve still stops at settings.tolerance; only the starting residual changes.
   const VectorX* initial_stress = nullptr;
   const VectorX* initial_pressure = nullptr;
+  /// A target divergence d of the new velocity (cell field, 1/s; nullptr: none): b2_k +=
+  /// W_L^p d on each pressure DOF's cell (add_divergence_source, pressure_projection.hpp).
+  const VectorX* divergence_source = nullptr;
 };
 
 /// Lines 7-11 of Algorithm 1 for the Stokes problem: select DOFs, build (assembled matrices or
