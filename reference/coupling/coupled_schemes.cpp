@@ -249,8 +249,11 @@ std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>&
                                                     const std::vector<RigidBody<Dim>>& bodies,
                                                     Backend backend) {
   const ContactSystem<Dim> contacts(bodies, in.contacts, in.contact_params);
-  return std::make_unique<MonolithicSystem<Dim>>(in.grid, form, std::move(w), in.dt, std::move(u_star), bodies,
-                                                 in.solids, contacts, backend, unknowns);
+  auto system = std::make_unique<MonolithicSystem<Dim>>(in.grid, form, std::move(w), in.dt,
+                                                        std::move(u_star), bodies, in.solids,
+                                                        contacts, backend, unknowns);
+  system->add_divergence_source(in.divergence_source);
+  return system;
 }
 
 template <int Dim>

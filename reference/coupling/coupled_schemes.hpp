@@ -61,6 +61,10 @@ struct CoupledStepInput {
   std::vector<Contact<Dim>> contacts;
   /// dt, dx, baumgarte, margin, restitution threshold (dx must be the grid's: alpha = 1/dx^Dim).
   ContactParameters contact_params;
+  /// A target divergence of the new velocity (cell field, 1/s; nullptr: none), added to b2 of
+  /// every system the scheme builds (MonolithicSystem::add_divergence_source): the simulation's
+  /// volume correction through the solve (StageSwitches::volume_source_gain).
+  const VectorX* divergence_source = nullptr;
 };
 
 /// The weights of eq. (24) (section 3.1.2, 4.4.6) for a liquid beside bodies: W_L^p, W_L^u

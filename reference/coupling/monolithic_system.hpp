@@ -129,6 +129,12 @@ class MonolithicSystem {
   const VectorX& b1() const { return b1_; }
   /// eq. (24): b2 = W_L^p G^T W_F^u u* - W_L^p (J_{p,2}^T v*_2 + J_{p,1}^T v*_1), n_p.
   const VectorX& b2() const { return b2_; }
+  /// b2 += W_L^p d on each pressure DOF's cell: a target divergence d (cell field, 1/s; nullptr
+  /// or empty: nothing) of the new velocity (add_divergence_source, pressure_projection.hpp;
+  /// CoupledStepInput::divergence_source). Called before any solve reads b2.
+  void add_divergence_source(const VectorX* d) {
+    monolith::add_divergence_source(dofs_.pressure.cell_of_dof, w_.pressure.liquid_cell, d, 0, b2_);
+  }
   /// eq. (24): b3 = -alpha (C (J_lambda v* + g_n) - target) (ContactSystem::b3), nc.
   VectorX b3() const { return contacts_.b3(); }
   /// eq. (24): b4 = -alpha (J_z v* + g_t) (ContactSystem::b4), nf.

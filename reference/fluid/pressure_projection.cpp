@@ -504,7 +504,7 @@ namespace {
 template <int Dim>
 PcgResult mgpcg_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, const PressureDofs& dofs,
                          double dt, Backend backend, const PcgSettings& settings, const VectorX& u,
-                         VectorX& p) {
+                         VectorX& p, const VectorX* divergence_source) {
   std::optional<ExplicitPressureSystem> sys;
   std::optional<MatrixFreePressureOperator<Dim>> mf;
   std::optional<SparseMatrixOperator> explicit_op;
@@ -520,6 +520,7 @@ PcgResult mgpcg_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, con
     op = &*mf;
     b = mf->rhs(u);
   }
+  add_divergence_source(dofs.cell_of_dof, w.liquid_cell, divergence_source, 0, b);
   const LazyPreconditioner m(dofs.size(), "multigrid", [&]() -> std::unique_ptr<Preconditioner> {
     SparseMatrix a = sys ? sys->A : mf->matrix(dofs);
     if (!dofs.null_space.empty())
@@ -534,10 +535,21 @@ PcgResult mgpcg_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, con
 
 }  // namespace
 
+void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& liquid_cell,
+                           const VectorX* divergence_source, int offset, VectorX& b) {
+  if (!divergence_source || divergence_source->size() == 0) return;
+  const VectorX& d = *divergence_source;
+  for (std::size_t k = 0; k < cell_of_dof.size(); ++k) {
+    const int c = cell_of_dof[k];
+    if (c < d.size()) b[offset + static_cast<int>(k)] += liquid_cell[c] * d[c];
+  }
+}
+
 template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
                                    Backend backend, const PcgSettings& settings,
-                                   VectorX& u, PreconditionerKind preconditioner) {
+                                   VectorX& u, PreconditionerKind preconditioner,
+                                   const VectorX* divergence_source) {
   PressureSolveResult result;
   // line 7: active DOFs
   const PressureDofs dofs = select_pressure_dofs(grid, w, dt);
@@ -545,18 +557,22 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
   VectorX p = VectorX::Zero(dofs.size());
   // lines 8-10: assemble (or set up the stencil) and solve
   if (preconditioner == PreconditionerKind::multigrid && dofs.size() > 0) {
-    result.pcg = mgpcg_pressure(grid, w, dofs, dt, backend, settings, u, p);
+    result.pcg = mgpcg_pressure(grid, w, dofs, dt, backend, settings, u, p, divergence_source);
   } else {
     switch (backend) {
       case Backend::explicit_matrices: {
         const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, w, dofs, dt, u);
         const SparseMatrixOperator op(sys.A, dofs.null_space);
-        result.pcg = pcg_solve(op, sys.b, p, settings);
+        VectorX b = sys.b;
+        add_divergence_source(dofs.cell_of_dof, w.liquid_cell, divergence_source, 0, b);
+        result.pcg = pcg_solve(op, b, p, settings);
         break;
       }
       case Backend::matrix_free: {
         const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
-        result.pcg = pcg_solve(op, op.rhs(u), p, settings);
+        VectorX b = op.rhs(u);
+        add_divergence_source(dofs.cell_of_dof, w.liquid_cell, divergence_source, 0, b);
+        result.pcg = pcg_solve(op, b, p, settings);
         break;
       }
     }
@@ -579,7 +595,7 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
                                          const VectorX&, VectorX&);                              \
   template PressureSolveResult solve_pressure<D>(const MacGrid<D>&, const PressureWeights&,      \
                                                  double, Backend, const PcgSettings&, \
-                                                 VectorX&, PreconditionerKind);
+                                                 VectorX&, PreconditionerKind, const VectorX*);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

@@ -158,10 +158,24 @@ struct PressureSolveResult {
 /// (which enters as u*). `preconditioner`: the paper's SSOR (default) or MGPCG, a V-cycle of the
 /// cell multigrid of reference/fluid/mac_hierarchy.hpp on the assembled matrix (built on the
 /// first iteration; docs/preconditioners.md section 8).
+///
+/// `divergence_source` (a cell field d, 1/s; nullptr: none) makes the solve's constraint
+/// W_L^p G^T W_F^u u = -W_L^p d instead of 0, i.e. the weighted divergence of the new velocity
+/// is d on the pressure DOFs: b_k += W_L^p d on each DOF's cell (add_divergence_source). Not a
+/// paper equation: a project item (docs/derivations.md, "volume feedback"), the volume correction
+/// of docs/particles.md "Volume correction through the solve".
 template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
                                    Backend backend, const PcgSettings& settings,
                                    VectorX& u,
-                                   PreconditionerKind preconditioner = PreconditionerKind::ssor);
+                                   PreconditionerKind preconditioner = PreconditionerKind::ssor,
+                                   const VectorX* divergence_source = nullptr);
+
+/// b_k += W_L^p_c d_c for each pressure DOF k of cell c (`cell_of_dof`, in DOF order; `offset`:
+/// the first pressure row of b): the right-hand side of eq. (8) / b2 of eq. (24) with a target
+/// divergence d (1/s) of the new velocity (solve_pressure's divergence_source). Nothing for a
+/// null or empty d.
+void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& liquid_cell,
+                           const VectorX* divergence_source, int offset, VectorX& b);
 
 }  // namespace monolith

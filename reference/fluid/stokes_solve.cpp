@@ -59,6 +59,8 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
       break;
     }
   }
+  add_divergence_source(dofs.pressure.cell_of_dof, w.pressure.liquid_cell,
+                        options.divergence_source, dofs.num_stress(), b);
   if (options.preconditioner == PreconditionerKind::ssor || dofs.size() == 0) {
     result.pcg = pcg_solve(*op, b, x, settings);
   } else {

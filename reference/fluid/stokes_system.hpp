@@ -313,6 +313,9 @@ struct StokesSolveOptions {
   /// iterations and, if it has not converged by then, solve again with the paper's SSOR from
   /// its last iterate (solver.preconditioner "auto"; an explicit "multigrid" keeps its result).
   bool fallback_to_ssor = false;
+  /// A target divergence d of the new velocity (cell field, 1/s; nullptr: none): b2_k +=
+  /// W_L^p d on each pressure DOF's cell (add_divergence_source, pressure_projection.hpp).
+  const VectorX* divergence_source = nullptr;
 };
 
 /// Lines 7-11 of Algorithm 1 for the Stokes problem: select DOFs, build (assembled matrices or

@@ -1179,6 +1179,7 @@ double surface_deficit_share(SurfaceDeficits rule, double mismatch) {
     case SurfaceDeficits::all:
       return 1.0;
     case SurfaceDeficits::none:
+    case SurfaceDeficits::to_solve:
       return 0.0;
     case SurfaceDeficits::beyond_dead_band:
       break;
@@ -1474,8 +1475,10 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     double e = *rho.find(ci) - v[kTarget];
     if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide)
       e = std::max(e, 0.0);
-    else if (v[kTarget] < kProjectionFullCell && e < 0.0)
+    else if (v[kTarget] < kProjectionFullCell && e < 0.0) {
+      if (surface_deficits == SurfaceDeficits::to_solve) stats.surface_deficits.emplace_back(c, e);
       e *= deficit_share;
+    }
     rhs[r] = e;
     stats.error_before += std::abs(e) * cell_volume;
   }
@@ -1568,6 +1571,7 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
     else {
       total.iterations += one.iterations;
       total.max_move = std::max(total.max_move, one.max_move);
+      total.surface_deficits = one.surface_deficits;
     }
   }
   return total;

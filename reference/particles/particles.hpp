@@ -5,6 +5,7 @@
 /// correction, and the liquid level set reconstructed from the particles (Zhu & Bridson 2005).
 
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "reference/core/common.hpp"
@@ -111,6 +112,10 @@ struct DensityProjectionStats {
   /// of the surface band's deficits corrected
   double volume_mismatch = 0.0;
   double deficit_share = 1.0;
+  /// With SurfaceDeficits::to_solve: the deficits on the liquid side of the surface band that
+  /// were not corrected, (cell index, e_c = rho~_c - T_c < 0 in cell volumes), cells increasing;
+  /// of the last iteration
+  std::vector<std::pair<int, double>> surface_deficits;
 };
 
 /// What the density projection does with a deficit of particle volume (rho~_c < T_c) on the
@@ -123,6 +128,10 @@ enum class SurfaceDeficits {
   /// set's response to the disorder of particles under a smooth surface), all from 0.6 % on (thin
   /// sheets, splashes)
   beyond_dead_band,
+  /// A measurement switch (docs/particles.md, "Volume correction through the solve"): not moved
+  /// but listed (DensityProjectionStats::surface_deficits), for the simulation to hand them to
+  /// the next step's solve as a divergence source (the correction then done by the velocity)
+  to_solve,
 };
 
 /// Grid-based implicit density projection after Kugelstadt, Bender, Fernandez-Fernandez, Jeske,

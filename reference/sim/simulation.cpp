@@ -274,9 +274,11 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
 
   // the seeded particles spread so that their volume and the level set's agree from frame 0
   if (scene.particles.position_correction && switches_.density_projection)
-    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
-                             kSeedProjectionIterations,
-                             switches_.density_projection_surface_deficits);
+    volume_errors_ =
+        project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_,
+                                 boundary_, kSeedProjectionIterations,
+                                 switches_.density_projection_surface_deficits)
+            .surface_deficits;
   // frame 0: the seeded state on the grid (no pressure yet); the faces' densities become the
   // diagonal of P in place (as in every step, update_step_weights)
   particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
@@ -748,9 +750,22 @@ void Simulation<Dim>::correct_volume(double dt) {
   if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
   account(frame_ledger_.position_correction, [&] { return liquid_potential_energy(); });
   if (switches_.density_projection && switches_.density_projection_in_steps)
-    project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_, boundary_,
-                             1, switches_.density_projection_surface_deficits);
+    volume_errors_ =
+        project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_,
+                                 boundary_, 1, switches_.density_projection_surface_deficits)
+            .surface_deficits;
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
+}
+
+template <int Dim>
+VectorX Simulation<Dim>::volume_source(double dt) const {
+  // d_c = gain e_c / dt: a cell short of particle volume by e_c (in cell volumes) converges by
+  // that much in the step (the solve's constraint with a target divergence, add_divergence_source)
+  if (volume_errors_.empty() || !(switches_.volume_source_gain > 0.0) || !(dt > 0.0))
+    return VectorX();
+  VectorX d = VectorX::Zero(grid_.num_cells());
+  for (const auto& [c, e] : volume_errors_) d[c] = switches_.volume_source_gain * e / dt;
+  return d;
 }
 
 template <int Dim>
@@ -926,7 +941,11 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // the oracle: this step's system to the requested sink (request_system_export)
   if (export_sink_ && stats_.steps + 1 == export_step_) options.export_sink = export_sink_;
   CoupledSolveResult& r = coupled_out_;
+  // the volume correction's divergence source (empty: none; StageSwitches::volume_source_gain)
+  const VectorX source = volume_source(dt);
+  in.divergence_source = source.size() > 0 ? &source : nullptr;
   solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options, r);
+  in.divergence_source = nullptr;
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
   if (model) {
@@ -997,6 +1016,8 @@ void Simulation<Dim>::solve_liquid(double dt) {
     VectorX u, pressure, stress;
   };
   const Backend backend = scene_.solver.backend;
+  // the volume correction's divergence source (empty: none; StageSwitches::volume_source_gain)
+  const VectorX source = volume_source(dt);
   // eq. (8) without stress
   // the weights of the solves: the simulation's own vectors, lent to w for the sequence below
   // and given back after it (also when a solve throws), instead of copies of four face-, one
@@ -1007,7 +1028,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     State out = from;
     const PressureSolveResult solve =
         solve_pressure(grid_, w.pressure, dt, backend, pcg_settings_, out.u,
-                       scene_.solver.pressure_preconditioner);
+                       scene_.solver.pressure_preconditioner, &source);
     record_solve(solve.pcg, solve.dofs, 0, solve_stage_name(stage));
     out.pressure = solve.pressure;
     return out;
@@ -1016,9 +1037,11 @@ void Simulation<Dim>::solve_liquid(double dt) {
   auto unified = [&](const State& from, const VectorX* eta) {
     w.viscosity = eta ? *eta : stress_eta_;
     State out = from;
+    StokesSolveOptions options = stokes_options(w.viscosity, dt);
+    options.divergence_source = &source;
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
-                     backend, pcg_settings_, out.u, stokes_options(w.viscosity, dt));
+                     backend, pcg_settings_, out.u, options);
     record_solve(solve.pcg, solve.pressure_dofs, solve.stress_dofs, "Stokes");
     if (solve.fell_back) ++stats_.solver.preconditioner_fallbacks;
     out.pressure = solve.pressure;

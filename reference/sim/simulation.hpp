@@ -83,6 +83,12 @@ struct StageSwitches {
   /// dead band passes the 2D sloshing tank with split_advection and the divergence-free surface
   /// cells, but still water and the floating box then move more than their bounds allow).
   SurfaceDeficits density_projection_surface_deficits = SurfaceDeficits::all;
+  /// With SurfaceDeficits::to_solve: the deficits e_c the density projection listed (surface
+  /// band, liquid side) become the next solve's divergence source d_c = gain e_c / dt (eq. (8) /
+  /// (24) with W_L^p G^T W_F^u u = -W_L^p d; docs/derivations.md "volume feedback"), so the
+  /// velocity closes them and its energy shows in the solve's column of the ledger. A measurement
+  /// switch (docs/particles.md, "Volume correction through the solve"); 0: listed, not used.
+  double volume_source_gain = 1.0;
   /// Measure the energy change of every stage (energy_ledger()): several extra sweeps over the
   /// faces and particles per step, so off unless a diagnosis asks for it.
   bool energy_ledger = false;
@@ -411,6 +417,12 @@ class Simulation : public AnySimulation {
   FrameStats stats_;
   // diagnosis: stages switched off, and the energy changes per stage of the current frame
   StageSwitches switches_;
+  /// SurfaceDeficits::to_solve: the last density projection's listed deficits (cell, e_c), the
+  /// next solve's divergence source (volume_source); not part of a checkpoint (a measurement
+  /// switch)
+  std::vector<std::pair<int, double>> volume_errors_;
+  /// The divergence source of the step's solve (cell field, 1/s), empty without listed deficits.
+  VectorX volume_source(double dt) const;
   EnergyLedger ledger_, frame_ledger_;
   double ledger_energy_ = 0.0;  ///< the energy after the last accounted stage of the step
   /// request_system_export: the step of the next frame whose system goes to the sink

@@ -58,6 +58,15 @@ std::vector<Variant> variants() {
          s.divergence_free_air = s.divergence_free_surface_cells = true;
          s.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
        }},
+      // the surface band's deficits handed to the next solve as a divergence source instead of
+      // moving particles (docs/particles.md, "Volume correction through the solve")
+      {"volume-source",
+       [](StageSwitches& s) { s.density_projection_surface_deficits = SurfaceDeficits::to_solve; }},
+      {"divergence-free-surface-volume-source",
+       [](StageSwitches& s) {
+         s.divergence_free_air = s.divergence_free_surface_cells = true;
+         s.density_projection_surface_deficits = SurfaceDeficits::to_solve;
+       }},
   };
 }
 

@@ -8,9 +8,16 @@
 //                  [--no-projection] [--no-correction] [--max-dt DT] [--split-drift]
 //                  [--divergence-free-air] [--divergence-free-surface] [--no-step-projection]
 //                  [--no-surface-deficits] [--dead-band-deficits] [--seed N]
+//                  [--volume-source GAIN] [--pic] [--no-air-velocity] [--all-faces-trusted]
+//                  [--unreached-extrapolated] [--cfl-layers] [--set KEY=VALUE]...
+//
+// --set: a scene override as `monolith run --set` (e.g. domain.boundary.z-=periodic
+// domain.boundary.z+=periodic: a 3D tank without its side walls across the sloshing).
 //
 // --dead-band-deficits: the surface band's deficits corrected only beyond a dead band of the level
 // set's volume over the particles' (SurfaceDeficits::beyond_dead_band, a measurement switch).
+// --volume-source GAIN: the surface band's deficits not moved but handed to the next solve as a
+// divergence source d = GAIN e / dt (SurfaceDeficits::to_solve, StageSwitches::volume_source_gain).
 //
 // Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
 // line before: which stage of the step changed the energy.
@@ -22,6 +29,7 @@
 #include <cstdlib>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "tests/support/bench_args.hpp"
 #include "tests/support/still_water.hpp"
@@ -36,6 +44,10 @@ int main(int argc, char** argv) {
   bool no_projection = false, no_correction = false, split_drift = false, divfree_air = false;
   bool divfree_surface = false, no_step_projection = false, no_surface_deficits = false;
   bool dead_band = false;
+  double volume_source = -1.0;
+  bool pic = false, no_air_velocity = false, all_faces_trusted = false;
+  bool unreached_extrapolated = false, cfl_layers = false;
+  std::vector<std::string> overrides;
   double max_dt = 0.02;
   int seed = 0;
   bench::BenchArgs args(argc, argv);
@@ -56,6 +68,13 @@ int main(int argc, char** argv) {
     else if (a == "--no-step-projection") no_step_projection = true;
     else if (a == "--no-surface-deficits") no_surface_deficits = true;
     else if (a == "--dead-band-deficits") dead_band = true;
+    else if (a == "--set") overrides.push_back(args.value());
+    else if (a == "--pic") pic = true;
+    else if (a == "--no-air-velocity") no_air_velocity = true;
+    else if (a == "--all-faces-trusted") all_faces_trusted = true;
+    else if (a == "--unreached-extrapolated") unreached_extrapolated = true;
+    else if (a == "--cfl-layers") cfl_layers = true;
+    else if (a == "--volume-source") volume_source = std::atof(args.value().c_str());
     else if (a == "--seed") seed = std::atoi(args.value().c_str());
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
@@ -79,9 +98,19 @@ int main(int argc, char** argv) {
   if (no_surface_deficits) switches.density_projection_surface_deficits = SurfaceDeficits::none;
   if (dead_band)
     switches.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
+  if (pic) switches.apic = false;
+  if (no_air_velocity) switches.air_velocity = false;
+  if (all_faces_trusted) switches.trusted_faces = false;
+  if (unreached_extrapolated) switches.unreached_faces_keep_u_star = false;
+  if (cfl_layers) switches.extrapolate_cfl_layers = true;
+  if (volume_source >= 0.0) {
+    switches.density_projection_surface_deficits = SurfaceDeficits::to_solve;
+    switches.volume_source_gain = volume_source;
+  }
   nlohmann::json scene = tank(dim, cells, seconds, backend, slope);
   scene["time"]["max_dt"] = max_dt;
   if (seed > 0) scene["particles"]["seed"] = seed;
+  scene = apply_overrides(scene, "sloshing.json", overrides);
   const auto sim = make_simulation(parse_scene(scene, "sloshing.json", "."), switches);
   const FrameStats s0 = sim->current_stats();
   const double e0 = total_energy(s0);

@@ -104,6 +104,13 @@ std::vector<Variant> variants() {
          s.split_advection = s.divergence_free_air = s.divergence_free_surface_cells = true;
          s.density_projection_surface_deficits = SurfaceDeficits::beyond_dead_band;
        }},
+      {"volume-source", "the surface band's deficits as the next solve's divergence source",
+       [](StageSwitches& s) { s.density_projection_surface_deficits = SurfaceDeficits::to_solve; }},
+      {"split-volume-source", "split-divergence-free and the deficits as a divergence source",
+       [](StageSwitches& s) {
+         s.split_advection = s.divergence_free_air = s.divergence_free_surface_cells = true;
+         s.density_projection_surface_deficits = SurfaceDeficits::to_solve;
+       }},
   };
 }
 

@@ -592,3 +592,29 @@ TEMPLATE_TEST_CASE_SIG("apply_stokes_update: D^T M W_L^s tau by the stencil is E
     CHECK(got.cwiseAbs().maxCoeff() > 0.0);
   }
 }
+
+TEMPLATE_TEST_CASE_SIG("a divergence source in the Stokes solve: eta = 0 gives solve_pressure's",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // StokesSolveOptions::divergence_source adds W_L^p d to b2 as solve_pressure's does
+  CaseOptions o;
+  o.n = Dim == 2 ? 12 : 6;
+  o.eta = 0.0;
+  const auto sc = make_case<Dim>(o);
+  PcgSettings settings;
+  settings.tolerance = 1e-12;
+  VectorX d = VectorX::Zero(sc.grid.num_cells());
+  for (int c = 0; c < sc.grid.num_cells(); ++c) d[c] = 3.0 * std::sin(1.0 + 0.7 * c);
+  for (const Backend backend : {Backend::explicit_matrices, Backend::matrix_free}) {
+    VectorX u_stokes = sc.u_star, u_pressure = sc.u_star, u_plain = sc.u_star;
+    StokesSolveOptions options;
+    options.divergence_source = &d;
+    solve_stokes(sc.grid, sc.w, sc.dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
+                 backend, settings, u_stokes, options);
+    solve_pressure(sc.grid, sc.w.pressure, sc.dt, backend, settings, u_pressure,
+                   PreconditionerKind::ssor, &d);
+    solve_pressure(sc.grid, sc.w.pressure, sc.dt, backend, settings, u_plain);
+    INFO(enum_name(backend));
+    CHECK(rel_diff(u_stokes, u_pressure) < 1e-11);
+    CHECK(rel_diff(u_plain, u_pressure) > 1e-3);  // the source changed the velocity
+  }
+}
