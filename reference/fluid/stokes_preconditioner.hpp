@@ -46,7 +46,7 @@ struct StokesPreconditionerOptions {
   /// pressure unknowns with W_L^p < 1 (the free-surface cells) is at least extra_cycle_threshold
   /// (0: never): the Woodbury form multiplies the V-cycle's error by about the stiffness, and the
   /// finest smoother is weakest at the free surface. 70: `viscous-bunny-into-sphere-3d` at 64^3
-  /// (stiffness 205, share 0.43, product 88) takes 7-27 % less solve time in the air with 3
+  /// (stiffness 205, share 0.43, product 88) takes 20-30 % less solve time in the air with 3
   /// cycles; at 48^3 (product 61) and 32^3 (34) 3 cycles break even or lose, as on the pool
   /// filling its box (products 3-7; docs/preconditioners.md, section 18).
   double stiffness = 0.0;
