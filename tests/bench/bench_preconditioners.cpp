@@ -6,7 +6,7 @@
 //
 //   build/bench/bench_preconditioners [--dim 2|3] [--n 16,32] [--eta 0.1,1,10,100,1000,5000]
 //       [--scene tank|blob|pool] [--backend matrixfree|explicit] [--ssor-max N] [--no-ssor]
-//       [--gamma G] [--cycles K (plus the stiffness rule's one unless --no-cycle-rule)] [--smoothing S] [--sweeps W] [--no-schur] [--no-elements]
+//       [--gamma G] [--cycles K] [--smoothing S] [--sweeps W] [--no-schur] [--no-elements]
 //       [--clamp T] [--repeats R] [--cut-threshold T (0: no cut block)] [--cut-layers L]
 //       [--no-renumber (Multigrid keeps the caller's numbering: same results, for timing)]
 //
@@ -60,7 +60,6 @@ struct Config {
   bool ssor = true;
   int repeats = 1;
   double noise = 0.0;
-  bool cycle_rule = true;  ///< StokesPreconditionerOptions::stiffness from the case's weights
   StokesPreconditionerOptions options;
 };
 
@@ -147,7 +146,7 @@ void run_case(const Config& cfg, int n, double eta) {
   int it_block = -1;
   bool conv_block = false;
   std::size_t bytes = 0;
-  int levels = 0, cycles = 0;
+  int levels = 0;
   for (int r = 0; r < cfg.repeats; ++r) {
     const auto t0 = Clock::now();
     StokesFactors f =
@@ -156,12 +155,7 @@ void run_case(const Config& cfg, int n, double eta) {
             : stokes_factors(sc.grid, layout, sc.w, dofs, sc.dt,
                              static_cast<const MatrixFreeStokesOperator<Dim>&>(*op),
                              cfg.options.min_fluid_fraction);
-    // the stiffness rule of StokesPreconditionerOptions (as solve_stokes sets it), unless
-    // --no-cycle-rule
-    StokesPreconditionerOptions po = cfg.options;
-    if (cfg.cycle_rule) po.stiffness = weights_stiffness(sc.w, sc.dt, sc.grid.dx());
-    const StokesPreconditioner<Dim> m(sc.grid, *op, std::move(f), po);
-    cycles = m.velocity_cycles();
+    const StokesPreconditioner<Dim> m(sc.grid, *op, std::move(f), cfg.options);
     t_setup += seconds_since(t0) / cfg.repeats;
     VectorX x;
     const auto t1 = Clock::now();
@@ -222,10 +216,10 @@ void run_case(const Config& cfg, int n, double eta) {
     }
   }
   std::printf("%dD %4d %-6s eta %7g | n_tau %7d n_p %6d | SSOR %5d%s %8.3f s | block %3d%s setup %7.3f solve %7.3f s"
-              " (%d lv, %d cycles, %.1f MB) | speed-up %.1f\n",
+              " (%d lv, %.1f MB) | speed-up %.1f\n",
               Dim, n, cfg.scene.c_str(), eta, dofs.num_stress(), dofs.num_pressure(), it_ssor,
               conv_ssor ? " " : "!", t_ssor, it_block, conv_block ? " " : "!", t_setup, t_solve, levels,
-              cycles, bytes / 1e6, cfg.ssor ? t_ssor / (t_setup + t_solve) : 0.0);
+              bytes / 1e6, cfg.ssor ? t_ssor / (t_setup + t_solve) : 0.0);
   std::fflush(stdout);
 }
 
@@ -253,7 +247,6 @@ int main(int argc, char** argv) {
     else if (a == "--noise") cfg.noise = std::atof(next());
     else if (a == "--gamma") cfg.options.penalty_factor = std::atof(next());
     else if (a == "--cycles") cfg.options.velocity_cycles = std::atoi(next());
-    else if (a == "--no-cycle-rule") cfg.cycle_rule = false;
     else if (a == "--smoothing") cfg.options.smoothing = std::atoi(next());
     else if (a == "--sweeps") cfg.options.outer_sweeps = std::atoi(next());
     else if (a == "--no-schur") { cfg.options.schur_correction = false; cfg.options.additive_pressure = false; }
