@@ -48,12 +48,6 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     a22.makeCompressed();
   }
   pressure_only_ = ns_ == 0;
-  // the cycles rule (StokesPreconditionerOptions::stiffness; docs/preconditioners.md section 18)
-  if (np_ > 0 && options.stiffness > 0.0 && options.extra_cycle_threshold > 0.0) {
-    int surface = 0;
-    for (int k = 0; k < np_; ++k) surface += f_.pressure_liquid[k] < 1.0;
-    if (options.stiffness * surface >= options.extra_cycle_threshold * np_) options_.velocity_cycles += 1;
-  }
   if (pressure_only_) {
     if (np_ > 0) pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, a22, mg);
   } else {

@@ -41,16 +41,6 @@ struct StokesPreconditionerOptions {
   /// transfers or sparsified coarse levels doubled the iterations (docs/preconditioners.md,
   /// section 10).
   int velocity_cycles = 2;
-  /// The solve's stiffness eta_max dt / (rho dx^2) (solve_stokes sets it, weights_stiffness; 0:
-  /// unknown, velocity_cycles as given). One V-cycle more when the stiffness times the share of
-  /// pressure unknowns with W_L^p < 1 (the free-surface cells) is at least extra_cycle_threshold
-  /// (0: never): the Woodbury form multiplies the V-cycle's error by about the stiffness, and the
-  /// finest smoother is weakest at the free surface. 70: `viscous-bunny-into-sphere-3d` at 64^3
-  /// (stiffness 205, share 0.43, product 88) takes 20-30 % less solve time in the air with 3
-  /// cycles; at 48^3 (product 61) and 32^3 (34) 3 cycles break even or lose, as on the pool
-  /// filling its box (products 3-7; docs/preconditioners.md, section 18).
-  double stiffness = 0.0;
-  double extra_cycle_threshold = 70.0;
   int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
   int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
   double omega = 1.0;                ///< their relaxation
@@ -91,8 +81,6 @@ class StokesPreconditioner : public Preconditioner {
   std::string name() const override { return "block"; }
 
   const StokesFactors& factors() const { return f_; }
-  /// V-cycles per velocity solve (velocity_cycles, plus the one of the stiffness rule).
-  int velocity_cycles() const { return options_.velocity_cycles; }
   const Multigrid& velocity_multigrid() const { return velocity_; }
   const Multigrid& pressure_multigrid() const { return pressure_; }
   /// The unknowns of the cut block C (increasing; empty when off or when there is none).

@@ -66,8 +66,7 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   } else {
     // built on the first PCG iteration only: a step whose right-hand side vanishes (a liquid at
     // rest under uniform gravity) or whose warm start already converges skips the set-up
-    StokesPreconditionerOptions mg = options.multigrid ? *options.multigrid : StokesPreconditionerOptions{};
-    if (mg.stiffness <= 0.0) mg.stiffness = weights_stiffness(w, dt, grid.dx());  // the cycles rule
+    const StokesPreconditionerOptions mg = options.multigrid ? *options.multigrid : StokesPreconditionerOptions{};
     const LinearOperator& a = *op;
     const LazyPreconditioner m(dofs.size(), "block", [&]() -> std::unique_ptr<Preconditioner> {
       const double floor = mg.min_fluid_fraction;
