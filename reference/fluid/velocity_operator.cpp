@@ -1,26 +1,12 @@
 #include "reference/fluid/velocity_operator.hpp"
 #include "reference/core/parallel.hpp"
-#include "reference/solvers/preconditioner.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
-#include <cmath>
-#include <limits>
 #include <stdexcept>
 
 namespace monolith {
-
-double weights_stiffness(const StokesWeights& w, double dt, double dx) {
-  double eta_max = 0.0;
-  for (Eigen::Index i = 0; i < w.viscosity.size(); ++i) eta_max = std::max(eta_max, w.viscosity[i]);
-  double rho = std::numeric_limits<double>::infinity();
-  const VectorX& density = w.pressure.face_density;
-  for (Eigen::Index f = 0; f < density.size(); ++f)
-    if (density[f] > 0.0) rho = std::min(rho, density[f]);
-  if (eta_max <= 0.0 || !std::isfinite(rho) || dx <= 0.0) return 0.0;
-  return solve_stiffness(eta_max, dt, rho, dx);
-}
 
 namespace {
 

@@ -59,12 +59,6 @@ struct StokesFactors {
   int size() const { return num_stress + num_pressure; }
 };
 
-/// The stiffness eta_max dt / (rho dx^2) of a solve with these weights (solve_stiffness of
-/// reference/solvers/preconditioner.hpp): eta_max the largest viscosity of `w`, rho the smallest
-/// positive face density (the diagonal of P); 0 when either is missing. What the simulator books
-/// per solve, from the weights alone (StokesPreconditionerOptions::stiffness).
-double weights_stiffness(const StokesWeights& w, double dt, double dx);
-
 /// K = 1/2 N^-1 W^s over the active stress unknowns (eq. (24)'s A11 term; docs/stokes.md): per
 /// unknown 1/2 m W_F^s W_L^s / eta of its StressGrid DOF, in the reduced form plus that of the
 /// eliminated DOF of its cell, which also couples the cell's diagonal unknowns (3D). With
