@@ -49,6 +49,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   np_ = f_.num_pressure;
   n_ = ns_ + np_;
   nf_ = static_cast<int>(f_.face.size());
+  cycles_ = options.velocity_cycles;
   if (a.size() != n_) throw std::invalid_argument("StokesPreconditioner: operator and factors differ in size");
   MacMultigridOptions mg;
   mg.smoothing = options.smoothing;
@@ -384,6 +385,9 @@ std::size_t StokesPreconditioner<Dim>::memory_bytes() const {
     bytes += csr(cut_rows_) + sizeof(double) * 3 * cut_.size() + sizeof(int) * cut_.size() +
              (sizeof(double) + sizeof(int)) * static_cast<std::size_t>(cut_factor_->analysed_entries());
   bytes += sizeof(double) * (f_.c.size() + penalty_.size() + schur_diagonal_.size());
+  if (commutator_)
+    bytes += csr(bp_) + csr(bpt_) +
+             sizeof(double) * (commutator_weight_.size() + lq_.size() + lh_.size() + lf_.size() + lg_.size() + lt_.size() + lu_.size());
   bytes += sizeof(double) * (8 * static_cast<std::size_t>(n_) + 2 * nf_ + 2 * np_);
   return bytes;
 }
