@@ -1,6 +1,8 @@
 #include "reference/fluid/stokes_preconditioner.hpp"
 #include "reference/core/parallel.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace monolith {
@@ -23,6 +25,19 @@ void multiply(const SparseMatrix& m, const double* x, double* y) {
   }
 }
 
+/// y = M x on the rows [begin, end) of a row-major sparse M (y sized end - begin).
+void multiply_rows(const SparseMatrix& m, int begin, int end, const double* x, double* y) {
+  const int* outer = m.outerIndexPtr();
+  const int* inner = m.innerIndexPtr();
+  const double* value = m.valuePtr();
+#pragma omp parallel for schedule(static) if (end - begin > kParallelRows) num_threads(process_threads())
+  for (int i = begin; i < end; ++i) {
+    double s = 0.0;
+    for (int k = outer[i]; k < outer[i + 1]; ++k) s += value[k] * x[inner[k]];
+    y[i - begin] = s;
+  }
+}
+
 }  // namespace
 
 template <int Dim>
@@ -34,6 +49,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   np_ = f_.num_pressure;
   n_ = ns_ + np_;
   nf_ = static_cast<int>(f_.face.size());
+  cycles_ = options.velocity_cycles;
   if (a.size() != n_) throw std::invalid_argument("StokesPreconditioner: operator and factors differ in size");
   MacMultigridOptions mg;
   mg.smoothing = options.smoothing;
@@ -61,6 +77,53 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       penalty_[k] = 1.0 / inv;
       schur_diagonal_[k] = inv + options.schur_viscous_factor * visc;
     }
+    // the viscous-to-mass ratio of each face row, r_f = C_f (B_tau K^-1 B_tau^T)_ff (each row by
+    // one thread); its median sets the V-cycle count, and diag(V0) = (1 + r) / C weighs the
+    // scaled commutator
+    VectorX ratio(nf_);
+    {
+      const int* outer = f_.b.outerIndexPtr();
+      const int* inner = f_.b.innerIndexPtr();
+      const double* value = f_.b.valuePtr();
+#pragma omp parallel for schedule(static) if (nf_ > kParallelRows) num_threads(process_threads())
+      for (int i = 0; i < nf_; ++i) {
+        double d = 0.0;
+        for (int a = outer[i]; a < outer[i + 1]; ++a) {
+          const int j = inner[a];
+          if (j >= ns_) continue;
+          for (SparseMatrix::InnerIterator it(kinv_, j); it; ++it)
+            for (int b = outer[i]; b < outer[i + 1]; ++b)
+              if (inner[b] == it.col()) d += value[a] * it.value() * value[b];
+        }
+        ratio[i] = f_.c[i] * d;
+      }
+    }
+    if (nf_ > 0) {
+      std::vector<double> sorted(ratio.data(), ratio.data() + nf_);
+      const auto mid = sorted.begin() + (nf_ - 1) / 2;
+      std::nth_element(sorted.begin(), mid, sorted.end());
+      viscous_ratio_ = *mid;
+    }
+    cycles_ = options.velocity_cycles;
+    if (options.cycle_ratio > 0.0 && viscous_ratio_ > options.cycle_ratio) {
+      const int extra = static_cast<int>(std::floor(std::log(viscous_ratio_ / options.cycle_ratio) / std::log(4.0)));
+      cycles_ = std::min(std::max(options.velocity_cycles, options.max_velocity_cycles), options.velocity_cycles + extra);
+    }
+    commutator_ = np_ > 0 && options.schur_correction && !options.additive_pressure &&
+                  options.schur != SchurApproximation::cahouet_chabard;
+    if (commutator_) {
+      bp_ = f_.b.rightCols(np_);
+      bpt_ = f_.b_transpose.bottomRows(np_);
+      commutator_weight_.resize(nf_);
+      for (int i = 0; i < nf_; ++i)
+        commutator_weight_[i] = options.schur == SchurApproximation::commutator_scaled ? f_.c[i] / (1.0 + ratio[i]) : f_.c[i];
+      lq_.setZero(np_);
+      lh_.setZero(np_);
+      lf_.setZero(nf_);
+      lg_.setZero(nf_);
+      lt_.setZero(ns_);
+      lu_.setZero(n_);
+    }
     SparseMatrix v = velocity_operator(f_, penalty_);
     ExtraPatches<Dim> extra;
     if (options.element_patches) extra = stress_element_patches<Dim>(f_);
@@ -70,7 +133,12 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     velocity_ = face_multigrid<Dim>(grid, f_.face, std::move(v), vmg, options.element_patches ? &extra : nullptr);
     if (np_ > 0 && (options.schur_correction || options.additive_pressure)) {
       // A22 is singular for enclosed liquid: the preconditioner inverts A22 + 1e-10 diag(A22)
+      // (the scaled commutator's L = B_p^T W B_p in its place; with W = C it is A22)
       SparseMatrix shifted = a22;
+      if (commutator_ && options.schur == SchurApproximation::commutator_scaled) {
+        shifted = SparseMatrix(bpt_ * sparse_diagonal(commutator_weight_)) * bp_;
+        shifted.makeCompressed();
+      }
       for (int k = 0; k < np_; ++k) shifted.coeffRef(k, k) *= 1.0 + 1e-10;
       pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, std::move(shifted), mg);
     }
@@ -198,17 +266,18 @@ void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, Vector
   // v ~ V^-1 B h
   multiply(f_.b, h_.data(), face_.data());
   if (options_.inner_cg <= 0) {
-    velocity_.apply(face_, v_, options_.velocity_cycles);
+    velocity_.apply(face_, v_, cycles_);
   } else {
     // a few CG steps on V with the V-cycle as preconditioner, from zero
     const SparseMatrix& vm = velocity_finest_;  // V in the numbering of f_.face
     v_.setZero(nf_);
+    iap_.resize(nf_);  // no-op after the first application
     ir_ = face_;
     velocity_.apply(ir_, iz_, 1);
     ip_ = iz_;
     double rz = ir_.dot(iz_);
     for (int k = 0; k < options_.inner_cg && rz > 0.0; ++k) {
-      multiply(vm, ip_.data(), (iap_.resize(nf_), iap_.data()));
+      multiply(vm, ip_.data(), iap_.data());
       const double alpha = rz / ip_.dot(iap_);
       v_ += alpha * ip_;
       if (k + 1 == options_.inner_cg) break;
@@ -247,12 +316,41 @@ void StokesPreconditioner<Dim>::apply_two_term(const VectorX& r, VectorX& z) con
   }
   // second term: A'^-1 E Pi S Pi E^T A'^-1 r, S = A22^-1 + diag
   for (int k = 0; k < np_; ++k) e_[k] = penalty_[k] * y1_[ns_ + k];
-  pressure_.apply(e_, s_, 1);
-  for (int k = 0; k < np_; ++k) s_[k] += schur_diagonal_[k] * e_[k];
+  apply_schur(e_, s_);
   w_.head(ns_).setZero();
   for (int k = 0; k < np_; ++k) w_[ns_ + k] = penalty_[k] * s_[k];
   apply_penalised_inverse(w_, y2_);
   z = y1_ + y2_;
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::apply_unpenalised_velocity(const VectorX& x, VectorX& y) const {
+  // t = B_tau^T x, u = [K^-1 t; 0], y = B u + x / C
+  multiply_rows(f_.b_transpose, 0, ns_, x.data(), lt_.data());
+  multiply_rows(kinv_, 0, ns_, lt_.data(), lu_.data());
+  multiply(f_.b, lu_.data(), y.data());  // lu_'s pressure part stays 0
+  for (int i = 0; i < nf_; ++i) y[i] += x[i] / f_.c[i];
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::apply_schur(const VectorX& e, VectorX& s) const {
+  s.resize(np_);
+  if (!commutator_) {
+    // Cahouet-Chabard type: A22^-1 + Pi^-1 + factor eta / W_L^p
+    pressure_.apply(e, s, 1);
+    for (int k = 0; k < np_; ++k) s[k] += schur_diagonal_[k] * e[k];
+    return;
+  }
+  // least-squares commutator: L^-1 B_p^T W V0 W B_p L^-1 e + Pi^-1 e, each L^-1 one cell V-cycle
+  // (the same symmetric map on both sides: symmetric positive semi-definite, plus Pi^-1 > 0)
+  pressure_.apply(e, lq_, 1);
+  multiply(bp_, lq_.data(), lf_.data());
+  for (int i = 0; i < nf_; ++i) lf_[i] *= commutator_weight_[i];
+  apply_unpenalised_velocity(lf_, lg_);
+  for (int i = 0; i < nf_; ++i) lg_[i] *= commutator_weight_[i];
+  multiply(bpt_, lg_.data(), lh_.data());
+  pressure_.apply(lh_, s, 1);
+  for (int k = 0; k < np_; ++k) s[k] += e[k] / penalty_[k];
 }
 
 template <int Dim>
@@ -287,6 +385,9 @@ std::size_t StokesPreconditioner<Dim>::memory_bytes() const {
     bytes += csr(cut_rows_) + sizeof(double) * 3 * cut_.size() + sizeof(int) * cut_.size() +
              (sizeof(double) + sizeof(int)) * static_cast<std::size_t>(cut_factor_->analysed_entries());
   bytes += sizeof(double) * (f_.c.size() + penalty_.size() + schur_diagonal_.size());
+  if (commutator_)
+    bytes += csr(bp_) + csr(bpt_) +
+             sizeof(double) * (commutator_weight_.size() + lq_.size() + lh_.size() + lf_.size() + lg_.size() + lt_.size() + lu_.size());
   bytes += sizeof(double) * (8 * static_cast<std::size_t>(n_) + 2 * nf_ + 2 * np_);
   return bytes;
 }

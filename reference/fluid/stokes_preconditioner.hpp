@@ -9,9 +9,13 @@
 ///   A^-1 = A'^-1 + A'^-1 E Pi S Pi E^T A'^-1,   S = (Pi - Pi E^T A'^-1 E Pi)^-1 = Sigma_pi^-1
 ///
 /// (E the pressure rows, Sigma_pi = B_p^T V^-1 B_p the pressure Schur complement of the velocity
-/// form, Sigma_pi^-1 = Sigma^-1 + Pi^-1). The preconditioner applies the right-hand sides with
-/// V^-1 replaced by multigrid V-cycles and S by a Cahouet-Chabard-type approximation
-/// (Poisson multigrid plus a viscosity-weighted diagonal), and wraps the result in SOR sweeps of
+/// form, Sigma_pi^-1 = Sigma^-1 + Pi^-1, Sigma = B_p^T V0^-1 B_p with V0 = C^-1 + B_tau K^-1
+/// B_tau^T the unpenalised velocity operator). The preconditioner applies the right-hand sides
+/// with V^-1 replaced by multigrid V-cycles (more of them the stiffer the system: their error
+/// reaches the result amplified by about the viscous-to-mass ratio of V, section 19) and Sigma^-1
+/// by a scaled least-squares commutator (BFBt; Sigma^-1 ~ L^-1 B_p^T W V0 W B_p L^-1 with
+/// W = diag(V0)^-1, L = B_p^T W B_p by cell multigrid; docs/preconditioners.md section 19), or
+/// by the older Cahouet-Chabard-type sum, and wraps the result in SOR sweeps of
 /// A itself (a symmetric two-level composition): SPD for any choice of its parts. Between the
 /// sweeps and that inverse, on each side, an exact solve with A's principal block A_CC on the
 /// unknowns next to a curved solid (the cut block, StokesPreconditionerOptions::cut_threshold;
@@ -32,6 +36,19 @@
 
 namespace monolith {
 
+/// The approximation of Sigma^-1 = (B_p^T V0^-1 B_p)^-1 in the two-term form (S = Sigma^-1 + Pi^-1).
+enum class SchurApproximation {
+  /// A22^-1 + schur_viscous_factor eta / W_L^p (Poisson multigrid plus a diagonal): the form of
+  /// sections 5-18; loses quality near free surfaces (section 17).
+  cahouet_chabard,
+  /// L^-1 B_p^T C V0 C B_p L^-1 with L = A22 = B_p^T C B_p (the commutator weighted by the face
+  /// mobility C; measured 4-8x worse than scaled on Fig. 5, section 19).
+  commutator_mobility,
+  /// L^-1 B_p^T W V0 W B_p L^-1, W = diag(V0)^-1, L = B_p^T W B_p (the scaled BFBt of
+  /// Elman et al. 2006 / May and Moresi 2008).
+  commutator_scaled,
+};
+
 struct StokesPreconditionerOptions {
   double penalty_factor = 3.0;       ///< gamma: Pi^-1 = gamma (eta / W_L^p + 1 / A22_ii)
   double min_fluid_fraction = 0.01;  ///< W_F^s floor in the preconditioner's K
@@ -40,14 +57,26 @@ struct StokesPreconditionerOptions {
   /// 1.3-1.5x less solve time; smoothing 2 or 3 cycles cost about the same, transverse-constant
   /// transfers or sparsified coarse levels doubled the iterations (docs/preconditioners.md,
   /// section 10).
+  /// (With cycle_ratio > 0: the count at or below that ratio; section 19.)
   int velocity_cycles = 2;
+  /// > 0: one V-cycle more per factor 4 of the median viscous-to-mass ratio r_f = C_f (V0)_ff - 1
+  /// of V's rows above this value (a fixed count per system: P stays a fixed SPD map).
+  /// velocity_cycles() of the preconditioner is velocity_cycles + max(0, floor(log4(median r /
+  /// cycle_ratio))), at most max_velocity_cycles. In 3D the median r is 6.7 eta dt / (rho dx^2)
+  /// (Fig. 5 at 32^3 and 64^3), so 270 is a stiffness of 40: 2 cycles at 32^3, 3 at 64^3, 4 at
+  /// 128^3 (section 19). 0: velocity_cycles always.
+  double cycle_ratio = 270.0;
+  int max_velocity_cycles = 6;
   int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
   int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
   double omega = 1.0;                ///< their relaxation
-  bool schur_correction = false;     ///< the second term (needed unless eta dt / (rho dx^2) >> 1)
-  bool additive_pressure = true;     ///< instead of the second term: + E A22^-1 E^T (one V solve less)
+  /// The second term (the two-term form; default since section 19: with the scaled commutator
+  /// 4.7x fewer iterations than the additive form on Fig. 5 at 64^3, 1.8x less solve time).
+  bool schur_correction = true;
+  bool additive_pressure = false;    ///< instead of the second term: + E A22^-1 E^T (one V solve less)
   int inner_cg = 0;                  ///< > 0: V^-1 by this many multigrid-preconditioned CG steps (nonlinear: flexible outer CG)
-  double schur_viscous_factor = 0.5; ///< S ~ A22^-1 + Pi^-1 + factor eta / W_L^p
+  SchurApproximation schur = SchurApproximation::commutator_scaled;  ///< Sigma^-1 in the two-term form
+  double schur_viscous_factor = 0.5; ///< cahouet_chabard: S ~ A22^-1 + Pi^-1 + factor eta / W_L^p
   bool element_patches = true;       ///< stress-element patches on the finest velocity level
   int max_coarse = 1500;             ///< multigrid coarsest-level size
   bool transverse_linear = true;     ///< MacMultigridOptions::transverse_linear of the velocity levels
@@ -81,12 +110,21 @@ class StokesPreconditioner : public Preconditioner {
   std::string name() const override { return "block"; }
 
   const StokesFactors& factors() const { return f_; }
+  const StokesPreconditionerOptions& options() const { return options_; }
   const Multigrid& velocity_multigrid() const { return velocity_; }
   const Multigrid& pressure_multigrid() const { return pressure_; }
   /// The unknowns of the cut block C (increasing; empty when off or when there is none).
   const std::vector<int>& cut_unknowns() const { return cut_; }
   /// Pi per pressure unknown.
   const VectorX& penalty() const { return penalty_; }
+  /// The V-cycles per velocity solve (options' velocity_cycles, raised by the stiffness rule).
+  int velocity_cycles() const { return cycles_; }
+  /// The median over V's rows of the viscous-to-mass ratio C_f (V0)_ff - 1 (0 without stress).
+  double viscous_ratio() const { return viscous_ratio_; }
+  /// s ~ Sigma^-1 e + Pi^-1 e (S of the second term; Sigma^-1 by options().schur).
+  void apply_schur(const VectorX& e, VectorX& s) const;
+  /// y = V0 x = x / C + B_tau K^-1 B_tau^T x over the faces (the preconditioner's K).
+  void apply_unpenalised_velocity(const VectorX& x, VectorX& y) const;
   /// y = A'^-1 g with the V-cycles in place of V^-1 (the first term above).
   void apply_penalised_inverse(const VectorX& g, VectorX& y) const;
   /// Bytes held (factors, hierarchies, scratch).
@@ -103,6 +141,11 @@ class StokesPreconditioner : public Preconditioner {
   StokesPreconditionerOptions options_;
   int n_ = 0, ns_ = 0, np_ = 0, nf_ = 0;
   SparseMatrix kinv_;       ///< K^-1 (stress unknowns)
+  int cycles_ = 0;          ///< V-cycles per velocity solve
+  double viscous_ratio_ = 0.0;
+  bool commutator_ = false;  ///< the two-term form with a commutator S
+  SparseMatrix bp_, bpt_;   ///< B_p (faces x n_p) and B_p^T (commutator only)
+  VectorX commutator_weight_;  ///< W (C or diag(V0)^-1) per face
   VectorX penalty_;         ///< Pi
   VectorX schur_diagonal_;  ///< Pi^-1 + factor eta / W_L^p
   Multigrid velocity_, pressure_;
@@ -112,6 +155,7 @@ class StokesPreconditioner : public Preconditioner {
   SparseMatrix cut_rows_;   ///< A_{C,:} (row-major, |C| x n)
   std::unique_ptr<SparseLdlt> cut_factor_;  ///< of A_CC
   mutable VectorX cut_r_, cut_d_;
+  mutable VectorX lq_, lh_, lf_, lg_, lt_, lu_;  ///< apply_schur scratch
   // scratch
   mutable VectorX ir_, iz_, ip_, iap_;
   mutable VectorX h_, face_, v_, back_, y1_, y2_, e_, s_, w_, res_, d_, az_;

@@ -9,6 +9,8 @@
 //       [--gamma G] [--cycles K] [--smoothing S] [--sweeps W] [--no-schur] [--no-elements]
 //       [--clamp T] [--repeats R] [--cut-threshold T (0: no cut block)] [--cut-layers L]
 //       [--no-renumber (Multigrid keeps the caller's numbering: same results, for timing)]
+//       [--two-term | --additive] [--schur cc|mobility|scaled (Sigma^-1 of the two-term form)]
+//       [--cycle-ratio R (0: --cycles always)]
 //
 // Scenes (unit box, walls, open top, rho = 1000, dt = 0.01, a smooth swirl plus one step of
 // gravity as u*):
@@ -257,6 +259,17 @@ int main(int argc, char** argv) {
     else if (a == "--no-fine-cells") cfg.options.fine_cell_patches = false;
     else if (a == "--additive") cfg.options.additive_pressure = true;
     else if (a == "--inner-cg") cfg.options.inner_cg = std::atoi(next());
+    else if (a == "--schur") {
+      const std::string v = next();
+      if (v == "cc") cfg.options.schur = SchurApproximation::cahouet_chabard;
+      else if (v == "mobility") cfg.options.schur = SchurApproximation::commutator_mobility;
+      else if (v == "scaled") cfg.options.schur = SchurApproximation::commutator_scaled;
+      else {
+        std::fprintf(stderr, "--schur: cc, mobility or scaled, not %s\n", v.c_str());
+        return 2;
+      }
+    }
+    else if (a == "--cycle-ratio") cfg.options.cycle_ratio = std::atof(next());
     else if (a == "--max-coarse") cfg.options.max_coarse = std::atoi(next());
     else if (a == "--cut-threshold") cfg.options.cut_threshold = std::atof(next());
     else if (a == "--cut-layers") cfg.options.cut_layers = std::atoi(next());

@@ -453,8 +453,10 @@ TEST_CASE("Back ends: a simulator frame with bodies agrees between the back ends
           "[unit][backends]") {
   // Fig. 3's scene at 32^2 under PVC-unified with viscosity: two coupled steps (contacts of the
   // bunny with the bowl and of the bowl with the liquid). As for the single solves above, the
-  // difference is solver error: it falls with the tolerance.
-  const FrameStats e7 = simulate_small("explicit", 1e-7), m7 = simulate_small("matrixfree", 1e-7);
+  // difference is solver error: it falls with the tolerance. (The loose solve at 1e-4: with the
+  // two-term block preconditioner of docs/preconditioners.md section 19 a solve to 1e-7 already
+  // lands at round-off, 2.7e-13, and the difference could not fall further.)
+  const FrameStats e7 = simulate_small("explicit", 1e-4), m7 = simulate_small("matrixfree", 1e-4);
   const FrameStats e10 = simulate_small("explicit", 1e-10),
                    m10 = simulate_small("matrixfree", 1e-10);
   REQUIRE(e10.solver.converged);
@@ -464,7 +466,7 @@ TEST_CASE("Back ends: a simulator frame with bodies agrees between the back ends
   const double d7 = frame_difference(m7, e7), d10 = frame_difference(m10, e10);
   std::printf(
       "simulator frame: explicit %ld iterations, matrixfree %ld at 1e-10; difference %.2e at "
-      "1e-7, %.2e at 1e-10\n",
+      "1e-4, %.2e at 1e-10\n",
       static_cast<long>(e10.solver.iterations), static_cast<long>(m10.solver.iterations), d7, d10);
   CHECK(d10 <= 1e-6);
   CHECK(d10 <= 1e-1 * d7);

@@ -269,14 +269,17 @@ TEMPLATE_TEST_CASE_SIG("the block preconditioner is symmetric positive definite"
       o.eta = eta;
       const auto sc = make_case<Dim>(o);
       const auto s = make_system(sc);
-      for (bool two_term : {false, true}) {
+      // additive, then the two-term form with each approximation of Sigma^-1
+      for (int form : {-1, 0, 1, 2}) {
+        const bool two_term = form >= 0;
         StokesPreconditionerOptions po = small_options();
         po.schur_correction = two_term;
         po.additive_pressure = !two_term;
+        if (two_term) po.schur = static_cast<SchurApproximation>(form);
         const StokesPreconditioner<Dim> m(sc.grid, *s.mf,
                                           stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), po);
         const Eigen::MatrixXd p = dense(m);
-        INFO("blob " << blob << " eta " << eta << " two-term " << two_term);
+        INFO("blob " << blob << " eta " << eta << " form " << form);
         CHECK((p - p.transpose()).cwiseAbs().maxCoeff() < 1e-9 * p.cwiseAbs().maxCoeff());
         // PCG applies the preconditioner between projections onto the complement of A's null
         // space (constant pressure of enclosed liquid, the blob): it must be SPD there
@@ -297,6 +300,103 @@ TEMPLATE_TEST_CASE_SIG("the block preconditioner is symmetric positive definite"
         CHECK(es.eigenvalues().minCoeff() > 0.0);
       }
     }
+}
+
+TEMPLATE_TEST_CASE_SIG("the scaled commutator: V0 and its diagonal, a symmetric positive S, the cycle rule",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // docs/preconditioners.md section 19: V0 = C^-1 + B_tau K^-1 B_tau^T, r_f = C_f (V0)_ff - 1,
+  // S = L^-1 B_p^T W V0 W B_p L^-1 + Pi^-1 (W = diag(V0)^-1), cycles = 2 + floor(log4(median r /
+  // cycle_ratio)) capped
+  for (double eta : {0.01, 10.0, 5000.0}) {
+    CaseOptions o;
+    o.n = Dim == 2 ? 16 : 8;
+    o.eta = eta;
+    const auto sc = make_case<Dim>(o);
+    const auto s = make_system(sc);
+    const StokesPreconditioner<Dim> m(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf),
+                                      small_options());
+    const StokesFactors& f = m.factors();
+    const int ns = f.num_stress, np = f.num_pressure, nf = static_cast<int>(f.face.size());
+    REQUIRE(ns > 0);
+    REQUIRE(np > 0);
+    // V0 densely from the factors
+    const Eigen::MatrixXd b(f.b);
+    const Eigen::MatrixXd kinv = Eigen::MatrixXd(f.compliance).inverse();
+    Eigen::MatrixXd v0 = b.leftCols(ns) * kinv * b.leftCols(ns).transpose();
+    for (int i = 0; i < nf; ++i) v0(i, i) += 1.0 / f.c[i];
+    const VectorX x = random_vector(nf, 3);
+    VectorX y(nf);
+    m.apply_unpenalised_velocity(x, y);
+    INFO("eta " << eta);
+    CHECK(rel_diff(y, v0 * x) < 1e-12);
+    // the median viscous-to-mass ratio and the cycle count it sets
+    std::vector<double> r(nf);
+    for (int i = 0; i < nf; ++i) r[i] = f.c[i] * v0(i, i) - 1.0;
+    std::sort(r.begin(), r.end());
+    const double median = r[(nf - 1) / 2];
+    CHECK(std::abs(m.viscous_ratio() - median) <= 1e-10 * median);
+    const StokesPreconditionerOptions def;
+    const int expected = median > def.cycle_ratio
+                             ? std::min(def.max_velocity_cycles,
+                                        def.velocity_cycles + static_cast<int>(std::floor(std::log(median / def.cycle_ratio) / std::log(4.0))))
+                             : def.velocity_cycles;
+    CHECK(m.velocity_cycles() == expected);
+    if (eta <= 10.0) CHECK(m.velocity_cycles() == 2);
+    // a threshold 20x below the median: floor(log4 20) = 2 more cycles, or the cap
+    StokesPreconditionerOptions po = small_options();
+    po.cycle_ratio = median / 20.0;
+    const StokesPreconditioner<Dim> m4(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), po);
+    CHECK(m4.velocity_cycles() == 4);
+    po.max_velocity_cycles = 3;
+    const StokesPreconditioner<Dim> m3(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), po);
+    CHECK(m3.velocity_cycles() == 3);
+    // S as a dense matrix: symmetric, and positive definite (Pi^-1 > 0 plus a semi-definite term)
+    Eigen::MatrixXd sd(np, np);
+    VectorX e = VectorX::Zero(np), col;
+    for (int j = 0; j < np; ++j) {
+      e[j] = 1.0;
+      m.apply_schur(e, col);
+      sd.col(j) = col;
+      e[j] = 0.0;
+    }
+    CHECK((sd - sd.transpose()).cwiseAbs().maxCoeff() < 1e-10 * sd.cwiseAbs().maxCoeff());
+    const VectorX pinv = m.penalty().cwiseInverse();
+    const Eigen::MatrixXd rest = 0.5 * (sd + sd.transpose()) - Eigen::MatrixXd(pinv.asDiagonal());
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(rest, Eigen::EigenvaluesOnly);
+    CHECK(es.eigenvalues().minCoeff() > -1e-10 * es.eigenvalues().cwiseAbs().maxCoeff());
+    CHECK(es.eigenvalues().maxCoeff() > 0.0);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("on a stiff pool around a solid the scaled commutator beats the Cahouet-Chabard "
+                       "and additive pressure terms",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // sections 17 and 19: the Cahouet-Chabard-type S (and the additive pressure term before it)
+  // lose quality with the stiffness next to free surfaces and walls; the scaled least-squares
+  // commutator less so. The pool with a wavy free surface around a solid ball, eta 5000, default
+  // options (multigrid hierarchies as in the scenes).
+  CaseOptions o;
+  o.n = Dim == 2 ? 64 : 16;
+  o.eta = 5000.0;
+  const auto sc = make_case<Dim>(o);
+  const auto s = make_system(sc);
+  std::array<int, 3> its{};
+  for (int form = 0; form < 3; ++form) {
+    StokesPreconditionerOptions po;
+    po.schur_correction = form > 0;
+    po.additive_pressure = form == 0;
+    po.schur = form == 1 ? SchurApproximation::cahouet_chabard : SchurApproximation::commutator_scaled;
+    const StokesPreconditioner<Dim> m(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), po);
+    PcgSettings settings;
+    settings.max_iterations = 5000;
+    VectorX x;
+    const PcgResult r = pcg_solve(*s.mf, s.mf->rhs(sc.u_star), x, settings, m);
+    CHECK(r.converged);
+    its[form] = r.iterations;
+  }
+  INFO("additive " << its[0] << ", Cahouet-Chabard " << its[1] << ", scaled commutator " << its[2]);
+  CHECK(its[2] < its[1]);
+  CHECK(its[1] < its[0]);
 }
 
 TEMPLATE_TEST_CASE_SIG("PCG with the block preconditioner reaches CHOLMOD's solution on both back ends",
