@@ -440,11 +440,17 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
 /// u_f, c_pa = sum_f grad w_fp u_f (row a of c is the gradient of component a; exact for affine
 /// fields away from walls).
 template <int Dim>
-void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u) {
+long grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
+                       std::vector<char>* unread) {
   constexpr int kCorners = 1 << Dim;
   const long np = static_cast<long>(particles.size());
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+  // with `unread`: a second pass (flags given) redoes the flagged particles only
+  const bool again = unread != nullptr && static_cast<long>(unread->size()) == np;
+  if (unread != nullptr && !again) unread->assign(np, 0);
+  long flagged = 0;
+#pragma omp parallel for schedule(static) reduction(+ : flagged) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
+    if (again && !(*unread)[p]) continue;
     std::array<int, kCorners> idx;
     std::array<double, kCorners> w;
     std::array<Vec<Dim>, kCorners> g;
@@ -462,7 +468,14 @@ void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
     }
     particles.v[p] = v;
     particles.c[p] = c;
+    if (unread != nullptr) {
+      // a NaN face (one the caller marked unreadable) makes v or c NaN
+      const bool bad = !(v.allFinite() && c.allFinite());
+      (*unread)[p] = bad;
+      flagged += bad;
+    }
   }
+  return flagged;
 }
 
 // --- extrapolation -------------------------------------------------------------------------------
@@ -629,19 +642,39 @@ void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<
 template <int Dim>
 long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
                       double dt, const SolidField<Dim>& solids,
-                      const std::array<BoundaryType, 2 * Dim>& boundary) {
+                      const std::array<BoundaryType, 2 * Dim>& boundary,
+                      std::vector<char>* unread) {
   const long np = static_cast<long>(particles.size());
   const double max_move = kAdvectionSubstep * grid.dx();
+  // with `unread`: a second pass (flags given) moves the flagged particles only
+  const bool again = unread != nullptr && static_cast<long>(unread->size()) == np;
+  if (unread != nullptr && !again) unread->assign(np, 0);
   std::vector<char> remove(np, 0);
   long removed = 0;
   // chunks handed out as threads come free: the substeps per particle follow its speed, which
   // varies across the liquid (each particle is independent, so the result does not change)
 #pragma omp parallel for schedule(dynamic, 512) reduction(+ : removed) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
+    if (again && !(*unread)[p]) continue;
     Vec<Dim> x = particles.x[p];
+    // a NaN read (a face the caller marked unreadable, or the particle's own v and c from
+    // grid_to_particles): the particle stays where it is, flagged (checked before the value
+    // places a point: a NaN point has no stencil)
+    const auto unreadable = [&](const Vec<Dim>& value) {
+      return unread != nullptr && !value.allFinite();
+    };
+    bool read = !unreadable(particles.v[p]) &&
+                !(unread != nullptr && !particles.c[p].allFinite());
     // number of substeps from the speeds along the full-step midpoint path
-    const Vec<Dim> v1 = grid.interpolate_velocity(u, x);
-    const Vec<Dim> v2 = grid.interpolate_velocity(u, Vec<Dim>(x + 0.5 * dt * v1));
+    const Vec<Dim> v1 = read ? grid.interpolate_velocity(u, x) : Vec<Dim>::Zero();
+    read = read && !unreadable(v1);
+    const Vec<Dim> v2 =
+        read ? grid.interpolate_velocity(u, Vec<Dim>(x + 0.5 * dt * v1)) : Vec<Dim>::Zero();
+    read = read && !unreadable(v2);
+    if (!read) {
+      (*unread)[p] = 1;
+      continue;
+    }
     const double path = dt * std::max(v1.norm(), v2.norm());
     const int n = std::clamp(static_cast<int>(std::ceil(path / max_move)), 1, kMaxAdvectionSubsteps);
     const double h = dt / n;
@@ -649,17 +682,37 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
     for (int s = 0; s < n && inside; ++s) {
       // midpoint rule (RK2) over the substep, then solids, walls, periodic wrap, open faces
       const Vec<Dim> a = s == 0 ? v1 : grid.interpolate_velocity(u, x);
+      if (unreadable(a)) {
+        read = false;
+        break;
+      }
       const Vec<Dim> xm = x + 0.5 * h * a;
-      x += h * grid.interpolate_velocity(u, xm);
+      const Vec<Dim> b = grid.interpolate_velocity(u, xm);
+      if (unreadable(b)) {
+        read = false;
+        break;
+      }
+      x += h * b;
       inside = settle_position(grid, solids, boundary, true, x);
     }
+    if (unread != nullptr) (*unread)[p] = !read;
+    if (!read) continue;
     if (!inside) {
       remove[p] = 1;
       ++removed;
     }
     particles.x[p] = x;
   }
-  if (removed > 0) particles.remove_flagged(remove);
+  if (removed > 0) {
+    particles.remove_flagged(remove);
+    // the flags follow their particles
+    if (unread != nullptr) {
+      std::size_t out = 0;
+      for (long p = 0; p < np; ++p)
+        if (!remove[p]) (*unread)[out++] = (*unread)[p];
+      unread->resize(out);
+    }
+  }
   return removed;
 }
 
@@ -1934,14 +1987,16 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                        unsigned);                                                  \
   template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,      \
                                   VectorX&);                                                       \
-  template void grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&);               \
+  template long grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&,                \
+                                  std::vector<char>*);                                             \
   template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \
   template void divergence_free_air_velocity(const MacGrid<D>&, const SampleLattice<D>&,          \
                                             const VectorX&, const VectorX&,                       \
                                             const std::vector<char>&,                             \
                                             const std::vector<char>&, int, double, VectorX&);     \
   template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,         \
-                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);    \
+                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&,     \
+                                 std::vector<char>*);                                              \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
                                   const std::array<BoundaryType, 2 * D>&);                         \
   template DensityProjectionStats project_particle_density(                                        \

@@ -591,6 +591,11 @@ int Simulation<Dim>::extrapolation_layers(double dt) const {
   // the drift of the next step (split_advection) and divergence_free_air (whose band is these
   // layers) keep the cfl bound
   const int cfl_layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
+  if (switches_.extrapolate_everywhere) {
+    int diameter = 0;  // in layers: steps of one face along one axis
+    for (int a = 0; a < Dim; ++a) diameter += grid_.cells()[a] + 1;
+    return diameter;
+  }
   if (switches_.extrapolate_cfl_layers || coupled_ || rigid_ || split_drift() ||
       switches_.divergence_free_air)
     return cfl_layers;
@@ -610,7 +615,71 @@ void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   if (!switches_.extrapolate_after_solve) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   trusted_faces(face_flags_);
-  extrapolate_velocity(grid_, u_, face_flags_, extrapolation_layers(dt));
+  reached_layers_ = extrapolation_layers(dt);
+  if (!guards_reads()) {
+    extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
+    return;
+  }
+  // the solve's velocity, for a deeper extrapolation and for the faces no particle read
+  const int nf = grid_.num_faces();
+  solved_u_.resize(nf);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) solved_u_[f] = u_[f];
+  extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
+  // the faces not reached: NaN while the particles read the velocity (advect), so that a read
+  // shows in the particle's values
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f)
+    if (!face_flags_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
+}
+
+template <int Dim>
+bool Simulation<Dim>::guards_reads() const {
+  return switches_.extrapolate_after_solve &&
+         (switches_.extend_to_every_read || switches_.poison_unreached_faces);
+}
+
+template <int Dim>
+bool Simulation<Dim>::extend_extrapolation() {
+  if (!switches_.extend_to_every_read) return false;
+  // a face lattice's diameter in extrapolation layers (steps of one face along one axis)
+  int diameter = 0;
+  for (int a = 0; a < Dim; ++a) diameter += grid_.cells()[a] + 1;
+  if (reached_layers_ >= diameter) return false;
+  reached_layers_ = std::min(diameter, 2 * reached_layers_ + 1);
+  const bool deepest = reached_layers_ >= diameter;
+  Stopwatch watch;
+  // the deeper extrapolation from the solve's velocity, in u_'s place while the stages of the
+  // step after the extrapolation run on it: its first layers are those of the shallower one
+  // (each layer reads only the layers before it), so every face reached already gets the same
+  // value again
+  const int nf = grid_.num_faces();
+  extended_u_.resize(nf);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) extended_u_[f] = solved_u_[f];
+  u_.swap(extended_u_);
+  face_flags_.swap(extended_flags_);
+  trusted_faces(face_flags_);
+  extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
+  // unreached even now (no trusted face of that component to reach them from): the solve's value
+  // as before the guard, unless the test switch keeps them NaN
+  if (!deepest || switches_.poison_unreached_faces) {
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f)
+      if (!face_flags_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
+  }
+  stats_.timing[FramePhase::extrapolation] += watch.seconds();
+  apply_wall_and_solid_velocities();  // (timed as extrapolation, as are the next two)
+  divergence_free_air();
+  const Stopwatch rest;
+  face_flags_.swap(extended_flags_);
+  u_.swap(extended_u_);
+  // only the faces still unread take the deeper values
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f)
+    if (std::isnan(u_[f])) u_[f] = extended_u_[f];
+  stats_.timing[FramePhase::extrapolation] += rest.seconds();
+  return true;
 }
 
 template <int Dim>
@@ -684,14 +753,60 @@ void Simulation<Dim>::rebuild_solid_field() {
 template <int Dim>
 void Simulation<Dim>::advect(double dt) {
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
-  // leaving through open faces are removed, particles that end up inside a solid are pushed out
-  ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
-  grid_to_particles(particles_, grid_, u_);
-  if (!switches_.apic)
-    for (auto& c : particles_.c) c.setZero();
+  // leaving through open faces are removed, particles that end up inside a solid are pushed out.
+  // With the guard (guards_reads), the faces the extrapolation did not reach are NaN here: a
+  // particle that reads one (its stencil, its path, a solid face interpolated from one) is
+  // flagged and redone after a deeper extrapolation, until none is left
+  const bool guard = guards_reads();
+  std::vector<char>* unread = guard ? &unread_ : nullptr;
+  if (guard) unread_.clear();
+  {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    grid_to_particles(particles_, grid_, u_, unread);
+    if (!switches_.apic)
+      for (auto& c : particles_.c) c.setZero();
+  }
+  const auto flagged = [&] { return std::count(unread_.begin(), unread_.end(), 1); };
+  for (long n = guard ? flagged() : 0; n > 0 && extend_extrapolation(); n = flagged()) {
+    reread_particles_ += n;
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    grid_to_particles(particles_, grid_, u_, unread);
+    if (!switches_.apic)
+      for (std::size_t p = 0; p < particles_.size(); ++p)
+        if (unread_[p]) particles_.c[p].setZero();
+  }
   account(frame_ledger_.to_particles, [&] { return particle_kinetic_energy(); });
   restart_ledger([&] { return liquid_potential_energy(); });
-  advect_particles(particles_, grid_, u_, split_drift() ? 0.5 * dt : dt, solids_, boundary_);
+  const double h = split_drift() ? 0.5 * dt : dt;
+  if (guard) unread_.clear();
+  {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    advect_particles(particles_, grid_, u_, h, solids_, boundary_, unread);
+  }
+  // (a particle's own v and c were read well: the deeper extrapolation leaves its stencil's
+  // faces as they were, so grid_to_particles would give it the same again)
+  for (long n = guard ? flagged() : 0; n > 0 && extend_extrapolation(); n = flagged()) {
+    reread_particles_ += n;
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    advect_particles(particles_, grid_, u_, h, solids_, boundary_, unread);
+  }
+  if (guard) {
+    // the faces no particle read get the solve's value back (what a probe or checkpoint of the
+    // grid velocity read before the guard)
+    const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f)
+      if (std::isnan(u_[f])) u_[f] = solved_u_[f];
+    // left flagged only when poisoned (StageSwitches::poison_unreached_faces): a read of a face
+    // the extrapolation did not reach
+    const auto left = std::find(unread_.begin(), unread_.end(), 1);
+    if (left != unread_.end()) {
+      std::ostringstream msg;
+      msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): particle "
+          << (left - unread_.begin()) << " read a face the extrapolation did not reach";
+      throw SimulationError(msg.str());
+    }
+  }
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
 }
 
@@ -1119,7 +1234,9 @@ void Simulation<Dim>::constrain_velocity_in_solids() {
     Vec<Dim> v = grid_.interpolate_velocity(u_, x);
     const double vn = (v - (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero())).dot(n);
     if (vn < 0.0) v -= vn * n;
-    values[j] = v[axis];
+    // (a NaN in any component, a face the guard of advect marks unread, makes the value NaN: the
+    // comparison above would drop it)
+    values[j] = std::isnan(vn) ? vn : v[axis];
   }
   for (int j = 0; j < count; ++j) u_[faces[j]] = values[j];
 }
@@ -1335,7 +1452,12 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
 template <int Dim>
 double Simulation<Dim>::face_kinetic_energy() const {
   double energy = 0.0;
-  for (int f = 0; f < grid_.num_faces(); ++f) energy += 0.5 * face_mass_[f] * u_[f] * u_[f];
+  // (between the extrapolation and the advection, a face not reached is NaN: its value is the
+  // solve's, solved_u_, as it was before the guard)
+  for (int f = 0; f < grid_.num_faces(); ++f) {
+    const double u = std::isnan(u_[f]) ? solved_u_[f] : u_[f];
+    energy += 0.5 * face_mass_[f] * u * u;
+  }
   return energy;
 }
 
