@@ -251,7 +251,7 @@ class Simulation : public AnySimulation {
   /// the velocity (extend_to_every_read or poison_unreached_faces).
   bool guards_reads() const;
   /// The faces the extrapolation after the solve left unreached get the values of one twice as
-  /// deep (from the solve's velocity, solved_u_), then the walls' and solids' velocities; faces
+  /// deep (from the solve's velocity, reached_u_), then the walls' and solids' velocities; faces
   /// already reached keep their values bit for bit. Returns false once the extrapolation reaches
   /// every face it can (then unreached faces hold the solve's value, unless poisoned).
   bool extend_extrapolation();
@@ -302,7 +302,11 @@ class Simulation : public AnySimulation {
   /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
   /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
   /// particles near a solid are not carried into it.
-  void constrain_velocity_in_solids();
+  /// same_pose (the guard's deeper extrapolation, after the bodies moved): the normals and solid
+  /// velocities of the step's first call.
+  void constrain_velocity_in_solids(bool same_pose = false);
+  /// Whether face f lies on a wall of the domain.
+  bool wall_face(int f) const;
   /// The faces whose centre lies in a solid (solid_phi_ < 0 there) into solid_faces_, from the
   /// box of the solids' negative points: wherever solid_phi_ is made.
   void find_faces_in_solids();
@@ -385,15 +389,22 @@ class Simulation : public AnySimulation {
   // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
   // constrain_velocity_in_solids
   std::vector<char> face_flags_;
-  // the guard of the particles' reads (guards_reads): the solve's velocity before the
-  // extrapolation, a deeper extrapolation's velocity and flags, the particles that read a face
+  // the guard of the particles' reads (guards_reads): the velocity after the extrapolation
+  // (before the faces not reached become NaN; on those the solve's values), a deeper extrapolation's velocity and flags, the particles that read a face
   // not reached, the layers of the last extrapolation
-  VectorX solved_u_, extended_u_;
+  VectorX reached_u_, extended_u_;
   std::vector<char> extended_flags_, unread_;
   int reached_layers_ = 0;
   long reread_particles_ = 0;
   std::vector<int> solid_faces_;
   std::vector<double> solid_values_;
+  /// per face of solid_faces_ (with the guard of advect): the normal, the solid's velocity and the
+  /// face's value before constrain_velocity_in_solids, as the step's first call had them
+  struct SolidFaceFrame {
+    Vec<Dim> normal, velocity;
+    double before = 0.0;
+  };
+  std::vector<SolidFaceFrame> solid_frame_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF
