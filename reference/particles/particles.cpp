@@ -523,44 +523,71 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
     value = sum / count;
     return true;
   };
-  // the invalid neighbours of `faces` (sorted, each once): the candidates of a layer
-  std::vector<int> candidates;
-  auto candidates_beside = [&](const std::vector<int>& faces) {
-    // gathered on several threads (sorted below: the same list for any split)
-    candidates = gather_in_order<int>(static_cast<int>(faces.size()),
-                                      [&](int i, std::vector<int>& out) {
-                                        std::array<int, 2 * Dim> nb;
-                                        neighbours(faces[i], nb);
-                                        for (int g : nb)
-                                          if (g >= 0 && !valid[g]) out.push_back(g);
-                                      });
-    std::sort(candidates.begin(), candidates.end());
-    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  // The candidates of a layer: the invalid neighbours of its sources (the given valid faces for
+  // the first layer, the faces the layer before filled for the others), each once. A candidate g
+  // is listed by the first of its neighbours (in g's neighbour order) that is a source, at that
+  // neighbour's first mention of g, so the sources can be visited on several threads (fixed
+  // blocks joined in order: the same list for any team) without sorting or a shared mark. During
+  // the call `valid` holds 1 for the faces valid before the last layer and kFresh for those it
+  // filled; the order of the list changes no value (every average of a layer reads the validity
+  // at the layer's start, and each candidate is written once).
+  constexpr char kFresh = 2;
+  const auto gather_candidates = [&](int count, auto&& source_face, auto&& is_source) {
+    return gather_in_order<int>(count, [&](int i, std::vector<int>& out) {
+      const int f = source_face(i);
+      if (f < 0) return;
+      std::array<int, 2 * Dim> nb, nb_of_g;
+      neighbours(f, nb);
+      for (int k = 0; k < 2 * Dim; ++k) {
+        const int g = nb[k];
+        if (g < 0 || valid[g]) continue;
+        bool first_mention = true;
+        for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
+        if (!first_mention) continue;
+        neighbours(g, nb_of_g);
+        int first_source = -1;
+        for (int l = 0; l < 2 * Dim && first_source < 0; ++l)
+          if (nb_of_g[l] >= 0 && is_source(nb_of_g[l])) first_source = nb_of_g[l];
+        if (first_source == f) out.push_back(g);
+      }
+    });
   };
-  // the first layer's: beside any valid face
-  candidates_beside(gather_in_order<int>(nf, [&](int f, std::vector<int>& out) {
-    if (valid[f]) out.push_back(f);
-  }));
+  // the first layer's: beside any valid face (the given flags made 0 / 1 first)
+#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
+  for (int f = 0; f < nf; ++f)
+    if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
+  std::vector<int> candidates = gather_candidates(
+      nf, [&](int f) { return valid[f] ? f : -1; }, [&](int g) { return valid[g] != 0; });
   std::vector<double> value;
   std::vector<char> filled;
+  std::vector<int> fresh;
   for (int layer = 0; layer < layers && !candidates.empty(); ++layer) {
     const int n = static_cast<int>(candidates.size());
     value.assign(n, 0.0);
     filled.assign(n, 0);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+#pragma omp parallel for schedule(static) num_threads(team_threads(n))
     for (int i = 0; i < n; ++i) filled[i] = average(candidates[i], value[i]);
-    // apply after all averages are taken (they read the previous layer's validity)
-    std::vector<int> fresh;
+    // apply after all averages are taken (they read the previous layer's validity); the faces of
+    // the layer before are no longer fresh
+#pragma omp parallel for schedule(static) num_threads(team_threads(n))
     for (int i = 0; i < n; ++i)
       if (filled[i]) {
         u[candidates[i]] = value[i];
-        valid[candidates[i]] = 1;
-        fresh.push_back(candidates[i]);
+        valid[candidates[i]] = kFresh;
       }
+    const int old = static_cast<int>(fresh.size());
+#pragma omp parallel for schedule(static) num_threads(team_threads(old))
+    for (int i = 0; i < old; ++i) valid[fresh[i]] = 1;
+    fresh = gather_in_order<int>(n, [&](int i, std::vector<int>& out) {
+      if (filled[i]) out.push_back(candidates[i]);
+    });
     if (fresh.empty()) break;
     // the next layer's: beside the faces just filled
-    candidates_beside(fresh);
+    candidates = gather_candidates(
+        static_cast<int>(fresh.size()), [&](int i) { return fresh[i]; },
+        [&](int g) { return valid[g] == kFresh; });
   }
+  for (int f : fresh) valid[f] = 1;
 }
 
 template <int Dim>
@@ -788,30 +815,46 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   // slots, the wrapped positions stored in slot order for locality; runs found through tiles of
   // 8^Dim cells made only where particles are
   {
+    // each pass on several threads: fixed blocks of slots count their digits, every block's
+    // share of a digit starts after the earlier digits and the earlier blocks' share of it, and
+    // each block scatters its slots in order (a stable sort, whose result is unique: the same
+    // order for any team)
     constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
     int bits = 0;
     while ((1L << bits) < nc) ++bits;
+    const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
     std::vector<int> sorted(np);
-    std::vector<int> count(kDigits + 1);
+    std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
+    const auto block_begin = [&](int b) { return np * b / blocks; };
     for (int shift = 0; shift < bits; shift += kDigitBits) {
-      std::fill(count.begin(), count.end(), 0);
-      for (long s = 0; s < np; ++s) ++count[((bucket[order[s]] >> shift) & (kDigits - 1)) + 1];
-      for (int d = 0; d < kDigits; ++d) count[d + 1] += count[d];
-      for (long s = 0; s < np; ++s) {
-        const int p = order[s];
-        sorted[count[(bucket[p] >> shift) & (kDigits - 1)]++] = p;
+      const auto digit = [&](long s) { return (bucket[order[s]] >> shift) & (kDigits - 1); };
+#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+      for (int b = 0; b < blocks; ++b) {
+        std::fill(count[b].begin(), count[b].end(), 0L);
+        for (long s = block_begin(b); s < block_begin(b + 1); ++s) ++count[b][digit(s)];
       }
+      long start = 0;
+      for (int d = 0; d < kDigits; ++d)
+        for (int b = 0; b < blocks; ++b) {
+          const long c = count[b][d];
+          count[b][d] = start;
+          start += c;
+        }
+#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+      for (int b = 0; b < blocks; ++b)
+        for (long s = block_begin(b); s < block_begin(b + 1); ++s)
+          sorted[count[b][digit(s)]++] = order[s];
       order.swap(sorted);
     }
   }
+#pragma omp parallel for schedule(static) num_threads(team_threads(np))
   for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
-  // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1])
-  std::vector<int> run_cell, run_start;
-  for (long s = 0; s < np; ++s)
-    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) {
-      run_cell.push_back(bucket[order[s]]);
-      run_start.push_back(static_cast<int>(s));
-    }
+  // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1]) (gathered in order)
+  std::vector<int> run_start = gather_in_order<int>(static_cast<int>(np), [&](int s, std::vector<int>& out) {
+    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) out.push_back(s);
+  });
+  std::vector<int> run_cell(run_start.size());
+  for (std::size_t k = 0; k < run_start.size(); ++k) run_cell[k] = bucket[order[run_start[k]]];
   run_start.push_back(static_cast<int>(np));
   const int runs = static_cast<int>(run_cell.size());
   TiledLattice<Dim, int> run_of(grid.cells(), -1);
