@@ -786,17 +786,16 @@ void Simulation<Dim>::advect(double dt) {
   {
     ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
     grid_to_particles(particles_, grid_, u_, unread);
-    if (!switches_.apic)
-      for (auto& c : particles_.c) c.setZero();
   }
   const auto flagged = [&] { return std::count(unread_.begin(), unread_.end(), 1); };
   for (long n = guard ? flagged() : 0; n > 0 && extend_extrapolation(); n = flagged()) {
     reread_particles_ += n;
     ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
     grid_to_particles(particles_, grid_, u_, unread);
-    if (!switches_.apic)
-      for (std::size_t p = 0; p < particles_.size(); ++p)
-        if (unread_[p]) particles_.c[p].setZero();
+  }
+  if (!switches_.apic) {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    for (auto& c : particles_.c) c.setZero();
   }
   account(frame_ledger_.to_particles, [&] { return particle_kinetic_energy(); });
   restart_ledger([&] { return liquid_potential_energy(); });
