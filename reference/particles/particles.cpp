@@ -440,11 +440,17 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
 /// u_f, c_pa = sum_f grad w_fp u_f (row a of c is the gradient of component a; exact for affine
 /// fields away from walls).
 template <int Dim>
-void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u) {
+long grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
+                       std::vector<char>* unread) {
   constexpr int kCorners = 1 << Dim;
   const long np = static_cast<long>(particles.size());
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+  // with `unread`: a second pass (flags given) redoes the flagged particles only
+  const bool again = unread != nullptr && static_cast<long>(unread->size()) == np;
+  if (unread != nullptr && !again) unread->assign(np, 0);
+  long flagged = 0;
+#pragma omp parallel for schedule(static) reduction(+ : flagged) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
+    if (again && !(*unread)[p]) continue;
     std::array<int, kCorners> idx;
     std::array<double, kCorners> w;
     std::array<Vec<Dim>, kCorners> g;
@@ -462,7 +468,14 @@ void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
     }
     particles.v[p] = v;
     particles.c[p] = c;
+    if (unread != nullptr) {
+      // a NaN face (one the caller marked unreadable) makes v or c NaN
+      const bool bad = !(v.allFinite() && c.allFinite());
+      (*unread)[p] = bad;
+      flagged += bad;
+    }
   }
+  return flagged;
 }
 
 // --- extrapolation -------------------------------------------------------------------------------
@@ -510,44 +523,71 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
     value = sum / count;
     return true;
   };
-  // the invalid neighbours of `faces` (sorted, each once): the candidates of a layer
-  std::vector<int> candidates;
-  auto candidates_beside = [&](const std::vector<int>& faces) {
-    // gathered on several threads (sorted below: the same list for any split)
-    candidates = gather_in_order<int>(static_cast<int>(faces.size()),
-                                      [&](int i, std::vector<int>& out) {
-                                        std::array<int, 2 * Dim> nb;
-                                        neighbours(faces[i], nb);
-                                        for (int g : nb)
-                                          if (g >= 0 && !valid[g]) out.push_back(g);
-                                      });
-    std::sort(candidates.begin(), candidates.end());
-    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  // The candidates of a layer: the invalid neighbours of its sources (the given valid faces for
+  // the first layer, the faces the layer before filled for the others), each once. A candidate g
+  // is listed by the first of its neighbours (in g's neighbour order) that is a source, at that
+  // neighbour's first mention of g, so the sources can be visited on several threads (fixed
+  // blocks joined in order: the same list for any team) without sorting or a shared mark. During
+  // the call `valid` holds 1 for the faces valid before the last layer and kFresh for those it
+  // filled; the order of the list changes no value (every average of a layer reads the validity
+  // at the layer's start, and each candidate is written once).
+  constexpr char kFresh = 2;
+  const auto gather_candidates = [&](int count, auto&& source_face, auto&& is_source) {
+    return gather_in_order<int>(count, [&](int i, std::vector<int>& out) {
+      const int f = source_face(i);
+      if (f < 0) return;
+      std::array<int, 2 * Dim> nb, nb_of_g;
+      neighbours(f, nb);
+      for (int k = 0; k < 2 * Dim; ++k) {
+        const int g = nb[k];
+        if (g < 0 || valid[g]) continue;
+        bool first_mention = true;
+        for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
+        if (!first_mention) continue;
+        neighbours(g, nb_of_g);
+        int first_source = -1;
+        for (int l = 0; l < 2 * Dim && first_source < 0; ++l)
+          if (nb_of_g[l] >= 0 && is_source(nb_of_g[l])) first_source = nb_of_g[l];
+        if (first_source == f) out.push_back(g);
+      }
+    });
   };
-  // the first layer's: beside any valid face
-  candidates_beside(gather_in_order<int>(nf, [&](int f, std::vector<int>& out) {
-    if (valid[f]) out.push_back(f);
-  }));
+  // the first layer's: beside any valid face (the given flags made 0 / 1 first)
+#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
+  for (int f = 0; f < nf; ++f)
+    if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
+  std::vector<int> candidates = gather_candidates(
+      nf, [&](int f) { return valid[f] ? f : -1; }, [&](int g) { return valid[g] != 0; });
   std::vector<double> value;
   std::vector<char> filled;
+  std::vector<int> fresh;
   for (int layer = 0; layer < layers && !candidates.empty(); ++layer) {
     const int n = static_cast<int>(candidates.size());
     value.assign(n, 0.0);
     filled.assign(n, 0);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+#pragma omp parallel for schedule(static) num_threads(team_threads(n))
     for (int i = 0; i < n; ++i) filled[i] = average(candidates[i], value[i]);
-    // apply after all averages are taken (they read the previous layer's validity)
-    std::vector<int> fresh;
+    // apply after all averages are taken (they read the previous layer's validity); the faces of
+    // the layer before are no longer fresh
+#pragma omp parallel for schedule(static) num_threads(team_threads(n))
     for (int i = 0; i < n; ++i)
       if (filled[i]) {
         u[candidates[i]] = value[i];
-        valid[candidates[i]] = 1;
-        fresh.push_back(candidates[i]);
+        valid[candidates[i]] = kFresh;
       }
+    const int old = static_cast<int>(fresh.size());
+#pragma omp parallel for schedule(static) num_threads(team_threads(old))
+    for (int i = 0; i < old; ++i) valid[fresh[i]] = 1;
+    fresh = gather_in_order<int>(n, [&](int i, std::vector<int>& out) {
+      if (filled[i]) out.push_back(candidates[i]);
+    });
     if (fresh.empty()) break;
     // the next layer's: beside the faces just filled
-    candidates_beside(fresh);
+    candidates = gather_candidates(
+        static_cast<int>(fresh.size()), [&](int i) { return fresh[i]; },
+        [&](int g) { return valid[g] == kFresh; });
   }
+  for (int f : fresh) valid[f] = 1;
 }
 
 template <int Dim>
@@ -629,19 +669,39 @@ void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<
 template <int Dim>
 long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
                       double dt, const SolidField<Dim>& solids,
-                      const std::array<BoundaryType, 2 * Dim>& boundary) {
+                      const std::array<BoundaryType, 2 * Dim>& boundary,
+                      std::vector<char>* unread) {
   const long np = static_cast<long>(particles.size());
   const double max_move = kAdvectionSubstep * grid.dx();
+  // with `unread`: a second pass (flags given) moves the flagged particles only
+  const bool again = unread != nullptr && static_cast<long>(unread->size()) == np;
+  if (unread != nullptr && !again) unread->assign(np, 0);
   std::vector<char> remove(np, 0);
   long removed = 0;
   // chunks handed out as threads come free: the substeps per particle follow its speed, which
   // varies across the liquid (each particle is independent, so the result does not change)
 #pragma omp parallel for schedule(dynamic, 512) reduction(+ : removed) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
+    if (again && !(*unread)[p]) continue;
     Vec<Dim> x = particles.x[p];
+    // a NaN read (a face the caller marked unreadable, or the particle's own v and c from
+    // grid_to_particles): the particle stays where it is, flagged (checked before the value
+    // places a point: a NaN point has no stencil)
+    const auto unreadable = [&](const Vec<Dim>& value) {
+      return unread != nullptr && !value.allFinite();
+    };
+    bool read = !unreadable(particles.v[p]) &&
+                !(unread != nullptr && !particles.c[p].allFinite());
     // number of substeps from the speeds along the full-step midpoint path
-    const Vec<Dim> v1 = grid.interpolate_velocity(u, x);
-    const Vec<Dim> v2 = grid.interpolate_velocity(u, Vec<Dim>(x + 0.5 * dt * v1));
+    const Vec<Dim> v1 = read ? grid.interpolate_velocity(u, x) : Vec<Dim>::Zero();
+    read = read && !unreadable(v1);
+    const Vec<Dim> v2 =
+        read ? grid.interpolate_velocity(u, Vec<Dim>(x + 0.5 * dt * v1)) : Vec<Dim>::Zero();
+    read = read && !unreadable(v2);
+    if (!read) {
+      (*unread)[p] = 1;
+      continue;
+    }
     const double path = dt * std::max(v1.norm(), v2.norm());
     const int n = std::clamp(static_cast<int>(std::ceil(path / max_move)), 1, kMaxAdvectionSubsteps);
     const double h = dt / n;
@@ -649,17 +709,37 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
     for (int s = 0; s < n && inside; ++s) {
       // midpoint rule (RK2) over the substep, then solids, walls, periodic wrap, open faces
       const Vec<Dim> a = s == 0 ? v1 : grid.interpolate_velocity(u, x);
+      if (unreadable(a)) {
+        read = false;
+        break;
+      }
       const Vec<Dim> xm = x + 0.5 * h * a;
-      x += h * grid.interpolate_velocity(u, xm);
+      const Vec<Dim> b = grid.interpolate_velocity(u, xm);
+      if (unreadable(b)) {
+        read = false;
+        break;
+      }
+      x += h * b;
       inside = settle_position(grid, solids, boundary, true, x);
     }
+    if (unread != nullptr) (*unread)[p] = !read;
+    if (!read) continue;
     if (!inside) {
       remove[p] = 1;
       ++removed;
     }
     particles.x[p] = x;
   }
-  if (removed > 0) particles.remove_flagged(remove);
+  if (removed > 0) {
+    particles.remove_flagged(remove);
+    // the flags follow their particles
+    if (unread != nullptr) {
+      std::size_t out = 0;
+      for (long p = 0; p < np; ++p)
+        if (!remove[p]) (*unread)[out++] = (*unread)[p];
+      unread->resize(out);
+    }
+  }
   return removed;
 }
 
@@ -735,30 +815,46 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   // slots, the wrapped positions stored in slot order for locality; runs found through tiles of
   // 8^Dim cells made only where particles are
   {
+    // each pass on several threads: fixed blocks of slots count their digits, every block's
+    // share of a digit starts after the earlier digits and the earlier blocks' share of it, and
+    // each block scatters its slots in order (a stable sort, whose result is unique: the same
+    // order for any team)
     constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
     int bits = 0;
     while ((1L << bits) < nc) ++bits;
+    const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
     std::vector<int> sorted(np);
-    std::vector<int> count(kDigits + 1);
+    std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
+    const auto block_begin = [&](int b) { return np * b / blocks; };
     for (int shift = 0; shift < bits; shift += kDigitBits) {
-      std::fill(count.begin(), count.end(), 0);
-      for (long s = 0; s < np; ++s) ++count[((bucket[order[s]] >> shift) & (kDigits - 1)) + 1];
-      for (int d = 0; d < kDigits; ++d) count[d + 1] += count[d];
-      for (long s = 0; s < np; ++s) {
-        const int p = order[s];
-        sorted[count[(bucket[p] >> shift) & (kDigits - 1)]++] = p;
+      const auto digit = [&](long s) { return (bucket[order[s]] >> shift) & (kDigits - 1); };
+#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+      for (int b = 0; b < blocks; ++b) {
+        std::fill(count[b].begin(), count[b].end(), 0L);
+        for (long s = block_begin(b); s < block_begin(b + 1); ++s) ++count[b][digit(s)];
       }
+      long start = 0;
+      for (int d = 0; d < kDigits; ++d)
+        for (int b = 0; b < blocks; ++b) {
+          const long c = count[b][d];
+          count[b][d] = start;
+          start += c;
+        }
+#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+      for (int b = 0; b < blocks; ++b)
+        for (long s = block_begin(b); s < block_begin(b + 1); ++s)
+          sorted[count[b][digit(s)]++] = order[s];
       order.swap(sorted);
     }
   }
+#pragma omp parallel for schedule(static) num_threads(team_threads(np))
   for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
-  // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1])
-  std::vector<int> run_cell, run_start;
-  for (long s = 0; s < np; ++s)
-    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) {
-      run_cell.push_back(bucket[order[s]]);
-      run_start.push_back(static_cast<int>(s));
-    }
+  // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1]) (gathered in order)
+  std::vector<int> run_start = gather_in_order<int>(static_cast<int>(np), [&](int s, std::vector<int>& out) {
+    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) out.push_back(s);
+  });
+  std::vector<int> run_cell(run_start.size());
+  for (std::size_t k = 0; k < run_start.size(); ++k) run_cell[k] = bucket[order[run_start[k]]];
   run_start.push_back(static_cast<int>(np));
   const int runs = static_cast<int>(run_cell.size());
   TiledLattice<Dim, int> run_of(grid.cells(), -1);
@@ -1938,14 +2034,16 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                        unsigned);                                                  \
   template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,      \
                                   VectorX&);                                                       \
-  template void grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&);               \
+  template long grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&,                \
+                                  std::vector<char>*);                                             \
   template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \
   template void divergence_free_air_velocity(const MacGrid<D>&, const SampleLattice<D>&,          \
                                             const VectorX&, const VectorX&,                       \
                                             const std::vector<char>&,                             \
                                             const std::vector<char>&, int, double, VectorX&);     \
   template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,         \
-                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&);    \
+                                 const SolidField<D>&, const std::array<BoundaryType, 2 * D>&,     \
+                                 std::vector<char>*);                                              \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
                                   const std::array<BoundaryType, 2 * D>&);                         \
   template DensityProjectionStats project_particle_density(                                        \

@@ -57,8 +57,14 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
                        VectorX& face_mass, VectorX& face_density);
 
 /// APIC grid-to-particle transfer: v and c from the face velocities u.
+/// With `unread` (the guard against unreadable faces, which the caller set to NaN in u;
+/// docs/particles.md "Velocity extrapolation"): when empty (or of another size) every particle is
+/// transferred and unread[p] = 1 marks those whose v or c came out non-finite; when it has one
+/// flag per particle, only the flagged ones are transferred again and their flags updated.
+/// Returns the number flagged (0 without `unread`).
 template <int Dim>
-void grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u);
+long grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
+                       std::vector<char>* unread = nullptr);
 
 /// Makes the extrapolated velocity divergence-free in the air cells beside the liquid: for each
 /// cell whose centre lies outside the liquid (0 < phi < layers dx, phi the liquid level set on the
@@ -89,10 +95,15 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
 /// along its gradient,
 /// keeps them inside walls, wraps periodic axes. Particles that leave through an open face are
 /// removed; returns how many were removed.
+/// With `unread` (as in grid_to_particles: empty for a first pass over every particle, one flag
+/// per particle to move the flagged ones only): a particle whose v or c is non-finite or that
+/// reads a non-finite velocity anywhere along its path stays where it was, flagged; the others'
+/// flags are cleared. The flags follow the particles through the removal.
 template <int Dim>
 long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const VectorX& u,
                       double dt, const SolidField<Dim>& solids,
-                      const std::array<BoundaryType, 2 * Dim>& boundary);
+                      const std::array<BoundaryType, 2 * Dim>& boundary,
+                      std::vector<char>* unread = nullptr);
 
 /// Position correction that keeps particles evenly spread so the liquid volume stays steady
 /// (Algorithm 1, line 15); respects solids, walls and periodicity.

@@ -57,7 +57,13 @@ std::vector<double> to_std(const Vec<Dim>& x) {
 }
 
 bool all_finite(const VectorX& v) {
-  return v.allFinite();
+  // on several threads (a logical and: the same answer for any split)
+  const Eigen::Index n = v.size();
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(&& : finite) num_threads(team_threads(n))
+  for (Eigen::Index i = 0; i < n; i += 4096)
+    finite = finite && v.segment(i, std::min<Eigen::Index>(4096, n - i)).allFinite();
+  return finite;
 }
 
 /// phi[k] = value(k) for every point k of the lattice box [lo, hi] (inclusive, clamped), on
@@ -615,6 +621,11 @@ int Simulation<Dim>::extrapolation_layers(double dt) const {
   // the drift of the next step (split_advection) and divergence_free_air (whose band is these
   // layers) keep the cfl bound
   const int cfl_layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
+  if (switches_.extrapolate_everywhere) {
+    int diameter = 0;  // in layers: steps of one face along one axis
+    for (int a = 0; a < Dim; ++a) diameter += grid_.cells()[a] + 1;
+    return diameter;
+  }
   if (switches_.extrapolate_cfl_layers || coupled_ || rigid_ || split_drift() ||
       switches_.divergence_free_air)
     return cfl_layers;
@@ -634,7 +645,84 @@ void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   if (!switches_.extrapolate_after_solve) return;
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   trusted_faces(face_flags_);
-  extrapolate_velocity(grid_, u_, face_flags_, extrapolation_layers(dt));
+  reached_layers_ = extrapolation_layers(dt);
+  extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
+  if (!guards_reads()) return;
+  // a copy for a deeper extrapolation (which reads only the trusted faces and the layers it fills
+  // itself, so the shallower layers here change nothing) and for the faces no particle read (the
+  // extrapolation did not write them: the solve's values); then the faces not reached are NaN
+  // while the particles read the velocity (advect), so that a read shows in the particle's values
+  const int nf = grid_.num_faces();
+  reached_u_.resize(nf);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) {
+    reached_u_[f] = u_[f];
+    if (!face_flags_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
+  }
+}
+
+template <int Dim>
+bool Simulation<Dim>::guards_reads() const {
+  return switches_.extrapolate_after_solve &&
+         (switches_.extend_to_every_read || switches_.poison_unreached_faces);
+}
+
+template <int Dim>
+bool Simulation<Dim>::extend_extrapolation() {
+  if (!switches_.extend_to_every_read) return false;
+  // a face lattice's diameter in extrapolation layers (steps of one face along one axis)
+  int diameter = 0;
+  for (int a = 0; a < Dim; ++a) diameter += grid_.cells()[a] + 1;
+  if (reached_layers_ >= diameter) return false;
+  reached_layers_ = std::min(diameter, 2 * reached_layers_ + 1);
+  const bool deepest = reached_layers_ >= diameter;
+  Stopwatch watch;
+  // the deeper extrapolation (from the copy made after the shallower one) in u_'s place while the
+  // stages of the step after the extrapolation run on it: its first layers are those of the
+  // shallower one (each layer reads only the trusted faces and the layers before it), so every
+  // face reached already gets the same value again
+  const int nf = grid_.num_faces();
+  extended_u_.resize(nf);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) extended_u_[f] = reached_u_[f];
+  u_.swap(extended_u_);
+  face_flags_.swap(extended_flags_);
+  trusted_faces(face_flags_);
+  extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
+  // unreached even now (no trusted face of that component to reach them from): the solve's value
+  // as before the guard, unless the test switch keeps them NaN
+  if (!deepest || switches_.poison_unreached_faces) {
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f)
+      if (!face_flags_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
+  }
+  // the walls and the fully solid faces as the step set them before it constrained the faces
+  // in solids (extended_u_ holds the step's velocity now; a face in a solid its value before),
+  // then the faces in solids constrained at the pose of the step's solve (the bodies have moved
+  // since: move_bodies)
+  {
+    const VectorX& given = extended_u_;
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f)
+      if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = given[f];
+    const int count = static_cast<int>(solid_faces_.size());
+    for (int j = 0; j < count && !solids_.empty(); ++j) {
+      const int f = solid_faces_[j];
+      if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = solid_frame_[j].before;
+    }
+  }
+  constrain_velocity_in_solids(true);
+  stats_.timing[FramePhase::extrapolation] += watch.seconds();
+  divergence_free_air();  // (timed as extrapolation)
+  const Stopwatch rest;
+  face_flags_.swap(extended_flags_);
+  u_.swap(extended_u_);
+  // only the faces still unread take the deeper values
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f)
+    if (std::isnan(u_[f])) u_[f] = extended_u_[f];
+  stats_.timing[FramePhase::extrapolation] += rest.seconds();
+  return true;
 }
 
 template <int Dim>
@@ -651,20 +739,24 @@ void Simulation<Dim>::divergence_free_air() {
 }
 
 template <int Dim>
+bool Simulation<Dim>::wall_face(int f) const {
+  const auto [axis, coord] = grid_.face_coord(f);
+  return grid_.is_boundary_face(axis, coord) &&
+         boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
+}
+
+template <int Dim>
 void Simulation<Dim>::apply_wall_and_solid_velocities() {
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   // zero the normal velocity on walls, give fully solid faces their solid's velocity (zero for
   // static solids), then remove the inflow into solids. The fully solid faces are found by
-  // their weight alone (a compare per face), the walls by their layers of faces.
+  // their weight alone (a compare per face, on several threads: each face written once), the
+  // walls by their layers of faces.
   const int nf = grid_.num_faces();
-  const auto wall = [&](int axis, const VecI<Dim>& coord) {
-    return grid_.is_boundary_face(axis, coord) &&
-           boundary_[2 * axis + (coord[axis] == 0 ? 0 : 1)] == BoundaryType::wall;
-  };
+#pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) {
-    if (weights_.fluid_face[f] != 0.0) continue;
+    if (weights_.fluid_face[f] != 0.0 || wall_face(f)) continue;
     const auto [axis, coord] = grid_.face_coord(f);
-    if (wall(axis, coord)) continue;
     u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
   }
   for (int axis = 0; axis < Dim; ++axis) {
@@ -708,14 +800,59 @@ void Simulation<Dim>::rebuild_solid_field() {
 template <int Dim>
 void Simulation<Dim>::advect(double dt) {
   // (14) grid to particles (APIC), then advect (RK2) through the extrapolated field; particles
-  // leaving through open faces are removed, particles that end up inside a solid are pushed out
-  ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
-  grid_to_particles(particles_, grid_, u_);
-  if (!switches_.apic)
+  // leaving through open faces are removed, particles that end up inside a solid are pushed out.
+  // With the guard (guards_reads), the faces the extrapolation did not reach are NaN here: a
+  // particle that reads one (its stencil, its path, a solid face interpolated from one) is
+  // flagged and redone after a deeper extrapolation, until none is left
+  const bool guard = guards_reads();
+  std::vector<char>* unread = guard ? &unread_ : nullptr;
+  if (guard) unread_.clear();
+  {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    grid_to_particles(particles_, grid_, u_, unread);
+  }
+  const auto flagged = [&] { return std::count(unread_.begin(), unread_.end(), 1); };
+  for (long n = guard ? flagged() : 0; n > 0 && extend_extrapolation(); n = flagged()) {
+    reread_particles_ += n;
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    grid_to_particles(particles_, grid_, u_, unread);
+  }
+  if (!switches_.apic) {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
     for (auto& c : particles_.c) c.setZero();
+  }
   account(frame_ledger_.to_particles, [&] { return particle_kinetic_energy(); });
   restart_ledger([&] { return liquid_potential_energy(); });
-  advect_particles(particles_, grid_, u_, split_drift() ? 0.5 * dt : dt, solids_, boundary_);
+  const double h = split_drift() ? 0.5 * dt : dt;
+  if (guard) unread_.clear();
+  {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    advect_particles(particles_, grid_, u_, h, solids_, boundary_, unread);
+  }
+  // (a particle's own v and c were read well: the deeper extrapolation leaves its stencil's
+  // faces as they were, so grid_to_particles would give it the same again)
+  for (long n = guard ? flagged() : 0; n > 0 && extend_extrapolation(); n = flagged()) {
+    reread_particles_ += n;
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    advect_particles(particles_, grid_, u_, h, solids_, boundary_, unread);
+  }
+  if (guard) {
+    // the faces no particle read get the solve's value back (what a probe or checkpoint of the
+    // grid velocity read before the guard)
+    const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f)
+      if (std::isnan(u_[f])) u_[f] = reached_u_[f];
+    // left flagged only when poisoned (StageSwitches::poison_unreached_faces): a read of a face
+    // the extrapolation did not reach
+    const auto left = std::find(unread_.begin(), unread_.end(), 1);
+    if (left != unread_.end()) {
+      std::ostringstream msg;
+      msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): particle "
+          << (left - unread_.begin()) << " read a face the extrapolation did not reach";
+      throw SimulationError(msg.str());
+    }
+  }
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
 }
 
@@ -1168,25 +1305,34 @@ void Simulation<Dim>::find_faces_in_solids() {
 }
 
 template <int Dim>
-void Simulation<Dim>::constrain_velocity_in_solids() {
+void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
   if (solids_.empty()) return;
   // every new value from the velocity before this stage, then all written (instead of a copy
   // of the whole velocity to read from); the faces in solids are those of the last
-  // find_faces_in_solids (the solids have not moved since)
+  // find_faces_in_solids (the solids have not moved since). With the guard of advect the
+  // normals and solid velocities are kept per face, so that a deeper extrapolation after the
+  // bodies moved (extend_extrapolation, same_pose) constrains at the pose of the step's solve
   const std::vector<int>& faces = solid_faces_;
   std::vector<double>& values = solid_values_;
   values.resize(faces.size());
   const int count = static_cast<int>(faces.size());
+  const bool keep = guards_reads() && !same_pose;
+  if (keep) solid_frame_.resize(faces.size());
 #pragma omp parallel for schedule(static) num_threads(team_threads(count))
   for (int j = 0; j < count; ++j) {
     const int f = faces[j];
     const auto [axis, coord] = grid_.face_coord(f);
     const Vec<Dim> x = grid_.face_center(axis, coord);
-    const Vec<Dim> n = solids_.gradient(x);
+    const Vec<Dim> n = same_pose ? solid_frame_[j].normal : solids_.gradient(x);
+    const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
+                                  : (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero());
+    if (keep) solid_frame_[j] = {n, vs, u_[f]};
     Vec<Dim> v = grid_.interpolate_velocity(u_, x);
-    const double vn = (v - (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero())).dot(n);
+    const double vn = (v - vs).dot(n);
     if (vn < 0.0) v -= vn * n;
-    values[j] = v[axis];
+    // (a NaN in any component, a face the guard of advect marks unread, makes the value NaN: the
+    // comparison above would drop it)
+    values[j] = std::isnan(vn) ? vn : v[axis];
   }
   for (int j = 0; j < count; ++j) u_[faces[j]] = values[j];
 }
@@ -1197,9 +1343,16 @@ void Simulation<Dim>::check_finite(const char* after) const {
   if (!all_finite(u_)) what = "non-finite grid velocity";
   if (!all_finite(pressure_)) what = "non-finite pressure";
   if (!all_finite(stress_)) what = "non-finite viscous stress";
-  for (std::size_t p = 0; p < particles_.size() && what.empty(); ++p)
-    if (!particles_.x[p].allFinite() || !particles_.v[p].allFinite())
-      what = "non-finite particle position or velocity (particle " + std::to_string(p) + ")";
+  if (what.empty()) {
+    // the first particle that is not finite (the smallest index: the same for any split)
+    const long np = static_cast<long>(particles_.size());
+    long first = np;
+#pragma omp parallel for schedule(static) reduction(min : first) num_threads(team_threads(np))
+    for (long p = 0; p < np; ++p)
+      if (!particles_.x[p].allFinite() || !particles_.v[p].allFinite()) first = std::min(first, p);
+    if (first < np)
+      what = "non-finite particle position or velocity (particle " + std::to_string(first) + ")";
+  }
   if (what.empty()) return;
   std::ostringstream msg;
   msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): " << what << " after " << after;
@@ -1402,7 +1555,12 @@ void Simulation<Dim>::fill_state_stats(FrameStats& s) const {
 template <int Dim>
 double Simulation<Dim>::face_kinetic_energy() const {
   double energy = 0.0;
-  for (int f = 0; f < grid_.num_faces(); ++f) energy += 0.5 * face_mass_[f] * u_[f] * u_[f];
+  // (between the extrapolation and the advection, a face not reached is NaN: its value is the
+  // solve's, reached_u_, as it was before the guard)
+  for (int f = 0; f < grid_.num_faces(); ++f) {
+    const double u = std::isnan(u_[f]) ? reached_u_[f] : u_[f];
+    energy += 0.5 * face_mass_[f] * u * u;
+  }
   return energy;
 }
 

@@ -92,6 +92,21 @@ struct StageSwitches {
   /// Measure the energy change of every stage (energy_ledger()): several extra sweeps over the
   /// faces and particles per step, so off unless a diagnosis asks for it.
   bool energy_ledger = false;
+  /// Every face a particle reads after the solve (grid_to_particles, the advection's path, the
+  /// solid faces interpolated from them) holds the extrapolated velocity: a particle that would
+  /// read a face the extrapolation did not reach is transferred and moved again after a deeper
+  /// extrapolation (Simulation::extend_extrapolation; docs/particles.md "Velocity
+  /// extrapolation"). false: such faces keep what the solve left there (the behaviour before
+  /// particles7; a comparison switch).
+  bool extend_to_every_read = true;
+  /// A test switch: the faces the extrapolation did not reach stay NaN while the particles read
+  /// the velocity (no fallback to the solve's value when even the deepest extrapolation cannot
+  /// reach them; with extend_to_every_read off, no deeper extrapolation either), so a particle
+  /// that reads one fails the step's finite check (tests/validation/test_unreached_faces.cpp).
+  bool poison_unreached_faces = false;
+  /// A test switch: the extrapolation after the solve reaches every face it can (as many layers
+  /// as the face lattices' diameter), whatever the step's speed.
+  bool extrapolate_everywhere = false;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
@@ -201,6 +216,9 @@ class Simulation : public AnySimulation {
   const std::vector<ShapePtr<Dim>>& static_shapes() const { return solid_shapes_; }
   /// The moving bodies with their contacts (null in scenes without dynamic or kinematic bodies).
   const RigidWorld<Dim>* rigid_world() const { return rigid_.get(); }
+  /// Particles transferred or moved again after a deeper extrapolation since the start
+  /// (StageSwitches::extend_to_every_read), counted once per pass; for tests.
+  long reread_particles() const { return reread_particles_; }
 
  private:
   /// One step of Algorithm 1 of length dt: the liquid with its solids and bodies (the coupled
@@ -235,6 +253,14 @@ class Simulation : public AnySimulation {
   void apply_wall_and_solid_velocities();
   /// The air cells beside the liquid made divergence-free (StageSwitches::divergence_free_air).
   void divergence_free_air();
+  /// Whether the faces the extrapolation did not reach are marked (NaN) while the particles read
+  /// the velocity (extend_to_every_read or poison_unreached_faces).
+  bool guards_reads() const;
+  /// The faces the extrapolation after the solve left unreached get the values of one twice as
+  /// deep (from the solve's velocity, reached_u_), then the walls' and solids' velocities; faces
+  /// already reached keep their values bit for bit. Returns false once the extrapolation reaches
+  /// every face it can (then unreached faces hold the solve's value, unless poisoned).
+  bool extend_extrapolation();
   /// Line 13: the bodies' poses (coupled scenes) and the particles' SolidField at the new pose.
   void move_bodies(double dt);
   /// The particles' SolidField from the static shapes and the posed moving bodies.
@@ -282,7 +308,11 @@ class Simulation : public AnySimulation {
   /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
   /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
   /// particles near a solid are not carried into it.
-  void constrain_velocity_in_solids();
+  /// same_pose (the guard's deeper extrapolation, after the bodies moved): the normals and solid
+  /// velocities of the step's first call.
+  void constrain_velocity_in_solids(bool same_pose = false);
+  /// Whether face f lies on a wall of the domain.
+  bool wall_face(int f) const;
   /// The faces whose centre lies in a solid (solid_phi_ < 0 there) into solid_faces_, from the
   /// box of the solids' negative points: wherever solid_phi_ is made.
   void find_faces_in_solids();
@@ -365,8 +395,22 @@ class Simulation : public AnySimulation {
   // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
   // constrain_velocity_in_solids
   std::vector<char> face_flags_;
+  // the guard of the particles' reads (guards_reads): the velocity after the extrapolation
+  // (before the faces not reached become NaN; on those the solve's values), a deeper extrapolation's velocity and flags, the particles that read a face
+  // not reached, the layers of the last extrapolation
+  VectorX reached_u_, extended_u_;
+  std::vector<char> extended_flags_, unread_;
+  int reached_layers_ = 0;
+  long reread_particles_ = 0;
   std::vector<int> solid_faces_;
   std::vector<double> solid_values_;
+  /// per face of solid_faces_ (with the guard of advect): the normal, the solid's velocity and the
+  /// face's value before constrain_velocity_in_solids, as the step's first call had them
+  struct SolidFaceFrame {
+    Vec<Dim> normal, velocity;
+    double before = 0.0;
+  };
+  std::vector<SolidFaceFrame> solid_frame_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF

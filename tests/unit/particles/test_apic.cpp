@@ -3,8 +3,10 @@
 // breadth-first velocity extrapolation.
 #include <omp.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <limits>
 #include <deque>
 #include <random>
 
@@ -395,4 +397,71 @@ TEST_CASE("velocity extrapolation fills breadth-first layers with neighbour aver
     REQUIRE(valid[f]);
     CHECK(u[f] == Approx(j).margin(1e-14));
   }
+}
+
+template <int Dim>
+void check_unread_flags() {
+  // A smooth velocity with a NaN block (faces a caller marks unreadable) on one side of the box:
+  // the particles whose stencil or path touches the block are flagged and left where they are,
+  // every other particle gets the bits of a transfer and advection without flags; a second pass
+  // over the flagged ones after the block got values equals one pass over all of them.
+  const MacGrid<Dim> grid = make_grid<Dim>(12);
+  const int nf = grid.num_faces();
+  VectorX u(nf), filled(nf);
+  for (int f = 0; f < nf; ++f) {
+    const auto [axis, coord] = grid.face_coord(f);
+    const Vec<Dim> x = grid.face_center(axis, coord);
+    u[f] = 0.8 + 0.3 * std::sin(3.0 * x[0] + axis) - 0.2 * x[1];
+  }
+  filled = u;
+  for (int f = 0; f < nf; ++f) {
+    const auto [axis, coord] = grid.face_coord(f);
+    if (grid.face_center(axis, coord)[0] > 0.25) u[f] = std::numeric_limits<double>::quiet_NaN();
+  }
+  std::array<BoundaryType, 2 * Dim> walls;
+  walls.fill(BoundaryType::wall);
+  const SolidField<Dim> no_solids;
+  const double dt = 0.05;  // 0.04 s at 0.8-1.3 m/s: up to about 0.8 dx
+  Particles<Dim> plain = random_cloud<Dim>(400, -0.45, 0.45, 3);
+  Particles<Dim> guarded = plain;
+  grid_to_particles(plain, grid, filled);
+  advect_particles(plain, grid, filled, dt, no_solids, walls);
+  std::vector<char> unread;
+  const long g2p_flags = grid_to_particles(guarded, grid, u, &unread);
+  const Particles<Dim> start = guarded;
+  unread.clear();  // a first pass over every particle
+  advect_particles(guarded, grid, u, dt, no_solids, walls, &unread);
+  REQUIRE(unread.size() == guarded.size());
+  long flagged = 0, moved = 0;
+  for (std::size_t p = 0; p < guarded.size(); ++p) {
+    if (unread[p]) {
+      ++flagged;
+      CHECK(guarded.x[p] == start.x[p]);
+      continue;
+    }
+    ++moved;
+    CHECK(guarded.x[p] == plain.x[p]);
+    CHECK(guarded.v[p] == plain.v[p]);
+    CHECK(guarded.c[p] == plain.c[p]);
+  }
+  CHECK(g2p_flags > 0);
+  CHECK(flagged > g2p_flags);  // the block also stops particles whose path reaches it
+  CHECK(moved > 100);
+  // the flagged ones again, through the filled velocity: now as the plain pass
+  const std::vector<char> both = unread;
+  CHECK(grid_to_particles(guarded, grid, filled, &unread) == 0);
+  unread = both;
+  advect_particles(guarded, grid, filled, dt, no_solids, walls, &unread);
+  CHECK(std::count(unread.begin(), unread.end(), 1) == 0);
+  for (std::size_t p = 0; p < guarded.size(); ++p) {
+    CHECK(guarded.x[p] == plain.x[p]);
+    CHECK(guarded.v[p] == plain.v[p]);
+    CHECK(guarded.c[p] == plain.c[p]);
+  }
+}
+
+TEST_CASE("transfers and advection flag the particles that read NaN faces and leave them be",
+          "[unit]") {
+  check_unread_flags<2>();
+  check_unread_flags<3>();
 }
