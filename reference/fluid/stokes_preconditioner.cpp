@@ -104,7 +104,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       std::nth_element(sorted.begin(), mid, sorted.end());
       viscous_ratio_ = *mid;
     }
-    cycles_ = options.velocity_cycles;
+    // (P6): one cycle more per factor 4 of the median ratio above cycle_ratio
     if (options.cycle_ratio > 0.0 && viscous_ratio_ > options.cycle_ratio) {
       const int extra = static_cast<int>(std::floor(std::log(viscous_ratio_ / options.cycle_ratio) / std::log(4.0)));
       cycles_ = std::min(std::max(options.velocity_cycles, options.max_velocity_cycles), options.velocity_cycles + extra);
@@ -341,7 +341,7 @@ void StokesPreconditioner<Dim>::apply_schur(const VectorX& e, VectorX& s) const 
     for (int k = 0; k < np_; ++k) s[k] += schur_diagonal_[k] * e[k];
     return;
   }
-  // least-squares commutator: L^-1 B_p^T W V0 W B_p L^-1 e + Pi^-1 e, each L^-1 one cell V-cycle
+  // (P7), the least-squares commutator: L^-1 B_p^T W V0 W B_p L^-1 e + Pi^-1 e, each L^-1 one cell V-cycle
   // (the same symmetric map on both sides: symmetric positive semi-definite, plus Pi^-1 > 0)
   pressure_.apply(e, lq_, 1);
   multiply(bp_, lq_.data(), lf_.data());

@@ -45,7 +45,7 @@ enum class SchurApproximation {
   /// mobility C; measured 4-8x worse than scaled on Fig. 5, section 19).
   commutator_mobility,
   /// L^-1 B_p^T W V0 W B_p L^-1, W = diag(V0)^-1, L = B_p^T W B_p (the scaled BFBt of
-  /// Elman et al. 2006 / May and Moresi 2008).
+  /// Elman et al. 2006 / May and Moresi 2008) [(P7)].
   commutator_scaled,
 };
 
@@ -60,7 +60,8 @@ struct StokesPreconditionerOptions {
   /// (With cycle_ratio > 0: the count at or below that ratio; section 19.)
   int velocity_cycles = 2;
   /// > 0: one V-cycle more per factor 4 of the median viscous-to-mass ratio r_f = C_f (V0)_ff - 1
-  /// of V's rows above this value (a fixed count per system: P stays a fixed SPD map).
+  /// of V's rows above this value [(P6): I - M'A' = D^-1 B^T (I - QV) C B amplifies the V-cycle
+  /// error by r] (a fixed count per system: P stays a fixed SPD map).
   /// velocity_cycles() of the preconditioner is velocity_cycles + max(0, floor(log4(median r /
   /// cycle_ratio))), at most max_velocity_cycles. In 3D the median r is 6.7 eta dt / (rho dx^2)
   /// (Fig. 5 at 32^3 and 64^3), so 270 is a stiffness of 40: 2 cycles at 32^3, 3 at 64^3, 4 at
@@ -117,11 +118,12 @@ class StokesPreconditioner : public Preconditioner {
   const std::vector<int>& cut_unknowns() const { return cut_; }
   /// Pi per pressure unknown.
   const VectorX& penalty() const { return penalty_; }
-  /// The V-cycles per velocity solve (options' velocity_cycles, raised by the stiffness rule).
+  /// The V-cycles per velocity solve (options' velocity_cycles, raised by the rule of (P6)).
   int velocity_cycles() const { return cycles_; }
   /// The median over V's rows of the viscous-to-mass ratio C_f (V0)_ff - 1 (0 without stress).
   double viscous_ratio() const { return viscous_ratio_; }
-  /// s ~ Sigma^-1 e + Pi^-1 e (S of the second term; Sigma^-1 by options().schur).
+  /// s ~ Sigma^-1 e + Pi^-1 e (S of the second term; Sigma^-1 by options().schur: with the
+  /// commutators, (P7)).
   void apply_schur(const VectorX& e, VectorX& s) const;
   /// y = V0 x = x / C + B_tau K^-1 B_tau^T x over the faces (the preconditioner's K).
   void apply_unpenalised_velocity(const VectorX& x, VectorX& y) const;
