@@ -1446,6 +1446,7 @@ void step_stats_fields(Archive& a, FrameStats& s) {
   a(v.stokes_solves_multigrid);
   a(v.stokes_solves_ssor);
   a(v.max_stokes_stiffness);
+  a(v.preconditioner_fallbacks);
   for (const FramePhase p : enum_values<FramePhase>()) a(s.timing[p]);
 }
 
