@@ -204,7 +204,10 @@ void StokesPreconditioner<Dim>::build_cut_block() {
   collect();
   if (list.empty()) return;
   if (options_.cut_pressure && np_ > 0) grow(true);
-  for (int layer = 0; layer < options_.cut_layers; ++layer) grow(false);
+  for (int layer = 0; layer < options_.cut_layers; ++layer) {
+    if (layer > 0 && options_.cut_layer_limit > 0 && static_cast<int>(list.size()) > options_.cut_layer_limit) break;
+    grow(false);
+  }
   SparseMatrix rows = rows_of(list);
   // A_CC, a principal block of A. Its pressure diagonal is scaled by 1 + 1e-10 (as for the
   // pressure hierarchy): A is only semi-definite for enclosed liquid (constant pressure), and C

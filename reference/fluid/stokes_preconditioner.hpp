@@ -96,6 +96,12 @@ struct StokesPreconditionerOptions {
   double cut_threshold = 0.5;
   bool cut_pressure = true;
   int cut_layers = 2;
+  /// Layers after the first are added only while the block holds at most this many unknowns
+  /// (0: no limit). The factor's cost grows much faster than the block: on the 64^3 tank (a cut
+  /// ball) two layers gave 28070 unknowns and 8.5M factor entries, half the set-up, one layer
+  /// 19307 and 3.9M at the same 6 PCG iterations; the wall bunny's block (about 2.8k unknowns)
+  /// keeps its two layers (docs/preconditioners.md, section 22).
+  int cut_layer_limit = 10000;
 };
 
 /// The preconditioner over the unknowns (tau, p) of StokesDofs. Holds a reference to `a` (the
@@ -116,6 +122,8 @@ class StokesPreconditioner : public Preconditioner {
   const Multigrid& pressure_multigrid() const { return pressure_; }
   /// The unknowns of the cut block C (increasing; empty when off or when there is none).
   const std::vector<int>& cut_unknowns() const { return cut_; }
+  /// Entries of the cut block's LDL^T factor (0 without a block).
+  long cut_factor_entries() const { return cut_factor_ ? static_cast<long>(cut_factor_->analysed_entries()) : 0; }
   /// Pi per pressure unknown.
   const VectorX& penalty() const { return penalty_; }
   /// The V-cycles per velocity solve (options' velocity_cycles, raised by the rule of (P6)).

@@ -8,6 +8,7 @@
 //       [--scene tank|blob|pool] [--backend matrixfree|explicit] [--ssor-max N] [--no-ssor]
 //       [--gamma G] [--cycles K] [--smoothing S] [--sweeps W] [--no-schur] [--no-elements]
 //       [--clamp T] [--repeats R] [--cut-threshold T (0: no cut block)] [--cut-layers L]
+//       [--cut-layer-limit N (layers after the first only while the block has at most N unknowns; 0: none)]
 //       [--no-renumber (Multigrid keeps the caller's numbering: same results, for timing)]
 //       [--two-term | --additive] [--schur cc|mobility|scaled (Sigma^-1 of the two-term form)]
 //       [--cycle-ratio R (0: --cycles always)]
@@ -19,6 +20,7 @@
 //   blob: a liquid ball (centre 0.5, radius 0.3) in the air, touching nothing;
 //   pool: liquid below y = 0.6, no solid.
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -43,6 +45,9 @@ using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
+/// CPU seconds of the process (all threads): on a shared machine less inflated by the load than
+/// the wall clock; with one thread the CPU time of the work itself.
+double cpu_seconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 
 std::vector<double> parse_list(const char* s) {
   std::vector<double> out;
@@ -131,26 +136,31 @@ void run_case(const Config& cfg, int n, double eta) {
   settings.max_iterations = cfg.ssor_max;
   // SSOR
   int it_ssor = -1;
-  double t_ssor = 0.0;
+  double t_ssor = 0.0, c_ssor = 0.0;
   bool conv_ssor = false;
   if (cfg.ssor) {
     for (int r = 0; r < cfg.repeats; ++r) {
       VectorX x;
       const auto t0 = Clock::now();
+      const double c0 = cpu_seconds();
       const PcgResult res = pcg_solve(*op, b, x, settings);
       t_ssor += seconds_since(t0) / cfg.repeats;
+      c_ssor += (cpu_seconds() - c0) / cfg.repeats;
       it_ssor = res.iterations;
       conv_ssor = res.converged;
     }
   }
   // block preconditioner
-  double t_setup = 0.0, t_solve = 0.0;
+  double t_setup = 0.0, t_solve = 0.0, c_setup = 0.0, c_solve = 0.0;
+  int cut_size = 0, cycles = 0;
+  long cut_entries = 0;
   int it_block = -1;
   bool conv_block = false;
   std::size_t bytes = 0;
   int levels = 0;
   for (int r = 0; r < cfg.repeats; ++r) {
     const auto t0 = Clock::now();
+    const double c0 = cpu_seconds();
     StokesFactors f =
         cfg.backend == "explicit"
             ? stokes_factors(sc.grid, layout, sc.w, dofs, sc.dt, *sys, cfg.options.min_fluid_fraction)
@@ -159,8 +169,10 @@ void run_case(const Config& cfg, int n, double eta) {
                              cfg.options.min_fluid_fraction);
     const StokesPreconditioner<Dim> m(sc.grid, *op, std::move(f), cfg.options);
     t_setup += seconds_since(t0) / cfg.repeats;
+    c_setup += (cpu_seconds() - c0) / cfg.repeats;
     VectorX x;
     const auto t1 = Clock::now();
+    const double c1 = cpu_seconds();
     settings.max_iterations = 2000;
     PcgResult res;
     if (cfg.options.inner_cg > 0) {
@@ -191,6 +203,10 @@ void run_case(const Config& cfg, int n, double eta) {
       res = pcg_solve(*op, b, x, settings, m);
     }
     t_solve += seconds_since(t1) / cfg.repeats;
+    c_solve += (cpu_seconds() - c1) / cfg.repeats;
+    cut_size = static_cast<int>(m.cut_unknowns().size());
+    cycles = m.velocity_cycles();
+    cut_entries = m.cut_factor_entries();
     it_block = res.iterations;
     conv_block = res.converged;
     bytes = m.memory_bytes();
@@ -222,6 +238,9 @@ void run_case(const Config& cfg, int n, double eta) {
               Dim, n, cfg.scene.c_str(), eta, dofs.num_stress(), dofs.num_pressure(), it_ssor,
               conv_ssor ? " " : "!", t_ssor, it_block, conv_block ? " " : "!", t_setup, t_solve, levels,
               bytes / 1e6, cfg.ssor ? t_ssor / (t_setup + t_solve) : 0.0);
+  std::printf("     cpu s: SSOR %.3f | block setup %.3f solve %.3f | speed-up %.1f | %d V-cycles | cut block %d unknowns, "
+              "%ld factor entries\n",
+              c_ssor, c_setup, c_solve, cfg.ssor ? c_ssor / (c_setup + c_solve) : 0.0, cycles, cut_size, cut_entries);
   std::fflush(stdout);
 }
 
@@ -273,6 +292,7 @@ int main(int argc, char** argv) {
     else if (a == "--max-coarse") cfg.options.max_coarse = std::atoi(next());
     else if (a == "--cut-threshold") cfg.options.cut_threshold = std::atof(next());
     else if (a == "--cut-layers") cfg.options.cut_layers = std::atoi(next());
+    else if (a == "--cut-layer-limit") cfg.options.cut_layer_limit = std::atoi(next());
     else if (a == "--no-renumber") cfg.options.renumber = false;
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());

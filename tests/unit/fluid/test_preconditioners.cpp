@@ -750,6 +750,20 @@ TEMPLATE_TEST_CASE_SIG("the cut block: the stress unknowns cut by the solid, the
   CHECK(rel_diff(xe, exact) < 1e-7);
   CHECK(std::abs(rm.iterations - re.iterations) <= 1);
   CHECK(rm.iterations < ro.iterations);
+  // the layer limit: a block above cut_layer_limit unknowns after its first layer gets no second
+  // one (this block is below the default limit, so the default keeps both)
+  StokesPreconditionerOptions one = po, limited = po, unlimited = po;
+  one.cut_layers = 1;
+  limited.cut_layer_limit = 1;
+  unlimited.cut_layer_limit = 0;
+  const StokesPreconditioner<Dim> m1(sc.grid, *s.mf, fm, one);
+  const StokesPreconditioner<Dim> ml(sc.grid, *s.mf, fm, limited);
+  const StokesPreconditioner<Dim> mu(sc.grid, *s.mf, fm, unlimited);
+  CHECK(static_cast<int>(cut.size()) <= po.cut_layer_limit);
+  CHECK(mu.cut_unknowns() == cut);
+  CHECK(m1.cut_unknowns().size() < cut.size());
+  CHECK(ml.cut_unknowns() == m1.cut_unknowns());
+  CHECK(ml.cut_factor_entries() < mm.cut_factor_entries());
 }
 
 TEMPLATE_TEST_CASE_SIG("the cut block keeps the preconditioner symmetric positive definite (pool around a "
