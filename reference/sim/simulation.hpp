@@ -22,6 +22,7 @@
 #include "reference/fluid/stokes_system.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
+#include "reference/grid/boxed_union_phi.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -369,6 +370,13 @@ class Simulation : public AnySimulation {
   /// Inclusive box of the lattice points where solid_phi_ may be < 0 (lo > hi: none); set
   /// wherever solid_phi_ is: the velocity constraints in the solids visit only its faces.
   VecI<Dim> solid_lo_ = VecI<Dim>::Zero(), solid_hi_ = -VecI<Dim>::Ones();
+  /// In coupled scenes between update_moving_solids and the end of update_liquid_weights: the
+  /// solids' union in the bodies' box, solid_phi_ then empty (invalid: solid_phi_ holds it)
+  BoxedUnionPhi<Dim> solid_box_phi_;
+  /// The solids' union at lattice point k, from solid_phi_ or solid_box_phi_.
+  double solid_phi_at(int k) const {
+    return solid_box_phi_.valid() ? solid_box_phi_(k) : solid_phi_[k];
+  }
   // moving bodies with contact (scenes with dynamic or kinematic bodies)
   std::unique_ptr<RigidWorld<Dim>> rigid_;
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
