@@ -757,11 +757,12 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   // their weight alone (a compare per face, on several threads: each face written once), the
   // walls by their layers of faces.
   const int nf = grid_.num_faces();
+  const std::vector<Box<Dim>> bounds = body_bounds();  // (posed once, not per face)
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) {
     if (weights_.fluid_face[f] != 0.0 || wall_face(f)) continue;
     const auto [axis, coord] = grid_.face_coord(f);
-    u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
+    u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord), bounds)[axis] : 0.0;
   }
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
@@ -975,17 +976,34 @@ void Simulation<Dim>::update_moving_solids() {
 }
 
 template <int Dim>
-Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x) const {
+std::vector<Box<Dim>> Simulation<Dim>::body_bounds() const {
+  std::vector<Box<Dim>> bounds;
+  if (!rigid_) return bounds;
+  for (const auto& b : rigid_->bodies()) bounds.push_back(b.bounds());
+  return bounds;
+}
+
+template <int Dim>
+Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x, const std::vector<Box<Dim>>& bounds) const {
   if (!rigid_) return Vec<Dim>::Zero();
   const auto& bodies = rigid_->bodies();
+  // a point outside a body's bounds is not inside it (and only inside points matter here)
+  const auto outside = [&](std::size_t i) {
+    const Box<Dim>& box = bounds[i];
+    return box.min().allFinite() && box.max().allFinite() &&
+           ((x.array() < box.min().array()).any() || (x.array() > box.max().array()).any());
+  };
+  // outside every moving body's bounds the answer is zero whatever is nearest (a fixed body, a
+  // static solid or none): no distance is evaluated (the faces in a large static solid, most of
+  // the faces this is asked for in Fig. 17's basin, evaluated every shape at every face)
+  bool near_moving = false;
+  for (std::size_t i = 0; i < bodies.size() && !near_moving; ++i)
+    near_moving = bodies[i].moves() && !outside(i);
+  if (!near_moving) return Vec<Dim>::Zero();
   double best = std::numeric_limits<double>::infinity();
   int which = -1;
   for (std::size_t i = 0; i < bodies.size(); ++i) {
-    // a point outside a body's bounds is not inside it (and only inside points matter here)
-    const Box<Dim> box = bodies[i].bounds();
-    if (box.min().allFinite() && box.max().allFinite() &&
-        ((x.array() < box.min().array()).any() || (x.array() > box.max().array()).any()))
-      continue;
+    if (outside(i)) continue;
     const double d = bodies[i].distance(x);
     if (d < best) {
       best = d;
@@ -1339,6 +1357,7 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
   const int count = static_cast<int>(faces.size());
   const bool keep = guards_reads() && !same_pose;
   if (keep) solid_frame_.resize(faces.size());
+  const std::vector<Box<Dim>> bounds = coupled_ && !same_pose ? body_bounds() : std::vector<Box<Dim>>();
 #pragma omp parallel for schedule(static) num_threads(team_threads(count))
   for (int j = 0; j < count; ++j) {
     const int f = faces[j];
@@ -1346,7 +1365,7 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     const Vec<Dim> x = grid_.face_center(axis, coord);
     const Vec<Dim> n = same_pose ? solid_frame_[j].normal : solids_.gradient(x);
     const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
-                                  : (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero());
+                                  : (coupled_ ? solid_velocity(x, bounds) : Vec<Dim>::Zero());
     if (keep) solid_frame_[j] = {n, vs, u_[f]};
     Vec<Dim> v = grid_.interpolate_velocity(u_, x);
     const double vn = (v - vs).dot(n);

@@ -327,7 +327,11 @@ class Simulation : public AnySimulation {
   void solve_coupled(double dt);
   /// Velocity of the solid at a point x inside the solids: the point velocity of the moving
   /// body whose (unshrunk) SDF is smallest there when that is a moving body, zero otherwise.
-  Vec<Dim> solid_velocity(const Vec<Dim>& x) const;
+  /// `bounds` are the bodies' bounds at their pose (body_bounds: posed once for a pass over many
+  /// points instead of once per body and point).
+  Vec<Dim> solid_velocity(const Vec<Dim>& x, const std::vector<Box<Dim>>& bounds) const;
+  /// RigidBody::bounds of every body at its pose (empty without bodies).
+  std::vector<Box<Dim>> body_bounds() const;
   /// The state of a checkpoint, every field once, in order (reference/core/state_io.hpp): what
   /// evolves during a run. Everything else is rebuilt from the scene (constructor) or derived
   /// from these fields (load_state recomputes the weights). A new evolving member goes here.
