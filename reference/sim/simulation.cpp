@@ -480,6 +480,7 @@ void Simulation<Dim>::step(double dt) {
   restart_ledger([&] { return particle_kinetic_energy(); });  // the energy ledger (diagnosis)
   particles_to_grid_with_forces(dt);  // (1)-(3)
   update_step_weights();              // (4)-(5)
+  release_liquid_phi();
   extrapolate_into_air();             // u* on the faces the particles did not reach
   solve_step(dt);                     // (6)-(12)
   check_finite("the pressure/viscosity/contact solve");
@@ -548,6 +549,19 @@ void Simulation<Dim>::update_step_weights() {
     ScopedTimer timer(stats_.timing[FramePhase::weights]);
     density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
   }
+}
+
+template <int Dim>
+void Simulation<Dim>::release_liquid_phi() {
+  // The liquid level set is read after the weights only by divergence_free_air (a diagnosis
+  // switch) and, outside the steps, at a frame's end (render, liquid_phi()), where
+  // advance_frame makes it again; the next step's weights make it anew too (into a lent buffer,
+  // update_moving_solids, or a fresh one). Its memory goes back to the heap before the solve,
+  // whose grid-sized vectors then reuse it: at a coupled step's memory peak (the solve) it was
+  // a lattice-sized vector alive and unread (541 MB at the paper's 256x128x256 grid).
+  // (The guard's velocity copy, reached_u_, is dead here too, but releasing it left the paper
+  // grid's peak as it was: not done)
+  if (!switches_.divergence_free_air) liquid_phi_ = VectorX();
 }
 
 template <int Dim>

@@ -202,7 +202,9 @@ class Simulation : public AnySimulation {
   const MacGrid<Dim>& grid() const { return grid_; }
   const std::array<BoundaryType, 2 * Dim>& boundary() const { return boundary_; }
   const Particles<Dim>& particles() const { return particles_; }
-  /// Liquid signed distance of the particles (negative inside) on half_lattice(grid()).
+  /// Liquid signed distance of the particles (negative inside) on half_lattice(grid()), as a
+  /// frame's end (and the set-up) leaves it; empty while a frame is stopped between two steps
+  /// (a step releases it after its weights: release_liquid_phi).
   const VectorX& liquid_phi() const { return liquid_phi_; }
   /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis.
   const PressureWeights& weights() const { return weights_; }
@@ -321,6 +323,9 @@ class Simulation : public AnySimulation {
   /// body at its current pose (fixed bodies included, as one-way bodies), shrunk by zeta, and the
   /// SolidField of the particles (static shapes and posed bodies).
   void update_moving_solids();
+  /// Releases the liquid level set before the solve: nothing in the rest of the step reads it
+  /// (unless divergence_free_air), and the next weights make it again.
+  void release_liquid_phi();
   /// Lines 6-12 of Algorithm 1 with moving bodies next to a liquid: contacts, the coupled
   /// pressure / viscosity / contact solve of the scene's scheme (section 6), and the new body
   /// velocities (eq. (21)). Updates u_ to the solved face velocities.
