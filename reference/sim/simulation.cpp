@@ -408,6 +408,9 @@ void Simulation<Dim>::update_liquid_weights() {
     if (extend) restore_points(liquid_phi_, phi_undo_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
+  // (read by nothing else: a cell-sized vector, 64 MiB at the paper's 256x128x256 grid, that
+  // the solve's vectors reuse instead of keeping it alive through the step)
+  volume_cells_ = VectorX();
   // with moving bodies the solids' level set is made again with the next weights
   // (update_moving_solids always runs before this) and read by nothing else (the velocity
   // constraints use the faces in solids found with it): its buffer goes back to the heap too
