@@ -318,11 +318,12 @@ void Simulation<Dim>::update_liquid_weights() {
   // lattice-sized copy is made (541 MB at the paper's 256x128x256 grid); the values the weights
   // read are those of extend_liquid_into_solids_in_box
   const bool solids = !solid_shapes_.empty() || coupled_;
-  const bool extend = solids && solid_phi_.size() == liquid_phi_.size();
+  const bool extend =
+      solids && (solid_phi_.size() == liquid_phi_.size() || solid_box_phi_.valid());
   if (extend) {
     const double reach = kLiquidSolidReach * grid_.dx(), dx = grid_.dx();
     overwrite_in_box<Dim>(lattice_, solid_lo_, solid_hi_, liquid_phi_, [&](int k) {
-      return liquid_extended_into_solid(liquid_phi_[k], solid_phi_[k], reach, dx);
+      return liquid_extended_into_solid(liquid_phi_[k], solid_phi_at(k), reach, dx);
     }, phi_undo_);
   }
   const VectorX& phi = liquid_phi_;
@@ -398,7 +399,7 @@ void Simulation<Dim>::update_liquid_weights() {
       }
     if (extend)
       overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
-        return std::max(liquid_phi_[k], -solid_phi_[k]);
+        return std::max(liquid_phi_[k], -solid_phi_at(k));
       }, phi_undo_);
     const VectorX& fluid_phi = liquid_phi_;
     classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
@@ -407,11 +408,17 @@ void Simulation<Dim>::update_liquid_weights() {
     if (extend) restore_points(liquid_phi_, phi_undo_);
   }
   liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
+  // (read by nothing else: a cell-sized vector, 64 MiB at the paper's 256x128x256 grid, that
+  // the solve's vectors reuse instead of keeping it alive through the step)
+  volume_cells_ = VectorX();
   // with moving bodies the solids' level set is made again with the next weights
   // (update_moving_solids always runs before this) and read by nothing else (the velocity
   // constraints use the faces in solids found with it): its buffer goes back to the heap too
   // (541 MB at the paper's 256x128x256 grid)
-  if (coupled_) solid_phi_ = VectorX();
+  if (coupled_) {
+    solid_phi_ = VectorX();
+    solid_box_phi_.clear();
+  }
 }
 
 template <int Dim>
@@ -476,6 +483,7 @@ void Simulation<Dim>::step(double dt) {
   restart_ledger([&] { return particle_kinetic_energy(); });  // the energy ledger (diagnosis)
   particles_to_grid_with_forces(dt);  // (1)-(3)
   update_step_weights();              // (4)-(5)
+  release_liquid_phi();
   extrapolate_into_air();             // u* on the faces the particles did not reach
   solve_step(dt);                     // (6)-(12)
   check_finite("the pressure/viscosity/contact solve");
@@ -544,6 +552,19 @@ void Simulation<Dim>::update_step_weights() {
     ScopedTimer timer(stats_.timing[FramePhase::weights]);
     density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
   }
+}
+
+template <int Dim>
+void Simulation<Dim>::release_liquid_phi() {
+  // The liquid level set is read after the weights only by divergence_free_air (a diagnosis
+  // switch) and, outside the steps, at a frame's end (render, liquid_phi()), where
+  // advance_frame makes it again; the next step's weights make it anew too (into a lent buffer,
+  // update_moving_solids, or a fresh one). Its memory goes back to the heap before the solve,
+  // whose grid-sized vectors then reuse it: at a coupled step's memory peak (the solve) it was
+  // a lattice-sized vector alive and unread (541 MB at the paper's 256x128x256 grid).
+  // (The guard's velocity copy, reached_u_, is dead here too, but releasing it left the paper
+  // grid's peak as it was: not done)
+  if (!switches_.divergence_free_air) liquid_phi_ = VectorX();
 }
 
 template <int Dim>
@@ -753,11 +774,12 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   // their weight alone (a compare per face, on several threads: each face written once), the
   // walls by their layers of faces.
   const int nf = grid_.num_faces();
+  const std::vector<Box<Dim>> bounds = body_bounds();  // (posed once, not per face)
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) {
     if (weights_.fluid_face[f] != 0.0 || wall_face(f)) continue;
     const auto [axis, coord] = grid_.face_coord(f);
-    u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord))[axis] : 0.0;
+    u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord), bounds)[axis] : 0.0;
   }
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
@@ -932,8 +954,9 @@ void Simulation<Dim>::update_moving_solids() {
   // left empty: read by nothing after this)
   solids.fluid_face.swap(weights_.fluid_face);
   weights_.fluid_face = VectorX();
-  solid_weights<Dim>(grid_, coupling_bodies(rigid_->bodies()), {}, boundary_,
-                     scene_.solver.shrink * grid_.dx(), solids, solid_scratch_);
+  const std::vector<CouplingBody<Dim>> bodies = coupling_bodies(rigid_->bodies());
+  const double shrink = scene_.solver.shrink * grid_.dx();
+  solid_weights<Dim>(grid_, bodies, {}, boundary_, shrink, solids, solid_scratch_);
   solid_phi_.swap(solids.lattice_phi);
   // its negative points lie in the box of its non-positive lattice cells (of the union's classes)
   if (solid_scratch_.signs.any_negative()) {
@@ -948,24 +971,56 @@ void Simulation<Dim>::update_moving_solids() {
   // (stress_fluid_ is the uncoupled solve's: freed here)
   weights_.fluid_face.swap(solids.fluid_face);
   solids.fluid_face = VectorX();
+  solid_box_phi_.clear();
   find_faces_in_solids();
+  // The union is read from here on only by update_liquid_weights, which follows: in the box of
+  // the bodies (their bounds grown by 2 dx, where solid_weights evaluates them) it is kept, and
+  // outside it is the closed form solid_weights wrote there (BoxedUnionPhi: the same bits). The
+  // lattice-sized buffer goes back to liquid_phi_, which update_liquid_weights overwrites with
+  // the new liquid level set: one lattice-sized vector for both level sets instead of two (541
+  // MB at the paper's 256x128x256 grid, alive at the step's memory peak)
+  {
+    std::vector<Box<Dim>> bounds;
+    for (const CouplingBody<Dim>& b : bodies) bounds.push_back(b.shape->bounds());
+    if (solid_box_phi_.assign(lattice_, bounds, 2.0 * grid_.dx(), shrink, solid_phi_)) {
+      if (liquid_phi_.size() == 0) liquid_phi_.swap(solid_phi_);
+      solid_phi_ = VectorX();
+    }
+  }
   stress_fluid_ = VectorX();
   // (without stress solves W_F^s was not made: solids.fluid_stress is empty, see above)
   rebuild_solid_field();
 }
 
 template <int Dim>
-Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x) const {
+std::vector<Box<Dim>> Simulation<Dim>::body_bounds() const {
+  std::vector<Box<Dim>> bounds;
+  if (!rigid_) return bounds;
+  for (const auto& b : rigid_->bodies()) bounds.push_back(b.bounds());
+  return bounds;
+}
+
+template <int Dim>
+Vec<Dim> Simulation<Dim>::solid_velocity(const Vec<Dim>& x, const std::vector<Box<Dim>>& bounds) const {
   if (!rigid_) return Vec<Dim>::Zero();
   const auto& bodies = rigid_->bodies();
+  // a point outside a body's bounds is not inside it (and only inside points matter here)
+  const auto outside = [&](std::size_t i) {
+    const Box<Dim>& box = bounds[i];
+    return box.min().allFinite() && box.max().allFinite() &&
+           ((x.array() < box.min().array()).any() || (x.array() > box.max().array()).any());
+  };
+  // outside every moving body's bounds the answer is zero whatever is nearest (a fixed body, a
+  // static solid or none): no distance is evaluated (the faces in a large static solid, most of
+  // the faces this is asked for in Fig. 17's basin, evaluated every shape at every face)
+  bool near_moving = false;
+  for (std::size_t i = 0; i < bodies.size() && !near_moving; ++i)
+    near_moving = bodies[i].moves() && !outside(i);
+  if (!near_moving) return Vec<Dim>::Zero();
   double best = std::numeric_limits<double>::infinity();
   int which = -1;
   for (std::size_t i = 0; i < bodies.size(); ++i) {
-    // a point outside a body's bounds is not inside it (and only inside points matter here)
-    const Box<Dim> box = bodies[i].bounds();
-    if (box.min().allFinite() && box.max().allFinite() &&
-        ((x.array() < box.min().array()).any() || (x.array() > box.max().array()).any()))
-      continue;
+    if (outside(i)) continue;
     const double d = bodies[i].distance(x);
     if (d < best) {
       best = d;
@@ -1299,7 +1354,8 @@ void Simulation<Dim>::find_faces_in_solids() {
       VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
       k[axis] -= 1;
       if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
-      if (solid_phi_[lattice_.index(k)] < 0.0) faces.push_back(grid_.face_index(axis, coord));
+      if (solid_phi_at(lattice_.index(k)) < 0.0)
+        faces.push_back(grid_.face_index(axis, coord));
     }
   }
 }
@@ -1318,6 +1374,7 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
   const int count = static_cast<int>(faces.size());
   const bool keep = guards_reads() && !same_pose;
   if (keep) solid_frame_.resize(faces.size());
+  const std::vector<Box<Dim>> bounds = coupled_ && !same_pose ? body_bounds() : std::vector<Box<Dim>>();
 #pragma omp parallel for schedule(static) num_threads(team_threads(count))
   for (int j = 0; j < count; ++j) {
     const int f = faces[j];
@@ -1325,7 +1382,7 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     const Vec<Dim> x = grid_.face_center(axis, coord);
     const Vec<Dim> n = same_pose ? solid_frame_[j].normal : solids_.gradient(x);
     const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
-                                  : (coupled_ ? solid_velocity(x) : Vec<Dim>::Zero());
+                                  : (coupled_ ? solid_velocity(x, bounds) : Vec<Dim>::Zero());
     if (keep) solid_frame_[j] = {n, vs, u_[f]};
     Vec<Dim> v = grid_.interpolate_velocity(u_, x);
     const double vn = (v - vs).dot(n);

@@ -22,6 +22,7 @@
 #include "reference/fluid/stokes_system.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
+#include "reference/grid/boxed_union_phi.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -201,7 +202,9 @@ class Simulation : public AnySimulation {
   const MacGrid<Dim>& grid() const { return grid_; }
   const std::array<BoundaryType, 2 * Dim>& boundary() const { return boundary_; }
   const Particles<Dim>& particles() const { return particles_; }
-  /// Liquid signed distance of the particles (negative inside) on half_lattice(grid()).
+  /// Liquid signed distance of the particles (negative inside) on half_lattice(grid()), as a
+  /// frame's end (and the set-up) leaves it; empty while a frame is stopped between two steps
+  /// (a step releases it after its weights: release_liquid_phi).
   const VectorX& liquid_phi() const { return liquid_phi_; }
   /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis.
   const PressureWeights& weights() const { return weights_; }
@@ -320,13 +323,20 @@ class Simulation : public AnySimulation {
   /// body at its current pose (fixed bodies included, as one-way bodies), shrunk by zeta, and the
   /// SolidField of the particles (static shapes and posed bodies).
   void update_moving_solids();
+  /// Releases the liquid level set before the solve: nothing in the rest of the step reads it
+  /// (unless divergence_free_air), and the next weights make it again.
+  void release_liquid_phi();
   /// Lines 6-12 of Algorithm 1 with moving bodies next to a liquid: contacts, the coupled
   /// pressure / viscosity / contact solve of the scene's scheme (section 6), and the new body
   /// velocities (eq. (21)). Updates u_ to the solved face velocities.
   void solve_coupled(double dt);
   /// Velocity of the solid at a point x inside the solids: the point velocity of the moving
   /// body whose (unshrunk) SDF is smallest there when that is a moving body, zero otherwise.
-  Vec<Dim> solid_velocity(const Vec<Dim>& x) const;
+  /// `bounds` are the bodies' bounds at their pose (body_bounds: posed once for a pass over many
+  /// points instead of once per body and point).
+  Vec<Dim> solid_velocity(const Vec<Dim>& x, const std::vector<Box<Dim>>& bounds) const;
+  /// RigidBody::bounds of every body at its pose (empty without bodies).
+  std::vector<Box<Dim>> body_bounds() const;
   /// The state of a checkpoint, every field once, in order (reference/core/state_io.hpp): what
   /// evolves during a run. Everything else is rebuilt from the scene (constructor) or derived
   /// from these fields (load_state recomputes the weights). A new evolving member goes here.
@@ -369,6 +379,13 @@ class Simulation : public AnySimulation {
   /// Inclusive box of the lattice points where solid_phi_ may be < 0 (lo > hi: none); set
   /// wherever solid_phi_ is: the velocity constraints in the solids visit only its faces.
   VecI<Dim> solid_lo_ = VecI<Dim>::Zero(), solid_hi_ = -VecI<Dim>::Ones();
+  /// In coupled scenes between update_moving_solids and the end of update_liquid_weights: the
+  /// solids' union in the bodies' box, solid_phi_ then empty (invalid: solid_phi_ holds it)
+  BoxedUnionPhi<Dim> solid_box_phi_;
+  /// The solids' union at lattice point k, from solid_phi_ or solid_box_phi_.
+  double solid_phi_at(int k) const {
+    return solid_box_phi_.valid() ? solid_box_phi_(k) : solid_phi_[k];
+  }
   // moving bodies with contact (scenes with dynamic or kinematic bodies)
   std::unique_ptr<RigidWorld<Dim>> rigid_;
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).

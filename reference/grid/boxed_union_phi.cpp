@@ -1,0 +1,104 @@
+#include "reference/grid/boxed_union_phi.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "reference/core/parallel.hpp"
+
+namespace monolith {
+
+template <int Dim>
+bool BoxedUnionPhi<Dim>::assign(const SampleLattice<Dim>& lattice,
+                                const std::vector<Box<Dim>>& bounds, double far,
+                                double shrink_in_metres, const VectorX& dense) {
+  valid_ = false;
+  if (bounds.empty() || dense.size() != lattice.size()) return false;
+  for (const Box<Dim>& box : bounds)
+    if (box.isEmpty() || !box.min().allFinite() || !box.max().allFinite()) return false;
+  dims_ = lattice.dims;
+  shrink_ = shrink_in_metres;
+  // the offset tables of body_phi_on_lattice: component a of p - clamp(p, box) at coordinate c
+  offset_.resize(bounds.size());
+  for (std::size_t i = 0; i < bounds.size(); ++i)
+    for (int a = 0; a < Dim; ++a) {
+      offset_[i][a].resize(lattice.dims[a]);
+      for (int c = 0; c < lattice.dims[a]; ++c) {
+        const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
+        offset_[i][a][c] = (p - p.cwiseMax(bounds[i].min()).cwiseMin(bounds[i].max()))[a];
+      }
+    }
+  // the box: every body's bounds grown by `far` and two lattice points (one for the rounding of
+  // the coordinates, one so that a point outside has an offset beyond far + spacing / 2 on some
+  // axis, which body_phi_on_lattice tests with rounded sums: it writes the closed form there)
+  lo_ = lattice.dims;
+  hi_ = -VecI<Dim>::Ones();
+  for (const Box<Dim>& box : bounds) {
+    VecI<Dim> lo, hi;
+    bool inside = true;
+    for (int a = 0; a < Dim; ++a) {
+      const double from = (box.min()[a] - far - lattice.origin[a]) / lattice.spacing;
+      const double to = (box.max()[a] + far - lattice.origin[a]) / lattice.spacing;
+      const double top = static_cast<double>(lattice.dims[a] - 1);
+      lo[a] = static_cast<int>(std::clamp(std::floor(from) - 2.0, 0.0, top + 1.0));
+      hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 2.0, -1.0, top));
+      inside = inside && lo[a] <= hi[a];
+    }
+    if (!inside) continue;  // the body is far from every point: the closed form everywhere
+    lo_ = lo_.cwiseMin(lo);
+    hi_ = hi_.cwiseMax(hi);
+  }
+  const bool any = (lo_.array() <= hi_.array()).all();
+  if (!any) {
+    lo_ = VecI<Dim>::Zero();
+    hi_ = -VecI<Dim>::Ones();
+  }
+  box_dims_ = any ? VecI<Dim>(hi_ - lo_ + VecI<Dim>::Ones()) : VecI<Dim>::Zero();
+  const Eigen::Index n = any ? box_dims_.prod() : 0;
+  // a box of more than half the lattice (a body as large as the domain: Fig. 17's basin) would
+  // save little and, while it is copied, be alive beside the dense union
+  if (2 * n > lattice.size()) return false;
+  // the box's values, by rows along x on several threads (each row written by one thread)
+  if (values_.size() != n) values_.resize(n);
+  if (any) {
+    VecI<Dim> row_dims = box_dims_;
+    row_dims[0] = 1;
+    const int rows = row_dims.prod(), nx = box_dims_[0];
+#pragma omp parallel for schedule(static) num_threads(team_threads(n))
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c = lo_ + lattice_coord<Dim>(q, row_dims);
+      std::copy_n(dense.data() + lattice.index(c), nx,
+                  values_.data() + static_cast<Eigen::Index>(q) * nx);
+    }
+  }
+  valid_ = true;
+  return true;
+}
+
+template <int Dim>
+double BoxedUnionPhi<Dim>::far_value(const VecI<Dim>& c) const {
+  double value = 0.0;
+  for (std::size_t i = 0; i < offset_.size(); ++i) {
+    // sqrt((t_0^2 + t_1^2) + t_2^2) + zeta, as body_phi_on_lattice sums them
+    double sum = offset_[i][0][c[0]] * offset_[i][0][c[0]];
+    for (int a = 1; a < Dim; ++a) {
+      const double square = offset_[i][a][c[a]] * offset_[i][a][c[a]];
+      sum += square;
+    }
+    const double v = std::sqrt(sum) + shrink_;
+    // the union is the first body's values, then the minimum with each further body's
+    value = i == 0 ? v : std::min(value, v);
+  }
+  return value;
+}
+
+template <int Dim>
+double BoxedUnionPhi<Dim>::at(const VecI<Dim>& c) const {
+  if ((c.array() >= lo_.array()).all() && (c.array() <= hi_.array()).all())
+    return values_[lattice_index<Dim>(c - lo_, box_dims_)];
+  return far_value(c);
+}
+
+template class BoxedUnionPhi<2>;
+template class BoxedUnionPhi<3>;
+
+}  // namespace monolith
