@@ -57,8 +57,10 @@ struct StokesPreconditionerOptions {
   /// A'^-1 restricted to the other unknowns) and gets the Jacobi term r_k / A22_kk instead. With
   /// its Pi_k^-1 = gamma (eta / W_L^p + 1 / A22_kk) up to 1e13 times the median, the penalised
   /// inverse's difference of two terms amplified the V-cycle error and the round-off until P was
-  /// non-symmetric and indefinite (docs/preconditioners.md sections 20-21) [(P8)]. 0: none left out.
-  double empty_cell_ratio = 1e-4;
+  /// non-symmetric and indefinite (docs/preconditioners.md sections 20-21) [(P8)]. 0: none left out
+  /// (the default here: on the liquid-only solves the snapshot measured more iterations with it;
+  /// CoupledPreconditionerOptions::empty_cell_ratio turns it on where a body term meets the liquid).
+  double empty_cell_ratio = 0.0;
   double min_fluid_fraction = 0.01;  ///< W_F^s floor in the preconditioner's K
   /// V-cycles per solve with V. 2: on `viscous-bunny-into-sphere-3d` (stiffness 205) one cycle
   /// needed 118-171 PCG iterations in the air and 313 on the curved wall, two 38-55 and 118, at

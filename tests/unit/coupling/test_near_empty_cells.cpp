@@ -143,7 +143,7 @@ TEST_CASE("a near-empty cell under a light floating body: the coupled block prec
   // level itself, an exact V^-1, as it never is on a scene's grid)
   with.fluid.max_coarse = without.fluid.max_coarse = 40;
   with.fluid.cut_threshold = without.fluid.cut_threshold = cut;
-  without.fluid.empty_cell_ratio = 0.0;
+  without.empty_cell_ratio = 0.0;
   const CoupledPreconditioner<2> mw(s, false, VectorX(), with);
   const CoupledPreconditioner<2> mo(s, false, VectorX(), without);
   REQUIRE(mw.body_correction());
