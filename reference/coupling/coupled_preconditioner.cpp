@@ -47,28 +47,49 @@ CoupledPreconditioner<Dim>::CoupledPreconditioner(const MonolithicSystem<Dim>& s
   rf_.setZero(nf_);
   zf_.setZero(nf_);
   if (nf_ == 0) return;
+  const int nd = system.num_body_dofs();
+  const bool correct = options.body_correction && nd > 0 && nd <= options.max_body_dofs;
+  // B_f^T, column by column (a body that touches no fluid unknown has zero columns)
+  Eigen::MatrixXd bft;
+  std::vector<char> nonzero(nd, 0);
+  bool coupled = false;
+  if (correct) {
+    bft.setZero(nf_, nd);
+    VectorX e = VectorX::Zero(nd);
+    for (int k = 0; k < nd; ++k) {
+      e.setZero();
+      e[k] = 1.0;
+      bft.col(k) = system.fluid_body_force_transpose(e);
+      nonzero[k] = bft.col(k).cwiseAbs().maxCoeff() != 0.0;
+      coupled = coupled || nonzero[k];
+    }
+  }
+  StokesPreconditionerOptions fluid_options = options.fluid;
+  if (coupled && options.empty_cell_ratio > 0.0) fluid_options.empty_cell_ratio = options.empty_cell_ratio;
   fluid_ = std::make_unique<StokesPreconditioner<Dim>>(
       system.grid(), system.stokes_operator(),
-      coupled_stokes_factors(system, options.fluid.min_fluid_fraction), options.fluid);
-  const int nd = system.num_body_dofs();
-  if (!options.body_correction || nd == 0 || nd > options.max_body_dofs) return;
-  // U = P B_f^T, column by column (an application of P per non-zero column of B_f^T; a body
-  // that touches no fluid unknown has zero columns, and with no non-zero column at all there is
-  // nothing to correct: Q = P)
+      coupled_stokes_factors(system, options.fluid.min_fluid_fraction), fluid_options);
+  if (!correct) return;
+  // U = P B_f^T, column by column (an application of P per non-zero column of B_f^T; with no
+  // non-zero column at all there is nothing to correct: Q = P)
   u_.setZero(nf_, nd);
-  VectorX e = VectorX::Zero(nd), column(nf_), pz(nf_);
-  bool coupled = false;
-  for (int k = 0; k < nd; ++k) {
-    e.setZero();
-    e[k] = 1.0;
-    column = system.fluid_body_force_transpose(e);
-    if (column.cwiseAbs().maxCoeff() == 0.0) continue;
-    coupled = true;
-    fluid_->apply(column, pz);
-    u_.col(k) = pz;
-  }
+  VectorX pz(nf_);
   // W = dt alpha M_r^-1
   const Eigen::MatrixXd w = (system.dt() * system.alpha()) * Eigen::MatrixXd(system.contacts().m_r_inverse);
+  if (coupled && !fluid_->empty_cells().empty()) {
+    // P's Jacobi term on the near-empty cells with A_ff's diagonal there, F + diag(B_f^T W B_f)
+    // (with F's alone, P would be up to 1e16 times too large on them and Q = P - U (..)^-1 U^T
+    // would cancel in round-off: docs/preconditioners.md section 21)
+    const int ns = system.num_stress();
+    const Eigen::MatrixXd bw = bft.bottomRows(nf_ - ns) * w;
+    VectorX extra = bw.cwiseProduct(bft.bottomRows(nf_ - ns)).rowwise().sum().cwiseMax(0.0);
+    fluid_->set_empty_cell_diagonal(extra);
+  }
+  for (int k = 0; k < nd; ++k) {
+    if (!nonzero[k]) continue;
+    fluid_->apply(VectorX(bft.col(k)), pz);
+    u_.col(k) = pz;
+  }
   if (!coupled) {
     // B_f = 0: Q = P, A_f3 = 0, S_c = A33' exactly
     u_.resize(0, 0);

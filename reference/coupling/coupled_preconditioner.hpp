@@ -68,6 +68,10 @@ struct CoupledPreconditionerOptions {
   /// comment) when there are at most this many contacts and S_c is available (the Woodbury term
   /// on, or no body touching the liquid); otherwise, and with 0, the Jacobi rows.
   int max_exact_contacts = 256;
+  /// fluid.empty_cell_ratio when a body's term touches the liquid (B_f != 0) and the body
+  /// correction is on: the near-empty cells of (P8), where P's 1 / A22_kk made the Woodbury
+  /// correction cancel in round-off (docs/preconditioners.md section 21). 0: fluid's own value.
+  double empty_cell_ratio = 1e-4;
 };
 
 /// M^-1 of the file comment over (tau, p) (with_contacts false: the FluidBodyOperator's unknowns)

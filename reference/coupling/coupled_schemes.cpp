@@ -88,6 +88,7 @@ long fluid_solve(const MonolithicSystem<Dim>& s, const FluidBodyOperator<Dim>& o
   pcg.tolerance = settings.mprgp.tolerance;
   pcg.max_iterations = settings.mprgp.max_iterations;
   pcg.omega = settings.mprgp.omega;
+  pcg.stagnation = settings.mprgp.stagnation;
   const PcgResult p = m ? pcg_solve(op, s.fluid_rhs(x.lambda, x.z), x.x_fluid, pcg, *m)
         : pcg_solve(op, s.fluid_rhs(x.lambda, x.z), x.x_fluid, pcg);
   if (p.breakdown) throw SimulationError("fluid solve: PCG broke down: " + p.message);
@@ -106,6 +107,7 @@ long fluid_solve_with_fallback(const MonolithicSystem<Dim>& s, const FluidBodyOp
                                CoupledSolveResult& r, const Preconditioner& m) {
   StaggeredSettings attempt = settings;
   attempt.mprgp.max_iterations = multigrid_attempt_budget(settings.mprgp.max_iterations);
+  attempt.mprgp.stagnation = attempt_stagnation_rule();
   const VectorX start = x.x_fluid;
   CoupledSolveResult trial;
   long iterations = 0;
@@ -207,6 +209,7 @@ Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& 
     // (docs/preconditioners.md section 20)
     StaggeredSettings attempt = settings;
     attempt.mprgp.max_iterations = multigrid_attempt_budget(settings.mprgp.max_iterations);
+    attempt.mprgp.stagnation = attempt_stagnation_rule();
     u = solve_pvc_unified(s, attempt, options);
     if (!u.converged || u.breakdown) {
       ++r.fallbacks;

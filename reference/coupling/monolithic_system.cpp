@@ -927,7 +927,8 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
   if (friction) {
     // staggered projections: eq. (25), z given (tau, p, lambda), then (26) given z
     const SparseMatrixOperator fop = friction_operator(system, gamma);
-    const MprgpSettings friction_settings = with_norm_estimate(fop, settings.mprgp);
+    MprgpSettings friction_settings = with_norm_estimate(fop, settings.mprgp);
+    friction_settings.stagnation = StagnationRule{};  // the attempt's rule is for the MLCP (26)
     auto solve_friction = [&](const VectorX& zl, const VectorX& zu) {
       record(mprgp_solve(fop, system.friction_rhs(r.x), zl, zu, r.z, friction_settings));
     };

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace monolith {
@@ -77,6 +78,31 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       penalty_[k] = 1.0 / inv;
       schur_diagonal_[k] = inv + options.schur_viscous_factor * visc;
     }
+    // the near-empty cells: out of (P2) and S (Pi^-1 = 0), Jacobi instead
+    penalty_divisor_ = penalty_;
+    penalty_used_ = penalty_;
+    VectorX a22_diagonal = a22.diagonal();
+    if (np_ > 0 && options.empty_cell_ratio > 0.0) {
+      std::vector<double> sorted(a22_diagonal.data(), a22_diagonal.data() + np_);
+      const auto mid = sorted.begin() + (np_ - 1) / 2;
+      std::nth_element(sorted.begin(), mid, sorted.end());
+      const double bound = options.empty_cell_ratio * *mid;
+      for (int k = 0; k < np_; ++k)
+        if (a22_diagonal[k] < bound && a22_diagonal[k] > 0.0) empty_.push_back(k);
+      empty_diagonal_.resize(static_cast<int>(empty_.size()));
+      for (std::size_t q = 0; q < empty_.size(); ++q) {
+        const int k = empty_[q];
+        empty_diagonal_[static_cast<int>(q)] = a22_diagonal[k];
+        penalty_divisor_[k] = std::numeric_limits<double>::infinity();  // x / inf = 0
+        penalty_used_[k] = 0.0;
+      }
+      empty_inverse_ = empty_diagonal_.cwiseInverse();
+      // the outer sweeps relax the other unknowns only (SOR on their principal block)
+      if (!empty_.empty()) {
+        swept_.assign(n_, 1);
+        for (int k : empty_) swept_[ns_ + k] = 0;
+      }
+    }
     // the viscous-to-mass ratio of each face row, r_f = C_f (B_tau K^-1 B_tau^T)_ff (each row by
     // one thread); its median sets the V-cycle count, and diag(V0) = (1 + r) / C weighs the
     // scaled commutator
@@ -114,6 +140,17 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     if (commutator_) {
       bp_ = f_.b.rightCols(np_);
       bpt_ = f_.b_transpose.bottomRows(np_);
+      if (!empty_.empty()) {
+        // B_p without the near-empty cells' columns (their rows of B_p^T)
+        VectorX keep = VectorX::Ones(np_);
+        for (int k : empty_) keep[k] = 0.0;
+        bp_ = SparseMatrix(bp_ * sparse_diagonal(keep));
+        bp_.prune(0.0);
+        bp_.makeCompressed();
+        bpt_ = SparseMatrix(sparse_diagonal(keep) * bpt_);
+        bpt_.prune(0.0);
+        bpt_.makeCompressed();
+      }
       commutator_weight_.resize(nf_);
       for (int i = 0; i < nf_; ++i)
         commutator_weight_[i] = options.schur == SchurApproximation::commutator_scaled ? f_.c[i] / (1.0 + ratio[i]) : f_.c[i];
@@ -124,7 +161,8 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       lt_.setZero(ns_);
       lu_.setZero(n_);
     }
-    SparseMatrix v = velocity_operator(f_, penalty_);
+    // V = C^-1 + B D^-1 B^T with D^-1 = 0 on the near-empty cells (1 / inf)
+    SparseMatrix v = velocity_operator(f_, penalty_divisor_);
     ExtraPatches<Dim> extra;
     if (options.element_patches) extra = stress_element_patches<Dim>(f_);
     MacMultigridOptions vmg = mg;
@@ -140,6 +178,24 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
         shifted.makeCompressed();
       }
       for (int k = 0; k < np_; ++k) shifted.coeffRef(k, k) *= 1.0 + 1e-10;
+      if (!empty_.empty()) {
+        // the near-empty cells decoupled (their rows and columns out, the median diagonal in
+        // their place): S is zero on them
+        std::vector<char> out(np_, 0);
+        for (int k : empty_) out[k] = 1;
+        shifted.prune([&](int i, int j, double) { return !out[i] && !out[j]; });
+        std::vector<double> sorted;
+        for (int k = 0; k < np_; ++k)
+          if (!out[k]) sorted.push_back(shifted.coeff(k, k));
+        double fill = 1.0;
+        if (!sorted.empty()) {
+          const auto mid = sorted.begin() + (sorted.size() - 1) / 2;
+          std::nth_element(sorted.begin(), mid, sorted.end());
+          fill = *mid;
+        }
+        for (int k : empty_) shifted.coeffRef(k, k) = fill;
+        shifted.makeCompressed();
+      }
       pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, std::move(shifted), mg);
     }
   }
@@ -208,6 +264,12 @@ void StokesPreconditioner<Dim>::build_cut_block() {
     if (layer > 0 && options_.cut_layer_limit > 0 && static_cast<int>(list.size()) > options_.cut_layer_limit) break;
     grow(false);
   }
+  if (!empty_.empty()) {
+    // without the near-empty cells (their Jacobi term is the two-term step's)
+    for (int k : empty_) in[ns_ + k] = 0;
+    collect();
+    if (list.empty()) return;
+  }
   SparseMatrix rows = rows_of(list);
   // A_CC, a principal block of A. Its pressure diagonal is scaled by 1 + 1e-10 (as for the
   // pressure hierarchy): A is only semi-definite for enclosed liquid (constant pressure), and C
@@ -265,7 +327,7 @@ template <int Dim>
 void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, VectorX& y) const {
   // h = D^-1 g
   multiply(kinv_, g.data(), h_.data());
-  for (int k = 0; k < np_; ++k) h_[ns_ + k] = g[ns_ + k] / penalty_[k];
+  for (int k = 0; k < np_; ++k) h_[ns_ + k] = g[ns_ + k] / penalty_divisor_[k];
   // v ~ V^-1 B h
   multiply(f_.b, h_.data(), face_.data());
   if (options_.inner_cg <= 0) {
@@ -296,7 +358,7 @@ void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, Vector
   y.resize(n_);
   multiply(kinv_, back_.data(), y.data());
   for (int i = 0; i < ns_; ++i) y[i] = h_[i] - y[i];
-  for (int k = 0; k < np_; ++k) y[ns_ + k] = h_[ns_ + k] - back_[ns_ + k] / penalty_[k];
+  for (int k = 0; k < np_; ++k) y[ns_ + k] = h_[ns_ + k] - back_[ns_ + k] / penalty_divisor_[k];
 }
 
 template <int Dim>
@@ -311,19 +373,42 @@ void StokesPreconditioner<Dim>::apply_two_term(const VectorX& r, VectorX& z) con
     pressure_.apply(e_, s_, 1);
     z = y1_;
     z.tail(np_) += s_;
+    add_empty_cells(r, z);
     return;
   }
   if (np_ == 0 || !options_.schur_correction) {
     z = y1_;
+    add_empty_cells(r, z);
     return;
   }
-  // second term: A'^-1 E Pi S Pi E^T A'^-1 r, S = A22^-1 + diag
-  for (int k = 0; k < np_; ++k) e_[k] = penalty_[k] * y1_[ns_ + k];
+  // second term: A'^-1 E Pi S Pi E^T A'^-1 r, S = A22^-1 + diag (Pi taken as 0 on the
+  // near-empty cells: A'^-1 is zero on them)
+  for (int k = 0; k < np_; ++k) e_[k] = penalty_used_[k] * y1_[ns_ + k];
   apply_schur(e_, s_);
   w_.head(ns_).setZero();
-  for (int k = 0; k < np_; ++k) w_[ns_ + k] = penalty_[k] * s_[k];
+  for (int k = 0; k < np_; ++k) w_[ns_ + k] = penalty_used_[k] * s_[k];
   apply_penalised_inverse(w_, y2_);
   z = y1_ + y2_;
+  add_empty_cells(r, z);
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::set_empty_cell_diagonal(const VectorX& extra) {
+  if (extra.size() != np_) throw std::invalid_argument("StokesPreconditioner: one extra diagonal entry per pressure unknown expected");
+  for (std::size_t q = 0; q < empty_.size(); ++q) {
+    const int k = empty_[q];
+    if (!(extra[k] >= 0.0)) throw std::invalid_argument("StokesPreconditioner: negative extra diagonal");
+    empty_inverse_[static_cast<int>(q)] = 1.0 / (empty_diagonal_[static_cast<int>(q)] + extra[k]);
+  }
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::add_empty_cells(const VectorX& r, VectorX& z) const {
+  // the near-empty cells by Jacobi (the two-term form is zero on them)
+  for (std::size_t q = 0; q < empty_.size(); ++q) {
+    const int i = ns_ + empty_[q];
+    z[i] = empty_inverse_[static_cast<int>(q)] * r[i];
+  }
 }
 
 template <int Dim>
@@ -342,6 +427,7 @@ void StokesPreconditioner<Dim>::apply_schur(const VectorX& e, VectorX& s) const 
     // Cahouet-Chabard type: A22^-1 + Pi^-1 + factor eta / W_L^p
     pressure_.apply(e, s, 1);
     for (int k = 0; k < np_; ++k) s[k] += schur_diagonal_[k] * e[k];
+    for (int k : empty_) s[k] = 0.0;
     return;
   }
   // (P7), the least-squares commutator: L^-1 B_p^T W V0 W B_p L^-1 e + Pi^-1 e, each L^-1 one cell V-cycle
@@ -353,7 +439,8 @@ void StokesPreconditioner<Dim>::apply_schur(const VectorX& e, VectorX& s) const 
   for (int i = 0; i < nf_; ++i) lg_[i] *= commutator_weight_[i];
   multiply(bpt_, lg_.data(), lh_.data());
   pressure_.apply(lh_, s, 1);
-  for (int k = 0; k < np_; ++k) s[k] += e[k] / penalty_[k];
+  for (int k = 0; k < np_; ++k) s[k] += e[k] / penalty_divisor_[k];
+  for (int k : empty_) s[k] = 0.0;
 }
 
 template <int Dim>
@@ -366,14 +453,24 @@ void StokesPreconditioner<Dim>::apply(const VectorX& r, VectorX& z) const {
   // symmetric two-level composition: SOR sweeps of A, the two-term inverse on the residual,
   // the adjoint sweeps
   z.setZero(n_);
-  a_.forward_sweeps(r, z, options_.omega, sweeps);
+  if (swept_.empty()) {
+    a_.forward_sweeps(r, z, options_.omega, sweeps);
+  } else {
+    // the near-empty cells stay 0 through the forward sweeps: their rows would divide by a
+    // diagonal up to 1e-16 of the median (the two-term step gives them their Jacobi value)
+    for (int k = 0; k < sweeps; ++k) a_.forward_sweep(r, z, options_.omega, &swept_);
+  }
   correct_cut(r, z);
   a_.apply(z, az_);
   res_ = r - az_;
   apply_two_term(res_, d_);
   z += d_;
   correct_cut(r, z);
-  a_.backward_sweeps(r, z, options_.omega, sweeps);
+  if (swept_.empty()) {
+    a_.backward_sweeps(r, z, options_.omega, sweeps);
+  } else {
+    for (int k = 0; k < sweeps; ++k) a_.backward_sweep(r, z, options_.omega, &swept_);
+  }
 }
 
 template <int Dim>

@@ -51,6 +51,16 @@ enum class SchurApproximation {
 
 struct StokesPreconditionerOptions {
   double penalty_factor = 3.0;       ///< gamma: Pi^-1 = gamma (eta / W_L^p + 1 / A22_ii)
+  /// Near-empty pressure cells: a pressure unknown whose Poisson diagonal A22_kk is below this
+  /// fraction of the median A22 diagonal (a liquid cell almost closed by solid faces) is left out
+  /// of the penalised inverse and of the Schur term (Pi_k^-1 = 0 in (P2): the limit Pi_k -> inf,
+  /// A'^-1 restricted to the other unknowns) and gets the Jacobi term r_k / A22_kk instead. With
+  /// its Pi_k^-1 = gamma (eta / W_L^p + 1 / A22_kk) up to 1e13 times the median, the penalised
+  /// inverse's difference of two terms amplified the V-cycle error and the round-off until P was
+  /// non-symmetric and indefinite (docs/preconditioners.md sections 20-21) [(P8)]. 0: none left out
+  /// (the default here: on the liquid-only solves the snapshot measured more iterations with it;
+  /// CoupledPreconditionerOptions::empty_cell_ratio turns it on where a body term meets the liquid).
+  double empty_cell_ratio = 0.0;
   double min_fluid_fraction = 0.01;  ///< W_F^s floor in the preconditioner's K
   /// V-cycles per solve with V. 2: on `viscous-bunny-into-sphere-3d` (stiffness 205) one cycle
   /// needed 118-171 PCG iterations in the air and 313 on the curved wall, two 38-55 and 118, at
@@ -124,8 +134,16 @@ class StokesPreconditioner : public Preconditioner {
   const std::vector<int>& cut_unknowns() const { return cut_; }
   /// Entries of the cut block's LDL^T factor (0 without a block).
   long cut_factor_entries() const { return cut_factor_ ? static_cast<long>(cut_factor_->analysed_entries()) : 0; }
-  /// Pi per pressure unknown.
+  /// Pi per pressure unknown (as the formula gives it, also on the near-empty cells).
   const VectorX& penalty() const { return penalty_; }
+  /// The near-empty pressure unknowns (0..n_p-1, increasing; options().empty_cell_ratio).
+  const std::vector<int>& empty_cells() const { return empty_; }
+  /// The Jacobi term of the near-empty cells becomes r_k / (A22_kk + extra_k) (extra: one
+  /// non-negative entry per pressure unknown; only those of the near-empty cells are used). The
+  /// coupled preconditioner passes the diagonal of the body term B_f^T W B_f, so that P is not
+  /// 1 / A22_kk (up to 1e16 times A_ff's scale) on a cell that a light body's term dominates:
+  /// the Woodbury correction (P4) would cancel it in round-off. Before the first apply.
+  void set_empty_cell_diagonal(const VectorX& extra);
   /// The V-cycles per velocity solve (options' velocity_cycles, raised by the rule of (P6)).
   int velocity_cycles() const { return cycles_; }
   /// The median over V's rows of the viscous-to-mass ratio C_f (V0)_ff - 1 (0 without stress).
@@ -142,6 +160,8 @@ class StokesPreconditioner : public Preconditioner {
 
  private:
   void apply_two_term(const VectorX& r, VectorX& z) const;
+  /// z_k = r_k / A22_kk on the near-empty cells.
+  void add_empty_cells(const VectorX& r, VectorX& z) const;
   void build_cut_block();
   /// z_C += A_CC^-1 (r - A z)_C.
   void correct_cut(const VectorX& r, VectorX& z) const;
@@ -157,6 +177,12 @@ class StokesPreconditioner : public Preconditioner {
   SparseMatrix bp_, bpt_;   ///< B_p (faces x n_p) and B_p^T (commutator only)
   VectorX commutator_weight_;  ///< W (C or diag(V0)^-1) per face
   VectorX penalty_;         ///< Pi
+  VectorX penalty_divisor_; ///< Pi in (P2) and S, divided by: +inf on the near-empty cells (Pi^-1 = 0)
+  VectorX penalty_used_;    ///< Pi in the second term: 0 on the near-empty cells
+  std::vector<int> empty_;  ///< the near-empty pressure unknowns
+  VectorX empty_diagonal_;  ///< A22_kk on them
+  VectorX empty_inverse_;   ///< 1 / (A22_kk + extra_k) on them
+  std::vector<char> swept_; ///< rows the outer sweeps relax (empty: all)
   VectorX schur_diagonal_;  ///< Pi^-1 + factor eta / W_L^p
   Multigrid velocity_, pressure_;
   SparseMatrix velocity_finest_;  ///< V in the faces' numbering (inner_cg > 0 only)

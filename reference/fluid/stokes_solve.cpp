@@ -79,6 +79,7 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
     VectorX start;
     if (options.fallback_to_ssor) {
       attempt.max_iterations = multigrid_attempt_budget(settings.max_iterations);
+      attempt.stagnation = attempt_stagnation_rule();
       start = x;
     }
     result.pcg = pcg_solve(*op, b, x, attempt, m);

@@ -235,6 +235,7 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
   exact_gradient();
   restart();
 
+  StagnationTest stagnation(settings.stagnation);
   bool verified = true;  // g is exact (not a recurrence) at the next convergence test
   for (;;) {
     // stopping rule on the projected gradient g^P = phi + beta
@@ -257,6 +258,10 @@ MprgpResult mprgp_solve(const LinearOperator& a, const VectorX& b, const VectorX
     }
     verified = false;
     if (result.iterations >= settings.max_iterations) break;
+    if (result.iterations > 0 && stagnation.stagnated(result.iterations, result.relative_residual)) {
+      result.stagnated = true;
+      break;
+    }
     ++result.iterations;
 
     MprgpStep kind;

@@ -15,6 +15,7 @@
 
 #include "reference/solvers/colouring.hpp"
 #include "reference/solvers/linear_operator.hpp"
+#include "reference/solvers/pcg.hpp"
 #include "reference/solvers/preconditioner.hpp"
 
 namespace monolith {
@@ -56,6 +57,9 @@ struct MprgpSettings {
   /// With precondition: z = M_FF^-1 g_F by the face-aware map (takes precedence over
   /// `preconditioner`). Not owned; nullptr: not used.
   const FacePreconditioner* face_preconditioner = nullptr;
+  /// Early exit when the projected gradient stops falling (pcg.hpp; off by default): the
+  /// multigrid attempt under "auto", which the SSOR fallback follows.
+  StagnationRule stagnation;
 };
 
 struct MprgpResult {
@@ -63,6 +67,7 @@ struct MprgpResult {
   int cg_steps = 0, expansion_steps = 0, proportioning_steps = 0;
   double relative_residual = 0; ///< ||g^P||_inf / ||b||_inf at exit (||g^P||_inf if b = 0)
   bool converged = false, breakdown = false;
+  bool stagnated = false;       ///< settings.stagnation stopped it (not converged)
   std::string message;          ///< what broke down, empty otherwise
   double norm_estimate = 0.0;   ///< the ||A|| used for alpha_bar
 };

@@ -1,5 +1,6 @@
 #include "reference/solvers/pcg.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -110,6 +111,7 @@ PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
   p = z;
   double rz = r.dot(z);
 
+  StagnationTest stagnation(settings.stagnation);
   for (int k = 0; k < settings.max_iterations; ++k) {
     // step along p
     a.apply(p, ap);
@@ -140,6 +142,10 @@ PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
       result.converged = true;
       break;
     }
+    if (stagnation.stagnated(k + 1, result.relative_residual)) {
+      result.stagnated = true;
+      break;
+    }
     // new conjugate direction
     precondition(r, z);
     const double rz_new = r.dot(z);
@@ -148,6 +154,23 @@ PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
   }
   project_out(null_space, x);
   return result;
+}
+
+StagnationTest::StagnationTest(const StagnationRule& rule)
+    : rule_(rule), best_now_(std::numeric_limits<double>::infinity()) {
+  if (rule_.window > 0) best_.assign(rule_.window + 1, std::numeric_limits<double>::infinity());
+}
+
+bool StagnationTest::stagnated(int iteration, double relative_residual) {
+  if (rule_.window <= 0) return false;
+  best_now_ = std::min(best_now_, relative_residual);
+  const int w = rule_.window + 1;
+  best_[iteration % w] = best_now_;
+  if (iteration < rule_.window) return false;
+  // the slot of iteration - window (iteration 0 = the start: no best yet, infinity)
+  const double before = iteration == rule_.window ? std::numeric_limits<double>::infinity()
+                                                  : best_[(iteration - rule_.window) % w];
+  return best_now_ > rule_.factor * before;
 }
 
 }  // namespace monolith
