@@ -54,6 +54,8 @@ std::vector<Variant> variants() {
       // faces that carry particle mass outside the level set (W_L^u = 0) are extrapolated over
       // instead of keeping u* (their ballistic velocity)
       {"no-ballistic-faces", [](StageSwitches& s) { s.unreached_faces_keep_u_star = false; }},
+      // those faces keep P2G's APIC value plus g dt (before issue 16's fix: the PIC value)
+      {"ballistic-apic", [](StageSwitches& s) { s.ballistic_faces_pic = false; }},
       {"split", [](StageSwitches& s) { s.split_advection = true; }},
   };
 }
