@@ -552,13 +552,31 @@ void Simulation<Dim>::ballistic_faces_take_pic(double dt) {
   // take, step after step, and the transfers release it (liquid-bunny-into-bowl-3d regained
   // 3.6 J; docs/particles.md, "Energy regains over long runs"). The PIC value (the particles'
   // velocities without their affine part) keeps c_yy at one step's -g dt / dx; a drop in flight
-  // loses APIC's rotation on these faces only. Each face written once, on several threads.
+  // loses APIC's rotation on these faces only. Only the faces beside a wall or solid along
+  // their axis take it (the sum needs a neighbour that does not fall; elsewhere the PIC value
+  // took the rotation of a free spinning blob's surface, test_viscous_simulation), unless
+  // ballistic_faces_pic_everywhere. Each face written once, on several threads.
   if (!ballistic_faces_pic()) return;
   ScopedTimer timer(stats_.timing[FramePhase::particles]);
+  const bool everywhere = switches_.ballistic_faces_pic_everywhere;
   const int nf = grid_.num_faces();
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f)
-    if (ballistic_face(f)) u_[f] = pic_u_[f] + dt * gravity_[grid_.face_coord(f).first];
+    if (ballistic_face(f) && (everywhere || face_beside_support(f)))
+      u_[f] = pic_u_[f] + dt * gravity_[grid_.face_coord(f).first];
+}
+
+template <int Dim>
+bool Simulation<Dim>::face_beside_support(int f) const {
+  if (weights_.fluid_face[f] < 1.0 || wall_face(f)) return true;
+  const auto [axis, coord] = grid_.face_coord(f);
+  for (int side : {-1, 1}) {
+    VecI<Dim> n = coord;
+    n[axis] += side;
+    const int g = grid_.face_index_or_outside(axis, n);
+    if (g >= 0 && (wall_face(g) || weights_.fluid_face[g] < 1.0)) return true;
+  }
+  return false;
 }
 
 template <int Dim>

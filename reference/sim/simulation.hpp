@@ -54,6 +54,10 @@ struct StageSwitches {
   /// step, which the transfers release (issue 16; docs/particles.md, "Energy regains over long
   /// runs"). false: the APIC value of P2G plus g dt, as before.
   bool ballistic_faces_pic = true;
+  /// With ballistic_faces_pic: every ballistic face takes the PIC value (false, the default: only
+  /// those beside a wall or solid along their own axis, Simulation::ballistic_face_beside_support;
+  /// everywhere it also took APIC's rotation from the surface faces of a free spinning blob)
+  bool ballistic_faces_pic_everywhere = false;
   /// The velocity is extrapolated from the trusted faces after the solve (false: every other
   /// face keeps what the solve, or the extrapolation before it, left there)
   bool extrapolate_after_solve = true;
@@ -451,6 +455,9 @@ class Simulation : public AnySimulation {
   /// update_step_weights, which decides W_L^u
   void ballistic_faces_take_pic(double dt);
   bool ballistic_faces_pic() const;
+  /// A face that is partly solid, or whose neighbour along its own axis is a wall face or partly
+  /// solid: the faces where a ballistic value meets a support that does not fall with it
+  bool face_beside_support(int f) const;
   /// face_mass_ > 0 per face, marked after every particles_to_grid: the trust test
   /// (trusted_face), gravity and the extrapolation into air read these flags, so the masses
   /// themselves are dead after them (masses_read_after_solve) and their storage is reused

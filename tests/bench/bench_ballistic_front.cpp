@@ -1,6 +1,7 @@
 // The surge front of dam-break-2d (as test_validation_dam_break runs it: 64 x 32 cells, 100 frames
-// per second, 34 frames) with the ballistic faces' PIC value (StageSwitches::ballistic_faces_pic,
-// the default) and with their APIC value (before issue 16's fix), side by side: the front
+// per second, 34 frames) with the PIC value on the ballistic faces beside walls and solids
+// (StageSwitches::ballistic_faces_pic, the default; column "pic") and with their APIC value
+// (before issue 16's fix; column "apic"), side by side: the front
 // Z = z/a (the largest particle x over a) at Martin & Moyce's (1952) times T = t sqrt(2 g / a),
 // the front speed over T in [1.6, 2.95] and the liquid volume's worst drift. The surge front is
 // a sheet along the floor whose faces are ballistic (docs/particles.md, "Energy regains over long

@@ -56,6 +56,9 @@ std::vector<Variant> variants() {
       {"no-ballistic-faces", [](StageSwitches& s) { s.unreached_faces_keep_u_star = false; }},
       // those faces keep P2G's APIC value plus g dt (before issue 16's fix: the PIC value)
       {"ballistic-apic", [](StageSwitches& s) { s.ballistic_faces_pic = false; }},
+      // every ballistic face takes the PIC value, not only those beside a wall or solid
+      {"ballistic-pic-everywhere",
+       [](StageSwitches& s) { s.ballistic_faces_pic_everywhere = true; }},
       {"split", [](StageSwitches& s) { s.split_advection = true; }},
   };
 }
