@@ -329,13 +329,14 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 /// of the grid.
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
-                       VectorX& face_mass, VectorX& face_density) {
+                       VectorX& face_mass, VectorX& face_density, VectorX* pic_u) {
   constexpr int kCorners = 1 << Dim;
   constexpr int kLast = Dim - 1;
   const int nf = grid.num_faces();
   const long np = static_cast<long>(particles.size());
-  // the three accumulators live in the outputs (setZero keeps the storage of a same-size vector)
-  for (VectorX* v : {&u, &face_mass, &face_density}) {
+  // the accumulators live in the outputs (setZero keeps the storage of a same-size vector)
+  for (VectorX* v : {&u, &face_mass, &face_density, pic_u}) {
+    if (v == nullptr) continue;
     v->resize(nf);
     fill_in_parallel(v->data(), nf, 0.0);
   }
@@ -416,6 +417,8 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
             face_mass[f] += weight * mp;
             u[f] += weight * mp * vel;
             face_density[f] += weight * mp * particles.density[p];
+            // the same face's momentum without the affine part, summed in the same order
+            if (pic_u != nullptr) (*pic_u)[f] += weight * mp * particles.v[p][a];
           }
         }
       }
@@ -429,9 +432,11 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
     if (m > 0.0) {
       u[f] = (0.0 + u[f]) / m;
       face_density[f] = (0.0 + face_density[f]) / m;
+      if (pic_u != nullptr) (*pic_u)[f] = (0.0 + (*pic_u)[f]) / m;
     } else {
       u[f] = 0.0;
       face_density[f] = 0.0;
+      if (pic_u != nullptr) (*pic_u)[f] = 0.0;
     }
   }
 }
@@ -2033,7 +2038,7 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                        const std::vector<ShapePtr<D>>&, const SolidField<D>&, int, \
                                        unsigned);                                                  \
   template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,      \
-                                  VectorX&);                                                       \
+                                  VectorX&, VectorX*);                                             \
   template long grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&,                \
                                   std::vector<char>*);                                             \
   template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \

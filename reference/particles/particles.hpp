@@ -52,9 +52,14 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 /// APIC particle-to-grid transfer onto the faces. Outputs, per face: u (momentum / mass, zero where
 /// no particle contributes), face_mass (sum of weighted particle masses), face_density
 /// (mass-weighted particle density, the diagonal of P; zero where face_mass is zero).
+/// With `pic_u`: also the PIC velocity per face, sum_p w_fp m_p v_p / sum_p w_fp m_p (the
+/// particles' velocities without their affine part c_p (x_f - x_p); zero where face_mass is
+/// zero), summed in the same particle order as u (the same bits for any thread count). The
+/// simulation gives it to the faces with mass outside the level set (Simulation::ballistic_face;
+/// docs/particles.md, "Energy regains over long runs").
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
-                       VectorX& face_mass, VectorX& face_density);
+                       VectorX& face_mass, VectorX& face_density, VectorX* pic_u = nullptr);
 
 /// APIC grid-to-particle transfer: v and c from the face velocities u.
 /// With `unread` (the guard against unreadable faces, which the caller set to NaN in u;

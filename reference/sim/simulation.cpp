@@ -484,6 +484,7 @@ void Simulation<Dim>::step(double dt) {
   particles_to_grid_with_forces(dt);  // (1)-(3)
   update_step_weights();              // (4)-(5)
   release_liquid_phi();
+  ballistic_faces_take_pic(dt);       // u* of the faces with mass outside the level set
   extrapolate_into_air();             // u* on the faces the particles did not reach
   solve_step(dt);                     // (6)-(12)
   check_finite("the pressure/viscosity/contact solve");
@@ -523,7 +524,8 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
     // the faces' densities into P's own storage (P of the last step is read by nothing from
     // here on; update_step_weights turns them into this step's P in place)
-    particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+    particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density,
+                      ballistic_faces_pic() ? &pic_u_ : nullptr);
     mark_faces_with_mass();
   }
   account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });
@@ -535,6 +537,54 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   for (int f = 0; f < nf; ++f)
     if (mass_faces_[f]) u_[f] += dt * gravity_[grid_.face_coord(f).first];
   if (coupled_) rigid_->apply_gravity(dt, gravity_);
+}
+
+template <int Dim>
+bool Simulation<Dim>::ballistic_faces_pic() const {
+  // without APIC (c = 0) the PIC value is P2G's own
+  return switches_.unreached_faces_keep_u_star && switches_.ballistic_faces_pic && switches_.apic;
+}
+
+template <int Dim>
+bool Simulation<Dim>::ballistic_face(int f) const {
+  return switches_.unreached_faces_keep_u_star && weights_.fluid_face[f] > 0.0 &&
+         weights_.liquid_face[f] == 0.0 && mass_faces_[f];
+}
+
+template <int Dim>
+void Simulation<Dim>::ballistic_faces_take_pic(double dt) {
+  // A ballistic face's u* is P2G's value plus g dt, and nothing in the solve changes it. For a
+  // particle lying on the floor the face below it is the wall's (0) and the one above it is
+  // ballistic: with APIC's value, v_y + c_yy dx - g dt there, G2P returns c_yy lower by g dt / dx
+  // than before, so the particle's affine matrix sums the free fall the floor does not let it
+  // take, step after step, and the transfers release it (liquid-bunny-into-bowl-3d regained
+  // 3.6 J; docs/particles.md, "Energy regains over long runs"). The PIC value (the particles'
+  // velocities without their affine part) keeps c_yy at one step's -g dt / dx; a drop in flight
+  // loses APIC's rotation on these faces only. Only the faces beside a wall or solid along
+  // their axis take it (the sum needs a neighbour that does not fall; elsewhere the PIC value
+  // took the rotation of a free spinning blob's surface, test_viscous_simulation), unless
+  // ballistic_faces_pic_everywhere. Each face written once, on several threads.
+  if (!ballistic_faces_pic()) return;
+  ScopedTimer timer(stats_.timing[FramePhase::particles]);
+  const bool everywhere = switches_.ballistic_faces_pic_everywhere;
+  const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f)
+    if (ballistic_face(f) && (everywhere || face_beside_support(f)))
+      u_[f] = pic_u_[f] + dt * gravity_[grid_.face_coord(f).first];
+}
+
+template <int Dim>
+bool Simulation<Dim>::face_beside_support(int f) const {
+  if (weights_.fluid_face[f] < 1.0 || wall_face(f)) return true;
+  const auto [axis, coord] = grid_.face_coord(f);
+  for (int side : {-1, 1}) {
+    VecI<Dim> n = coord;
+    n[axis] += side;
+    const int g = grid_.face_index_or_outside(axis, n);
+    if (g >= 0 && (wall_face(g) || weights_.fluid_face[g] < 1.0)) return true;
+  }
+  return false;
 }
 
 template <int Dim>
@@ -617,8 +667,7 @@ bool Simulation<Dim>::trusted_face(int f) const {
                 "the trust test reads the clamped W_L^u");
   return weights_.fluid_face[f] > 0.0 &&
          (weights_.fluid_face[f] * weights_.liquid_face[f] >= kTrustedLiquidFaceFraction ||
-          (switches_.unreached_faces_keep_u_star && weights_.liquid_face[f] == 0.0 &&
-           mass_faces_[f]) ||
+          ballistic_face(f) ||
           (!switches_.trusted_faces && weights_.liquid_face[f] > 0.0));
 }
 

@@ -49,6 +49,16 @@ struct StageSwitches {
   /// Faces that carry particle mass but no liquid fraction (W_L^u = 0) keep u* (false: they are
   /// extrapolated like the air)
   bool unreached_faces_keep_u_star = true;
+  /// Those faces (Simulation::ballistic_face) keep the particles' PIC velocity plus g dt, not the
+  /// APIC one: a particle a wall supports (the face below it the wall's, the one above
+  /// ballistic) otherwise stores one more step of free fall g dt / dx in its affine matrix each
+  /// step, which the transfers release (issue 16; docs/particles.md, "Energy regains over long
+  /// runs"). false: the APIC value of P2G plus g dt, as before.
+  bool ballistic_faces_pic = true;
+  /// With ballistic_faces_pic: every ballistic face takes the PIC value (false, the default: only
+  /// those beside a wall or solid along their own axis, Simulation::ballistic_face_beside_support;
+  /// everywhere it also took APIC's rotation from the surface faces of a free spinning blob)
+  bool ballistic_faces_pic_everywhere = false;
   /// The velocity is extrapolated from the trusted faces after the solve (false: every other
   /// face keeps what the solve, or the extrapolation before it, left there)
   bool extrapolate_after_solve = true;
@@ -451,6 +461,20 @@ class Simulation : public AnySimulation {
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
   /// (the faces' densities of particles_to_grid go straight into weights_.face_density)
   VectorX u_, face_mass_, pressure_, stress_;
+  /// P2G's PIC velocity per face (particles_to_grid's pic_u; kept across steps, no allocation
+  /// after the first), read on the ballistic faces only (ballistic_faces_take_pic)
+  VectorX pic_u_;
+  /// A face that carries particle mass but lies outside the liquid's level set (W_F^u > 0,
+  /// W_L^u = 0, with unreached_faces_keep_u_star): it keeps u* through the solve and hands it to
+  /// the particles (trusted_face)
+  bool ballistic_face(int f) const;
+  /// The ballistic faces' u* from the PIC velocity (StageSwitches::ballistic_faces_pic): after
+  /// update_step_weights, which decides W_L^u
+  void ballistic_faces_take_pic(double dt);
+  bool ballistic_faces_pic() const;
+  /// A face that is partly solid, or whose neighbour along its own axis is a wall face or partly
+  /// solid: the faces where a ballistic value meets a support that does not fall with it
+  bool face_beside_support(int f) const;
   /// face_mass_ > 0 per face, marked after every particles_to_grid: the trust test
   /// (trusted_face), gravity and the extrapolation into air read these flags, so the masses
   /// themselves are dead after them (masses_read_after_solve) and their storage is reused

@@ -240,6 +240,45 @@ TEST_CASE("apic particles-to-grid gives the same bits for any thread count", "[u
   }
 }
 
+TEST_CASE("apic particles-to-grid's PIC velocity drops the affine part only", "[unit]") {
+  // pic_u (read on the ballistic faces, issue 16) is P2G of the same particles with c = 0, bit for
+  // bit, for any thread count, and asking for it leaves u, the masses and densities unchanged
+  const MacGrid<3> grid = make_grid<3>(10);
+  Particles<3> particles = random_cloud<3>(8000, -0.55, 0.5, 11u);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (std::size_t p = 0; p < particles.size(); ++p) {
+    for (int a = 0; a < 3; ++a) particles.v[p][a] = u(rng);
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) particles.c[p](a, b) = 20.0 * u(rng);
+  }
+  Particles<3> no_affine = particles;
+  for (auto& c : no_affine.c) c.setZero();
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  VectorX u_apic, m_apic, d_apic, u_pic, m_pic, d_pic;
+  particles_to_grid(particles, grid, u_apic, m_apic, d_apic);
+  particles_to_grid(no_affine, grid, u_pic, m_pic, d_pic);
+  for (int threads : {1, 2, 3}) {
+    CAPTURE(threads);
+    omp_set_num_threads(threads);
+    VectorX uu, mm, dd, pic;
+    particles_to_grid(particles, grid, uu, mm, dd, &pic);
+    REQUIRE((uu.array() == u_apic.array()).all());
+    REQUIRE((mm.array() == m_apic.array()).all());
+    REQUIRE((dd.array() == d_apic.array()).all());
+    REQUIRE((pic.array() == u_pic.array()).all());
+    // the affine part is not small here: the two velocities differ on most faces with mass
+    long differing = 0, with_mass = 0;
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      with_mass += mm[f] > 0.0;
+      differing += mm[f] > 0.0 && std::abs(pic[f] - uu[f]) > 1e-3;
+    }
+    CHECK(differing > with_mass / 2);
+  }
+  omp_set_num_threads(saved);
+}
+
 namespace {
 
 template <int Dim>
