@@ -5,10 +5,20 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <utility>
+#include <vector>
 
 namespace monolith {
 
 namespace {
+
+/// The lower median of `values` (the middle one of an odd count, the lower middle of an even
+/// count; `values` reordered). `values` must not be empty.
+double lower_median(std::vector<double> values) {
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>((values.size() - 1) / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
 
 constexpr int kParallelRows = 4096;
 
@@ -83,10 +93,8 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     penalty_used_ = penalty_;
     VectorX a22_diagonal = a22.diagonal();
     if (np_ > 0 && options.empty_cell_ratio > 0.0) {
-      std::vector<double> sorted(a22_diagonal.data(), a22_diagonal.data() + np_);
-      const auto mid = sorted.begin() + (np_ - 1) / 2;
-      std::nth_element(sorted.begin(), mid, sorted.end());
-      const double bound = options.empty_cell_ratio * *mid;
+      const double bound = options.empty_cell_ratio *
+                           lower_median(std::vector<double>(a22_diagonal.data(), a22_diagonal.data() + np_));
       for (int k = 0; k < np_; ++k)
         if (a22_diagonal[k] < bound && a22_diagonal[k] > 0.0) empty_.push_back(k);
       empty_diagonal_.resize(static_cast<int>(empty_.size()));
@@ -124,12 +132,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
         ratio[i] = f_.c[i] * d;
       }
     }
-    if (nf_ > 0) {
-      std::vector<double> sorted(ratio.data(), ratio.data() + nf_);
-      const auto mid = sorted.begin() + (nf_ - 1) / 2;
-      std::nth_element(sorted.begin(), mid, sorted.end());
-      viscous_ratio_ = *mid;
-    }
+    if (nf_ > 0) viscous_ratio_ = lower_median(std::vector<double>(ratio.data(), ratio.data() + nf_));
     // (P6): one cycle more per factor 4 of the median ratio above cycle_ratio
     if (options.cycle_ratio > 0.0 && viscous_ratio_ > options.cycle_ratio) {
       const int extra = static_cast<int>(std::floor(std::log(viscous_ratio_ / options.cycle_ratio) / std::log(4.0)));
@@ -187,12 +190,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
         std::vector<double> sorted;
         for (int k = 0; k < np_; ++k)
           if (!out[k]) sorted.push_back(shifted.coeff(k, k));
-        double fill = 1.0;
-        if (!sorted.empty()) {
-          const auto mid = sorted.begin() + (sorted.size() - 1) / 2;
-          std::nth_element(sorted.begin(), mid, sorted.end());
-          fill = *mid;
-        }
+        const double fill = sorted.empty() ? 1.0 : lower_median(std::move(sorted));
         for (int k : empty_) shifted.coeffRef(k, k) = fill;
         shifted.makeCompressed();
       }
