@@ -955,6 +955,8 @@ void Simulation<Dim>::correct_volume(double dt) {
   // keeps the particle volume and the level set's volume equal (docs/particles.md)
   if (!scene_.particles.position_correction) return;
   ScopedTimer timer(stats_.timing[FramePhase::particles]);
+  const bool pay = switches_.line15_energy != Line15Energy::free;
+  const double potential_before = pay ? liquid_potential_energy() : 0.0;
   if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
   account(frame_ledger_.position_correction, [&] { return liquid_potential_energy(); });
   if (switches_.density_projection && switches_.density_projection_in_steps)
@@ -963,6 +965,43 @@ void Simulation<Dim>::correct_volume(double dt) {
                                  boundary_, 1, switches_.density_projection_surface_deficits)
             .surface_deficits;
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
+  if (pay) {
+    double gain = liquid_potential_energy() - potential_before;
+    if (switches_.line15_energy == Line15Energy::balance) {
+      // a drop is kept as credit against the next rises
+      gain += line15_credit_;
+      line15_credit_ = std::min(0.0, gain);
+    }
+    if (gain > 0.0) {
+      // the ledger books the kinetic energy taken with the projection's column
+      restart_ledger([&] { return particle_kinetic_energy(); });
+      pay_line15_energy(gain);
+      account(frame_ledger_.density_projection, [&] { return particle_kinetic_energy(); });
+    }
+  }
+}
+
+template <int Dim>
+void Simulation<Dim>::pay_line15_energy(double gain) {
+  // The moves of line 15 are not the flow's: they correct the particles' spacing and volume, and
+  // lifting particle volume into the surface (the density projection's corrections of a surface
+  // band the flow disordered or spread) raises the potential energy by what no force paid for.
+  // Here the kinetic energy pays it: a uniform scaling of the liquid's velocities (the affine
+  // parts with them, so the next transfer's face momenta scale alike) by
+  //   s = sqrt(max(0, 1 - dPE / KE)),   KE = sum_p 1/2 m_p |v_p|^2,
+  // which lowers KE by dPE (by all of KE if it holds less). A drop of the potential energy is
+  // not given back (line 15 may lose energy, never create it).
+  const double kinetic = particle_kinetic_energy();
+  if (!(kinetic > 0.0) || !(gain > 0.0)) return;
+  const double s = std::sqrt(std::max(0.0, 1.0 - gain / kinetic));
+  const long np = static_cast<long>(particles_.size());
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (long p = 0; p < np; ++p) {
+    particles_.v[p] *= s;
+    particles_.c[p] *= s;
+  }
+  // the next step's first half drift reads u_ (the velocity the particles were given)
+  if (split_drift()) u_ *= s;
 }
 
 template <int Dim>
@@ -1585,6 +1624,9 @@ void Simulation<Dim>::state_fields(Archive& a) {
   a(cell_eta_);
   a(previous_shear_rate_);
   a(liquid_weights_current_);
+  // Line15Energy::balance's credit (only with that measurement switch: the format is otherwise
+  // unchanged)
+  if (switches_.line15_energy == Line15Energy::balance) a(line15_credit_);
   // the bodies: poses, velocities, the last contacts and forces (RigidWorld::state_fields)
   bool bodies = rigid_ != nullptr;
   a(bodies);

@@ -37,6 +37,20 @@ namespace monolith {
 /// Stages of the step that a diagnosis can switch off or replace, to measure what each one
 /// contributes (tests/bench/bench_still_water.cpp; docs/particles.md, "Still water"). The defaults
 /// are the simulator; scene files do not reach these switches.
+/// What pays for the potential energy line 15's moves (correct_positions, the density projection)
+/// add to the liquid (StageSwitches::line15_energy).
+enum class Line15Energy {
+  free,  ///< nothing: the moves change the energy as they do (the default)
+  /// each step whose line 15 raises -sum m g . x by dPE > 0 takes dPE from the liquid's kinetic
+  /// energy (every particle's v and c, and with split_advection the grid velocity the next half
+  /// drift reads, scaled by sqrt(max(0, 1 - dPE / KE)), KE = sum 1/2 m |v|^2); a drop is lost
+  per_step,
+  /// the same, but a drop is banked: the kinetic energy pays only when line 15's summed change
+  /// since the start would otherwise be positive (credit = min(0, credit + dPE), pay the rest),
+  /// so line 15 never adds energy over the run and loses only what it did not take back
+  balance,
+};
+
 struct StageSwitches {
   bool position_correction = true;  ///< correct_positions (Algorithm 1, line 15)
   bool density_projection = true;   ///< project_particle_density (line 15)
@@ -118,6 +132,10 @@ struct StageSwitches {
   /// A test switch: the extrapolation after the solve reaches every face it can (as many layers
   /// as the face lattices' diameter), whatever the step's speed.
   bool extrapolate_everywhere = false;
+  /// Whether the potential energy the moves of line 15 (correct_positions and the density
+  /// projection) add is paid by the liquid's kinetic energy (Line15Energy; docs/particles.md,
+  /// "Line 15's potential energy paid by the kinetic energy (slosh9)"). A measurement switch.
+  Line15Energy line15_energy = Line15Energy::free;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
@@ -287,6 +305,11 @@ class Simulation : public AnySimulation {
   void first_half_drift(double dt);
   /// Line 15: position correction and the particle density projection (when enabled).
   void correct_volume(double dt);
+  /// StageSwitches::line15_paid_by_kinetic_energy: takes `gain` (J, > 0) of potential energy that
+  /// line 15 added from the liquid's kinetic energy (uniform scaling of the particles' v and c)
+  void pay_line15_energy(double gain);
+  /// Line15Energy::balance: line 15's summed potential energy change not yet paid (<= 0, J)
+  double line15_credit_ = 0.0;
   /// The energy ledger (only with StageSwitches::energy_ledger; otherwise nothing is measured):
   /// adds now() - (the energy after the previous stage) to stage and makes now() the energy
   /// after this one.

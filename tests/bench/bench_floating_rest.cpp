@@ -62,6 +62,9 @@ std::vector<Variant> variants() {
       // moving particles (docs/particles.md, "Volume correction through the solve")
       {"volume-source",
        [](StageSwitches& s) { s.density_projection_surface_deficits = SurfaceDeficits::to_solve; }},
+      // line 15's potential energy paid by the liquid's kinetic energy (docs/particles.md, slosh9)
+      {"paid", [](StageSwitches& s) { s.line15_energy = Line15Energy::per_step; }},
+      {"balance", [](StageSwitches& s) { s.line15_energy = Line15Energy::balance; }},
       {"divergence-free-surface-volume-source",
        [](StageSwitches& s) {
          s.divergence_free_air = s.divergence_free_surface_cells = true;

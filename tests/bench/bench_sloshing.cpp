@@ -9,7 +9,7 @@
 //                  [--divergence-free-air] [--divergence-free-surface] [--no-step-projection]
 //                  [--no-surface-deficits] [--dead-band-deficits] [--seed N]
 //                  [--volume-source GAIN] [--pic] [--no-air-velocity] [--all-faces-trusted]
-//                  [--unreached-extrapolated] [--cfl-layers] [--set KEY=VALUE]...
+//                  [--unreached-extrapolated] [--cfl-layers] [--pay-line15 per-step|balance] [--set KEY=VALUE]...
 //
 // --set: a scene override as `monolith run --set` (e.g. domain.boundary.z-=periodic
 // domain.boundary.z+=periodic: a 3D tank without its side walls across the sloshing).
@@ -18,6 +18,8 @@
 // set's volume over the particles' (SurfaceDeficits::beyond_dead_band, a measurement switch).
 // --volume-source GAIN: the surface band's deficits not moved but handed to the next solve as a
 // divergence source d = GAIN e / dt (SurfaceDeficits::to_solve, StageSwitches::volume_source_gain).
+// --pay-line15 per-step|balance: the potential energy line 15's moves add is taken from the
+// liquid's kinetic energy (StageSwitches::line15_energy, Line15Energy, a measurement switch).
 //
 // Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
 // line before: which stage of the step changed the energy.
@@ -47,6 +49,7 @@ int main(int argc, char** argv) {
   double volume_source = -1.0;
   bool pic = false, no_air_velocity = false, all_faces_trusted = false;
   bool unreached_extrapolated = false, cfl_layers = false;
+  Line15Energy pay_line15 = Line15Energy::free;
   std::vector<std::string> overrides;
   double max_dt = 0.02;
   int seed = 0;
@@ -75,6 +78,8 @@ int main(int argc, char** argv) {
     else if (a == "--unreached-extrapolated") unreached_extrapolated = true;
     else if (a == "--cfl-layers") cfl_layers = true;
     else if (a == "--volume-source") volume_source = std::atof(args.value().c_str());
+    else if (a == "--pay-line15")
+      pay_line15 = args.value() == "balance" ? Line15Energy::balance : Line15Energy::per_step;
     else if (a == "--seed") seed = std::atoi(args.value().c_str());
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
@@ -103,6 +108,7 @@ int main(int argc, char** argv) {
   if (all_faces_trusted) switches.trusted_faces = false;
   if (unreached_extrapolated) switches.unreached_faces_keep_u_star = false;
   if (cfl_layers) switches.extrapolate_cfl_layers = true;
+  switches.line15_energy = pay_line15;
   if (volume_source >= 0.0) {
     switches.density_projection_surface_deficits = SurfaceDeficits::to_solve;
     switches.volume_source_gain = volume_source;

@@ -106,6 +106,20 @@ std::vector<Variant> variants() {
        }},
       {"volume-source", "the surface band's deficits as the next solve's divergence source",
        [](StageSwitches& s) { s.density_projection_surface_deficits = SurfaceDeficits::to_solve; }},
+      {"paid", "line 15's potential energy paid by the kinetic energy, per step (slosh9)",
+       [](StageSwitches& s) { s.line15_energy = Line15Energy::per_step; }},
+      {"balance", "line 15's potential energy paid by the kinetic energy, balance (slosh9)",
+       [](StageSwitches& s) { s.line15_energy = Line15Energy::balance; }},
+      {"split-paid", "drift-kick-drift and line 15's potential energy paid per step (slosh9)",
+       [](StageSwitches& s) {
+         s.split_advection = true;
+         s.line15_energy = Line15Energy::per_step;
+       }},
+      {"split-balance", "drift-kick-drift and line 15's potential energy paid, balance (slosh9)",
+       [](StageSwitches& s) {
+         s.split_advection = true;
+         s.line15_energy = Line15Energy::balance;
+       }},
       {"split-volume-source", "split-divergence-free and the deficits as a divergence source",
        [](StageSwitches& s) {
          s.split_advection = s.divergence_free_air = s.divergence_free_surface_cells = true;
