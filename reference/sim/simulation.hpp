@@ -34,9 +34,6 @@
 
 namespace monolith {
 
-/// Stages of the step that a diagnosis can switch off or replace, to measure what each one
-/// contributes (tests/bench/bench_still_water.cpp; docs/particles.md, "Still water"). The defaults
-/// are the simulator; scene files do not reach these switches.
 /// What pays for the potential energy line 15's moves (correct_positions, the density projection)
 /// add to the liquid (StageSwitches::line15_energy).
 enum class Line15Energy {
@@ -47,10 +44,15 @@ enum class Line15Energy {
   per_step,
   /// the same, but a drop is banked: the kinetic energy pays only when line 15's summed change
   /// since the start would otherwise be positive (credit = min(0, credit + dPE), pay the rest),
-  /// so line 15 never adds energy over the run and loses only what it did not take back
+  /// so line 15 never adds energy over the run (while the kinetic energy can pay: a rise larger
+  /// than it is paid with all of it, the rest not carried) and loses only what it did not take
+  /// back
   balance,
 };
 
+/// Stages of the step that a diagnosis can switch off or replace, to measure what each one
+/// contributes (tests/bench/bench_still_water.cpp; docs/particles.md, "Still water"). The defaults
+/// are the simulator; scene files do not reach these switches.
 struct StageSwitches {
   bool position_correction = true;  ///< correct_positions (Algorithm 1, line 15)
   bool density_projection = true;   ///< project_particle_density (line 15)
@@ -305,8 +307,9 @@ class Simulation : public AnySimulation {
   void first_half_drift(double dt);
   /// Line 15: position correction and the particle density projection (when enabled).
   void correct_volume(double dt);
-  /// StageSwitches::line15_paid_by_kinetic_energy: takes `gain` (J, > 0) of potential energy that
-  /// line 15 added from the liquid's kinetic energy (uniform scaling of the particles' v and c)
+  /// StageSwitches::line15_energy: takes `gain` (J, > 0) of potential energy that line 15 added
+  /// from the liquid's kinetic energy (uniform scaling of the particles' v and c; all of it if
+  /// the kinetic energy holds less)
   void pay_line15_energy(double gain);
   /// Line15Energy::balance: line 15's summed potential energy change not yet paid (<= 0, J)
   double line15_credit_ = 0.0;
