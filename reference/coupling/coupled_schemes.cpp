@@ -441,10 +441,22 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
   // (the systems built below share their weights: they live in this function's State values,
   // which in.weights outlives, so the input's weights are lent to them without an owner)
   const std::shared_ptr<const StokesWeights> input(&in.weights, [](const StokesWeights*) {});
+  // Otherwise (the pressure solves of PC-VC-PC-unified with a viscous liquid) the pressure
+  // weights are copied and the stress vectors left out: weights without them are inviscid
+  // (StokesWeights::inviscid) and give the system of the zeroed viscosity bit for bit (test
+  // "inviscid weights without stress vectors give the system of zero stress weights bit for
+  // bit"), without a copy of W_F^s, W_L^s and a zero eta (three stress-sized vectors per step,
+  // 1.2 GB at the paper's 256x128x256 grid). An export keeps them: the oracle reads every weight
+  // of the system it is given.
   std::shared_ptr<const StokesWeights> inviscid = input;
   if (!all_plus_zero) {
-    auto zeroed = std::make_shared<StokesWeights>(in.weights);
-    zeroed->viscosity.setZero();
+    auto zeroed = std::make_shared<StokesWeights>();
+    zeroed->pressure = in.weights.pressure;
+    if (options.export_sink) {
+      zeroed->fluid_stress = in.weights.fluid_stress;
+      zeroed->liquid_stress = in.weights.liquid_stress;
+      zeroed->viscosity.setZero(in.weights.viscosity.size());
+    }
     inviscid = std::move(zeroed);
   }
   // the state between the solves of the sequence: the system and unknowns of the last solve

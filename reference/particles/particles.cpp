@@ -437,12 +437,12 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
 }
 
 /// The PIC sums of particles_to_grid on the listed faces only. A particle in cell c (its wrapped
-/// position's cell, clamped to the grid or wrapped on a periodic axis) reaches, on every face lattice, samples whose coordinate
-/// lies within c - 1 .. c + 1 along every axis (axis_stencil: i0 = floor(q - shift) with shift 0
-/// or 1/2, clamped), so the particles that reach a listed face sit in the 3^Dim cells around the
-/// face's coordinate (wrapped on periodic axes). Those particles are found in parallel, then
-/// summed serially in particle order with the stencils, weights and products of
-/// particles_to_grid: each listed face gets P2G's sums, bit for bit.
+/// position's cell, clamped to the grid or wrapped on a periodic axis) reaches, on every face
+/// lattice, samples whose coordinate lies within c - 1 .. c + 1 along every axis (axis_stencil:
+/// i0 = floor(q - shift) with shift 0 or 1/2, clamped), so the particles that reach a listed
+/// face sit in the 3^Dim cells around the face's coordinate (wrapped on periodic axes). Those
+/// particles are found in parallel, then summed serially in particle order with the stencils,
+/// weights and products of particles_to_grid: each listed face gets P2G's sums, bit for bit.
 template <int Dim>
 void pic_velocity_on_faces(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
                            const std::vector<int>& faces, std::vector<double>& pic) {
