@@ -441,8 +441,8 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
   // (the systems built below share their weights: they live in this function's State values,
   // which in.weights outlives, so the input's weights are lent to them without an owner)
   const std::shared_ptr<const StokesWeights> input(&in.weights, [](const StokesWeights*) {});
-  // Otherwise (the pressure solves of PC-VC-PC-unified with a viscous liquid) the pressure
-  // weights are copied and the stress vectors left out: weights without them are inviscid
+  // Otherwise (a viscous input: the pressure solves of PC-VC-PC-unified, or a P.. C scheme) the
+  // pressure weights are copied and the stress vectors left out: weights without them are inviscid
   // (StokesWeights::inviscid) and give the system of the zeroed viscosity bit for bit (test
   // "inviscid weights without stress vectors give the system of zero stress weights bit for
   // bit"), without a copy of W_F^s, W_L^s and a zero eta (three stress-sized vectors per step,
@@ -559,6 +559,13 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
   r.u.swap(end.u);
   r.pressure.swap(end.pressure);
   r.stress.swap(end.stress);
+  // A P.. C scheme with a viscous input ran on weights without stress vectors (`zeroed`), whose
+  // systems leave the stress empty (stress_full_into); the result's stress is every StressGrid
+  // component, +0 without stress unknowns, as the copy with a zeroed eta gave it (an empty one
+  // made the callers' reads of it, such as max |tau|, read past its end: test_coupled_schemes
+  // crashed in "2D no bodies", P-C). Empty only for an inviscid input.
+  if (r.stress.size() == 0 && !in.weights.inviscid())
+    r.stress.setZero(StressGrid<Dim>(in.grid).num_dofs());
   r.body_velocity.swap(end.v);
   r.lambda.swap(end.x.lambda);
   r.z.swap(end.x.z);
