@@ -944,6 +944,12 @@ void Simulation<Dim>::advect(double dt) {
           << (left - unread_.begin()) << " read a face the extrapolation did not reach";
       throw SimulationError(msg.str());
     }
+    // the guard's copies are dead until the next step's extrapolation writes them again (u_ has
+    // no NaN left, so face_kinetic_energy does not read reached_u_): their memory goes back to
+    // the heap, where the next step's solids' weights take it (the union's lattice-sized level
+    // set was the step's live peak at Fig. 2's paper grid, with this face-sized copy beside it)
+    reached_u_ = VectorX();
+    extended_u_ = VectorX();
   }
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
 }
