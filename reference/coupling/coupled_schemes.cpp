@@ -482,6 +482,9 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
     std::shared_ptr<const VectorX> u_star =
         options.export_sink ? std::make_shared<const VectorX>(u_from)
                             : std::shared_ptr<const VectorX>(&u_from, [](const VectorX*) {});
+    // weights without stress vectors given a viscous input (`zeroed`, below): their system has
+    // no stress field (stress_full_into leaves it empty)
+    const bool stress_dropped = w->inviscid() && !in.weights.inviscid();
     out.system = build_system(in, std::move(w), form, unknowns, std::move(u_star), bodies, backend);
     out.bodies = bodies;
     const MonolithicSystem<Dim>& sys = *out.system;
@@ -507,7 +510,14 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
     sys.fluid_velocities_into(out.x.x_fluid, out.u);
     out.v = sys.body_velocities(out.x.x_fluid, out.x.lambda, out.x.z);
     sys.pressure_cells_into(out.x.x_fluid, out.pressure);
-    sys.stress_full_into(out.x.x_fluid, out.stress);
+    // The result's stress is every StressGrid component, +0 without stress unknowns, as the copy
+    // with a zeroed eta gave it, written into the kept buffer; an empty one (the system's own)
+    // made the callers' reads of it, such as max |tau|, read past its end (test_coupled_schemes
+    // crashed in "2D no bodies", P-C with a viscous input). Empty only for an inviscid input.
+    if (stress_dropped)
+      out.stress.setZero(StressGrid<Dim>(in.grid).num_dofs());
+    else
+      sys.stress_full_into(out.x.x_fluid, out.stress);
     return out;
   };
   const bool pc_vc_pc = scheme == CouplingScheme::pc_vc_pc_unified;
@@ -559,13 +569,6 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
   r.u.swap(end.u);
   r.pressure.swap(end.pressure);
   r.stress.swap(end.stress);
-  // A P.. C scheme with a viscous input ran on weights without stress vectors (`zeroed`), whose
-  // systems leave the stress empty (stress_full_into); the result's stress is every StressGrid
-  // component, +0 without stress unknowns, as the copy with a zeroed eta gave it (an empty one
-  // made the callers' reads of it, such as max |tau|, read past its end: test_coupled_schemes
-  // crashed in "2D no bodies", P-C). Empty only for an inviscid input.
-  if (r.stress.size() == 0 && !in.weights.inviscid())
-    r.stress.setZero(StressGrid<Dim>(in.grid).num_dofs());
   r.body_velocity.swap(end.v);
   r.lambda.swap(end.x.lambda);
   r.z.swap(end.x.z);
