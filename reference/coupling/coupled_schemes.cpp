@@ -441,10 +441,22 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
   // (the systems built below share their weights: they live in this function's State values,
   // which in.weights outlives, so the input's weights are lent to them without an owner)
   const std::shared_ptr<const StokesWeights> input(&in.weights, [](const StokesWeights*) {});
+  // Otherwise (a viscous input: the pressure solves of PC-VC-PC-unified, or a P.. C scheme) the
+  // pressure weights are copied and the stress vectors left out: weights without them are inviscid
+  // (StokesWeights::inviscid) and give the system of the zeroed viscosity bit for bit (test
+  // "inviscid weights without stress vectors give the system of zero stress weights bit for
+  // bit"), without a copy of W_F^s, W_L^s and a zero eta (three stress-sized vectors per step,
+  // 1.2 GB at the paper's 256x128x256 grid). An export keeps them: the oracle reads every weight
+  // of the system it is given.
   std::shared_ptr<const StokesWeights> inviscid = input;
   if (!all_plus_zero) {
-    auto zeroed = std::make_shared<StokesWeights>(in.weights);
-    zeroed->viscosity.setZero();
+    auto zeroed = std::make_shared<StokesWeights>();
+    zeroed->pressure = in.weights.pressure;
+    if (options.export_sink) {
+      zeroed->fluid_stress = in.weights.fluid_stress;
+      zeroed->liquid_stress = in.weights.liquid_stress;
+      zeroed->viscosity.setZero(in.weights.viscosity.size());
+    }
     inviscid = std::move(zeroed);
   }
   // the state between the solves of the sequence: the system and unknowns of the last solve
@@ -470,6 +482,9 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
     std::shared_ptr<const VectorX> u_star =
         options.export_sink ? std::make_shared<const VectorX>(u_from)
                             : std::shared_ptr<const VectorX>(&u_from, [](const VectorX*) {});
+    // weights without stress vectors given a viscous input (`zeroed`, below): their system has
+    // no stress field (stress_full_into leaves it empty)
+    const bool stress_dropped = w->inviscid() && !in.weights.inviscid();
     out.system = build_system(in, std::move(w), form, unknowns, std::move(u_star), bodies, backend);
     out.bodies = bodies;
     const MonolithicSystem<Dim>& sys = *out.system;
@@ -495,7 +510,14 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
     sys.fluid_velocities_into(out.x.x_fluid, out.u);
     out.v = sys.body_velocities(out.x.x_fluid, out.x.lambda, out.x.z);
     sys.pressure_cells_into(out.x.x_fluid, out.pressure);
-    sys.stress_full_into(out.x.x_fluid, out.stress);
+    // The result's stress is every StressGrid component, +0 without stress unknowns, as the copy
+    // with a zeroed eta gave it, written into the kept buffer; an empty one (the system's own)
+    // made the callers' reads of it, such as max |tau|, read past its end (test_coupled_schemes
+    // crashed in "2D no bodies", P-C with a viscous input). Empty only for an inviscid input.
+    if (stress_dropped)
+      out.stress.setZero(StressGrid<Dim>(in.grid).num_dofs());
+    else
+      sys.stress_full_into(out.x.x_fluid, out.stress);
     return out;
   };
   const bool pc_vc_pc = scheme == CouplingScheme::pc_vc_pc_unified;

@@ -329,14 +329,13 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 /// of the grid.
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
-                       VectorX& face_mass, VectorX& face_density, VectorX* pic_u) {
+                       VectorX& face_mass, VectorX& face_density) {
   constexpr int kCorners = 1 << Dim;
   constexpr int kLast = Dim - 1;
   const int nf = grid.num_faces();
   const long np = static_cast<long>(particles.size());
   // the accumulators live in the outputs (setZero keeps the storage of a same-size vector)
-  for (VectorX* v : {&u, &face_mass, &face_density, pic_u}) {
-    if (v == nullptr) continue;
+  for (VectorX* v : {&u, &face_mass, &face_density}) {
     v->resize(nf);
     fill_in_parallel(v->data(), nf, 0.0);
   }
@@ -417,8 +416,6 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
             face_mass[f] += weight * mp;
             u[f] += weight * mp * vel;
             face_density[f] += weight * mp * particles.density[p];
-            // the same face's momentum without the affine part, summed in the same order
-            if (pic_u != nullptr) (*pic_u)[f] += weight * mp * particles.v[p][a];
           }
         }
       }
@@ -432,13 +429,99 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
     if (m > 0.0) {
       u[f] = (0.0 + u[f]) / m;
       face_density[f] = (0.0 + face_density[f]) / m;
-      if (pic_u != nullptr) (*pic_u)[f] = (0.0 + (*pic_u)[f]) / m;
     } else {
       u[f] = 0.0;
       face_density[f] = 0.0;
-      if (pic_u != nullptr) (*pic_u)[f] = 0.0;
     }
   }
+}
+
+/// The PIC sums of particles_to_grid on the listed faces only. A particle in cell c (its wrapped
+/// position's cell, clamped to the grid or wrapped on a periodic axis) reaches, on every face
+/// lattice, samples whose coordinate lies within c - 1 .. c + 1 along every axis (axis_stencil:
+/// i0 = floor(q - shift) with shift 0 or 1/2, clamped), so the particles that reach a listed
+/// face sit in the 3^Dim cells around the face's coordinate (wrapped on periodic axes). Those
+/// particles are found in parallel, then summed serially in particle order with the stencils,
+/// weights and products of particles_to_grid: each listed face gets P2G's sums, bit for bit.
+template <int Dim>
+void pic_velocity_on_faces(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const std::vector<int>& faces, std::vector<double>& pic) {
+  constexpr int kCorners = 1 << Dim;
+  constexpr int kAround = Dim == 2 ? 9 : 27;
+  const std::size_t nl = faces.size();
+  pic.assign(nl, 0.0);
+  if (nl == 0) return;
+  const VecI<Dim>& cells = grid.cells();
+  // the cells around the listed faces, sorted
+  std::vector<int> near_cells;
+  near_cells.reserve(nl * kAround);
+  for (const int f : faces) {
+    const VecI<Dim> coord = grid.face_coord(f).second;
+    for (int k = 0; k < kAround; ++k) {
+      VecI<Dim> c;
+      bool inside = true;
+      int rest = k;
+      for (int b = 0; b < Dim; ++b, rest /= 3) {
+        c[b] = coord[b] + rest % 3 - 1;
+        if (grid.periodic(b))
+          c[b] = ((c[b] % cells[b]) + cells[b]) % cells[b];
+        else if (c[b] < 0 || c[b] >= cells[b])
+          inside = false;
+      }
+      if (inside) near_cells.push_back(grid.cell_index(c));
+    }
+  }
+  std::sort(near_cells.begin(), near_cells.end());
+  near_cells.erase(std::unique(near_cells.begin(), near_cells.end()), near_cells.end());
+
+  // the particles in those cells (flags in parallel, the list in particle order)
+  const long np = static_cast<long>(particles.size());
+  const Vec<Dim>& origin = grid.origin();
+  const double dx = grid.dx();
+  std::vector<char> near(np, 0);
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (long p = 0; p < np; ++p) {
+    const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+    VecI<Dim> c;
+    for (int b = 0; b < Dim; ++b) {
+      // (on a periodic axis the quotient of a wrapped position can round up to cells[b])
+      const int q = static_cast<int>(std::floor((xp[b] - origin[b]) / dx));
+      c[b] = grid.periodic(b) ? ((q % cells[b]) + cells[b]) % cells[b]
+                              : std::clamp(q, 0, cells[b] - 1);
+    }
+    near[p] = std::binary_search(near_cells.begin(), near_cells.end(), grid.cell_index(c));
+  }
+
+  // the sums, in particle order (particles_to_grid's loop body for the listed faces)
+  std::vector<double> mass(nl, 0.0);
+  for (long p = 0; p < np; ++p) {
+    if (!near[p]) continue;
+    const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
+    const double mp = particles.mass[p];
+    for (int a = 0; a < Dim; ++a) {
+      const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
+      const VecI<Dim> dims = grid.face_dims(a);
+      const int offset = grid.face_offset(a);
+      std::array<typename MacGrid<Dim>::AxisStencil, Dim> st;
+      for (int b = 0; b < Dim; ++b)
+        st[b] = grid.axis_stencil(b, (xp[b] - origin[b]) / dx - shift[b], dims[b]);
+      for (int k = 0; k < kCorners; ++k) {
+        double weight = 1.0;
+        for (int b = 0; b < Dim; ++b) weight *= st[b].weight[(k >> b) & 1];
+        if (weight == 0.0) continue;
+        int index = 0;
+        for (int b = Dim - 1; b >= 0; --b) index = index * dims[b] + st[b].index[(k >> b) & 1];
+        const int f = offset + index;
+        const auto it = std::lower_bound(faces.begin(), faces.end(), f);
+        if (it == faces.end() || *it != f) continue;
+        const std::size_t i = static_cast<std::size_t>(it - faces.begin());
+        mass[i] += weight * mp;
+        pic[i] += weight * mp * particles.v[p][a];
+      }
+    }
+  }
+  for (std::size_t i = 0; i < nl; ++i)
+    pic[i] = mass[i] > 0.0 ? (0.0 + pic[i]) / mass[i] : 0.0;
 }
 
 /// APIC grid-to-particle (first half of Algorithm 1 line 14; Jiang et al. 2015): v_pa = sum_f w_fp
@@ -2038,7 +2121,9 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                        const std::vector<ShapePtr<D>>&, const SolidField<D>&, int, \
                                        unsigned);                                                  \
   template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,      \
-                                  VectorX&, VectorX*);                                             \
+                                  VectorX&);                                                       \
+  template void pic_velocity_on_faces(const Particles<D>&, const MacGrid<D>&,                      \
+                                      const std::vector<int>&, std::vector<double>&);              \
   template long grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&,                \
                                   std::vector<char>*);                                             \
   template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \

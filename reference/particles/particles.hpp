@@ -52,14 +52,21 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 /// APIC particle-to-grid transfer onto the faces. Outputs, per face: u (momentum / mass, zero where
 /// no particle contributes), face_mass (sum of weighted particle masses), face_density
 /// (mass-weighted particle density, the diagonal of P; zero where face_mass is zero).
-/// With `pic_u`: also the PIC velocity per face, sum_p w_fp m_p v_p / sum_p w_fp m_p (the
-/// particles' velocities without their affine part c_p (x_f - x_p); zero where face_mass is
-/// zero), summed in the same particle order as u (the same bits for any thread count). The
-/// simulation gives it to the faces with mass outside the level set (Simulation::ballistic_face;
-/// docs/particles.md, "Energy regains over long runs").
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
-                       VectorX& face_mass, VectorX& face_density, VectorX* pic_u = nullptr);
+                       VectorX& face_mass, VectorX& face_density);
+
+/// The PIC velocity of the listed faces only: pic[i] = sum_p w_fp m_p v_p / sum_p w_fp m_p for
+/// f = faces[i] (the particles' velocities without their affine part c_p (x_f - x_p); zero where
+/// no particle reaches f). `faces` sorted ascending, no repeats. Both sums run over the particles
+/// in particle order with P2G's weights and products, so pic[i] has the bits of
+/// particles_to_grid's u at f for the same particles with c = 0, for any thread count. Visits
+/// only the particles in the cells around the listed faces: the simulation asks for the few
+/// ballistic faces beside a support (Simulation::ballistic_faces_take_pic; docs/particles.md,
+/// "Energy regains over long runs"), so nothing face-sized is kept for them.
+template <int Dim>
+void pic_velocity_on_faces(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const std::vector<int>& faces, std::vector<double>& pic);
 
 /// APIC grid-to-particle transfer: v and c from the face velocities u.
 /// With `unread` (the guard against unreadable faces, which the caller set to NaN in u;

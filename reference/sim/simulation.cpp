@@ -524,8 +524,7 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
     // the faces' densities into P's own storage (P of the last step is read by nothing from
     // here on; update_step_weights turns them into this step's P in place)
-    particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density,
-                      ballistic_faces_pic() ? &pic_u_ : nullptr);
+    particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
     mark_faces_with_mass();
   }
   account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });
@@ -563,15 +562,37 @@ void Simulation<Dim>::ballistic_faces_take_pic(double dt) {
   // loses APIC's rotation on these faces only. Only the faces beside a wall or solid along
   // their axis take it (the sum needs a neighbour that does not fall; elsewhere the PIC value
   // took the rotation of a free spinning blob's surface, test_viscous_simulation), unless
-  // ballistic_faces_pic_everywhere. Each face written once, on several threads.
+  // ballistic_faces_pic_everywhere. The PIC value is summed for the listed faces only
+  // (pic_velocity_on_faces, from the particles in the cells around them, which have not moved
+  // since particles_to_grid): a few thousand faces at Fig. 2's paper grid, where a face-sized
+  // PIC sum in P2G kept 200 MB alive and first-touched.
   if (!ballistic_faces_pic()) return;
   ScopedTimer timer(stats_.timing[FramePhase::particles]);
   const bool everywhere = switches_.ballistic_faces_pic_everywhere;
   const int nf = grid_.num_faces();
+  // the faces, per thread over fixed ranges, joined in thread order: ascending
+  const int threads = process_threads();
+  std::vector<std::vector<int>> found(threads);
+#pragma omp parallel num_threads(threads)
+  {
+    const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+    for (int r = t; r < threads; r += nt) {
+      const int lo = static_cast<int>(static_cast<long>(nf) * r / threads);
+      const int hi = static_cast<int>(static_cast<long>(nf) * (r + 1) / threads);
+      for (int f = lo; f < hi; ++f)
+        if (mass_faces_[f] && ballistic_face(f) && (everywhere || face_beside_support(f)))
+          found[r].push_back(f);
+    }
+  }
+  pic_faces_.clear();
+  for (const auto& list : found) pic_faces_.insert(pic_faces_.end(), list.begin(), list.end());
+  pic_velocity_on_faces(particles_, grid_, pic_faces_, pic_values_);
+  const long nl = static_cast<long>(pic_faces_.size());
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f)
-    if (ballistic_face(f) && (everywhere || face_beside_support(f)))
-      u_[f] = pic_u_[f] + dt * gravity_[grid_.face_coord(f).first];
+  for (long i = 0; i < nl; ++i) {
+    const int f = pic_faces_[i];
+    u_[f] = pic_values_[i] + dt * gravity_[grid_.face_coord(f).first];
+  }
 }
 
 template <int Dim>
@@ -923,6 +944,12 @@ void Simulation<Dim>::advect(double dt) {
           << (left - unread_.begin()) << " read a face the extrapolation did not reach";
       throw SimulationError(msg.str());
     }
+    // the guard's copies are dead until the next step's extrapolation writes them again (u_ has
+    // no NaN left, so face_kinetic_energy does not read reached_u_): their memory goes back to
+    // the heap, where the next step's solids' weights take it (the union's lattice-sized level
+    // set was the step's live peak at Fig. 2's paper grid, with this face-sized copy beside it)
+    reached_u_ = VectorX();
+    extended_u_ = VectorX();
   }
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
 }

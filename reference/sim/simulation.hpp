@@ -487,9 +487,11 @@ class Simulation : public AnySimulation {
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
   /// (the faces' densities of particles_to_grid go straight into weights_.face_density)
   VectorX u_, face_mass_, pressure_, stress_;
-  /// P2G's PIC velocity per face (particles_to_grid's pic_u; kept across steps, no allocation
-  /// after the first), read on the ballistic faces only (ballistic_faces_take_pic)
-  VectorX pic_u_;
+  /// The faces that take the PIC value this step (ascending) and that value
+  /// (pic_velocity_on_faces): lists as long as the ballistic faces beside a support, nothing
+  /// face-sized (ballistic_faces_take_pic)
+  std::vector<int> pic_faces_;
+  std::vector<double> pic_values_;
   /// A face that carries particle mass but lies outside the liquid's level set (W_F^u > 0,
   /// W_L^u = 0, with unreached_faces_keep_u_star): it keeps u* through the solve and hands it to
   /// the particles (trusted_face)
