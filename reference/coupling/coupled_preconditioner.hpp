@@ -37,6 +37,18 @@
 /// free set changes). SPD as M is (S_c is); the same cost per application as the Jacobi rows
 /// (one P). docs/preconditioners.md section 17, docs/mprgp.md.
 ///
+/// Near-empty cells E (pressure cells almost closed between a body and a solid, whose Poisson
+/// diagonal the body term dwarfs; CoupledPreconditionerOptions::empty_cell_ratio) are left out of
+/// P (P = blkdiag(P_r, 0)) and solved exactly with the body term: with H = F_EE + B_E^T W B_E
+/// (F_EE's diagonal floored, empty_cell_floor) and W' = (W^-1 + B_E F_EE^-1 B_E^T)^-1,
+///
+///   Q^-1 = blkdiag(P_r^-1, F_EE) + B_f^T W B_f,   x_r = (P_r - U (W'^-1 + B_f U)^-1 U^T) r',
+///   r' = r_r - B_r^T W B_E H^-1 r_E,   x_E = H^-1 (r_E - B_E^T W B_r x_r)
+///
+/// (block elimination of E; the couplings of E to the rest in F, of A22_kk's size, are left
+/// out). W' takes W's place in S_c and the body columns, so S_c and apply_in_face keep their form
+/// (docs/preconditioners.md section 23).
+///
 /// SPD whenever P is; apply allocates nothing and is deterministic for any thread count (P's
 /// applications are, the body correction runs over rows in fixed order).
 
@@ -70,8 +82,29 @@ struct CoupledPreconditionerOptions {
   int max_exact_contacts = 256;
   /// fluid.empty_cell_ratio when a body's term touches the liquid (B_f != 0) and the body
   /// correction is on: the near-empty cells of (P8), where P's 1 / A22_kk made the Woodbury
-  /// correction cancel in round-off (docs/preconditioners.md section 21). 0: fluid's own value.
-  double empty_cell_ratio = 1e-4;
+  /// correction cancel in round-off (docs/preconditioners.md section 21). 1e-2 since section 23:
+  /// the cells of a thin gap under a resting body at 1e-4..3e-3 of the median with d_k / A22_kk
+  /// 0.05..0.3 stalled bunny-into-block-newtonian-2d and -shear-thinning-2d when kept in P.
+  /// 0: fluid's own value.
+  double empty_cell_ratio = 1e-2;
+  /// fluid.empty_cell_extra_ratio in the same case: a cell below empty_cell_ratio is near-empty
+  /// only where the body term's diagonal is at least this fraction of its Poisson diagonal,
+  /// d_k = (B_f^T W B_f)_kk >= ratio x A22_kk (section 23: the cells below 1e-4 of the median in
+  /// the 3D viscous scenes have d_k / A22_kk below 2e-5 and cost 1.1-3x the iterations when left
+  /// out of P; a cell closed by the body alone has d_k = 0, rigid motion keeping its volume).
+  double empty_cell_body_ratio = 1e-3;
+  /// Those cells E solved exactly with the body term (Q^-1 = blkdiag(P_r^-1, F_EE) + B_f^T W B_f
+  /// by block elimination of E, the file comment) instead of section 21's Jacobi term
+  /// r_k / (A22_kk + d_k) (false), which counts the body term twice on E and cannot see a
+  /// combination of E's pressures that the body's motion does not change (rank of B_E below |E|;
+  /// A_ff holds it at A22's scale): bunny-into-block-shear-thinning-2d frame 31 stalled on it.
+  bool exact_empty_cells = true;
+  /// F_EE's diagonal is raised to at least this fraction of the body term's, (B_E^T W B_E)_kk:
+  /// H = F_EE + B_E^T W B_E then has a condition number below about 1 / floor where the body
+  /// term cannot see a mode of E (A_ff holds it at A22's scale, down to 1e-18 of the median:
+  /// solved exactly, that mode's huge values cancel in round-off in B_f x; hollow-spheres-
+  /// viscous-2d stalled so).
+  double empty_cell_floor = 1e-8;
 };
 
 /// M^-1 of the file comment over (tau, p) (with_contacts false: the FluidBodyOperator's unknowns)
@@ -104,7 +137,7 @@ class CoupledPreconditioner : public Preconditioner, public FacePreconditioner {
 
  private:
   void setup_exact_contacts(const VectorX& contact_diagonal, const Eigen::MatrixXd& w,
-                            const Eigen::MatrixXd& w_effective,
+                            const Eigen::MatrixXd& w_body, const Eigen::MatrixXd& w_effective,
                             const CoupledPreconditionerOptions& options);
 
   const MonolithicSystem<Dim>& s_;
@@ -116,6 +149,18 @@ class CoupledPreconditioner : public Preconditioner, public FacePreconditioner {
   mutable VectorX rf_, zf_, force_, coeff_;
   /// zf_ -= U coeff_ (the Woodbury body columns U times their coefficients).
   void subtract_body_columns() const;
+  // the near-empty cells E solved exactly (CoupledPreconditionerOptions::exact_empty_cells)
+  std::vector<int> empty_;       ///< E (fluid unknowns, increasing; empty: none)
+  Eigen::MatrixXd empty_body_;   ///< B_E^T (|E| x nd)
+  Eigen::MatrixXd empty_gain_;   ///< K_E = H^-1 B_E^T W, H = F_EE + B_E^T W B_E (|E| x nd)
+  Eigen::MatrixXd body_transpose_;  ///< B_r^T (nf x nd, zero on E)
+  Eigen::MatrixXd j_;            ///< J (nc x nd; with E and exact contacts)
+  Eigen::LLT<Eigen::MatrixXd> empty_factor_;  ///< of H
+  mutable VectorX er_, ex_, et_;
+  /// er_ = r_E, rf_ = r' (r_r - B_r^T K_E^T r_E, zero on E).
+  void reduce_empty_cells() const;
+  /// zf_ on E = H^-1 er_ - K_E force_ (force_ = B_r x_r).
+  void solve_empty_cells() const;
   // exact contact elimination (apply_in_face)
   bool exact_contacts_ = false;
   Eigen::MatrixXd bu_;          ///< B_f U (nd x nd)

@@ -95,8 +95,15 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     if (np_ > 0 && options.empty_cell_ratio > 0.0) {
       const double bound = options.empty_cell_ratio *
                            lower_median(std::vector<double>(a22_diagonal.data(), a22_diagonal.data() + np_));
-      for (int k = 0; k < np_; ++k)
-        if (a22_diagonal[k] < bound && a22_diagonal[k] > 0.0) empty_.push_back(k);
+      const VectorX& extra = options.empty_cell_extra;
+      if (extra.size() != 0 && extra.size() != np_)
+        throw std::invalid_argument("StokesPreconditioner: one extra diagonal entry per pressure unknown expected");
+      for (int k = 0; k < np_; ++k) {
+        if (!(a22_diagonal[k] < bound && a22_diagonal[k] > 0.0)) continue;
+        const double d = extra.size() ? extra[k] : 0.0;
+        if (options.empty_cell_extra_ratio > 0.0 && !(d >= options.empty_cell_extra_ratio * a22_diagonal[k])) continue;
+        empty_.push_back(k);
+      }
       empty_diagonal_.resize(static_cast<int>(empty_.size()));
       for (std::size_t q = 0; q < empty_.size(); ++q) {
         const int k = empty_[q];
@@ -105,6 +112,8 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
         penalty_used_[k] = 0.0;
       }
       empty_inverse_ = empty_diagonal_.cwiseInverse();
+      if (extra.size()) set_empty_cell_diagonal(extra);
+      if (!options.empty_cell_jacobi) empty_inverse_.setZero();
       // the outer sweeps relax the other unknowns only (SOR on their principal block)
       if (!empty_.empty()) {
         swept_.assign(n_, 1);
@@ -396,7 +405,8 @@ void StokesPreconditioner<Dim>::set_empty_cell_diagonal(const VectorX& extra) {
   for (std::size_t q = 0; q < empty_.size(); ++q) {
     const int k = empty_[q];
     if (!(extra[k] >= 0.0)) throw std::invalid_argument("StokesPreconditioner: negative extra diagonal");
-    empty_inverse_[static_cast<int>(q)] = 1.0 / (empty_diagonal_[static_cast<int>(q)] + extra[k]);
+    empty_inverse_[static_cast<int>(q)] =
+        options_.empty_cell_jacobi ? 1.0 / (empty_diagonal_[static_cast<int>(q)] + extra[k]) : 0.0;
   }
 }
 

@@ -61,6 +61,20 @@ struct StokesPreconditionerOptions {
   /// (the default here: on the liquid-only solves the snapshot measured more iterations with it;
   /// CoupledPreconditionerOptions::empty_cell_ratio turns it on where a body term meets the liquid).
   double empty_cell_ratio = 0.0;
+  /// The diagonal d_k of a term added to the system's pressure rows that P does not see (the
+  /// coupled preconditioner passes the body term's, (B_f^T W B_f)_kk; one entry per pressure
+  /// unknown, non-negative; empty: d = 0). The Jacobi term of a near-empty cell is
+  /// r_k / (A22_kk + d_k).
+  VectorX empty_cell_extra;
+  /// > 0: a cell below empty_cell_ratio is near-empty only if also d_k >= this x A22_kk (the
+  /// added term dwarfs or matches its Poisson row: where the Woodbury correction (P4) would have
+  /// to cancel P's 1 / A22_kk). The cells of the 3D viscous scenes below 1e-4 of the median have
+  /// d_k / A22_kk below 2e-5 and P is better with them kept; those of the 2D stalls 0.07..1e13
+  /// (docs/preconditioners.md section 23). 0: no such condition.
+  double empty_cell_extra_ratio = 0.0;
+  /// false: no Jacobi term, P is zero on the near-empty cells' rows and columns (P = blkdiag(P_r, 0);
+  /// the coupled preconditioner solves those cells itself, exactly with the body term).
+  bool empty_cell_jacobi = true;
   double min_fluid_fraction = 0.01;  ///< W_F^s floor in the preconditioner's K
   /// V-cycles per solve with V. 2: on `viscous-bunny-into-sphere-3d` (stiffness 205) one cycle
   /// needed 118-171 PCG iterations in the air and 313 on the curved wall, two 38-55 and 118, at
