@@ -165,8 +165,14 @@ class StokesPreconditioner : public Preconditioner {
   void build_cut_block();
   /// z_C += A_CC^-1 (r - A z)_C.
   void correct_cut(const VectorX& r, VectorX& z) const;
+  /// `count` outer SOR sweeps of A (backward when `reverse`) on the rows swept_ allows: on an
+  /// explicit A in the order factors().sweep_order (the matrix-free operator's), else by a_.
+  void outer_sweeps(bool reverse, const VectorX& r, VectorX& z, int count) const;
 
   const LinearOperator& a_;
+  /// a_ as an explicit matrix whose sweeps run in f_.sweep_order (nullptr: a_ sweeps itself)
+  const SparseMatrix* ordered_matrix_ = nullptr;
+  VectorX ordered_diagonal_;
   StokesFactors f_;
   StokesPreconditionerOptions options_;
   int n_ = 0, ns_ = 0, np_ = 0, nf_ = 0;
