@@ -67,22 +67,21 @@ struct StokesPreconditionerOptions {
   /// 1.3-1.5x less solve time; smoothing 2 or 3 cycles cost about the same, transverse-constant
   /// transfers or sparsified coarse levels doubled the iterations (docs/preconditioners.md,
   /// section 10).
-  /// (With cycle_ratio > 0: the count at or below that ratio; section 19.) 1 since section 24:
-  /// with cycle_ratio 67.5 the same counts as 2 with 270 wherever the median ratio is at least
-  /// 270 (2 + floor(log4(r / 270)) = 1 + floor(log4(r / 67.5))), and one cycle below it (a
-  /// stiffness below about 40 in 3D), where the second cycle did not pay: the 64^3 tank at
-  /// eta 100 (median ratio 27) 6 PCG iterations with one cycle or two, at about half the solve
-  /// time (docs/preconditioners.md sections 22, 24).
-  int velocity_cycles = 1;
+  /// (With cycle_ratio > 0: the count at or below that ratio; section 19.) Section 24 measured
+  /// velocity_cycles 1 with cycle_ratio 67.5 (the same counts as 2 with 270 wherever the median
+  /// ratio is at least 270, since 1 + floor(log4(r / 67.5)) = 2 + floor(log4(r / 270)); one cycle
+  /// below): half the solve time on the 64^3 tank at eta 100 (6 iterations either way), but about
+  /// twice the iterations on the 3D built-in scenes below that ratio (viscous-coiling-3d,
+  /// liquid-drop-bingham-3d, viscous-sphere-wall-3d, ...): not the default.
+  int velocity_cycles = 2;
   /// > 0: one V-cycle more per factor 4 of the median viscous-to-mass ratio r_f = C_f (V0)_ff - 1
   /// of V's rows above this value [(P6): I - M'A' = D^-1 B^T (I - QV) C B amplifies the V-cycle
   /// error by r] (a fixed count per system: P stays a fixed SPD map).
   /// velocity_cycles() of the preconditioner is velocity_cycles + max(0, floor(log4(median r /
   /// cycle_ratio))), at most max_velocity_cycles. In 3D the median r is 6.7 eta dt / (rho dx^2)
   /// (Fig. 5 at 32^3 and 64^3), so 270 is a stiffness of 40: 2 cycles at 32^3, 3 at 64^3, 4 at
-  /// 128^3 (section 19). 0: velocity_cycles always. 67.5 with velocity_cycles 1 (section 24): the
-  /// same counts at and above a median ratio of 270, one cycle below.
-  double cycle_ratio = 67.5;
+  /// 128^3 (section 19). 0: velocity_cycles always.
+  double cycle_ratio = 270.0;
   int max_velocity_cycles = 6;
   int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
   int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
