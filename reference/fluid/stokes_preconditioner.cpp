@@ -62,6 +62,14 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   nf_ = static_cast<int>(f_.face.size());
   cycles_ = options.velocity_cycles;
   if (a.size() != n_) throw std::invalid_argument("StokesPreconditioner: operator and factors differ in size");
+  // an explicit A swept in the matrix-free operator's order: its own sweeps run in index order,
+  // a different SOR and so a different preconditioner (docs/preconditioners.md section 24)
+  if (const auto* sm = dynamic_cast<const SparseMatrixOperator*>(&a); sm && !f_.sweep_order.empty()) {
+    if (static_cast<int>(f_.sweep_order.size()) != n_)
+      throw std::invalid_argument("StokesPreconditioner: the sweep order does not list every unknown");
+    ordered_matrix_ = &sm->matrix();
+    ordered_diagonal_ = sm->diagonal();
+  }
   MacMultigridOptions mg;
   mg.smoothing = options.smoothing;
   mg.max_coarse = options.max_coarse;
@@ -331,6 +339,39 @@ void StokesPreconditioner<Dim>::correct_cut(const VectorX& r, VectorX& z) const 
 }
 
 template <int Dim>
+void StokesPreconditioner<Dim>::outer_sweeps(bool reverse, const VectorX& r, VectorX& z, int count) const {
+  const std::vector<char>* active = swept_.empty() ? nullptr : &swept_;
+  if (!ordered_matrix_) {
+    if (!active) {
+      if (reverse) a_.backward_sweeps(r, z, options_.omega, count);
+      else a_.forward_sweeps(r, z, options_.omega, count);
+    } else {
+      for (int k = 0; k < count; ++k) {
+        if (reverse) a_.backward_sweep(r, z, options_.omega, active);
+        else a_.forward_sweep(r, z, options_.omega, active);
+      }
+    }
+    return;
+  }
+  // SparseMatrixOperator's relaxation of a row, over the rows in the matrix-free order
+  const SparseMatrix& m = *ordered_matrix_;
+  const int* outer = m.outerIndexPtr();
+  const int* inner = m.innerIndexPtr();
+  const double* value = m.valuePtr();
+  const double omega = options_.omega;
+  const std::vector<int>& order = f_.sweep_order;
+  for (int k = 0; k < count; ++k)
+    for (int q = 0; q < n_; ++q) {
+      const int i = order[reverse ? n_ - 1 - q : q];
+      if (ordered_diagonal_[i] == 0.0 || (active && !(*active)[i])) continue;
+      double off = 0.0;
+      for (int e = outer[i]; e < outer[i + 1]; ++e)
+        if (inner[e] != i) off += value[e] * z[inner[e]];
+      z[i] = (1.0 - omega) * z[i] + omega * (r[i] - off) / ordered_diagonal_[i];
+    }
+}
+
+template <int Dim>
 void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, VectorX& y) const {
   // h = D^-1 g
   multiply(kinv_, g.data(), h_.data());
@@ -461,24 +502,17 @@ void StokesPreconditioner<Dim>::apply(const VectorX& r, VectorX& z) const {
   // symmetric two-level composition: SOR sweeps of A, the two-term inverse on the residual,
   // the adjoint sweeps
   z.setZero(n_);
-  if (swept_.empty()) {
-    a_.forward_sweeps(r, z, options_.omega, sweeps);
-  } else {
-    // the near-empty cells stay 0 through the forward sweeps: their rows would divide by a
-    // diagonal up to 1e-16 of the median (the two-term step gives them their Jacobi value)
-    for (int k = 0; k < sweeps; ++k) a_.forward_sweep(r, z, options_.omega, &swept_);
-  }
+  // (with near-empty cells, swept_: they stay 0 through the forward sweeps, whose rows would
+  // divide by a diagonal up to 1e-16 of the median; the two-term step gives them their Jacobi
+  // value)
+  outer_sweeps(false, r, z, sweeps);
   correct_cut(r, z);
   a_.apply(z, az_);
   res_ = r - az_;
   apply_two_term(res_, d_);
   z += d_;
   correct_cut(r, z);
-  if (swept_.empty()) {
-    a_.backward_sweeps(r, z, options_.omega, sweeps);
-  } else {
-    for (int k = 0; k < sweeps; ++k) a_.backward_sweep(r, z, options_.omega, &swept_);
-  }
+  outer_sweeps(true, r, z, sweeps);
 }
 
 template <int Dim>

@@ -81,7 +81,12 @@ struct StokesPreconditionerOptions {
   /// 1.3-1.5x less solve time; smoothing 2 or 3 cycles cost about the same, transverse-constant
   /// transfers or sparsified coarse levels doubled the iterations (docs/preconditioners.md,
   /// section 10).
-  /// (With cycle_ratio > 0: the count at or below that ratio; section 19.)
+  /// (With cycle_ratio > 0: the count at or below that ratio; section 19.) Section 24 measured
+  /// velocity_cycles 1 with cycle_ratio 67.5 (the same counts as 2 with 270 wherever the median
+  /// ratio is at least 270, since 1 + floor(log4(r / 67.5)) = 2 + floor(log4(r / 270)); one cycle
+  /// below): half the solve time on the 64^3 tank at eta 100 (6 iterations either way), but about
+  /// twice the iterations on the 3D built-in scenes below that ratio (viscous-coiling-3d,
+  /// liquid-drop-bingham-3d, viscous-sphere-wall-3d, ...): not the default.
   int velocity_cycles = 2;
   /// > 0: one V-cycle more per factor 4 of the median viscous-to-mass ratio r_f = C_f (V0)_ff - 1
   /// of V's rows above this value [(P6): I - M'A' = D^-1 B^T (I - QV) C B amplifies the V-cycle
@@ -179,8 +184,14 @@ class StokesPreconditioner : public Preconditioner {
   void build_cut_block();
   /// z_C += A_CC^-1 (r - A z)_C.
   void correct_cut(const VectorX& r, VectorX& z) const;
+  /// `count` outer SOR sweeps of A (backward when `reverse`) on the rows swept_ allows: on an
+  /// explicit A in the order factors().sweep_order (the matrix-free operator's), else by a_.
+  void outer_sweeps(bool reverse, const VectorX& r, VectorX& z, int count) const;
 
   const LinearOperator& a_;
+  /// a_ as an explicit matrix whose sweeps run in f_.sweep_order (nullptr: a_ sweeps itself)
+  const SparseMatrix* ordered_matrix_ = nullptr;
+  VectorX ordered_diagonal_;
   StokesFactors f_;
   StokesPreconditionerOptions options_;
   int n_ = 0, ns_ = 0, np_ = 0, nf_ = 0;

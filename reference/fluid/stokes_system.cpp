@@ -1007,6 +1007,35 @@ StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& so
   return w;
 }
 
+template <int Dim>
+std::vector<int> stokes_sweep_order(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                                    const StokesDofs& dofs) {
+  // buckets (layout component or pressure, colour), each filled in increasing grid index: the
+  // stress unknowns by their StressGrid DOF, the pressure unknowns by their cell
+  const StressGrid<Dim>& stress = layout.grid();
+  const int ns = dofs.num_stress(), np = dofs.num_pressure();
+  const int blocks = layout.num_components() + 1;
+  std::vector<int> position(StressGrid<Dim>::num_components(), -1);
+  for (int j = 0; j < layout.num_components(); ++j) position[layout.component(j)] = j;
+  std::vector<std::vector<std::pair<int, int>>> bucket(2 * blocks);  // (grid index, unknown)
+  for (int i = 0; i < ns; ++i) {
+    const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);
+    const auto [k, c] = stress.coord(d);
+    bucket[2 * position[k] + (c.sum() & 1)].emplace_back(d, i);
+  }
+  for (int k = 0; k < np; ++k) {
+    const int cell = dofs.pressure.cell_of_dof[k];
+    bucket[2 * (blocks - 1) + (grid.cell_coord(cell).sum() & 1)].emplace_back(cell, ns + k);
+  }
+  std::vector<int> order;
+  order.reserve(static_cast<std::size_t>(ns + np));
+  for (auto& b : bucket) {
+    std::sort(b.begin(), b.end());
+    for (const auto& entry : b) order.push_back(entry.second);
+  }
+  return order;
+}
+
 #define MONOLITH_INSTANTIATE(D)                                                                  \
   template StokesWeights uniform_stokes_weights<D>(const MacGrid<D>&, const VectorX&,            \
                                                    const VectorX&,                               \
@@ -1020,6 +1049,8 @@ StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& so
                                                             const StokesDofs&, double,           \
                                                             const VectorX&);                     \
   template class MatrixFreeStokesOperator<D>;                                                    \
+  template std::vector<int> stokes_sweep_order<D>(const MacGrid<D>&, const StressLayout<D>&,     \
+                                                  const StokesDofs&);                            \
   template VectorX deformation_rate_transpose_product<D>(const StressGrid<D>&, const VectorX&,      \
                                                         const VectorX&);                          \
   template void apply_stokes_update<D>(const MacGrid<D>&, const StressLayout<D>&,                \

@@ -253,6 +253,17 @@ class MatrixFreeStokesOperator : public LinearOperator {
   mutable VectorX stress_scratch_, cell_scratch_, face_scratch_;
 };
 
+/// The unknowns of `dofs` in the order MatrixFreeStokesOperator's forward SOR sweep relaxes
+/// them: per stress component in StressLayout order, then the pressure; within each, the entries
+/// whose lattice coordinates sum to an even number (red) before the odd ones (black), each colour
+/// in grid order. Its backward sweep is this list reversed (within a colour the rows share no
+/// face, so their order there does not matter). The block preconditioner sweeps an explicit A in
+/// this order, so that both back ends apply the same preconditioner (docs/preconditioners.md,
+/// section 24).
+template <int Dim>
+std::vector<int> stokes_sweep_order(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
+                                    const StokesDofs& dofs);
+
 /// D^T M W_L^s tau_full on every face (the stress part of the force of apply_stokes_update), by
 /// the stencil of D, without assembling it: bit for bit Eigen's product with
 /// deformation_rate_matrix(stress).

@@ -126,9 +126,9 @@ template <int Dim>
 StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
                              const StokesWeights& w, const StokesDofs& dofs, double dt,
                              const ExplicitStokesSystem& s, double min_fluid_fraction) {
-  (void)grid;
   StokesFactors f;
   fill_common(layout, w, dofs, min_fluid_fraction, f);
+  f.sweep_order = stokes_sweep_order(grid, layout, dofs);
   // C = dt W_F^u P^-1 (W_L^u)^-1 and its active faces
   const VectorX c_all = dt * VectorX(s.W_F_u.diagonal().cwiseProduct(s.P_inv.diagonal())
                                           .cwiseProduct(s.W_L_u_inv.diagonal()));

@@ -56,6 +56,11 @@ struct StokesFactors {
   std::vector<std::vector<int>> element_unknowns;
   std::vector<int> element_component;
   std::vector<VecI<3>> element_coord;
+  /// The unknowns in the matrix-free operator's SOR sweep order (stokes_sweep_order): filled by
+  /// the explicit back end's stokes_factors, so that the block preconditioner sweeps the explicit
+  /// A in that order rather than in index order (the same preconditioner on both back ends,
+  /// docs/preconditioners.md section 24). Empty: the operator's own order.
+  std::vector<int> sweep_order;
   int size() const { return num_stress + num_pressure; }
 };
 

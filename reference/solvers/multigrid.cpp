@@ -3,6 +3,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 #include <array>
 #include <stdexcept>
 #include <string>
@@ -347,13 +348,112 @@ double Multigrid::operator_complexity() const {
   return total / static_cast<double>(levels_[0].a.nonZeros());
 }
 
-SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p) {
-  const SparseMatrix pt = p.transpose();
-  SparseMatrix ap = a * p;
-  SparseMatrix c = pt * ap;
-  c.prune(0.0, 0.0);
-  c.makeCompressed();
+SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros) {
+  if (a.cols() != b.rows()) throw std::invalid_argument("sparse_row_product: sizes do not match");
+  if (!a.isCompressed() || !b.isCompressed())
+    throw std::invalid_argument("sparse_row_product: compressed matrices expected");
+  const int m = static_cast<int>(a.rows()), n = static_cast<int>(b.cols());
+  const int* a_outer = a.outerIndexPtr();
+  const int* a_inner = a.innerIndexPtr();
+  const double* a_value = a.valuePtr();
+  const int* b_outer = b.outerIndexPtr();
+  const int* b_inner = b.innerIndexPtr();
+  const double* b_value = b.valuePtr();
+  // (Gustavson's row-by-row product: row i of the result accumulates a_ik b_k: over the entries
+  // of a's row i in stored order, each row by one thread, the first term of a column assigned and
+  // the others added: the additions of Eigen's conservative product, in its order, without its
+  // two transposes for sorting)
+  std::vector<int> outer(static_cast<std::size_t>(m) + 1, 0);
+  const bool parallel = m > kParallelRows;
+  // pass 1: the columns per row
+#pragma omp parallel if (parallel) num_threads(process_threads())
+  {
+    std::vector<int> mark(static_cast<std::size_t>(n), -1);
+#pragma omp for schedule(static)
+    for (int i = 0; i < m; ++i) {
+      int count = 0;
+      for (int e = a_outer[i]; e < a_outer[i + 1]; ++e) {
+        const int k = a_inner[e];
+        for (int q = b_outer[k]; q < b_outer[k + 1]; ++q)
+          if (mark[b_inner[q]] != i) {
+            mark[b_inner[q]] = i;
+            ++count;
+          }
+      }
+      outer[static_cast<std::size_t>(i) + 1] = count;
+    }
+  }
+  for (int i = 0; i < m; ++i) outer[static_cast<std::size_t>(i) + 1] += outer[i];
+  std::vector<int> inner(static_cast<std::size_t>(outer[m]));
+  std::vector<double> value(static_cast<std::size_t>(outer[m]));
+  std::vector<int> kept(drop_zeros ? static_cast<std::size_t>(m) : 0);
+  // pass 2: values, columns sorted per row (and the exact zeros dropped, compacted below)
+#pragma omp parallel if (parallel) num_threads(process_threads())
+  {
+    std::vector<int> mark(static_cast<std::size_t>(n), -1);
+    std::vector<double> sum(static_cast<std::size_t>(n));
+#pragma omp for schedule(static)
+    for (int i = 0; i < m; ++i) {
+      int end = outer[i];
+      for (int e = a_outer[i]; e < a_outer[i + 1]; ++e) {
+        const int k = a_inner[e];
+        const double x = a_value[e];
+        for (int q = b_outer[k]; q < b_outer[k + 1]; ++q) {
+          const int j = b_inner[q];
+          if (mark[j] != i) {
+            mark[j] = i;
+            sum[j] = x * b_value[q];
+            inner[end++] = j;
+          } else {
+            sum[j] += x * b_value[q];
+          }
+        }
+      }
+      std::sort(inner.begin() + outer[i], inner.begin() + end);
+      int out = outer[i];
+      for (int e = outer[i]; e < end; ++e) {
+        const double v = sum[inner[e]];
+        if (drop_zeros && !(std::abs(v) > 0.0)) continue;  // Eigen's prune(0, 0)
+        inner[out] = inner[e];
+        value[out++] = v;
+      }
+      if (drop_zeros) kept[i] = out - outer[i];
+    }
+  }
+  SparseMatrix c(m, n);
+  if (drop_zeros) {
+    // compact the rows (serial: a copy within the arrays, in increasing order)
+    int pos = 0;
+    for (int i = 0; i < m; ++i) {
+      const int start = outer[i];
+      for (int e = 0; e < kept[i]; ++e) {
+        inner[pos + e] = inner[start + e];
+        value[pos + e] = value[start + e];
+      }
+      outer[i] = pos;
+      pos += kept[i];
+    }
+    outer[m] = pos;
+  }
+  c.resizeNonZeros(outer[m]);
+  std::copy(outer.begin(), outer.end(), c.outerIndexPtr());
+  std::copy(inner.begin(), inner.begin() + outer[m], c.innerIndexPtr());
+  std::copy(value.begin(), value.begin() + outer[m], c.valuePtr());
   return c;
+}
+
+SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p) {
+  // P^T (A P), both products row by row; A P keeps its cancelled entries (as Eigen's product
+  // did), P^T A P drops the exact zeros: the same matrix, bit for bit, as
+  // prune(P^T * (A * P)) with Eigen's products (test_multigrid's check), at about half the cost
+  SparseMatrix pt = p.transpose();
+  pt.makeCompressed();
+  SparseMatrix ac = a;
+  ac.makeCompressed();
+  SparseMatrix pc = p;
+  pc.makeCompressed();
+  const SparseMatrix ap = sparse_row_product(ac, pc, false);
+  return sparse_row_product(pt, ap, true);
 }
 
 bool patches_independent(const SparseMatrix& a, const PatchSet& patches) {

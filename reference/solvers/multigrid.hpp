@@ -136,6 +136,12 @@ class MultigridPreconditioner : public Preconditioner {
   int cycles_;
 };
 
+/// a b for compressed row-major a, b, row by row (Gustavson; rows sorted; one thread per row,
+/// so the result does not depend on the thread count): the same additions in the same order as
+/// Eigen's conservative sparse product, hence the same bits; with `drop_zeros` the entries that
+/// are exactly zero are left out (Eigen's prune(0, 0)), else kept as Eigen keeps them.
+SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros);
+
 /// The Galerkin coarse operator P^T A P (row-major, explicit zeros dropped).
 SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p);
 
