@@ -68,7 +68,7 @@ CoupledStepInput<2> tank_with_closed_cells(int n, double eta, double open, int c
   std::array<BoundaryType, 4> boundary = testing::all_boundaries<2>(BoundaryType::wall);
   boundary[3] = BoundaryType::open;
   in.solids = solid_weights<2>(in.grid, coupling_bodies(in.bodies), {}, boundary, 0.01 * dx);
-  REQUIRE(in.solids.static_face.size() == static_cast<std::size_t>(in.grid.num_faces()));
+  REQUIRE(in.solids.static_face.size() == static_cast<Eigen::Index>(in.grid.num_faces()));
   // the cells under the box's bottom (y = 0.38), from x = 0.5 to the right
   cells.clear();
   for (int q = 0; q < count; ++q) {
