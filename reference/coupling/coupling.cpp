@@ -262,8 +262,9 @@ void negative_points(const VecI<Dim>& lo, const VecI<Dim>& hi, const Fn& value,
   neg_hi = nhi;
 }
 
-/// lattice_cube_negative_fraction with the level set read through phi(lattice coordinate):
-/// the same corners in the same order, so the same value.
+/// lattice_cube_negative_fraction with the level set read through phi: directly from
+/// phi.values when every corner lies in the box [phi.lo, phi.hi] (its points, x fastest), else
+/// through phi(lattice coordinate); the same corners in the same order, so the same value.
 template <int Dim, class Phi>
 double cube_negative_fraction_at(const MacGrid<Dim>& grid, const VecI<Dim>& lower,
                                  const Phi& phi) {
@@ -276,14 +277,39 @@ double cube_negative_fraction_at(const MacGrid<Dim>& grid, const VecI<Dim>& lowe
     }
   std::array<std::array<double, kCorners>, kCorners> corners;
   int negatives = 0;
-  for (int sub = 0; sub < kCorners; ++sub)
-    for (int k = 0; k < kCorners; ++k) {
-      VecI<Dim> p;
-      for (int a = 0; a < Dim; ++a) p[a] = coord[a][(sub >> a) & 1][(k >> a) & 1];
-      const double v = phi(p);
-      corners[sub][k] = v;
-      negatives += v < 0.0;
+  // every corner inside the box of directly indexed values (phi.values, phi.lo, phi.hi): their
+  // indices as sums of per-axis offsets, as lattice_cube_negative_fraction forms them
+  bool inside = true;
+  for (int a = 0; a < Dim; ++a)
+    for (int s = 0; s < 2; ++s)
+      inside = inside && coord[a][s][0] >= phi.lo[a] && coord[a][s][1] <= phi.hi[a];
+  if (inside) {
+    std::array<std::array<std::array<int, 2>, 2>, Dim> offset;
+    int stride = 1;
+    for (int a = 0; a < Dim; ++a) {
+      for (int s = 0; s < 2; ++s)
+        offset[a][s] = {(coord[a][s][0] - phi.lo[a]) * stride,
+                        (coord[a][s][1] - phi.lo[a]) * stride};
+      stride *= phi.hi[a] - phi.lo[a] + 1;
     }
+    for (int sub = 0; sub < kCorners; ++sub)
+      for (int k = 0; k < kCorners; ++k) {
+        int index = 0;
+        for (int a = 0; a < Dim; ++a) index += offset[a][(sub >> a) & 1][(k >> a) & 1];
+        const double v = (*phi.values)[index];
+        corners[sub][k] = v;
+        negatives += v < 0.0;
+      }
+  } else {
+    for (int sub = 0; sub < kCorners; ++sub)
+      for (int k = 0; k < kCorners; ++k) {
+        VecI<Dim> p;
+        for (int a = 0; a < Dim; ++a) p[a] = coord[a][(sub >> a) & 1][(k >> a) & 1];
+        const double v = phi(p);
+        corners[sub][k] = v;
+        negatives += v < 0.0;
+      }
+  }
   if (negatives == 0) return 0.0;
   if (negatives == kCorners * kCorners) return 1.0;
   double sum = 0.0;
@@ -421,10 +447,16 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
                            },
                            neg_lo, neg_hi);
       scratch.union_parts.set_negative_box(part, neg_lo, neg_hi);
-      const PartsUnionPhi<Dim>& parts = scratch.union_parts;
-      body_face_fractions_at<Dim>(
-          grid, [&](const VecI<Dim>& c) { return parts.part_at(part, c); }, body.shape->bounds(),
-          w.body_face[i]);
+      // the fractions read the box's values directly (part_at outside it: the same values)
+      struct BoxedPhi {
+        const PartsUnionPhi<Dim>* parts;
+        int part;
+        const VectorX* values;
+        VecI<Dim> lo, hi;
+        double operator()(const VecI<Dim>& c) const { return parts->part_at(part, c); }
+      };
+      const BoxedPhi phi{&scratch.union_parts, part, &values, lo, hi};
+      body_face_fractions_at<Dim>(grid, phi, body.shape->bounds(), w.body_face[i]);
     }
     scratch.union_parts.finish();
     have_union = true;

@@ -190,17 +190,46 @@ double PartsUnionPhi<Dim>::at(const VecI<Dim>& c) const {
 }
 
 template <int Dim>
-bool PartsUnionPhi<Dim>::negative(int k) const {
-  const VecI<Dim> c = lattice_coord<Dim>(k, dims_);
+bool PartsUnionPhi<Dim>::negative(const VecI<Dim>& c, int k) const {
+  // the dense parts by index first, then the boxed parts in their boxes of negative points
+  bool boxed = false;
   for (int i = 0; i < count_; ++i) {
     const Part& part = parts_[i];
+    if (!part.dense) {
+      boxed = true;
+      continue;
+    }
+    if ((*part.dense)[k] < 0.0) return true;
+  }
+  if (!boxed) return false;
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if (part.dense) continue;
     if ((c.array() < part.neg_lo.array()).any() || (c.array() > part.neg_hi.array()).any())
       continue;
-    if (part.dense) {
-      if ((*part.dense)[k] < 0.0) return true;
-    } else if (part.values[lattice_index<Dim>(c - part.lo, part.box_dims)] < 0.0) {
-      return true;
+    if (part.values[lattice_index<Dim>(c - part.lo, part.box_dims)] < 0.0) return true;
+  }
+  return false;
+}
+
+template <int Dim>
+bool PartsUnionPhi<Dim>::negative(int k) const {
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if (part.dense && (*part.dense)[k] < 0.0) return true;
+  }
+  VecI<Dim> c;
+  bool have_c = false;
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if (part.dense) continue;
+    if (!have_c) {
+      c = lattice_coord<Dim>(k, dims_);
+      have_c = true;
     }
+    if ((c.array() < part.neg_lo.array()).any() || (c.array() > part.neg_hi.array()).any())
+      continue;
+    if (part.values[lattice_index<Dim>(c - part.lo, part.box_dims)] < 0.0) return true;
   }
   return false;
 }

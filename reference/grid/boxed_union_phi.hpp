@@ -97,6 +97,15 @@ class PartsUnionPhi {
   double operator()(int k) const { return at(lattice_coord<Dim>(k, dims_)); }
   /// Whether the union is < 0 at lattice point k (some part is; the closed form never is).
   bool negative(int k) const;
+  /// The same at lattice point c of index k (no division for the coordinate).
+  bool negative(const VecI<Dim>& c, int k) const;
+  /// Boxed part `i`'s stored values and box (the box's points, x fastest), for readers that
+  /// index them directly inside the box and read part_at outside it.
+  const VectorX& boxed_values(int i, VecI<Dim>& lo, VecI<Dim>& hi) const {
+    lo = parts_[i].lo;
+    hi = parts_[i].hi;
+    return parts_[i].values;
+  }
   /// The inclusive box of the union's negative points (lo > hi: none).
   void negative_box(VecI<Dim>& lo, VecI<Dim>& hi) const;
 

@@ -401,7 +401,11 @@ void Simulation<Dim>::update_liquid_weights() {
       }
     if (extend)
       overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
-        return std::max(liquid_phi_[k], -solid_phi_at(k));
+        // where phi_L >= 0 and the solids' union is not negative, -phi_S <= 0 <= phi_L and the
+        // maximum is phi_L itself (the union's value, closed forms per body, is not needed)
+        const double l = liquid_phi_[k];
+        if (l >= 0.0 && !solid_negative_at(k)) return l;
+        return std::max(l, -solid_phi_at(k));
       }, phi_undo_);
     const VectorX& fluid_phi = liquid_phi_;
     classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
@@ -1480,7 +1484,7 @@ void Simulation<Dim>::find_faces_in_solids() {
       VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
       k[axis] -= 1;
       if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
-      if (solid_negative_at(lattice_.index(k)))
+      if (solid_negative_at(k, lattice_.index(k)))
         faces.push_back(grid_.face_index(axis, coord));
     }
   }

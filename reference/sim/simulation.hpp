@@ -431,6 +431,11 @@ class Simulation : public AnySimulation {
     if (solid_scratch_.union_parts.valid()) return solid_scratch_.union_parts.negative(k);
     return solid_phi_at(k) < 0.0;
   }
+  /// The same at lattice point c of index k.
+  bool solid_negative_at(const VecI<Dim>& c, int k) const {
+    if (solid_scratch_.union_parts.valid()) return solid_scratch_.union_parts.negative(c, k);
+    return solid_phi_at(k) < 0.0;
+  }
   // moving bodies with contact (scenes with dynamic or kinematic bodies)
   std::unique_ptr<RigidWorld<Dim>> rigid_;
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
