@@ -319,13 +319,19 @@ double cube_negative_fraction_at(const MacGrid<Dim>& grid, const VecI<Dim>& lowe
 
 /// body_face_fractions of a bounded body whose lattice phi is read through phi(coordinate)
 /// (a part of PartsUnionPhi): the same faces, the same values.
+///
+/// `near` receives the faces visited (every other face is 0). With `zero_all` false, w must
+/// already be 0 on every face but those (the caller zeroed its previous list).
 template <int Dim, class Phi>
 void body_face_fractions_at(const MacGrid<Dim>& grid, const Phi& phi, const Box<Dim>& box,
-                            VectorX& w) {
-  if (w.size() != grid.num_faces()) w.resize(grid.num_faces());
-  w.setZero();
+                            VectorX& w, bool zero_all, std::vector<int>& near) {
+  if (w.size() != grid.num_faces()) {
+    w.resize(grid.num_faces());
+    zero_all = true;
+  }
+  if (zero_all) w.setZero();
   const double reach = 1.5 * grid.dx();
-  std::vector<int> near;
+  near.clear();
   for (int axis = 0; axis < Dim; ++axis) {
     const auto [lo, hi] = lattice_range<Dim>(grid, box, MacGrid<Dim>::face_shift(axis),
                                              grid.face_dims(axis), reach + grid.dx());
@@ -397,6 +403,7 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   scratch.fixed_face.resize(bodies.size());
   scratch.fixed_neg_lo.resize(bodies.size());
   scratch.fixed_neg_hi.resize(bodies.size());
+  scratch.fixed_neg_known.resize(bodies.size(), 0);
   // the union kept per part (issue 20): the bodies that never move by their kept phi, the
   // others by their values in their box; no lattice-sized pass per call
   bool in_parts = scratch.union_in_parts && static_solids.empty() && !scratch.stress &&
@@ -408,6 +415,45 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
       in_parts = false;
   }
   scratch.union_parts.clear();
+  // The faces' weights of the last call kept (the same bodies, every output where this call
+  // left it: its buffers, not reallocated): only the faces near a moving body, now or in the
+  // last call, are visited below; every other face keeps the fixed bodies' weights of the last
+  // call, which are those of this call there (no moving body's fraction reaches it). The
+  // caller that keeps the outputs must not write into them (Simulation: it reads them only).
+  bool incremental = in_parts && scratch.kept && !parts && w.fluid_face.size() == nf &&
+                     w.fluid_face.data() == scratch.kept_fluid_face &&
+                     scratch.kept_fixed.size() == bodies.size() &&
+                     scratch.near.size() == bodies.size() &&
+                     scratch.kept_body_face.size() == bodies.size();
+  for (std::size_t i = 0; i < bodies.size() && incremental; ++i) {
+    const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+    incremental = w.body_face[i].size() == nf &&
+                  w.body_face[i].data() == scratch.kept_body_face[i] &&
+                  scratch.kept_fixed[i] == static_cast<char>(fixed) &&
+                  (!fixed || scratch.fixed_face[i].size() == nf);
+  }
+  scratch.kept = false;
+  // the faces whose weights are made again (incremental: the moving bodies' faces of the last
+  // call and of this one, each once: scratch.face_mark)
+  std::vector<int>& touched = scratch.touched;
+  touched.clear();
+  if (incremental && scratch.face_mark.size() != static_cast<std::size_t>(nf))
+    scratch.face_mark.assign(nf, 0);
+  const auto touch = [&](int f) {
+    if (scratch.face_mark[f]) return;
+    scratch.face_mark[f] = 1;
+    touched.push_back(f);
+  };
+  scratch.near.resize(bodies.size());
+  if (incremental)
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+      if (fixed) continue;
+      for (const int f : scratch.near[i]) {
+        w.body_face[i][f] = 0.0;
+        touch(f);
+      }
+    }
   if (in_parts) {
     scratch.union_parts.begin(lattice, shrink_in_metres);
     for (std::size_t i = 0; i < bodies.size(); ++i) {
@@ -420,6 +466,9 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
                                    scratch.fixed_phi[i]);
           body_face_fractions<Dim>(grid, lattice, scratch.fixed_phi[i], body.shape->bounds(),
                                    scratch.fixed_face[i]);
+          scratch.fixed_neg_known[i] = 0;
+        }
+        if (!scratch.fixed_neg_known[i]) {
           const VectorX& phi = scratch.fixed_phi[i];
           VecI<Dim> lo = VecI<Dim>::Zero(), hi = lattice.dims - VecI<Dim>::Ones();
           if (!body_phi_negative_box<Dim>(lattice, *body.shape, far, lo, hi)) {
@@ -428,8 +477,10 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
           }
           negative_points<Dim>(lo, hi, [&](const VecI<Dim>& c) { return phi[lattice.index(c)]; },
                                scratch.fixed_neg_lo[i], scratch.fixed_neg_hi[i]);
+          scratch.fixed_neg_known[i] = 1;
         }
-        w.body_face[i] = scratch.fixed_face[i];
+        if (!incremental) w.body_face[i] = scratch.fixed_face[i];  // (else below, where touched)
+        scratch.near[i].clear();
         scratch.union_parts.add_dense(&scratch.fixed_phi[i], scratch.fixed_neg_lo[i],
                                       scratch.fixed_neg_hi[i]);
         continue;
@@ -456,10 +507,20 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
         double operator()(const VecI<Dim>& c) const { return parts->part_at(part, c); }
       };
       const BoxedPhi phi{&scratch.union_parts, part, &values, lo, hi};
-      body_face_fractions_at<Dim>(grid, phi, body.shape->bounds(), w.body_face[i]);
+      body_face_fractions_at<Dim>(grid, phi, body.shape->bounds(), w.body_face[i], !incremental,
+                                  scratch.near[i]);
+      if (incremental)
+        for (const int f : scratch.near[i]) touch(f);
     }
     scratch.union_parts.finish();
     have_union = true;
+    if (incremental) {
+      // the fixed bodies' raw fractions where the weights are made again
+      for (std::size_t i = 0; i < bodies.size(); ++i)
+        if (i < scratch.fixed.size() && scratch.fixed[i])
+          for (const int f : touched) w.body_face[i][f] = scratch.fixed_face[i][f];
+      for (const int f : touched) scratch.face_mark[f] = 0;
+    }
   }
   for (std::size_t i = 0; i < bodies.size() && !in_parts; ++i) {
     const CouplingBody<Dim>& body = bodies[i];
@@ -490,6 +551,7 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     if (fixed) {
       scratch.fixed_phi[i] = body_phi;
       scratch.fixed_face[i] = w.body_face[i];
+      scratch.fixed_neg_known[i] = 0;
     }
     if (have_union) union_phi = union_phi.cwiseMin(body_phi);
     have_union = true;
@@ -510,8 +572,11 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   else if (w.solid_face.size() != nf)
     w.solid_face.resize(nf);
   if (w.fluid_face.size() != nf) w.fluid_face.resize(nf);
-#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
-  for (int f = 0; f < nf; ++f) {
+  // every face, or (incremental) the touched faces only
+  const int passes = incremental ? static_cast<int>(touched.size()) : nf;
+#pragma omp parallel for schedule(static) num_threads(team_threads(passes))
+  for (int n = 0; n < passes; ++n) {
+    const int f = incremental ? touched[n] : n;
     double static_part = parts ? w.static_face[f] : 0.0;
     double sum = static_part;
     for (const VectorX& body : w.body_face) sum += body[f];
@@ -550,6 +615,17 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     }
   }
 
+  if (in_parts && !parts) {
+    // the outputs this call leaves, for the next call's incremental pass
+    scratch.kept = true;
+    scratch.kept_fluid_face = w.fluid_face.data();
+    scratch.kept_body_face.resize(bodies.size());
+    scratch.kept_fixed.resize(bodies.size());
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      scratch.kept_body_face[i] = w.body_face[i].data();
+      scratch.kept_fixed[i] = i < scratch.fixed.size() && scratch.fixed[i];
+    }
+  }
   if (in_parts) {
     // no classes: the box of the lattice cells with a negative corner (the cells l with
     // l <= p <= l + 1 for a negative point p), as classify_lattice_cells_in_box finds it; W_F^s

@@ -17,6 +17,7 @@
 /// contact_system.hpp (ContactSystem::body_dof).
 
 #include <array>
+#include <cstdint>
 #include <vector>
 
 #include "reference/core/common.hpp"
@@ -120,6 +121,18 @@ struct SolidWeightsScratch {
   PartsUnionPhi<Dim> union_parts;  ///< the union per part (valid() when taken)
   /// per body that never moves: the box of its kept phi's negative points (with fixed_phi)
   std::vector<VecI<Dim>> fixed_neg_lo, fixed_neg_hi;
+  std::vector<char> fixed_neg_known;  ///< whether fixed_neg_lo, hi hold the kept phi's box
+  /// With the union kept per body and `parts` false, the next call makes the face weights again
+  /// only at the faces near a moving body (in this call or the next) when it is given the same
+  /// output buffers (SolidWeights::body_face, fluid_face: same data pointers and sizes, the same
+  /// bodies fixed) and nothing wrote into them in between; the state of that below.
+  bool kept = false;
+  const double* kept_fluid_face = nullptr;
+  std::vector<const double*> kept_body_face;
+  std::vector<char> kept_fixed;
+  std::vector<std::vector<int>> near;  ///< per moving body: the faces of its fractions
+  std::vector<std::uint8_t> face_mark;  ///< face-sized, 0 between calls
+  std::vector<int> touched;
 };
 
 /// The same into `w`, whose vectors (and the scratch buffers) are reused when they have the

@@ -61,7 +61,7 @@ void check_parts(int n, double shrink_cells) {
   scratch.parts = false;
   scratch.stress = false;
   scratch.union_in_parts = true;
-  for (int pose = 0; pose < 3; ++pose) {
+  for (int pose = 0; pose < 4; ++pose) {
     Vec<Dim> basin_half = Vec<Dim>::Constant(0.45);
     basin_half[1] = 0.3;
     Vec<Dim> basin_centre = Vec<Dim>::Constant(0.5);
@@ -69,7 +69,9 @@ void check_parts(int n, double shrink_cells) {
     const double t = 0.07 * pose;
     const std::vector<CouplingBody<Dim>> bodies = {
         slab<Dim>(basin_centre, basin_half),
-        ball<Dim>(Vec<Dim>::Constant(0.3 + t) + Vec<Dim>::LinSpaced(0.011, 0.029), 0.13),
+        ball<Dim>(Vec<Dim>::Constant(0.3 + (pose == 3 ? 0.0 : t)) +
+                      Vec<Dim>::LinSpaced(0.011, 0.029),
+                  0.13),
         ball<Dim>(Vec<Dim>::Constant(0.85 - 0.5 * t), 0.12)};
     SolidWeights<Dim> dense;
     SolidWeightsScratch<Dim> dense_scratch;
@@ -78,8 +80,22 @@ void check_parts(int n, double shrink_cells) {
     solid_weights<Dim>(grid, bodies, {}, boundary, shrink, dense, dense_scratch);
     REQUIRE(dense.lattice_phi.size() == lattice.size());
     kept.lattice_phi = VectorX();  // left as it was: empty
+    // pose 3: another W_F^u buffer (other data) instead of the kept one: every face made again
+    if (pose == 3) {
+      VectorX other = VectorX::Constant(grid.num_faces(), 7.0);
+      kept.fluid_face.swap(other);
+    }
+    const bool incremental = scratch.kept && pose != 3;
     solid_weights<Dim>(grid, bodies, {}, boundary, shrink, kept, scratch);
     REQUIRE(scratch.union_parts.valid());
+    CHECK(scratch.kept);
+    // the calls after the first visit only the faces near the moving balls
+    if (incremental) {
+      CHECK(scratch.touched.size() > 0);
+      CHECK(static_cast<int>(scratch.touched.size()) < grid.num_faces() / 2);
+    } else {
+      CHECK(scratch.touched.empty());
+    }
     CHECK(kept.lattice_phi.size() == 0);
     REQUIRE(kept.body_face.size() == bodies.size());
     for (std::size_t i = 0; i < bodies.size(); ++i)
