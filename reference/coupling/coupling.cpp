@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -175,6 +176,183 @@ void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lat
   }
 }
 
+/// body_phi_on_lattice's values at the lattice points of the inclusive box [lo, hi] only (a
+/// bounded shape), into `out` (the box's points, x fastest): per point the same operations, so
+/// the same bits as the dense vector there.
+template <int Dim>
+void body_phi_in_box(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
+                     double shrink_in_metres, double far, const VecI<Dim>& lo,
+                     const VecI<Dim>& hi, VectorX& out) {
+  if ((lo.array() > hi.array()).any()) return;
+  const Box<Dim> box = shape.bounds();
+  const VecI<Dim> box_dims = hi - lo + VecI<Dim>::Ones();
+  const int nx = box_dims[0];
+  VecI<Dim> row_dims = box_dims;
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+  std::array<std::vector<double>, Dim> offset;
+  for (int a = 0; a < Dim; ++a) {
+    offset[a].resize(lattice.dims[a]);
+    for (int c = 0; c < lattice.dims[a]; ++c) {
+      const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
+      offset[a][c] = (p - p.cwiseMax(box.min()).cwiseMin(box.max()))[a];
+    }
+  }
+#pragma omp parallel for schedule(static) num_threads(team_threads(box_dims.prod()))
+  for (int q = 0; q < rows; ++q) {
+    VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+    double* o = out.data() + static_cast<std::size_t>(q) * nx;
+    std::array<double, Dim> square;
+    for (int a = 1; a < Dim; ++a) square[a] = offset[a][c[a]] * offset[a][c[a]];
+    const auto outside = [&](int x) {
+      double sum = offset[0][x] * offset[0][x];
+      for (int a = 1; a < Dim; ++a) sum += square[a];
+      return std::sqrt(sum);
+    };
+    for (int i = 0; i < nx; ++i) o[i] = outside(lo[0] + i) + shrink_in_metres;
+    double rest = 0.0;
+    for (int a = 1; a < Dim; ++a) rest += square[a];
+    if (std::sqrt(rest) > far) continue;
+    for (int i = 0; i < nx; ++i) {
+      const int x = lo[0] + i;
+      if (std::abs(offset[0][x]) > far || outside(x) > far) continue;
+      c[0] = x;
+      o[i] = shape.distance(lattice.position(c)) + shrink_in_metres;
+    }
+  }
+}
+
+/// The inclusive box of the points c in [lo, hi] where value(c) < 0 (lo > hi: none); any
+/// thread count gives the same box.
+template <int Dim, class Fn>
+void negative_points(const VecI<Dim>& lo, const VecI<Dim>& hi, const Fn& value,
+                     VecI<Dim>& neg_lo, VecI<Dim>& neg_hi) {
+  VecI<Dim> nlo = VecI<Dim>::Constant(std::numeric_limits<int>::max()), nhi = -VecI<Dim>::Ones();
+  if ((lo.array() <= hi.array()).all()) {
+    const VecI<Dim> box_dims = hi - lo + VecI<Dim>::Ones();
+    VecI<Dim> row_dims = box_dims;
+    row_dims[0] = 1;
+    const int rows = row_dims.prod();
+#pragma omp parallel num_threads(team_threads(box_dims.prod()))
+    {
+      VecI<Dim> tlo = nlo, thi = nhi;
+#pragma omp for schedule(static)
+      for (int q = 0; q < rows; ++q) {
+        VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+        for (int x = lo[0]; x <= hi[0]; ++x) {
+          c[0] = x;
+          if (value(c) < 0.0) {
+            tlo = tlo.cwiseMin(c);
+            thi = thi.cwiseMax(c);
+          }
+        }
+      }
+#pragma omp critical(monolith_negative_points)
+      {
+        nlo = nlo.cwiseMin(tlo);
+        nhi = nhi.cwiseMax(thi);
+      }
+    }
+  }
+  if ((nlo.array() > nhi.array()).any()) {
+    nlo = VecI<Dim>::Zero();
+    nhi = -VecI<Dim>::Ones();
+  }
+  neg_lo = nlo;
+  neg_hi = nhi;
+}
+
+/// lattice_cube_negative_fraction with the level set read through phi: directly from
+/// phi.values when every corner lies in the box [phi.lo, phi.hi] (its points, x fastest), else
+/// through phi(lattice coordinate); the same corners in the same order, so the same value.
+template <int Dim, class Phi>
+double cube_negative_fraction_at(const MacGrid<Dim>& grid, const VecI<Dim>& lower,
+                                 const Phi& phi) {
+  constexpr int kCorners = 1 << Dim;
+  std::array<std::array<std::array<int, 2>, 2>, Dim> coord;
+  for (int a = 0; a < Dim; ++a)
+    for (int s = 0; s < 2; ++s) {
+      const int l = map_lattice_cell(lower[a] + s, 2 * grid.cells()[a], grid.periodic(a));
+      coord[a][s] = {l, l + 1};
+    }
+  std::array<std::array<double, kCorners>, kCorners> corners;
+  int negatives = 0;
+  // every corner inside the box of directly indexed values (phi.values, phi.lo, phi.hi): their
+  // indices as sums of per-axis offsets, as lattice_cube_negative_fraction forms them
+  bool inside = true;
+  for (int a = 0; a < Dim; ++a)
+    for (int s = 0; s < 2; ++s)
+      inside = inside && coord[a][s][0] >= phi.lo[a] && coord[a][s][1] <= phi.hi[a];
+  if (inside) {
+    std::array<std::array<std::array<int, 2>, 2>, Dim> offset;
+    int stride = 1;
+    for (int a = 0; a < Dim; ++a) {
+      for (int s = 0; s < 2; ++s)
+        offset[a][s] = {(coord[a][s][0] - phi.lo[a]) * stride,
+                        (coord[a][s][1] - phi.lo[a]) * stride};
+      stride *= phi.hi[a] - phi.lo[a] + 1;
+    }
+    for (int sub = 0; sub < kCorners; ++sub)
+      for (int k = 0; k < kCorners; ++k) {
+        int index = 0;
+        for (int a = 0; a < Dim; ++a) index += offset[a][(sub >> a) & 1][(k >> a) & 1];
+        const double v = (*phi.values)[index];
+        corners[sub][k] = v;
+        negatives += v < 0.0;
+      }
+  } else {
+    for (int sub = 0; sub < kCorners; ++sub)
+      for (int k = 0; k < kCorners; ++k) {
+        VecI<Dim> p;
+        for (int a = 0; a < Dim; ++a) p[a] = coord[a][(sub >> a) & 1][(k >> a) & 1];
+        const double v = phi(p);
+        corners[sub][k] = v;
+        negatives += v < 0.0;
+      }
+  }
+  if (negatives == 0) return 0.0;
+  if (negatives == kCorners * kCorners) return 1.0;
+  double sum = 0.0;
+  for (int sub = 0; sub < kCorners; ++sub) sum += lattice_cell_negative_fraction<Dim>(corners[sub]);
+  return sum / kCorners;
+}
+
+/// body_face_fractions of a bounded body whose lattice phi is read through phi(coordinate)
+/// (a part of PartsUnionPhi): the same faces, the same values.
+///
+/// `near` receives the faces visited (every other face is 0). With `zero_all` false, w must
+/// already be 0 on every face but those (the caller zeroed its previous list).
+template <int Dim, class Phi>
+void body_face_fractions_at(const MacGrid<Dim>& grid, const Phi& phi, const Box<Dim>& box,
+                            VectorX& w, bool zero_all, std::vector<int>& near) {
+  if (w.size() != grid.num_faces()) {
+    w.resize(grid.num_faces());
+    zero_all = true;
+  }
+  if (zero_all) w.setZero();
+  const double reach = 1.5 * grid.dx();
+  near.clear();
+  for (int axis = 0; axis < Dim; ++axis) {
+    const auto [lo, hi] = lattice_range<Dim>(grid, box, MacGrid<Dim>::face_shift(axis),
+                                             grid.face_dims(axis), reach + grid.dx());
+    for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
+      const Vec<Dim> x = grid.face_center(axis, coord);
+      if ((x.array() < box.min().array() - reach).any() ||
+          (x.array() > box.max().array() + reach).any())
+        return;
+      near.push_back(grid.face_index(axis, coord));
+    });
+  }
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int n = 0; n < static_cast<int>(near.size()); ++n) {
+    const int f = near[n];
+    const auto [axis, coord] = grid.face_coord(f);
+    VecI<Dim> lower = 2 * coord;
+    lower[axis] -= 1;
+    w[f] = cube_negative_fraction_at<Dim>(grid, lower, phi);
+  }
+}
+
 }  // namespace
 
 template <int Dim>
@@ -223,7 +401,128 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   w.body_face.resize(bodies.size());
   scratch.fixed_phi.resize(bodies.size());
   scratch.fixed_face.resize(bodies.size());
-  for (std::size_t i = 0; i < bodies.size(); ++i) {
+  scratch.fixed_neg_lo.resize(bodies.size());
+  scratch.fixed_neg_hi.resize(bodies.size());
+  scratch.fixed_neg_known.resize(bodies.size(), 0);
+  // the union kept per part (issue 20): the bodies that never move by their kept phi, the
+  // others by their values in their box; no lattice-sized pass per call
+  bool in_parts = scratch.union_in_parts && static_solids.empty() && !scratch.stress &&
+                  shrink_in_metres >= 0.0 && !bodies.empty();
+  for (std::size_t i = 0; i < bodies.size() && in_parts; ++i) {
+    const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+    const Box<Dim> box = bodies[i].shape->bounds();
+    if (!fixed && (box.isEmpty() || !box.min().allFinite() || !box.max().allFinite()))
+      in_parts = false;
+  }
+  scratch.union_parts.clear();
+  // The faces' weights of the last call kept (the same bodies, every output where this call
+  // left it: its buffers, not reallocated): only the faces near a moving body, now or in the
+  // last call, are visited below; every other face keeps the fixed bodies' weights of the last
+  // call, which are those of this call there (no moving body's fraction reaches it). The
+  // caller that keeps the outputs must not write into them (Simulation: it reads them only).
+  bool incremental = in_parts && scratch.kept && !parts && w.fluid_face.size() == nf &&
+                     w.fluid_face.data() == scratch.kept_fluid_face &&
+                     scratch.kept_fixed.size() == bodies.size() &&
+                     scratch.near.size() == bodies.size() &&
+                     scratch.kept_body_face.size() == bodies.size();
+  for (std::size_t i = 0; i < bodies.size() && incremental; ++i) {
+    const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+    incremental = w.body_face[i].size() == nf &&
+                  w.body_face[i].data() == scratch.kept_body_face[i] &&
+                  scratch.kept_fixed[i] == static_cast<char>(fixed) &&
+                  (!fixed || scratch.fixed_face[i].size() == nf);
+  }
+  scratch.kept = false;
+  // the faces whose weights are made again (incremental: the moving bodies' faces of the last
+  // call and of this one, each once: scratch.face_mark)
+  std::vector<int>& touched = scratch.touched;
+  touched.clear();
+  if (incremental && scratch.face_mark.size() != static_cast<std::size_t>(nf))
+    scratch.face_mark.assign(nf, 0);
+  const auto touch = [&](int f) {
+    if (scratch.face_mark[f]) return;
+    scratch.face_mark[f] = 1;
+    touched.push_back(f);
+  };
+  scratch.near.resize(bodies.size());
+  if (incremental)
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+      if (fixed) continue;
+      for (const int f : scratch.near[i]) {
+        w.body_face[i][f] = 0.0;
+        touch(f);
+      }
+    }
+  if (in_parts) {
+    scratch.union_parts.begin(lattice, shrink_in_metres);
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      const CouplingBody<Dim>& body = bodies[i];
+      const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
+      if (fixed) {
+        if (scratch.fixed_phi[i].size() != lattice.size() || scratch.fixed_face[i].size() != nf) {
+          // the first call: the body's lattice phi, its fractions and its negative points, kept
+          body_phi_on_lattice<Dim>(lattice, *body.shape, shrink_in_metres, far,
+                                   scratch.fixed_phi[i]);
+          body_face_fractions<Dim>(grid, lattice, scratch.fixed_phi[i], body.shape->bounds(),
+                                   scratch.fixed_face[i]);
+          scratch.fixed_neg_known[i] = 0;
+        }
+        if (!scratch.fixed_neg_known[i]) {
+          const VectorX& phi = scratch.fixed_phi[i];
+          VecI<Dim> lo = VecI<Dim>::Zero(), hi = lattice.dims - VecI<Dim>::Ones();
+          if (!body_phi_negative_box<Dim>(lattice, *body.shape, far, lo, hi)) {
+            lo = VecI<Dim>::Zero();
+            hi = lattice.dims - VecI<Dim>::Ones();
+          }
+          negative_points<Dim>(lo, hi, [&](const VecI<Dim>& c) { return phi[lattice.index(c)]; },
+                               scratch.fixed_neg_lo[i], scratch.fixed_neg_hi[i]);
+          scratch.fixed_neg_known[i] = 1;
+        }
+        if (!incremental) w.body_face[i] = scratch.fixed_face[i];  // (else below, where touched)
+        scratch.near[i].clear();
+        scratch.union_parts.add_dense(&scratch.fixed_phi[i], scratch.fixed_neg_lo[i],
+                                      scratch.fixed_neg_hi[i]);
+        continue;
+      }
+      const int part = scratch.union_parts.num_parts();
+      VecI<Dim> lo, hi;
+      scratch.union_parts.add_boxed(body.shape->bounds(), far, lo, hi);
+      VectorX& values = scratch.union_parts.boxed_values(part);
+      body_phi_in_box<Dim>(lattice, *body.shape, shrink_in_metres, far, lo, hi, values);
+      const VecI<Dim> box_dims = hi - lo + VecI<Dim>::Ones();
+      VecI<Dim> neg_lo, neg_hi;
+      negative_points<Dim>(lo, hi,
+                           [&](const VecI<Dim>& c) {
+                             return values[lattice_index<Dim>(c - lo, box_dims)];
+                           },
+                           neg_lo, neg_hi);
+      scratch.union_parts.set_negative_box(part, neg_lo, neg_hi);
+      // the fractions read the box's values directly (part_at outside it: the same values)
+      struct BoxedPhi {
+        const PartsUnionPhi<Dim>* parts;
+        int part;
+        const VectorX* values;
+        VecI<Dim> lo, hi;
+        double operator()(const VecI<Dim>& c) const { return parts->part_at(part, c); }
+      };
+      const BoxedPhi phi{&scratch.union_parts, part, &values, lo, hi};
+      body_face_fractions_at<Dim>(grid, phi, body.shape->bounds(), w.body_face[i], !incremental,
+                                  scratch.near[i]);
+      if (incremental)
+        for (const int f : scratch.near[i]) touch(f);
+    }
+    scratch.union_parts.finish();
+    have_union = true;
+    if (incremental) {
+      // the fixed bodies' raw fractions where the weights are made again
+      for (std::size_t i = 0; i < bodies.size(); ++i)
+        if (i < scratch.fixed.size() && scratch.fixed[i])
+          for (const int f : touched) w.body_face[i][f] = scratch.fixed_face[i][f];
+      for (const int f : touched) scratch.face_mark[f] = 0;
+    }
+  }
+  for (std::size_t i = 0; i < bodies.size() && !in_parts; ++i) {
     const CouplingBody<Dim>& body = bodies[i];
     if (union_box) {
       VecI<Dim> lo, hi;
@@ -252,12 +551,13 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     if (fixed) {
       scratch.fixed_phi[i] = body_phi;
       scratch.fixed_face[i] = w.body_face[i];
+      scratch.fixed_neg_known[i] = 0;
     }
     if (have_union) union_phi = union_phi.cwiseMin(body_phi);
     have_union = true;
   }
   // no solid at all: +infinity everywhere
-  if (!have_union) solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres, union_phi);
+  if (!have_union && !in_parts) solid_phi_on_lattice<Dim>(grid, lattice, static_solids, shrink_in_metres, union_phi);
 
   // the body's lattice phi is not needed any more: its memory goes back to the heap for the
   // solve (a lattice-sized vector, 541 MB at the paper's 256x128x256 grid)
@@ -272,8 +572,11 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   else if (w.solid_face.size() != nf)
     w.solid_face.resize(nf);
   if (w.fluid_face.size() != nf) w.fluid_face.resize(nf);
-#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
-  for (int f = 0; f < nf; ++f) {
+  // every face, or (incremental) the touched faces only
+  const int passes = incremental ? static_cast<int>(touched.size()) : nf;
+#pragma omp parallel for schedule(static) num_threads(team_threads(passes))
+  for (int n = 0; n < passes; ++n) {
+    const int f = incremental ? touched[n] : n;
     double static_part = parts ? w.static_face[f] : 0.0;
     double sum = static_part;
     for (const VectorX& body : w.body_face) sum += body[f];
@@ -312,6 +615,47 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     }
   }
 
+  if (in_parts && !parts) {
+    // the outputs this call leaves, for the next call's incremental pass
+    scratch.kept = true;
+    scratch.kept_fluid_face = w.fluid_face.data();
+    scratch.kept_body_face.resize(bodies.size());
+    scratch.kept_fixed.resize(bodies.size());
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      scratch.kept_body_face[i] = w.body_face[i].data();
+      scratch.kept_fixed[i] = i < scratch.fixed.size() && scratch.fixed[i];
+    }
+  }
+  if (in_parts) {
+    // no classes: the box of the lattice cells with a negative corner (the cells l with
+    // l <= p <= l + 1 for a negative point p), as classify_lattice_cells_in_box finds it; W_F^s
+    // is not made (scratch.stress false)
+    LatticeSigns<Dim>& signs = scratch.signs;
+    signs.cells = 2 * grid.cells();
+    signs.written_lo = VecI<Dim>::Zero();
+    signs.written_hi = -VecI<Dim>::Ones();
+    signs.cls.clear();
+    signs.row_start.clear();
+    signs.mixed_x.clear();
+    signs.mixed_fraction.clear();
+    signs.phi_data = nullptr;
+    signs.phi_size = -1;
+    VecI<Dim> lo, hi;
+    scratch.union_parts.negative_box(lo, hi);
+    if ((lo.array() <= hi.array()).all()) {
+      for (int a = 0; a < Dim; ++a) {
+        lo[a] = std::max(lo[a] - 1, 0);
+        hi[a] = std::min(hi[a], signs.cells[a] - 1);
+      }
+      signs.lo = lo;
+      signs.hi = hi;
+    } else {
+      signs.lo = signs.cells;
+      signs.hi = -VecI<Dim>::Ones();
+    }
+    w.fluid_stress = VectorX();
+    return;
+  }
   // W_F^s from the union of all solids (its classes in the bodies' box when there is one)
   if (union_box)
     classify_lattice_cells_in_box(grid, lattice, union_phi, union_lo, union_hi, scratch.signs);
@@ -417,6 +761,13 @@ BodyCouplingOperator<Dim>::BodyCouplingOperator(const MacGrid<Dim>& grid,
                                                 const std::vector<CouplingBody<Dim>>& bodies,
                                                 const SolidWeights<Dim>& weights,
                                                 BodyGroup group)
+    : BodyCouplingOperator(grid, bodies, weights, group, Columns{}) {}
+
+template <int Dim>
+BodyCouplingOperator<Dim>::BodyCouplingOperator(const MacGrid<Dim>& grid,
+                                                const std::vector<CouplingBody<Dim>>& bodies,
+                                                const SolidWeights<Dim>& weights,
+                                                BodyGroup group, const Columns& columns)
     : grid_(grid), stress_(grid), bodies_(bodies), body_face_(weights.body_face) {
   rows_ = body_rows(bodies_, group, &num_rows_);
   surface_cells_.assign(bodies_.size(), {});
@@ -431,11 +782,21 @@ BodyCouplingOperator<Dim>::BodyCouplingOperator(const MacGrid<Dim>& grid,
     const Box<Dim> bounds = bodies_[i].shape->bounds();
     Block column;
     const auto [lo, hi] = lattice_range<Dim>(grid_, bounds, Vec<Dim>::Constant(0.5), grid_.cells(), margin);
-    for_range<Dim>(lo, hi, [&](const VecI<Dim>& c) {
-      const int cell = grid_.cell_index(c);
-      if (pressure_column(body, cell, column)) surface_cells_[i].push_back(cell);
-    });
-    std::sort(surface_cells_[i].begin(), surface_cells_[i].end());
+    if (columns.cells) {
+      // the listed cells in the range, in increasing order (the order of the sort below)
+      for (const int cell : *columns.cells) {
+        const VecI<Dim> c = grid_.cell_coord(cell);
+        if ((c.array() < lo.array()).any() || (c.array() > hi.array()).any()) continue;
+        if (pressure_column(body, cell, column)) surface_cells_[i].push_back(cell);
+      }
+    } else {
+      for_range<Dim>(lo, hi, [&](const VecI<Dim>& c) {
+        const int cell = grid_.cell_index(c);
+        if (pressure_column(body, cell, column)) surface_cells_[i].push_back(cell);
+      });
+      std::sort(surface_cells_[i].begin(), surface_cells_[i].end());
+    }
+    if (!columns.stress) continue;
     for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
       const auto [slo, shi] = lattice_range<Dim>(grid_, bounds, StressGrid<Dim>::shift(k), stress_.dims(k), margin);
       for_range<Dim>(slo, shi, [&](const VecI<Dim>& c) {

@@ -17,11 +17,13 @@
 /// contact_system.hpp (ContactSystem::body_dof).
 
 #include <array>
+#include <cstdint>
 #include <vector>
 
 #include "reference/core/common.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
+#include "reference/grid/boxed_union_phi.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -108,6 +110,29 @@ struct SolidWeightsScratch {
   /// left empty (the simulation's inviscid coupled steps: at the paper's 256x128x256 grid 400 MB
   /// made and dropped every step). The union's lattice-cell classes (signs) are made either way.
   bool stress = true;
+  /// Set by the caller: the union of the solids may be kept per body in `union_parts` (the
+  /// kept phi of the bodies that never move, each moving body's values in its box: no
+  /// lattice-sized pass per call) instead of written into SolidWeights::lattice_phi, which is
+  /// then left as it was. Taken when there is no static solid, W_F^s is not made (`stress`
+  /// false), zeta >= 0 and every moving body is bounded; else the union is written as before and
+  /// union_parts is not valid. The union's lattice-cell classes are then not made either:
+  /// `signs` holds only the box of the lattice cells with a negative corner (signs.lo, hi).
+  bool union_in_parts = false;
+  PartsUnionPhi<Dim> union_parts;  ///< the union per part (valid() when taken)
+  /// per body that never moves: the box of its kept phi's negative points (with fixed_phi)
+  std::vector<VecI<Dim>> fixed_neg_lo, fixed_neg_hi;
+  std::vector<char> fixed_neg_known;  ///< whether fixed_neg_lo, hi hold the kept phi's box
+  /// With the union kept per body and `parts` false, the next call makes the face weights again
+  /// only at the faces near a moving body (in this call or the next) when it is given the same
+  /// output buffers (SolidWeights::body_face, fluid_face: same data pointers and sizes, the same
+  /// bodies fixed) and nothing wrote into them in between; the state of that below.
+  bool kept = false;
+  const double* kept_fluid_face = nullptr;
+  std::vector<const double*> kept_body_face;
+  std::vector<char> kept_fixed;
+  std::vector<std::vector<int>> near;  ///< per moving body: the faces of its fractions
+  std::vector<std::uint8_t> face_mark;  ///< face-sized, 0 between calls
+  std::vector<int> touched;
 };
 
 /// The same into `w`, whose vectors (and the scratch buffers) are reused when they have the
@@ -160,11 +185,31 @@ SparseMatrix aggregation_matrix(const MacGrid<Dim>& grid,
 template <int Dim>
 class BodyCouplingOperator {
  public:
+  /// The columns a caller reads (issue 20: the system's unknowns). By default every column:
+  /// every cell of J_p and every StressGrid DOF of J_s.
+  struct Columns {
+    /// The cells whose J_p columns are wanted, increasing (the pressure unknowns' cells,
+    /// PressureDofs::cell_of_dof); null: every cell. Cells not listed get no column (their
+    /// surface entries are absent; every listed cell's column is the one of the full operator).
+    const std::vector<int>* cells = nullptr;
+    /// Whether J_s is wanted at all (false: a system without stress unknowns; no stress
+    /// surface is searched and J_s has no column).
+    bool stress = true;
+  };
+
   BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
                        const SolidWeights<Dim>& weights, BodyGroup group);
+  /// The same restricted to the columns of `columns`: the surface is searched only among the
+  /// listed cells (time in proportion to the unknowns, not to the bodies' boxes: Fig. 17's basin
+  /// spans half the lattice) and, without stress, not among the stress DOFs. The columns kept
+  /// are those of the full operator bit for bit.
+  BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
+                       const SolidWeights<Dim>& weights, BodyGroup group, const Columns& columns);
   /// A temporary's weights would not outlive the operator.
   BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
                        SolidWeights<Dim>&& weights, BodyGroup group) = delete;
+  BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
+                       SolidWeights<Dim>&& weights, BodyGroup group, const Columns&) = delete;
 
   int num_rows() const { return num_rows_; }
   int num_cells() const { return grid_.num_cells(); }

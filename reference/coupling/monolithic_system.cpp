@@ -98,8 +98,15 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   dofs_ = select_stokes_dofs<Dim>(grid, layout_, w, dt, unknowns);
   const int nd = contacts.num_body_dofs();
   const std::vector<CouplingBody<Dim>> view = coupling_bodies(bodies);
-  const BodyCouplingOperator<Dim> two(grid, view, solids, BodyGroup::two_way);
-  const BodyCouplingOperator<Dim> one(grid, view, solids, BodyGroup::one_way);
+  // J_p's columns only at the pressure unknowns' cells and J_s only with stress unknowns: the
+  // system reads no other column (add_body_rhs and build_rigid_columns select the unknowns; the
+  // explicit products go through S_p^T and S_tau), and the surface search then costs the
+  // unknowns, not the bodies' boxes (issue 20: Fig. 17's basin spans half the lattice)
+  typename BodyCouplingOperator<Dim>::Columns wanted;
+  wanted.cells = &dofs_.pressure.cell_of_dof;
+  wanted.stress = num_stress() > 0;
+  const BodyCouplingOperator<Dim> two(grid, view, solids, BodyGroup::two_way, wanted);
+  const BodyCouplingOperator<Dim> one(grid, view, solids, BodyGroup::one_way, wanted);
   if (two.num_rows() != nd)
     throw std::invalid_argument("MonolithicSystem: bodies and ContactSystem disagree");
   j_lambda_t_ = contacts.j_lambda.transpose();

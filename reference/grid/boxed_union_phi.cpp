@@ -101,4 +101,156 @@ double BoxedUnionPhi<Dim>::at(const VecI<Dim>& c) const {
 template class BoxedUnionPhi<2>;
 template class BoxedUnionPhi<3>;
 
+
+template <int Dim>
+void PartsUnionPhi<Dim>::begin(const SampleLattice<Dim>& lattice, double shrink_in_metres) {
+  valid_ = false;
+  lattice_ = lattice;
+  dims_ = lattice.dims;
+  shrink_ = shrink_in_metres;
+  count_ = 0;
+}
+
+template <int Dim>
+void PartsUnionPhi<Dim>::add_dense(const VectorX* phi, const VecI<Dim>& neg_lo,
+                                   const VecI<Dim>& neg_hi) {
+  if (count_ == static_cast<int>(parts_.size())) parts_.emplace_back();
+  Part& part = parts_[count_++];
+  part.dense = phi;
+  part.neg_lo = neg_lo;
+  part.neg_hi = neg_hi;
+}
+
+template <int Dim>
+void PartsUnionPhi<Dim>::add_boxed(const Box<Dim>& bounds, double far, VecI<Dim>& lo,
+                                   VecI<Dim>& hi) {
+  if (count_ == static_cast<int>(parts_.size())) parts_.emplace_back();
+  Part& part = parts_[count_++];
+  part.dense = nullptr;
+  // the offset table of body_phi_on_lattice: component a of p - clamp(p, box) at coordinate c
+  for (int a = 0; a < Dim; ++a) {
+    part.offset[a].resize(dims_[a]);
+    for (int c = 0; c < dims_[a]; ++c) {
+      const Vec<Dim> p = lattice_.position(VecI<Dim>::Constant(c));
+      part.offset[a][c] = (p - p.cwiseMax(bounds.min()).cwiseMin(bounds.max()))[a];
+    }
+  }
+  // BoxedUnionPhi's box of one body: its bounds grown by `far` and two lattice points (outside
+  // it body_phi_on_lattice writes the closed form)
+  bool any = true;
+  for (int a = 0; a < Dim; ++a) {
+    const double from = (bounds.min()[a] - far - lattice_.origin[a]) / lattice_.spacing;
+    const double to = (bounds.max()[a] + far - lattice_.origin[a]) / lattice_.spacing;
+    const double top = static_cast<double>(dims_[a] - 1);
+    lo[a] = static_cast<int>(std::clamp(std::floor(from) - 2.0, 0.0, top + 1.0));
+    hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 2.0, -1.0, top));
+    any = any && lo[a] <= hi[a];
+  }
+  if (!any) {
+    lo = VecI<Dim>::Zero();
+    hi = -VecI<Dim>::Ones();
+  }
+  part.lo = lo;
+  part.hi = hi;
+  part.box_dims = any ? VecI<Dim>(hi - lo + VecI<Dim>::Ones()) : VecI<Dim>::Zero();
+  const Eigen::Index n = any ? part.box_dims.prod() : 0;
+  if (part.values.size() != n) part.values.resize(n);
+  part.neg_lo = VecI<Dim>::Zero();
+  part.neg_hi = -VecI<Dim>::Ones();
+}
+
+template <int Dim>
+void PartsUnionPhi<Dim>::set_negative_box(int part, const VecI<Dim>& neg_lo,
+                                          const VecI<Dim>& neg_hi) {
+  parts_[part].neg_lo = neg_lo;
+  parts_[part].neg_hi = neg_hi;
+}
+
+template <int Dim>
+double PartsUnionPhi<Dim>::part_at(int i, const VecI<Dim>& c) const {
+  const Part& part = parts_[i];
+  if (part.dense) return (*part.dense)[lattice_index<Dim>(c, dims_)];
+  if ((c.array() >= part.lo.array()).all() && (c.array() <= part.hi.array()).all())
+    return part.values[lattice_index<Dim>(c - part.lo, part.box_dims)];
+  // sqrt((t_0^2 + t_1^2) + t_2^2) + zeta, as body_phi_on_lattice sums them
+  double sum = part.offset[0][c[0]] * part.offset[0][c[0]];
+  for (int a = 1; a < Dim; ++a) {
+    const double square = part.offset[a][c[a]] * part.offset[a][c[a]];
+    sum += square;
+  }
+  return std::sqrt(sum) + shrink_;
+}
+
+template <int Dim>
+double PartsUnionPhi<Dim>::at(const VecI<Dim>& c) const {
+  // the first part's value, then the minimum with each further part's (cwiseMin's order)
+  double value = part_at(0, c);
+  for (int i = 1; i < count_; ++i) value = std::min(value, part_at(i, c));
+  return value;
+}
+
+template <int Dim>
+bool PartsUnionPhi<Dim>::negative(const VecI<Dim>& c, int k) const {
+  // the dense parts by index first, then the boxed parts in their boxes of negative points
+  bool boxed = false;
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if (!part.dense) {
+      boxed = true;
+      continue;
+    }
+    if ((*part.dense)[k] < 0.0) return true;
+  }
+  if (!boxed) return false;
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if (part.dense) continue;
+    if ((c.array() < part.neg_lo.array()).any() || (c.array() > part.neg_hi.array()).any())
+      continue;
+    if (part.values[lattice_index<Dim>(c - part.lo, part.box_dims)] < 0.0) return true;
+  }
+  return false;
+}
+
+template <int Dim>
+bool PartsUnionPhi<Dim>::negative(int k) const {
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if (part.dense && (*part.dense)[k] < 0.0) return true;
+  }
+  VecI<Dim> c;
+  bool have_c = false;
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if (part.dense) continue;
+    if (!have_c) {
+      c = lattice_coord<Dim>(k, dims_);
+      have_c = true;
+    }
+    if ((c.array() < part.neg_lo.array()).any() || (c.array() > part.neg_hi.array()).any())
+      continue;
+    if (part.values[lattice_index<Dim>(c - part.lo, part.box_dims)] < 0.0) return true;
+  }
+  return false;
+}
+
+template <int Dim>
+void PartsUnionPhi<Dim>::negative_box(VecI<Dim>& lo, VecI<Dim>& hi) const {
+  lo = dims_;
+  hi = -VecI<Dim>::Ones();
+  for (int i = 0; i < count_; ++i) {
+    const Part& part = parts_[i];
+    if ((part.neg_lo.array() > part.neg_hi.array()).any()) continue;
+    lo = lo.cwiseMin(part.neg_lo);
+    hi = hi.cwiseMax(part.neg_hi);
+  }
+  if ((lo.array() > hi.array()).any()) {
+    lo = VecI<Dim>::Zero();
+    hi = -VecI<Dim>::Ones();
+  }
+}
+
+template class PartsUnionPhi<2>;
+template class PartsUnionPhi<3>;
+
 }  // namespace monolith

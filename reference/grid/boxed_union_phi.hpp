@@ -56,4 +56,73 @@ class BoxedUnionPhi {
   VectorX values_;
 };
 
+
+/// The solids' union level set on the half lattice kept per part instead of as one
+/// lattice-sized vector (issue 20: Fig. 17's static basin and two moving shells). solid_weights
+/// (reference/coupling) writes the union as the first body's lattice phi, then the minimum with
+/// every further body's, each body's phi being its shape's distance (+ zeta) within `far` of its
+/// bounds and the distance to the bounds box (+ zeta) farther out. Here a part is either
+///  - dense: a lattice-sized vector of its values (a body that never moves: computed once and
+///    kept by the caller, not copied), or
+///  - boxed: its values in a box of lattice points (its bounds grown by `far` and two points, as
+///    in BoxedUnionPhi) and the closed form of the distance to the bounds outside it,
+/// and the union's value at a point is the minimum over the parts in body order, with the same
+/// operations as the dense union (std::min of the running value and the next part), so the same
+/// bits. The sign alone (negative()) needs no closed form: with zeta >= 0 it is >= 0.
+template <int Dim>
+class PartsUnionPhi {
+ public:
+  /// Starts a union over `lattice` with shrink zeta (no part yet; not valid until finish()).
+  void begin(const SampleLattice<Dim>& lattice, double shrink_in_metres);
+  /// Appends a dense part: `phi` (lattice-sized, not copied: it must outlive the reads) whose
+  /// negative points lie in the inclusive box [neg_lo, neg_hi] (lo > hi: none).
+  void add_dense(const VectorX* phi, const VecI<Dim>& neg_lo, const VecI<Dim>& neg_hi);
+  /// Appends a boxed part for a body with these bounds (bounded, not empty) and `far`; returns
+  /// the inclusive box of lattice points it stores (lo > hi on some axis: none).
+  void add_boxed(const Box<Dim>& bounds, double far, VecI<Dim>& lo, VecI<Dim>& hi);
+  /// The stored values of boxed part `part` (the box's points, x fastest), to be written by the
+  /// caller after add_boxed; then set_negative_box.
+  VectorX& boxed_values(int part) { return parts_[part].values; }
+  void set_negative_box(int part, const VecI<Dim>& neg_lo, const VecI<Dim>& neg_hi);
+  /// The union is complete (at least one part).
+  void finish() { valid_ = count_ > 0; }
+  void clear() { valid_ = false; }
+  bool valid() const { return valid_; }
+  int num_parts() const { return count_; }
+
+  /// Part `i`'s value at lattice point c (stored, or the closed form outside its box).
+  double part_at(int i, const VecI<Dim>& c) const;
+  /// The union's value at lattice point c / index k.
+  double at(const VecI<Dim>& c) const;
+  double operator()(int k) const { return at(lattice_coord<Dim>(k, dims_)); }
+  /// Whether the union is < 0 at lattice point k (some part is; the closed form never is).
+  bool negative(int k) const;
+  /// The same at lattice point c of index k (no division for the coordinate).
+  bool negative(const VecI<Dim>& c, int k) const;
+  /// Boxed part `i`'s stored values and box (the box's points, x fastest), for readers that
+  /// index them directly inside the box and read part_at outside it.
+  const VectorX& boxed_values(int i, VecI<Dim>& lo, VecI<Dim>& hi) const {
+    lo = parts_[i].lo;
+    hi = parts_[i].hi;
+    return parts_[i].values;
+  }
+  /// The inclusive box of the union's negative points (lo > hi: none).
+  void negative_box(VecI<Dim>& lo, VecI<Dim>& hi) const;
+
+ private:
+  struct Part {
+    const VectorX* dense = nullptr;
+    VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones(), box_dims = VecI<Dim>::Zero();
+    VectorX values;
+    std::array<std::vector<double>, Dim> offset;  ///< per axis: offset from the bounds
+    VecI<Dim> neg_lo = VecI<Dim>::Zero(), neg_hi = -VecI<Dim>::Ones();
+  };
+  bool valid_ = false;
+  SampleLattice<Dim> lattice_;
+  VecI<Dim> dims_ = VecI<Dim>::Zero();
+  double shrink_ = 0.0;
+  std::vector<Part> parts_;  ///< kept across begin() calls (their buffers reused)
+  int count_ = 0;            ///< parts of the current union (parts_ may hold more buffers)
+};
+
 }  // namespace monolith

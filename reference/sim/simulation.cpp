@@ -318,12 +318,14 @@ void Simulation<Dim>::update_liquid_weights() {
   // lattice-sized copy is made (541 MB at the paper's 256x128x256 grid); the values the weights
   // read are those of extend_liquid_into_solids_in_box
   const bool solids = !solid_shapes_.empty() || coupled_;
-  const bool extend =
-      solids && (solid_phi_.size() == liquid_phi_.size() || solid_box_phi_.valid());
+  const bool extend = solids && (solid_phi_.size() == liquid_phi_.size() ||
+                                  solid_box_phi_.valid() || solid_scratch_.union_parts.valid());
   if (extend) {
     const double reach = kLiquidSolidReach * grid_.dx(), dx = grid_.dx();
+    // liquid_extended_into_solid, which reads only the solids' sign (solid_negative_at)
     overwrite_in_box<Dim>(lattice_, solid_lo_, solid_hi_, liquid_phi_, [&](int k) {
-      return liquid_extended_into_solid(liquid_phi_[k], solid_phi_at(k), reach, dx);
+      const double l = liquid_phi_[k];
+      return l < reach && solid_negative_at(k) ? std::min(l, -0.5 * dx) : l;
     }, phi_undo_);
   }
   const VectorX& phi = liquid_phi_;
@@ -399,7 +401,11 @@ void Simulation<Dim>::update_liquid_weights() {
       }
     if (extend)
       overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
-        return std::max(liquid_phi_[k], -solid_phi_at(k));
+        // where phi_L >= 0 and the solids' union is not negative, -phi_S <= 0 <= phi_L and the
+        // maximum is phi_L itself (the union's value, closed forms per body, is not needed)
+        const double l = liquid_phi_[k];
+        if (l >= 0.0 && !solid_negative_at(k)) return l;
+        return std::max(l, -solid_phi_at(k));
       }, phi_undo_);
     const VectorX& fluid_phi = liquid_phi_;
     classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
@@ -418,6 +424,7 @@ void Simulation<Dim>::update_liquid_weights() {
   if (coupled_) {
     solid_phi_ = VectorX();
     solid_box_phi_.clear();
+    solid_scratch_.union_parts.clear();
   }
 }
 
@@ -1056,6 +1063,10 @@ void Simulation<Dim>::update_moving_solids() {
   // W_F^s only where a solve reads it: without stress solves (and no export of this step's
   // system) solve_coupled passes inviscid weights (lean_coupled_weights), so it is not made
   solid_scratch_.stress = !lean_coupled_weights();
+  // the union kept per body where solid_weights can (Fig. 17: the basin's kept phi, the shells'
+  // values in their boxes), read below and by update_liquid_weights through solid_phi_at and
+  // solid_negative_at; solids.lattice_phi's lent buffer is then left unwritten
+  solid_scratch_.union_in_parts = true;
   // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
@@ -1094,7 +1105,11 @@ void Simulation<Dim>::update_moving_solids() {
   // lattice-sized buffer goes back to liquid_phi_, which update_liquid_weights overwrites with
   // the new liquid level set: one lattice-sized vector for both level sets instead of two (541
   // MB at the paper's 256x128x256 grid, alive at the step's memory peak)
-  {
+  if (solid_scratch_.union_parts.valid()) {
+    // the union is kept per body: the lent buffer (unwritten) goes back to the liquid level set
+    if (liquid_phi_.size() == 0) liquid_phi_.swap(solid_phi_);
+    solid_phi_ = VectorX();
+  } else {
     std::vector<Box<Dim>> bounds;
     for (const CouplingBody<Dim>& b : bodies) bounds.push_back(b.shape->bounds());
     if (solid_box_phi_.assign(lattice_, bounds, 2.0 * grid_.dx(), shrink, solid_phi_)) {
@@ -1469,7 +1484,7 @@ void Simulation<Dim>::find_faces_in_solids() {
       VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
       k[axis] -= 1;
       if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
-      if (solid_phi_at(lattice_.index(k)) < 0.0)
+      if (solid_negative_at(k, lattice_.index(k)))
         faces.push_back(grid_.face_index(axis, coord));
     }
   }

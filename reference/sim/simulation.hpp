@@ -418,9 +418,23 @@ class Simulation : public AnySimulation {
   /// In coupled scenes between update_moving_solids and the end of update_liquid_weights: the
   /// solids' union in the bodies' box, solid_phi_ then empty (invalid: solid_phi_ holds it)
   BoxedUnionPhi<Dim> solid_box_phi_;
-  /// The solids' union at lattice point k, from solid_phi_ or solid_box_phi_.
+  /// The solids' union at lattice point k, from the union kept per body
+  /// (solid_scratch_.union_parts, between update_moving_solids and the end of
+  /// update_liquid_weights when solid_weights kept it so), solid_box_phi_ or solid_phi_.
   double solid_phi_at(int k) const {
+    if (solid_scratch_.union_parts.valid()) return solid_scratch_.union_parts(k);
     return solid_box_phi_.valid() ? solid_box_phi_(k) : solid_phi_[k];
+  }
+  /// Whether the solids' union is < 0 at lattice point k (solid_phi_at(k) < 0.0, without the
+  /// union's far values when it is kept per body).
+  bool solid_negative_at(int k) const {
+    if (solid_scratch_.union_parts.valid()) return solid_scratch_.union_parts.negative(k);
+    return solid_phi_at(k) < 0.0;
+  }
+  /// The same at lattice point c of index k.
+  bool solid_negative_at(const VecI<Dim>& c, int k) const {
+    if (solid_scratch_.union_parts.valid()) return solid_scratch_.union_parts.negative(c, k);
+    return solid_phi_at(k) < 0.0;
   }
   // moving bodies with contact (scenes with dynamic or kinematic bodies)
   std::unique_ptr<RigidWorld<Dim>> rigid_;

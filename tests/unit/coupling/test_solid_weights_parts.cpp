@@ -1,0 +1,192 @@
+// The solids' union kept per body (SolidWeightsScratch::union_in_parts, PartsUnionPhi) against
+// the dense union of solid_weights, and the body-coupling operator restricted to the system's
+// columns against the full one: the same bits (issue 20, Fig. 17's basin and shells).
+#include <catch2/catch.hpp>
+
+#include <cstring>
+#include <memory>
+#include <vector>
+
+#include "reference/coupling/coupling.hpp"
+#include "reference/grid/boxed_union_phi.hpp"
+#include "tests/support/test_helpers.hpp"
+
+using namespace monolith;
+using monolith::testing::all_boundaries;
+using monolith::testing::TestBall;
+using monolith::testing::TestBox;
+using monolith::testing::unit_grid;
+
+namespace {
+
+bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+
+long differing(const VectorX& a, const VectorX& b) {
+  if (a.size() != b.size()) return -1;
+  long n = 0;
+  for (Eigen::Index i = 0; i < a.size(); ++i) n += !same_bits(a[i], b[i]);
+  return n;
+}
+
+template <int Dim>
+CouplingBody<Dim> ball(const Vec<Dim>& c, double r, bool two_way = true) {
+  CouplingBody<Dim> b;
+  b.shape = std::make_shared<TestBall<Dim>>(c, r);
+  b.center = c;
+  b.two_way = two_way;
+  return b;
+}
+
+template <int Dim>
+CouplingBody<Dim> slab(const Vec<Dim>& c, const Vec<Dim>& half) {
+  CouplingBody<Dim> b;
+  b.shape = std::make_shared<TestBox<Dim>>(c, half);
+  b.center = c;
+  b.two_way = false;
+  return b;
+}
+
+/// A large fixed body (more than half the lattice, as Fig. 17's basin) and two moving balls, one
+/// reaching into it and one crossing the domain's edge, over three poses: per call the weights
+/// kept per part equal those of a dense call bit for bit, the union at every lattice point too.
+template <int Dim>
+void check_parts(int n, double shrink_cells) {
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+  const double shrink = shrink_cells * grid.dx();
+  SolidWeights<Dim> kept;
+  SolidWeightsScratch<Dim> scratch;
+  scratch.fixed = {1, 0, 0};
+  scratch.parts = false;
+  scratch.stress = false;
+  scratch.union_in_parts = true;
+  for (int pose = 0; pose < 4; ++pose) {
+    Vec<Dim> basin_half = Vec<Dim>::Constant(0.45);
+    basin_half[1] = 0.3;
+    Vec<Dim> basin_centre = Vec<Dim>::Constant(0.5);
+    basin_centre[1] = 0.3;
+    const double t = 0.07 * pose;
+    const std::vector<CouplingBody<Dim>> bodies = {
+        slab<Dim>(basin_centre, basin_half),
+        ball<Dim>(Vec<Dim>::Constant(0.3 + (pose == 3 ? 0.0 : t)) +
+                      Vec<Dim>::LinSpaced(0.011, 0.029),
+                  0.13),
+        ball<Dim>(Vec<Dim>::Constant(0.85 - 0.5 * t), 0.12)};
+    SolidWeights<Dim> dense;
+    SolidWeightsScratch<Dim> dense_scratch;
+    dense_scratch.parts = false;
+    dense_scratch.stress = false;
+    solid_weights<Dim>(grid, bodies, {}, boundary, shrink, dense, dense_scratch);
+    REQUIRE(dense.lattice_phi.size() == lattice.size());
+    kept.lattice_phi = VectorX();  // left as it was: empty
+    // pose 3: another W_F^u buffer (other data) instead of the kept one: every face made again
+    if (pose == 3) {
+      VectorX other = VectorX::Constant(grid.num_faces(), 7.0);
+      kept.fluid_face.swap(other);
+    }
+    const bool incremental = scratch.kept && pose != 3;
+    solid_weights<Dim>(grid, bodies, {}, boundary, shrink, kept, scratch);
+    REQUIRE(scratch.union_parts.valid());
+    CHECK(scratch.kept);
+    // the calls after the first visit only the faces near the moving balls
+    if (incremental) {
+      CHECK(scratch.touched.size() > 0);
+      CHECK(static_cast<int>(scratch.touched.size()) < grid.num_faces() / 2);
+    } else {
+      CHECK(scratch.touched.empty());
+    }
+    CHECK(kept.lattice_phi.size() == 0);
+    REQUIRE(kept.body_face.size() == bodies.size());
+    for (std::size_t i = 0; i < bodies.size(); ++i)
+      CHECK(differing(kept.body_face[i], dense.body_face[i]) == 0);
+    CHECK(differing(kept.fluid_face, dense.fluid_face) == 0);
+    CHECK(kept.fluid_stress.size() == 0);
+    // the union's classes' box
+    CHECK(scratch.signs.lo == dense_scratch.signs.lo);
+    CHECK(scratch.signs.hi == dense_scratch.signs.hi);
+    CHECK(scratch.signs.any_negative());
+    // every lattice point: the value's bits and its sign
+    long value_differs = 0, sign_differs = 0;
+    for (int k = 0; k < lattice.size(); ++k) {
+      value_differs += !same_bits(scratch.union_parts(k), dense.lattice_phi[k]);
+      sign_differs += scratch.union_parts.negative(k) != (dense.lattice_phi[k] < 0.0);
+    }
+    CHECK(value_differs == 0);
+    CHECK(sign_differs == 0);
+  }
+  // W_F^s wanted: the union is written densely, not kept per part
+  scratch.stress = true;
+  const std::vector<CouplingBody<Dim>> one = {ball<Dim>(Vec<Dim>::Constant(0.5), 0.2)};
+  scratch.fixed = {0};
+  solid_weights<Dim>(grid, one, {}, boundary, shrink, kept, scratch);
+  CHECK_FALSE(scratch.union_parts.valid());
+  CHECK(kept.lattice_phi.size() == lattice.size());
+}
+
+/// The operator restricted to listed cells and without stress: the listed cells' columns of
+/// the full operator, bit for bit, and nothing else.
+template <int Dim>
+void check_restricted_operator() {
+  const MacGrid<Dim> grid = unit_grid<Dim>(12);
+  const std::vector<CouplingBody<Dim>> bodies = {
+      ball<Dim>(Vec<Dim>::Constant(0.4) + Vec<Dim>::LinSpaced(0.01, 0.03), 0.2),
+      ball<Dim>(Vec<Dim>::Constant(0.7), 0.15, false)};
+  const SolidWeights<Dim> w = solid_weights<Dim>(grid, bodies, {},
+                                                 all_boundaries<Dim>(BoundaryType::wall),
+                                                 0.01 * grid.dx());
+  for (const BodyGroup group : {BodyGroup::two_way, BodyGroup::one_way}) {
+    const BodyCouplingOperator<Dim> full(grid, bodies, w, group);
+    // every third cell, increasing
+    std::vector<int> cells;
+    for (int c = 0; c < grid.num_cells(); c += 3) cells.push_back(c);
+    typename BodyCouplingOperator<Dim>::Columns wanted;
+    wanted.cells = &cells;
+    wanted.stress = false;
+    const BodyCouplingOperator<Dim> part(grid, bodies, w, group, wanted);
+    const auto all = full.pressure_columns();
+    const auto some = part.pressure_columns();
+    std::size_t expected = 0, matched = 0;
+    std::size_t j = 0;
+    for (const auto& c : all) {
+      if (c.index % 3 != 0) continue;
+      ++expected;
+      if (j < some.size() && some[j].body == c.body && some[j].index == c.index &&
+          some[j].row == c.row) {
+        bool same = true;
+        for (int r = 0; r < kBodyDofs<Dim>; ++r)
+          same = same && same_bits(some[j].column[r], c.column[r]);
+        matched += same;
+      }
+      ++j;
+    }
+    CHECK(expected > 0);
+    CHECK(some.size() == expected);
+    CHECK(matched == expected);
+    CHECK(part.stress_columns().empty());
+    CHECK_FALSE(full.stress_columns().empty());
+    // the same with every cell listed: the full operator's surface
+    std::vector<int> every(grid.num_cells());
+    for (int c = 0; c < grid.num_cells(); ++c) every[c] = c;
+    wanted.cells = &every;
+    wanted.stress = true;
+    const BodyCouplingOperator<Dim> whole(grid, bodies, w, group, wanted);
+    CHECK(whole.surface_cells() == full.surface_cells());
+    CHECK(whole.surface_stress() == full.surface_stress());
+  }
+}
+
+}  // namespace
+
+TEST_CASE("solid weights with the union kept per body equal the dense union's bits",
+          "[unit][dense-reference]") {
+  check_parts<2>(40, 0.01);
+  check_parts<2>(24, 0.0);
+  check_parts<3>(24, 0.01);
+}
+
+TEST_CASE("the body-coupling operator restricted to listed cells keeps their columns' bits",
+          "[unit]") {
+  check_restricted_operator<2>();
+  check_restricted_operator<3>();
+}
