@@ -64,11 +64,14 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   if (a.size() != n_) throw std::invalid_argument("StokesPreconditioner: operator and factors differ in size");
   // an explicit A swept in the matrix-free operator's order: its own sweeps run in index order,
   // a different SOR and so a different preconditioner (docs/preconditioners.md section 24)
-  if (const auto* sm = dynamic_cast<const SparseMatrixOperator*>(&a); sm && !f_.sweep_order.empty()) {
+  // (SparseMatrixOperator and the coupled systems' ExplicitStokesOperator both expose it)
+  if (const SparseMatrix* m = a.explicit_matrix(); m && !f_.sweep_order.empty()) {
     if (static_cast<int>(f_.sweep_order.size()) != n_)
       throw std::invalid_argument("StokesPreconditioner: the sweep order does not list every unknown");
-    ordered_matrix_ = &sm->matrix();
-    ordered_diagonal_ = sm->diagonal();
+    if (!m->isCompressed() || m->rows() != n_ || m->cols() != n_)
+      throw std::invalid_argument("StokesPreconditioner: the explicit matrix is not compressed n x n");
+    ordered_matrix_ = m;
+    ordered_diagonal_ = m->diagonal();
   }
   MacMultigridOptions mg;
   mg.smoothing = options.smoothing;
