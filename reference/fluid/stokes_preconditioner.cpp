@@ -158,6 +158,15 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       const int extra = static_cast<int>(std::floor(std::log(viscous_ratio_ / options.cycle_ratio) / std::log(4.0)));
       cycles_ = std::min(std::max(options.velocity_cycles, options.max_velocity_cycles), options.velocity_cycles + extra);
     }
+    // (P9): one cycle fewer where the liquid fills its box (a small free-surface share)
+    if (np_ > 0) {
+      int surface = 0;
+      for (int k = 0; k < np_; ++k)
+        if (f_.pressure_liquid[k] < 1.0) ++surface;
+      free_surface_share_ = static_cast<double>(surface) / np_;
+    }
+    if (Dim == 3 && np_ > 0 && options.lean_share > 0.0 && free_surface_share_ < options.lean_share)
+      cycles_ = std::max(1, cycles_ - 1);
     commutator_ = np_ > 0 && options.schur_correction && !options.additive_pressure &&
                   options.schur != SchurApproximation::cahouet_chabard;
     if (commutator_) {
