@@ -23,6 +23,8 @@ namespace {
 
 /// The explicit fluid part F = stokes().A as a LinearOperator without a second copy of A: rows
 /// in index order for the sweeps, as SparseMatrixOperator does (same arithmetic, same iterates).
+/// explicit_matrix() exposes A, so the block preconditioner sweeps it in the matrix-free
+/// operator's order, as it does SparseMatrixOperator's (docs/preconditioners.md, section 25).
 class ExplicitStokesOperator : public LinearOperator {
  public:
   explicit ExplicitStokesOperator(std::shared_ptr<const ExplicitStokesSystem> system)
@@ -30,6 +32,7 @@ class ExplicitStokesOperator : public LinearOperator {
   int size() const override { return static_cast<int>(system_->A.rows()); }
   void apply(const VectorX& x, VectorX& y) const override { sparse_row_product(system_->A, x, y); }
   VectorX diagonal() const override { return diagonal_; }
+  const SparseMatrix* explicit_matrix() const override { return &system_->A; }
   void forward_sweep(const VectorX& rhs, VectorX& x, double omega,
                      const std::vector<char>* active = nullptr) const override {
     for (int i = 0; i < size(); ++i)

@@ -64,11 +64,14 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   if (a.size() != n_) throw std::invalid_argument("StokesPreconditioner: operator and factors differ in size");
   // an explicit A swept in the matrix-free operator's order: its own sweeps run in index order,
   // a different SOR and so a different preconditioner (docs/preconditioners.md section 24)
-  if (const auto* sm = dynamic_cast<const SparseMatrixOperator*>(&a); sm && !f_.sweep_order.empty()) {
+  // (SparseMatrixOperator and the coupled systems' ExplicitStokesOperator both expose it)
+  if (const SparseMatrix* m = a.explicit_matrix(); m && !f_.sweep_order.empty()) {
     if (static_cast<int>(f_.sweep_order.size()) != n_)
       throw std::invalid_argument("StokesPreconditioner: the sweep order does not list every unknown");
-    ordered_matrix_ = &sm->matrix();
-    ordered_diagonal_ = sm->diagonal();
+    if (!m->isCompressed() || m->rows() != n_ || m->cols() != n_)
+      throw std::invalid_argument("StokesPreconditioner: the explicit matrix is not compressed n x n");
+    ordered_matrix_ = m;
+    ordered_diagonal_ = m->diagonal();
   }
   MacMultigridOptions mg;
   mg.smoothing = options.smoothing;
@@ -155,6 +158,15 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       const int extra = static_cast<int>(std::floor(std::log(viscous_ratio_ / options.cycle_ratio) / std::log(4.0)));
       cycles_ = std::min(std::max(options.velocity_cycles, options.max_velocity_cycles), options.velocity_cycles + extra);
     }
+    // (P9): one cycle fewer where the liquid fills its box (a small free-surface share)
+    if (np_ > 0) {
+      int surface = 0;
+      for (int k = 0; k < np_; ++k)
+        if (f_.pressure_liquid[k] < 1.0) ++surface;
+      free_surface_share_ = static_cast<double>(surface) / np_;
+    }
+    if (Dim == 3 && np_ > 0 && options.lean_share > 0.0 && free_surface_share_ < options.lean_share)
+      cycles_ = std::max(1, cycles_ - 1);
     commutator_ = np_ > 0 && options.schur_correction && !options.additive_pressure &&
                   options.schur != SchurApproximation::cahouet_chabard;
     if (commutator_) {

@@ -97,6 +97,14 @@ struct StokesPreconditionerOptions {
   /// 128^3 (section 19). 0: velocity_cycles always.
   double cycle_ratio = 270.0;
   int max_velocity_cycles = 6;
+  /// 3D: one V-cycle fewer (at least one) than the rule above gives when the free-surface share
+  /// (the pressure unknowns with W_L^p < 1 over all pressure unknowns) is below this [(P9)]. A
+  /// liquid that fills its box (the 64^3 tank of the benchmark: share 0.035) gets the same PCG
+  /// iterations from one cycle as from two at eta 100 and 2 more at eta 1000, at about 0.55x the
+  /// cost per iteration; the built-in 3D scenes (shares 0.37-0.76) need up to twice the
+  /// iterations with one cycle (docs/preconditioners.md sections 24-25). 0: off. Not applied in
+  /// 2D (not measured there).
+  double lean_share = 0.15;
   int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
   int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
   double omega = 1.0;                ///< their relaxation
@@ -167,6 +175,8 @@ class StokesPreconditioner : public Preconditioner {
   int velocity_cycles() const { return cycles_; }
   /// The median over V's rows of the viscous-to-mass ratio C_f (V0)_ff - 1 (0 without stress).
   double viscous_ratio() const { return viscous_ratio_; }
+  /// The pressure unknowns with W_L^p < 1 over all pressure unknowns (0 without pressure).
+  double free_surface_share() const { return free_surface_share_; }
   /// s ~ Sigma^-1 e + Pi^-1 e (S of the second term; Sigma^-1 by options().schur: with the
   /// commutators, (P7)).
   void apply_schur(const VectorX& e, VectorX& s) const;
@@ -198,6 +208,7 @@ class StokesPreconditioner : public Preconditioner {
   SparseMatrix kinv_;       ///< K^-1 (stress unknowns)
   int cycles_ = 0;          ///< V-cycles per velocity solve
   double viscous_ratio_ = 0.0;
+  double free_surface_share_ = 0.0;
   bool commutator_ = false;  ///< the two-term form with a commutator S
   SparseMatrix bp_, bpt_;   ///< B_p (faces x n_p) and B_p^T (commutator only)
   VectorX commutator_weight_;  ///< W (C or diag(V0)^-1) per face

@@ -55,6 +55,12 @@ class LinearOperator {
   /// Bytes one apply must move at least (every array it streams through, once per pass); 0 if
   /// not reported. For the benchmark harness (achieved bandwidth of the apply).
   virtual double bytes_per_apply() const { return 0.0; }
+  /// The operator as an explicit compressed row-major matrix whose row relaxation is the one of
+  /// forward_sweep above (the diagonal of the matrix, rows with A_ii = 0 skipped), or nullptr
+  /// (matrix-free). The block preconditioner sweeps such a matrix in the matrix-free operator's
+  /// order instead of the index order of the operator's own sweeps, so that both back ends apply
+  /// the same preconditioner (docs/preconditioners.md, sections 24-25).
+  virtual const SparseMatrix* explicit_matrix() const { return nullptr; }
 
  private:
   std::vector<VectorX> no_null_space_;
@@ -153,6 +159,7 @@ class SparseMatrixOperator : public LinearOperator {
   const SparseMatrix& matrix() const {
     return a_;
   }
+  const SparseMatrix* explicit_matrix() const override { return &a_; }
   /// CSR arrays (values, column indices, row starts), the diagonal and the null space.
   std::size_t memory_bytes() const override {
     std::size_t bytes = static_cast<std::size_t>(a_.nonZeros()) * (sizeof(double) + sizeof(int)) +

@@ -12,6 +12,7 @@
 //       [--no-renumber (Multigrid keeps the caller's numbering: same results, for timing)]
 //       [--two-term | --additive] [--schur cc|mobility|scaled (Sigma^-1 of the two-term form)]
 //       [--cycle-ratio R (0: --cycles always)]
+//       [--lean-share S (3D: one V-cycle fewer below this free-surface share; 0: off)]
 //
 // Scenes (unit box, walls, open top, rho = 1000, dt = 0.01, a smooth swirl plus one step of
 // gravity as u*):
@@ -153,6 +154,7 @@ void run_case(const Config& cfg, int n, double eta) {
   // block preconditioner
   double t_setup = 0.0, t_solve = 0.0, c_setup = 0.0, c_solve = 0.0;
   int cut_size = 0, cycles = 0;
+  double share = 0.0;
   long cut_entries = 0;
   int it_block = -1;
   bool conv_block = false;
@@ -206,6 +208,7 @@ void run_case(const Config& cfg, int n, double eta) {
     c_solve += (cpu_seconds() - c1) / cfg.repeats;
     cut_size = static_cast<int>(m.cut_unknowns().size());
     cycles = m.velocity_cycles();
+    share = m.free_surface_share();
     cut_entries = m.cut_factor_entries();
     it_block = res.iterations;
     conv_block = res.converged;
@@ -238,9 +241,9 @@ void run_case(const Config& cfg, int n, double eta) {
               Dim, n, cfg.scene.c_str(), eta, dofs.num_stress(), dofs.num_pressure(), it_ssor,
               conv_ssor ? " " : "!", t_ssor, it_block, conv_block ? " " : "!", t_setup, t_solve, levels,
               bytes / 1e6, cfg.ssor ? t_ssor / (t_setup + t_solve) : 0.0);
-  std::printf("     cpu s: SSOR %.3f | block setup %.3f solve %.3f | speed-up %.1f | %d V-cycles | cut block %d unknowns, "
+  std::printf("     cpu s: SSOR %.3f | block setup %.3f solve %.3f | speed-up %.1f | %d V-cycles (share %.3f) | cut block %d unknowns, "
               "%ld factor entries\n",
-              c_ssor, c_setup, c_solve, cfg.ssor ? c_ssor / (c_setup + c_solve) : 0.0, cycles, cut_size, cut_entries);
+              c_ssor, c_setup, c_solve, cfg.ssor ? c_ssor / (c_setup + c_solve) : 0.0, cycles, share, cut_size, cut_entries);
   std::fflush(stdout);
 }
 
@@ -289,6 +292,7 @@ int main(int argc, char** argv) {
       }
     }
     else if (a == "--cycle-ratio") cfg.options.cycle_ratio = std::atof(next());
+    else if (a == "--lean-share") cfg.options.lean_share = std::atof(next());
     else if (a == "--max-coarse") cfg.options.max_coarse = std::atoi(next());
     else if (a == "--cut-threshold") cfg.options.cut_threshold = std::atof(next());
     else if (a == "--cut-layers") cfg.options.cut_layers = std::atoi(next());

@@ -173,14 +173,21 @@ void check_fluid_body_solve(int n, double eta) {
   CHECK((x_m - exact).cwiseAbs().maxCoeff() <= 1e-6 * scale);
   CHECK((x_m - x_ssor).cwiseAbs().maxCoeff() <= 1e-6 * scale);
   CHECK((x_e - x_m).cwiseAbs().maxCoeff() <= 1e-8 * scale);
-  CHECK(std::abs(re.iterations - rm.iterations) <= 2);
+  CHECK(std::abs(re.iterations - rm.iterations) <= 1);
   // far fewer iterations than SSOR on the stiff cases
   if (eta >= 100.0) CHECK(4 * rm.iterations < rs.iterations);
-  // (the two back ends' preconditioners differ by design: P's outer SOR sweeps of F run in row
-  // order on the explicit matrix and in colour groups on the stencils; their solutions agree)
+  // the two back ends apply the same preconditioner: P's outer SOR sweeps of F run in the
+  // matrix-free operator's colour order on the explicit matrix too (ExplicitStokesOperator
+  // exposes its matrix; docs/preconditioners.md section 25), so M r agrees to round-off (in
+  // index order the two differed by 1e-3..1e-1 relative)
   const VectorX r = testing::random_vector(m.num_fluid(), 3);
-  VectorX zm;
+  VectorX zm, ze;
   pm.apply(r, zm);
+  pe.apply(r, ze);
+  REQUIRE(e.stokes_operator().explicit_matrix() != nullptr);
+  REQUIRE(m.stokes_operator().explicit_matrix() == nullptr);
+  const double agree = (ze - zm).cwiseAbs().maxCoeff() / zm.cwiseAbs().maxCoeff();
+  CHECK(agree < 1e-9);
   // 1 vs 2 threads, matrix-free: bitwise
   const int threads = omp_get_max_threads();
   omp_set_num_threads(2);
@@ -193,8 +200,9 @@ void check_fluid_body_solve(int n, double eta) {
   CHECK((x_m2 - x_m).cwiseAbs().maxCoeff() == 0.0);
   CHECK(rm2.iterations == rm.iterations);
   std::printf("A_ff solve %dD n=%d eta %g: %d unknowns, SSOR %d iterations, block %d (explicit %d),"
-              " error vs dense %.1e\n", Dim, n, eta, m.num_fluid(), rs.iterations, rm.iterations,
-              re.iterations, (x_m - exact).cwiseAbs().maxCoeff() / scale);
+              " error vs dense %.1e, back ends' M r apart %.1e\n", Dim, n, eta, m.num_fluid(),
+              rs.iterations, rm.iterations, re.iterations, (x_m - exact).cwiseAbs().maxCoeff() / scale,
+              agree);
 }
 
 /// KKT conditions of the MLCP (26) (no friction) at x = (tau, p, lambda) for the dense A (boost

@@ -38,6 +38,8 @@ struct CaseOptions {
   bool solid = true;    ///< a solid ball in the pool
   double eta = 10.0;
   bool vary = true;     ///< density and viscosity vary in space
+  double level = 0.62;  ///< the pool's surface height
+  double wave = 0.08;   ///< the amplitude of its sine wave
 };
 
 template <int Dim>
@@ -57,7 +59,7 @@ Case<Dim> make_case(const CaseOptions& o) {
   for (int k = 0; k < lattice.size(); ++k) {
     const Vec<Dim> x = lattice.position(lattice.coord(k));
     liquid_phi[k] = o.blob ? (x - Vec<Dim>::Constant(0.5)).norm() - 0.3
-                           : x[1] - 0.62 - 0.08 * std::sin(2.0 * M_PI * x[0]);
+                           : x[1] - o.level - o.wave * std::sin(2.0 * M_PI * x[0]);
   }
   sc.w = uniform_stokes_weights(grid, solid_phi, liquid_phi, boundary, 1000.0, o.eta);
   if (o.vary) {
@@ -116,6 +118,13 @@ double rel_diff(const VectorX& a, const VectorX& b) {
 StokesPreconditionerOptions small_options() {
   StokesPreconditionerOptions o;
   o.max_coarse = 40;
+  return o;
+}
+
+/// small_options without the lean-share rule (P9) (for the tests of the other cycle rules).
+StokesPreconditionerOptions no_lean_options() {
+  StokesPreconditionerOptions o = small_options();
+  o.lean_share = 0.0;
   return o;
 }
 
@@ -336,14 +345,20 @@ TEMPLATE_TEST_CASE_SIG("the scaled commutator: V0 and its diagonal, a symmetric 
     const double median = r[(nf - 1) / 2];
     CHECK(std::abs(m.viscous_ratio() - median) <= 1e-10 * median);
     const StokesPreconditionerOptions def;
-    const int expected = median > def.cycle_ratio
-                             ? std::min(def.max_velocity_cycles,
-                                        def.velocity_cycles + static_cast<int>(std::floor(std::log(median / def.cycle_ratio) / std::log(4.0))))
-                             : def.velocity_cycles;
+    int expected = median > def.cycle_ratio
+                       ? std::min(def.max_velocity_cycles,
+                                  def.velocity_cycles + static_cast<int>(std::floor(std::log(median / def.cycle_ratio) / std::log(4.0))))
+                       : def.velocity_cycles;
+    // (P9): the share of pressure unknowns with W_L^p < 1; in 3D one cycle fewer below lean_share
+    int surface = 0;
+    for (int k = 0; k < np; ++k) surface += f.pressure_liquid[k] < 1.0 ? 1 : 0;
+    CHECK(m.free_surface_share() == static_cast<double>(surface) / np);
+    CHECK(m.free_surface_share() > 0.0);
+    if (Dim == 3 && m.free_surface_share() < def.lean_share) expected = std::max(1, expected - 1);
     CHECK(m.velocity_cycles() == expected);
-    if (eta <= 10.0) CHECK(m.velocity_cycles() == def.velocity_cycles);
+    if (eta <= 10.0 && m.free_surface_share() >= def.lean_share) CHECK(m.velocity_cycles() == def.velocity_cycles);
     // a threshold 20x below the median: floor(log4 20) = 2 more cycles, or the cap
-    StokesPreconditionerOptions po = small_options();
+    StokesPreconditionerOptions po = no_lean_options();
     po.cycle_ratio = median / 20.0;
     const StokesPreconditioner<Dim> m4(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), po);
     CHECK(m4.velocity_cycles() == po.velocity_cycles + 2);
@@ -353,11 +368,11 @@ TEMPLATE_TEST_CASE_SIG("the scaled commutator: V0 and its diagonal, a symmetric 
     // the one-cycle rule of section 24 (1 cycle, ratio 67.5: 1 + floor(log4(r / 67.5)) =
     // 2 + floor(log4(r / 270))) gives section 19's counts (2 cycles, ratio 270) wherever the
     // median ratio is at least 270, and one cycle below it
-    StokesPreconditionerOptions one_cycle = small_options();
+    StokesPreconditionerOptions one_cycle = no_lean_options();
     one_cycle.velocity_cycles = 1;
     one_cycle.cycle_ratio = 67.5;
     const StokesPreconditioner<Dim> m1(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), one_cycle);
-    StokesPreconditionerOptions section19 = small_options();
+    StokesPreconditionerOptions section19 = no_lean_options();
     section19.velocity_cycles = 2;
     section19.cycle_ratio = 270.0;
     const StokesPreconditioner<Dim> m2(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), section19);
@@ -379,6 +394,44 @@ TEMPLATE_TEST_CASE_SIG("the scaled commutator: V0 and its diagonal, a symmetric 
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(rest, Eigen::EigenvaluesOnly);
     CHECK(es.eigenvalues().minCoeff() > -1e-10 * es.eigenvalues().cwiseAbs().maxCoeff());
     CHECK(es.eigenvalues().maxCoeff() > 0.0);
+  }
+}
+
+TEST_CASE("the lean-share rule (P9): one V-cycle fewer in 3D where the liquid fills its box", "[unit]") {
+  // a deep pool (liquid below the flat y = 0.92 around the solid ball) at 16^3 has few cells with
+  // W_L^p < 1; a liquid ball in the air has many. The rule takes one cycle off the pool only,
+  // never below one, and does nothing with lean_share 0 or in 2D
+  for (double eta : {100.0, 5000.0}) {
+    for (bool blob : {false, true}) {
+      CaseOptions o;
+      o.n = 16;
+      o.eta = eta;
+      o.blob = blob;
+      o.level = 0.92;
+      o.wave = 0.0;
+      const auto sc = make_case<3>(o);
+      const auto s = make_system(sc);
+      StokesPreconditionerOptions lean = small_options(), off = no_lean_options();
+      lean.lean_share = 0.15;
+      const StokesPreconditioner<3> ml(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), lean);
+      const StokesPreconditioner<3> mo(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), off);
+      INFO("eta " << eta << (blob ? ", ball in the air" : ", deep pool") << ", share " << ml.free_surface_share());
+      CHECK(ml.free_surface_share() == mo.free_surface_share());
+      if (blob) {
+        CHECK(ml.free_surface_share() > 0.15);
+        CHECK(ml.velocity_cycles() == mo.velocity_cycles());
+      } else {
+        CHECK(ml.free_surface_share() < 0.15);
+        CHECK(mo.velocity_cycles() >= 2);
+        CHECK(ml.velocity_cycles() == mo.velocity_cycles() - 1);
+      }
+      // never below one cycle
+      StokesPreconditionerOptions one = lean;
+      one.velocity_cycles = 1;
+      one.cycle_ratio = 0.0;
+      const StokesPreconditioner<3> m1(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf), one);
+      CHECK(m1.velocity_cycles() == 1);
+    }
   }
 }
 
