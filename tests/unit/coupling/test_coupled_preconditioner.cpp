@@ -25,10 +25,17 @@
 #include "reference/solvers/mprgp.hpp"
 #include "reference/solvers/pcg.hpp"
 #include "tests/support/body_helpers.hpp"
+#include "tests/support/coupled_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
+using monolith::testing::ContactElimination;
+using monolith::testing::contact_elimination;
+using monolith::testing::dense;
+using monolith::testing::in_face_maps;
+using monolith::testing::InFaceMaps;
 using monolith::testing::make_body;
+using monolith::testing::make_system;
 
 namespace {
 
@@ -65,36 +72,9 @@ CoupledStepInput<Dim> tank(int n, double eta, double mu) {
   std::array<BoundaryType, 2 * Dim> boundary = testing::all_boundaries<Dim>(BoundaryType::wall);
   boundary[3] = BoundaryType::open;
   in.solids = solid_weights<Dim>(in.grid, coupling_bodies(in.bodies), {}, boundary, 0.01 * dx);
-  const VectorX phi = testing::sample_lattice<Dim>(half_lattice(in.grid),
-                                                   [&](const Vec<Dim>& x) { return x[1] - 0.55; });
-  in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
-  in.u_star = 0.2 * testing::random_vector(in.grid.num_faces(), 7);
-  in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).array() += -9.81 * kDt;
+  testing::fill_tank_liquid(in, kRho, eta);
   in.contacts = detect_contacts<Dim>(in.bodies, testing::unit_box_walls<Dim>(mu), 0.3 * dx);
-  in.contact_params.dt = kDt;
-  in.contact_params.dx = dx;
   return in;
-}
-
-template <int Dim>
-MonolithicSystem<Dim> make_system(const CoupledStepInput<Dim>& in, Backend backend) {
-  const ContactSystem<Dim> contacts(in.bodies, in.contacts, in.contact_params);
-  return MonolithicSystem<Dim>(in.grid, StressForm::reduced, in.weights, in.dt, in.u_star,
-                               in.bodies, in.solids, contacts, backend);
-}
-
-/// M^-1 densely (column by column through apply).
-Eigen::MatrixXd dense(const Preconditioner& m) {
-  const int n = m.size();
-  Eigen::MatrixXd d(n, n);
-  VectorX e = VectorX::Zero(n), z;
-  for (int k = 0; k < n; ++k) {
-    e.setZero();
-    e[k] = 1.0;
-    m.apply(e, z);
-    d.col(k) = z;
-  }
-  return d;
 }
 
 template <int Dim>
@@ -274,14 +254,9 @@ void check_exact_contacts(int n, double eta) {
   const CoupledPreconditioner<Dim> m(s, true, contact_diagonal);
   REQUIRE(m.body_correction());
   REQUIRE(m.has_exact_contacts());
-  const CoupledPreconditioner<Dim> q(s, false, VectorX());
-  const Eigen::MatrixXd qd = dense(q);
   // M = A with Q^-1 in the fluid block's place
-  Eigen::MatrixXd md = a;
-  md.topLeftCorner(nf, nf) = (0.5 * (qd + qd.transpose())).inverse();
-  const Eigen::MatrixXd schur = a.bottomRightCorner(nc, nc) -
-                                a.bottomLeftCorner(nc, nf) * qd * a.topRightCorner(nf, nc);
-  const double serr = (m.contact_schur() - schur).norm() / schur.norm();
+  const ContactElimination ref = contact_elimination(a, dense(CoupledPreconditioner<Dim>(s, false, VectorX())), nf);
+  const double serr = (m.contact_schur() - ref.schur).norm() / ref.schur.norm();
   CHECK(serr < 1e-8);
   // free sets: every contact, none, every other one (the same as none with one contact)
   double worst = 0.0;
@@ -289,23 +264,10 @@ void check_exact_contacts(int n, double eta) {
     std::vector<char> free(nt, 1);
     for (int i = 0; i < nc; ++i)
       free[nf + i] = pattern == 0 ? 1 : pattern == 1 ? 0 : static_cast<char>(i % 2);
-    std::vector<int> f;
-    for (int i = 0; i < nt; ++i)
-      if (free[i]) f.push_back(i);
-    const int k = static_cast<int>(f.size());
-    Eigen::MatrixXd mff(k, k), zd(k, k);
-    for (int r = 0; r < k; ++r)
-      for (int c = 0; c < k; ++c) mff(r, c) = md(f[r], f[c]);
-    VectorX e = VectorX::Zero(nt), z;
-    for (int c = 0; c < k; ++c) {
-      e.setZero();
-      e[f[c]] = 1.0;
-      m.apply_in_face(e, free, z);
-      for (int i = 0; i < nt; ++i)
-        if (!free[i]) CHECK(z[i] == 0.0);
-      for (int r = 0; r < k; ++r) zd(r, c) = z[f[r]];
-    }
-    const Eigen::MatrixXd expected = mff.inverse();
+    const InFaceMaps maps = in_face_maps(m, ref.m, free);
+    CHECK(maps.outside == 0);
+    const Eigen::MatrixXd& zd = maps.applied;
+    const Eigen::MatrixXd& expected = maps.expected;
     const double err = (zd - expected).norm() / expected.norm();
     worst = std::max(worst, err);
     CHECK(err < 1e-6);
