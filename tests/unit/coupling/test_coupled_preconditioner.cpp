@@ -29,13 +29,7 @@
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
-using monolith::testing::ContactElimination;
-using monolith::testing::contact_elimination;
-using monolith::testing::dense;
-using monolith::testing::in_face_maps;
-using monolith::testing::InFaceMaps;
 using monolith::testing::make_body;
-using monolith::testing::make_system;
 
 namespace {
 
@@ -81,7 +75,7 @@ template <int Dim>
 void check_spd(int n, double eta) {
   INFO(Dim << "D n=" << n << " eta " << eta);
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
-  const MonolithicSystem<Dim> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<Dim> s = testing::make_system(in, Backend::matrix_free);
   REQUIRE(s.num_stress() > 0);
   REQUIRE(s.num_contacts() > 0);
   REQUIRE(s.num_body_dofs() == 2 * kBodyDofs<Dim>);
@@ -93,7 +87,7 @@ void check_spd(int n, double eta) {
   const CoupledPreconditioner<Dim> mp(s, true, contact_diagonal, without);
   REQUIRE(mc.body_correction());
   REQUIRE(!mp.body_correction());
-  const Eigen::MatrixXd dc = dense(mc), dp = dense(mp);
+  const Eigen::MatrixXd dc = testing::dense(mc), dp = testing::dense(mp);
   for (const Eigen::MatrixXd* d : {&dc, &dp}) {
     const double asym = (*d - d->transpose()).norm() / d->norm();
     CHECK(asym < 1e-9);
@@ -130,8 +124,8 @@ template <int Dim>
 void check_fluid_body_solve(int n, double eta) {
   INFO(Dim << "D n=" << n << " eta " << eta);
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
-  const MonolithicSystem<Dim> e = make_system(in, Backend::explicit_matrices);
-  const MonolithicSystem<Dim> m = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<Dim> e = testing::make_system(in, Backend::explicit_matrices);
+  const MonolithicSystem<Dim> m = testing::make_system(in, Backend::matrix_free);
   const FluidBodyOperator<Dim> oe(e), om(m);
   const VectorX b = m.fluid_rhs(VectorX(), VectorX());
   // the dense solution (A_ff is SPD here: open top)
@@ -198,7 +192,7 @@ void check_mprgp(int n, double eta) {
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
   double worst_diff = 0.0;
   for (Backend backend : {Backend::explicit_matrices, Backend::matrix_free}) {
-    const MonolithicSystem<Dim> s = make_system(in, backend);
+    const MonolithicSystem<Dim> s = testing::make_system(in, backend);
     REQUIRE(s.num_contacts() > 0);
     StaggeredSettings settings;
     settings.mprgp.tolerance = 1e-9;
@@ -245,7 +239,7 @@ template <int Dim>
 void check_exact_contacts(int n, double eta) {
   INFO(Dim << "D n=" << n << " eta " << eta);
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
-  const MonolithicSystem<Dim> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<Dim> s = testing::make_system(in, Backend::matrix_free);
   const int nf = s.num_fluid(), nc = s.num_contacts(), nt = nf + nc;
   REQUIRE(nc >= 1);
   const MonolithicOperator<Dim> op(s, 1e-4);
@@ -255,7 +249,8 @@ void check_exact_contacts(int n, double eta) {
   REQUIRE(m.body_correction());
   REQUIRE(m.has_exact_contacts());
   // M = A with Q^-1 in the fluid block's place
-  const ContactElimination ref = contact_elimination(a, dense(CoupledPreconditioner<Dim>(s, false, VectorX())), nf);
+  const CoupledPreconditioner<Dim> q(s, false, VectorX());
+  const testing::ContactElimination ref = testing::contact_elimination(a, testing::dense(q), nf);
   const double serr = (m.contact_schur() - ref.schur).norm() / ref.schur.norm();
   CHECK(serr < 1e-8);
   // free sets: every contact, none, every other one (the same as none with one contact)
@@ -264,7 +259,7 @@ void check_exact_contacts(int n, double eta) {
     std::vector<char> free(nt, 1);
     for (int i = 0; i < nc; ++i)
       free[nf + i] = pattern == 0 ? 1 : pattern == 1 ? 0 : static_cast<char>(i % 2);
-    const InFaceMaps maps = in_face_maps(m, ref.m, free);
+    const testing::InFaceMaps maps = testing::in_face_maps(m, ref.m, free);
     CHECK(maps.outside == 0);
     const Eigen::MatrixXd& zd = maps.applied;
     const Eigen::MatrixXd& expected = maps.expected;

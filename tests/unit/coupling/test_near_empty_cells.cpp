@@ -36,12 +36,6 @@
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
-using monolith::testing::ContactElimination;
-using monolith::testing::contact_elimination;
-using monolith::testing::dense;
-using monolith::testing::in_face_maps;
-using monolith::testing::InFaceMaps;
-using monolith::testing::make_system;
 
 namespace {
 
@@ -110,7 +104,7 @@ Quality measure(const MonolithicSystem<2>& s, const CoupledPreconditioner<2>& m)
   Quality q;
   const FluidBodyOperator<2> op(s);
   const Eigen::MatrixXd a = op.dense_matrix();
-  const Eigen::MatrixXd d = dense(m);
+  const Eigen::MatrixXd d = testing::dense(m);
   q.asymmetry = (d - d.transpose()).norm() / d.norm();
   const Eigen::MatrixXd sym = 0.5 * (d + d.transpose());
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(sym, Eigen::EigenvaluesOnly);
@@ -173,7 +167,7 @@ TEST_CASE("cells closed between a light floating body and a static solid: solved
   INFO("eta " << eta << " cut " << cut << " cells " << count);
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(24, eta, 1e-10, count, false, false, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   REQUIRE(s.num_stress() > 0);
   REQUIRE(s.num_body_dofs() == kBodyDofs<2>);
   CoupledPreconditionerOptions exact, jacobi, kept;
@@ -223,7 +217,7 @@ TEST_CASE("a cell closed by the body alone keeps its volume under rigid motion: 
           "[coupled_preconditioner][near_empty]") {
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(24, 100.0, 1e-10, 1, true, false, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   CoupledPreconditionerOptions options, any;
   options.fluid.max_coarse = any.fluid.max_coarse = 40;
   any.empty_cell_body_ratio = 0.0;  // section 21's rule: every cell below 1e-4 of the median
@@ -240,7 +234,7 @@ TEST_CASE("near-empty cells with contacts in face: M_FF^-1 of A with Q^-1 in the
           "[coupled_preconditioner][near_empty]") {
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(16, 100.0, 1e-10, 3, false, true, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   const int nf = s.num_fluid(), nc = s.num_contacts(), nt = nf + nc;
   REQUIRE(nc >= 1);
   const MonolithicOperator<2> op(s, 1e-4);
@@ -249,13 +243,14 @@ TEST_CASE("near-empty cells with contacts in face: M_FF^-1 of A with Q^-1 in the
   const CoupledPreconditioner<2> m(s, true, contact_diagonal);
   REQUIRE(m.has_exact_contacts());
   REQUIRE(m.fluid().empty_cells().size() == 3);
-  const ContactElimination ref = contact_elimination(a, dense(CoupledPreconditioner<2>(s, false, VectorX())), nf);
+  const CoupledPreconditioner<2> q(s, false, VectorX());
+  const testing::ContactElimination ref = testing::contact_elimination(a, testing::dense(q), nf);
   CHECK((m.contact_schur() - ref.schur).norm() / ref.schur.norm() < 1e-8);
   double worst = 0.0;
   for (int pattern = 0; pattern < 2; ++pattern) {
     std::vector<char> free(nt, 1);
     if (pattern == 1) free[nf] = 0;
-    const InFaceMaps maps = in_face_maps(m, ref.m, free);
+    const testing::InFaceMaps maps = testing::in_face_maps(m, ref.m, free);
     CHECK(maps.outside == 0);
     const Eigen::MatrixXd& zd = maps.applied;
     const Eigen::MatrixXd& expected = maps.expected;
@@ -272,7 +267,7 @@ TEST_CASE("near-empty cells with contacts in face: M_FF^-1 of A with Q^-1 in the
 TEST_CASE("near-empty cells: 1 and 2 threads give the same bits", "[coupled_preconditioner][near_empty]") {
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(24, 100.0, 1e-10, 3, false, true, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   const int nt = s.num_fluid() + s.num_contacts();
   const MonolithicOperator<2> op(s, 1e-4);
   const VectorX contact_diagonal = op.diagonal().tail(s.num_contacts());
