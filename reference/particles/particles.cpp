@@ -207,15 +207,21 @@ std::array<typename MacGrid<Dim>::AxisStencil, Dim> face_axis_stencils(const Mac
 }
 
 /// Corner k of a stencil (bit b of k picks its sample on axis b): its weight, the product of the
-/// axes' weights in axis order, and its index on the lattice of size dims (grid.stencil()'s).
+/// axes' weights in axis order (grid.stencil()'s).
 template <int Dim>
-double stencil_corner(const std::array<typename MacGrid<Dim>::AxisStencil, Dim>& st,
-                      const VecI<Dim>& dims, int k, int& index) {
+double corner_weight(const std::array<typename MacGrid<Dim>::AxisStencil, Dim>& st, int k) {
   double weight = 1.0;
   for (int b = 0; b < Dim; ++b) weight *= st[b].weight[(k >> b) & 1];
-  index = 0;
-  for (int b = Dim - 1; b >= 0; --b) index = index * dims[b] + st[b].index[(k >> b) & 1];
   return weight;
+}
+
+/// Corner k's index on the lattice of size dims (grid.stencil()'s).
+template <int Dim>
+int corner_index(const std::array<typename MacGrid<Dim>::AxisStencil, Dim>& st,
+                 const VecI<Dim>& dims, int k) {
+  int index = 0;
+  for (int b = Dim - 1; b >= 0; --b) index = index * dims[b] + st[b].index[(k >> b) & 1];
+  return index;
 }
 
 }  // namespace
@@ -425,9 +431,9 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
               rel[b][bit] =
                   (origin[b] + (static_cast<double>(st[b].index[bit]) + shift[b]) * dx) - xp[b];
           for (int k = 0; k < kCorners; ++k) {
-            int index = 0;
-            const double weight = stencil_corner<Dim>(st, dims, k, index);
+            const double weight = corner_weight<Dim>(st, k);
             if (weight == 0.0 || !owned(st[kLast].index[(k >> kLast) & 1])) continue;
+            const int index = corner_index<Dim>(st, dims, k);
             // affine velocity at the face sample (minimum image on periodic axes)
             Vec<Dim> rel_k;
             for (int b = 0; b < Dim; ++b) rel_k[b] = rel[b][(k >> b) & 1];
@@ -524,10 +530,9 @@ void pic_velocity_on_faces(const Particles<Dim>& particles, const MacGrid<Dim>& 
       const int offset = grid.face_offset(a);
       const auto st = face_axis_stencils(grid, a, xp);
       for (int k = 0; k < kCorners; ++k) {
-        int index = 0;
-        const double weight = stencil_corner<Dim>(st, dims, k, index);
+        const double weight = corner_weight<Dim>(st, k);
         if (weight == 0.0) continue;
-        const int f = offset + index;
+        const int f = offset + corner_index<Dim>(st, dims, k);
         const auto it = std::lower_bound(faces.begin(), faces.end(), f);
         if (it == faces.end() || *it != f) continue;
         const std::size_t i = static_cast<std::size_t>(it - faces.begin());
