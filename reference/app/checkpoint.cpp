@@ -27,7 +27,8 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[8] = {'M', 'O', 'N', 'O', 'C', 'K', 'P', 'T'};
-constexpr std::uint32_t kFormatVersion = 2;  // 2: thread count and input-file digests
+// 2: thread count and input-file digests; 3: the state's listed volume deficits
+constexpr std::uint32_t kFormatVersion = 3;
 /// magic, version, reserved, payload length
 constexpr std::size_t kHeaderBytes = 8 + 4 + 4 + 8;
 constexpr std::size_t kChecksumBytes = 8;
@@ -173,7 +174,7 @@ CheckpointRecord read_checkpoint(const fs::path& path) {
   std::memcpy(&length, bytes.data() + 16, 8);
   if (version != kFormatVersion)
     throw InputError(label + "checkpoint format version " + std::to_string(version) + " (this build reads version " +
-                     std::to_string(kFormatVersion) + ")");
+                     std::to_string(kFormatVersion) + "; a checkpoint of another format continues only in the build that wrote it)");
   const std::uint64_t expected = kHeaderBytes + length + kChecksumBytes;
   if (length > bytes.size() || bytes.size() != expected)
     throw InputError(label + "truncated or extended checkpoint: " + std::to_string(bytes.size()) + " bytes, its header says " +

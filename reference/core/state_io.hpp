@@ -14,6 +14,7 @@
 #include <cstring>
 #include <string>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "reference/core/errors.hpp"
@@ -57,6 +58,11 @@ class StateWriter {
     raw(m.data(), sizeof(S) * static_cast<std::size_t>(m.size()));
   }
   void operator()(const Eigen::Quaterniond& q) { (*this)(q.coeffs()); }
+  template <class T, class U>
+  void operator()(const std::pair<T, U>& p) {
+    (*this)(p.first);
+    (*this)(p.second);
+  }
   template <class T, class A>
   void operator()(const std::vector<T, A>& v) {
     size(v.size());
@@ -124,6 +130,11 @@ class StateReader {
     raw(m.data(), sizeof(S) * static_cast<std::size_t>(m.size()));
   }
   void operator()(Eigen::Quaterniond& q) { (*this)(q.coeffs()); }
+  template <class T, class U>
+  void operator()(std::pair<T, U>& p) {
+    (*this)(p.first);
+    (*this)(p.second);
+  }
   template <class T, class A>
   void operator()(std::vector<T, A>& v) {
     if constexpr (state_detail::is_block<T>::value) {

@@ -17,6 +17,20 @@ namespace {
 
 constexpr int kParallelRows = 4096;
 
+/// y -= M c for a dense m (rows x cols), row by row: each row's sum over the columns in column
+/// order, rows in parallel above kParallelRows (the same bits for any thread count).
+void subtract_dense_product(const Eigen::MatrixXd& m, const VectorX& c, VectorX& y) {
+  const int rows = static_cast<int>(m.rows()), cols = static_cast<int>(m.cols());
+  const double* x = c.data();
+  double* out = y.data();
+#pragma omp parallel for schedule(static) if (rows > kParallelRows) num_threads(process_threads())
+  for (int i = 0; i < rows; ++i) {
+    double sum = 0.0;
+    for (int k = 0; k < cols; ++k) sum += m(i, k) * x[k];
+    out[i] -= sum;
+  }
+}
+
 /// The factors B, C, K of the system's fluid part F (either back end).
 template <int Dim>
 StokesFactors coupled_stokes_factors(const MonolithicSystem<Dim>& s, double floor) {
@@ -242,16 +256,7 @@ void CoupledPreconditioner<Dim>::reduce_empty_cells() const {
     rf_[empty_[q]] = 0.0;
   }
   et_.noalias() = empty_gain_.transpose() * er_;
-  const int nd = nd_;
-  const double* t = et_.data();
-  double* rf = rf_.data();
-  const Eigen::MatrixXd& b = body_transpose_;
-#pragma omp parallel for schedule(static) if (nf_ > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < nf_; ++i) {
-    double sum = 0.0;
-    for (int k = 0; k < nd; ++k) sum += b(i, k) * t[k];
-    rf[i] -= sum;
-  }
+  subtract_dense_product(body_transpose_, et_, rf_);
 }
 
 template <int Dim>
@@ -264,17 +269,8 @@ void CoupledPreconditioner<Dim>::solve_empty_cells() const {
 
 template <int Dim>
 void CoupledPreconditioner<Dim>::subtract_body_columns() const {
-  // zf_ -= U coeff_, row by row (each row's sum over the body columns in column order)
-  const int nd = nd_;
-  const double* c = coeff_.data();
-  double* zf = zf_.data();
-  const Eigen::MatrixXd& u = u_;
-#pragma omp parallel for schedule(static) if (nf_ > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < nf_; ++i) {
-    double s = 0.0;
-    for (int k = 0; k < nd; ++k) s += u(i, k) * c[k];
-    zf[i] -= s;
-  }
+  // zf_ -= U coeff_
+  subtract_dense_product(u_, coeff_, zf_);
 }
 
 template <int Dim>

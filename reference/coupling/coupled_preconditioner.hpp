@@ -153,7 +153,11 @@ class CoupledPreconditioner : public Preconditioner, public FacePreconditioner {
   std::vector<int> empty_;       ///< E (fluid unknowns, increasing; empty: none)
   Eigen::MatrixXd empty_body_;   ///< B_E^T (|E| x nd)
   Eigen::MatrixXd empty_gain_;   ///< K_E = H^-1 B_E^T W, H = F_EE + B_E^T W B_E (|E| x nd)
-  Eigen::MatrixXd body_transpose_;  ///< B_r^T (nf x nd, zero on E)
+  /// B_r^T (nf x nd, zero on E). Kept, not derived from the system's B_f^T product at each
+  /// application: on the matrix-free back end in 3D that product sums each surface sample's six
+  /// body columns in Eigen's vectorised dot order, not in column order as these rows do, and
+  /// differs in the last bits (docs/preconditioners.md section 23, "B_r^T kept").
+  Eigen::MatrixXd body_transpose_;
   Eigen::MatrixXd j_;            ///< J (nc x nd; with E and exact contacts)
   Eigen::LLT<Eigen::MatrixXd> empty_factor_;  ///< of H
   mutable VectorX er_, ex_, et_;

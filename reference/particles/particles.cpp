@@ -191,7 +191,38 @@ Vec<Dim> periodic_difference(const MacGrid<Dim>& grid, Vec<Dim> d) {
   return d;
 }
 
+/// The per-axis stencils (MacGrid::axis_stencil) of the face lattice normal to `axis` at the
+/// wrapped position xp: grid.stencil()'s set-up, axis by axis, for particles_to_grid and
+/// pic_velocity_on_faces (which must sum the same weights bit for bit).
+template <int Dim>
+std::array<typename MacGrid<Dim>::AxisStencil, Dim> face_axis_stencils(const MacGrid<Dim>& grid,
+                                                                       int axis,
+                                                                       const Vec<Dim>& xp) {
+  const Vec<Dim> shift = MacGrid<Dim>::face_shift(axis);
+  const VecI<Dim> dims = grid.face_dims(axis);
+  std::array<typename MacGrid<Dim>::AxisStencil, Dim> st;
+  for (int b = 0; b < Dim; ++b)
+    st[b] = grid.axis_stencil(b, (xp[b] - grid.origin()[b]) / grid.dx() - shift[b], dims[b]);
+  return st;
+}
 
+/// Corner k of a stencil (bit b of k picks its sample on axis b): its weight, the product of the
+/// axes' weights in axis order (grid.stencil()'s).
+template <int Dim>
+double corner_weight(const std::array<typename MacGrid<Dim>::AxisStencil, Dim>& st, int k) {
+  double weight = 1.0;
+  for (int b = 0; b < Dim; ++b) weight *= st[b].weight[(k >> b) & 1];
+  return weight;
+}
+
+/// Corner k's index on the lattice of size dims (grid.stencil()'s).
+template <int Dim>
+int corner_index(const std::array<typename MacGrid<Dim>::AxisStencil, Dim>& st,
+                 const VecI<Dim>& dims, int k) {
+  int index = 0;
+  for (int b = Dim - 1; b >= 0; --b) index = index * dims[b] + st[b].index[(k >> b) & 1];
+  return index;
+}
 
 }  // namespace
 
@@ -393,20 +424,16 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
           const int offset = grid.face_offset(a);
           // grid.stencil() per axis: the corners' indices, weights and, per axis, the face
           // sample's coordinate minus the particle's (face_center's arithmetic per component)
-          std::array<typename MacGrid<Dim>::AxisStencil, Dim> st;
+          const auto st = face_axis_stencils(grid, a, xp);
           std::array<std::array<double, 2>, Dim> rel;
-          for (int b = 0; b < Dim; ++b) {
-            st[b] = grid.axis_stencil(b, (xp[b] - origin[b]) / dx - shift[b], dims[b]);
+          for (int b = 0; b < Dim; ++b)
             for (int bit = 0; bit < 2; ++bit)
               rel[b][bit] =
                   (origin[b] + (static_cast<double>(st[b].index[bit]) + shift[b]) * dx) - xp[b];
-          }
           for (int k = 0; k < kCorners; ++k) {
-            double weight = 1.0;
-            for (int b = 0; b < Dim; ++b) weight *= st[b].weight[(k >> b) & 1];
+            const double weight = corner_weight<Dim>(st, k);
             if (weight == 0.0 || !owned(st[kLast].index[(k >> kLast) & 1])) continue;
-            int index = 0;
-            for (int b = Dim - 1; b >= 0; --b) index = index * dims[b] + st[b].index[(k >> b) & 1];
+            const int index = corner_index<Dim>(st, dims, k);
             // affine velocity at the face sample (minimum image on periodic axes)
             Vec<Dim> rel_k;
             for (int b = 0; b < Dim; ++b) rel_k[b] = rel[b][(k >> b) & 1];
@@ -499,19 +526,13 @@ void pic_velocity_on_faces(const Particles<Dim>& particles, const MacGrid<Dim>& 
     const Vec<Dim> xp = grid.wrap_position(particles.x[p]);
     const double mp = particles.mass[p];
     for (int a = 0; a < Dim; ++a) {
-      const Vec<Dim> shift = MacGrid<Dim>::face_shift(a);
       const VecI<Dim> dims = grid.face_dims(a);
       const int offset = grid.face_offset(a);
-      std::array<typename MacGrid<Dim>::AxisStencil, Dim> st;
-      for (int b = 0; b < Dim; ++b)
-        st[b] = grid.axis_stencil(b, (xp[b] - origin[b]) / dx - shift[b], dims[b]);
+      const auto st = face_axis_stencils(grid, a, xp);
       for (int k = 0; k < kCorners; ++k) {
-        double weight = 1.0;
-        for (int b = 0; b < Dim; ++b) weight *= st[b].weight[(k >> b) & 1];
+        const double weight = corner_weight<Dim>(st, k);
         if (weight == 0.0) continue;
-        int index = 0;
-        for (int b = Dim - 1; b >= 0; --b) index = index * dims[b] + st[b].index[(k >> b) & 1];
-        const int f = offset + index;
+        const int f = offset + corner_index<Dim>(st, dims, k);
         const auto it = std::lower_bound(faces.begin(), faces.end(), f);
         if (it == faces.end() || *it != f) continue;
         const std::size_t i = static_cast<std::size_t>(it - faces.begin());

@@ -1669,6 +1669,9 @@ void Simulation<Dim>::state_fields(Archive& a) {
   // Line15Energy::balance's credit (only with that measurement switch: the format is otherwise
   // unchanged)
   if (switches_.line15_energy == Line15Energy::balance) a(line15_credit_);
+  // SurfaceDeficits::to_solve: the last density projection's listed deficits, the next step's
+  // divergence source (empty under every other setting)
+  a(volume_errors_);
   // the bodies: poses, velocities, the last contacts and forces (RigidWorld::state_fields)
   bool bodies = rigid_ != nullptr;
   a(bodies);
@@ -1696,6 +1699,9 @@ void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
       (stress_.size() != stress_grid_.num_dofs() &&
        !(stress_.size() == 0 && sequence_ == SolveSequence::pressure)))
     r.fail("sizes that do not match the scene's grid or particles");
+  for (const auto& deficit : volume_errors_)
+    if (deficit.first < 0 || deficit.first >= grid_.num_cells())
+      r.fail("a listed volume deficit outside the scene's grid");
   // (checkpoints written before the stress field was dropped without stress solves hold zeros)
   if (sequence_ == SolveSequence::pressure) stress_ = VectorX();
   // what is derived from the state: the solids at the bodies' pose and the liquid weights, as

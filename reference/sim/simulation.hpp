@@ -545,8 +545,8 @@ class Simulation : public AnySimulation {
   // diagnosis: stages switched off, and the energy changes per stage of the current frame
   StageSwitches switches_;
   /// SurfaceDeficits::to_solve: the last density projection's listed deficits (cell, e_c), the
-  /// next solve's divergence source (volume_source); not part of a checkpoint (a measurement
-  /// switch)
+  /// next solve's divergence source (volume_source); part of the state (state_fields), so that a
+  /// resumed run with that measurement switch continues bit for bit
   std::vector<std::pair<int, double>> volume_errors_;
   /// The divergence source of the step's solve (cell field, 1/s), empty without listed deficits.
   VectorX volume_source(double dt) const;

@@ -29,15 +29,13 @@
 #include "reference/rigid/rigid_world.hpp"
 #include "reference/sim/simulation.hpp"
 #include "tests/support/bench_args.hpp"
+#include "tests/support/stage_variants.hpp"
 
 using namespace monolith;
 
 namespace {
 
-struct Variant {
-  std::string name;
-  std::function<void(StageSwitches&)> apply;
-};
+using Variant = bench::StageVariant;
 
 std::vector<Variant> variants() {
   return {
@@ -127,21 +125,6 @@ void print_affine(const AnySimulation& any, int frame) {
   std::printf("\n");
 }
 
-double energy(const FrameStats& s) {
-  return s.kinetic_energy_liquid + s.kinetic_energy_bodies + s.potential_energy_liquid +
-         s.potential_energy_bodies;
-}
-
-void add(EnergyLedger& sum, const EnergyLedger& l) {
-  sum.to_grid += l.to_grid;
-  sum.forces_and_solve += l.forces_and_solve;
-  sum.velocity_extension += l.velocity_extension;
-  sum.to_particles += l.to_particles;
-  sum.advection += l.advection;
-  sum.position_correction += l.position_correction;
-  sum.density_projection += l.density_projection;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -183,13 +166,10 @@ int main(int argc, char** argv) {
   }
   if (frames <= 0) frames = 3 * scene.time.frames;
   for (const Variant& v : variants()) {
-    if (!only.empty() && std::find(only.begin(), only.end(), v.name) == only.end()) continue;
-    StageSwitches switches;
-    switches.energy_ledger = true;
-    v.apply(switches);
-    auto sim = make_simulation(scene, switches);
+    if (!v.selected(only)) continue;
+    auto sim = make_simulation(scene, v.switches());
     const FrameStats s0 = sim->current_stats();
-    const double e0 = energy(s0);
+    const double e0 = bench::mechanical_energy(s0);
     double lowest = e0, worst = -1e300, worst_regain = 0.0, worst_bound = 0.0;
     int worst_frame = 0;
     EnergyLedger total;
@@ -200,8 +180,8 @@ int main(int argc, char** argv) {
       for (int f = 1; f <= frames; ++f) {
         const FrameStats s = sim->advance_frame();
         const EnergyLedger l = sim->energy_ledger();
-        add(total, l);
-        const double e = energy(s);
+        bench::accumulate(total, l);
+        const double e = bench::mechanical_energy(s);
         const double regain = e - lowest;
         // the slow test's bound without its floor of 1e-5 M g H
         const double bound = 0.02 * (e0 - lowest);

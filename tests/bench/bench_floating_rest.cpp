@@ -22,17 +22,14 @@
 #include "reference/core/errors.hpp"
 #include "tests/support/bench_args.hpp"
 #include "tests/support/coupled_validation.hpp"
-#include "tests/support/still_water.hpp"
+#include "tests/support/stage_variants.hpp"
 
 using namespace monolith;
 using namespace monolith::validation;
 
 namespace {
 
-struct Variant {
-  std::string name;
-  std::function<void(StageSwitches&)> apply;
-};
+using Variant = bench::StageVariant;
 
 std::vector<Variant> variants() {
   return {
@@ -112,21 +109,14 @@ int main(int argc, char** argv) {
     return 2;
   }
   for (const Variant& v : variants()) {
-    if (!only.empty() && std::find(only.begin(), only.end(), v.name) == only.end()) continue;
-    StageSwitches switches;
-    switches.energy_ledger = true;
-    v.apply(switches);
-    auto sim = make_simulation(scene, switches);
+    if (!v.selected(only)) continue;
+    auto sim = make_simulation(scene, v.switches());
     if (every > 0)
       std::printf("%-14s %6s %8s %12s %12s %12s %12s %12s %12s\n", v.name.c_str(), "frame", "t",
                   "offset (dx)", "v_y (m/s)", "|v| (m/s)", "x - x0 (dx)", "v_x (m/s)",
                   "E - E0 (J)");
     const FrameStats s0 = sim->current_stats();
-    auto energy = [](const FrameStats& s) {
-      return s.kinetic_energy_liquid + s.kinetic_energy_bodies + s.potential_energy_liquid +
-             s.potential_energy_bodies;
-    };
-    const double e0 = energy(s0);
+    const double e0 = bench::mechanical_energy(s0);
     double sum = 0.0, lo = 1e9, hi = -1e9, speed = 0.0, late_speed = 0.0;
     EnergyLedger ledger;
     int count = 0;
@@ -134,7 +124,7 @@ int main(int argc, char** argv) {
       for (int f = 1; f <= frames; ++f) {
         const FrameStats s = sim->advance_frame();
         const EnergyLedger l = sim->energy_ledger();
-        still_water::accumulate(ledger, l);
+        bench::accumulate(ledger, l);
         const double predicted = body.centre_at(s.liquid_volume + body.s * body.volume());
         const double offset = (s.bodies[0].position[1] - predicted) / dx;
         double v2 = 0.0;
@@ -149,7 +139,7 @@ int main(int argc, char** argv) {
           std::printf("%-14s %6d %8.2f %12.5f %12.3e %12.3e %12.5f %12.3e %12.4e\n",
                       v.name.c_str(), f, s.time, offset, s.bodies[0].velocity[1], std::sqrt(v2),
                       (s.bodies[0].position[0] - s0.bodies[0].position[0]) / dx,
-                      s.bodies[0].velocity[0], energy(s) - e0);
+                      s.bodies[0].velocity[0], bench::mechanical_energy(s) - e0);
       }
     } catch (const std::exception& e) {
       std::printf("%-14s failed: %s\n", v.name.c_str(), e.what());

@@ -26,57 +26,14 @@
 #include "reference/core/errors.hpp"
 #include "reference/sim/simulation.hpp"
 #include "tests/support/bench_args.hpp"
+#include "tests/support/stage_variants.hpp"
 #include "tests/support/still_water.hpp"
 
 using namespace monolith;
 
 namespace {
 
-nlohmann::json still_water_scene(int dim, int cells, double seconds, const std::string& backend) {
-  using nlohmann::json;
-  const bool d3 = dim == 3;
-  json j;
-  j["format"] = "monolith-scene/1";
-  j["name"] = d3 ? "still-water-3d" : "still-water-2d";
-  j["dim"] = dim;
-  j["domain"]["lower"] = d3 ? json::array({0, 0, 0}) : json::array({0, 0});
-  j["domain"]["upper"] = d3 ? json::array({1, 1, 1}) : json::array({1, 1});
-  j["domain"]["cells"] = d3 ? json::array({cells, cells, cells}) : json::array({cells, cells});
-  json boundary = {{"x-", "wall"}, {"x+", "wall"}, {"y-", "wall"}, {"y+", "open"}};
-  if (d3) {
-    boundary["z-"] = "wall";
-    boundary["z+"] = "wall";
-  }
-  j["domain"]["boundary"] = boundary;
-  j["gravity"] = d3 ? json::array({0, -9.81, 0}) : json::array({0, -9.81});
-  j["time"] = {{"fps", 50}, {"frames", static_cast<int>(std::lround(50 * seconds))},
-               {"cfl", 3.0}, {"max_dt", 0.02}};
-  j["solver"] = {{"scheme", "PVC-unified"}, {"tolerance", 1e-6}, {"max_iterations", 2000},
-                 {"backend", backend}};
-  json water;
-  water["name"] = "water";
-  water["density"] = 1000;
-  water["shape"] = {{"type", "box"},
-                    {"center", d3 ? json::array({0.5, 0.25, 0.5}) : json::array({0.5, 0.25})},
-                    {"half_size", d3 ? json::array({0.5, 0.25, 0.5}) : json::array({0.5, 0.25})}};
-  j["liquids"] = json::array({water});
-  json probes = json::array();
-  const double points[5][2] = {{0.25, 0.25}, {0.5, 0.45}, {0.9, 0.1}, {0.05, 0.4}, {0.5, 0.05}};
-  for (int k = 0; k < 5; ++k) {
-    json position = d3 ? json::array({points[k][0], points[k][1], 0.5})
-                       : json::array({points[k][0], points[k][1]});
-    probes.push_back({{"name", "p" + std::to_string(k)}, {"position", position}});
-  }
-  j["probes"] = probes;
-  j["render"] = {{"enabled", false}};
-  return j;
-}
-
-struct Variant {
-  std::string name;
-  std::string what;
-  std::function<void(StageSwitches&)> apply;
-};
+using Variant = bench::StageVariant;
 
 std::vector<Variant> variants() {
   return {
@@ -167,7 +124,7 @@ int main(int argc, char** argv) {
   if (cells <= 0) cells = dim == 2 ? 64 : 32;
   SceneDesc scene;
   try {
-    nlohmann::json j = still_water_scene(dim, cells, seconds, backend);
+    nlohmann::json j = still_water::tank(dim, cells, seconds, backend);
     j = apply_overrides(j, "still water", overrides);
     scene = parse_scene(j, "still water", ".");
   } catch (const InputError& e) {
@@ -182,11 +139,8 @@ int main(int argc, char** argv) {
               "KE 1s", "KE 5s", "KE end", "KE max", "probe", "volume", "to_grid", "solve",
               "extend", "to_part", "advect", "correct", "project", "total");
   for (const Variant& v : variants()) {
-    if (!only.empty() && std::find(only.begin(), only.end(), v.name) == only.end()) continue;
-    StageSwitches switches;
-    switches.energy_ledger = true;
-    v.apply(switches);
-    auto sim = make_simulation(scene, switches);
+    if (!v.selected(only)) continue;
+    auto sim = make_simulation(scene, v.switches());
     FrameStats s = sim->current_stats();
     const double volume0 = s.liquid_volume;
     double ke1 = 0.0, ke5 = 0.0, ke_max = 0.0, probe = 0.0, drift = 0.0;
@@ -196,7 +150,7 @@ int main(int argc, char** argv) {
       for (int f = 1; f <= frames; ++f) {
         s = sim->advance_frame();
         const EnergyLedger l = sim->energy_ledger();
-        still_water::accumulate(sum, l);
+        bench::accumulate(sum, l);
         const double ke = s.kinetic_energy_liquid;
         if (std::abs(s.time - 1.0) < 1e-9) ke1 = ke;
         if (std::abs(s.time - 5.0) < 1e-9) ke5 = ke;

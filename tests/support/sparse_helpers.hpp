@@ -10,6 +10,25 @@
 
 namespace monolith::testing {
 
+/// The 5-point matrix on m x m nodes (node (i, j) is row i + m j): -1 between grid neighbours,
+/// diagonal 4 + extra[r] in row r (extra > 0: symmetric positive definite; a small constant
+/// extra gives a condition number of about m^2).
+inline SparseMatrix five_point_matrix(int m, const VectorX& extra) {
+  std::vector<Eigen::Triplet<double>> t;
+  auto id = [m](int i, int j) { return i + m * j; };
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i) {
+      t.emplace_back(id(i, j), id(i, j), 4.0 + extra[id(i, j)]);
+      if (i > 0) t.emplace_back(id(i, j), id(i - 1, j), -1.0);
+      if (i < m - 1) t.emplace_back(id(i, j), id(i + 1, j), -1.0);
+      if (j > 0) t.emplace_back(id(i, j), id(i, j - 1), -1.0);
+      if (j < m - 1) t.emplace_back(id(i, j), id(i, j + 1), -1.0);
+    }
+  SparseMatrix a(m * m, m * m);
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
 /// The 7-point matrix on m^3 nodes: -1 between grid neighbours, diagonal
 /// `diagonal + ramp * (r % 7)` in row r (6.5 and 0: a shifted Laplacian, symmetric positive
 /// definite; a small ramp makes rows differ so that a wrong ordering shows in the last bits).

@@ -12,6 +12,7 @@
 
 #include "reference/app/scene_file.hpp"
 #include "reference/sim/simulation.hpp"
+#include "tests/support/stage_variants.hpp"
 
 namespace monolith::still_water {
 
@@ -68,21 +69,10 @@ inline nlohmann::json tank(int dim, int cells, double seconds, const std::string
 }
 
 /// Kinetic + potential energy of the liquid and the bodies in one frame's statistics.
-inline double total_energy(const FrameStats& s) {
-  return s.kinetic_energy_liquid + s.kinetic_energy_bodies + s.potential_energy_liquid +
-         s.potential_energy_bodies;
-}
+inline double total_energy(const FrameStats& s) { return bench::mechanical_energy(s); }
 
-/// Adds one frame's energy ledger (Simulation::energy_ledger) to a running sum, stage by stage.
-inline void accumulate(EnergyLedger& sum, const EnergyLedger& l) {
-  sum.to_grid += l.to_grid;
-  sum.forces_and_solve += l.forces_and_solve;
-  sum.velocity_extension += l.velocity_extension;
-  sum.to_particles += l.to_particles;
-  sum.advection += l.advection;
-  sum.position_correction += l.position_correction;
-  sum.density_projection += l.density_projection;
-}
+/// Adds one frame's energy ledger to a running sum, stage by stage (stage_variants.hpp).
+using bench::accumulate;
 
 /// M g H of the water at rest (J; 2D: J per metre of depth): the scale of the rest criterion.
 inline double mgh() { return kRho * kDepth * kG * kDepth; }

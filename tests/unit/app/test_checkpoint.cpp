@@ -11,7 +11,9 @@
 #include <algorithm>
 #include <chrono>
 #include <csignal>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -246,6 +248,13 @@ TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2
   SECTION("not a checkpoint") { refused("{\"format\": 1}", "not a monolith checkpoint"); }
   SECTION("another scene's checkpoint in this run's folder") {
     refused(read_bytes(checkpoint_path(other)), "another scene");
+  }
+  SECTION("an older format version") {
+    // version 2 (before the state's listed volume deficits), the rest of the file as it was
+    std::string old = good;
+    const std::uint32_t version = 2;
+    std::memcpy(&old[8], &version, 4);
+    refused(old, "checkpoint format version 2 (this build reads version 3");
   }
   SECTION("written by another build") {
     CheckpointRecord record = read_checkpoint(file);

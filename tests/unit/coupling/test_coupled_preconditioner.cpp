@@ -25,6 +25,7 @@
 #include "reference/solvers/mprgp.hpp"
 #include "reference/solvers/pcg.hpp"
 #include "tests/support/body_helpers.hpp"
+#include "tests/support/coupled_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -65,43 +66,16 @@ CoupledStepInput<Dim> tank(int n, double eta, double mu) {
   std::array<BoundaryType, 2 * Dim> boundary = testing::all_boundaries<Dim>(BoundaryType::wall);
   boundary[3] = BoundaryType::open;
   in.solids = solid_weights<Dim>(in.grid, coupling_bodies(in.bodies), {}, boundary, 0.01 * dx);
-  const VectorX phi = testing::sample_lattice<Dim>(half_lattice(in.grid),
-                                                   [&](const Vec<Dim>& x) { return x[1] - 0.55; });
-  in.weights = coupled_stokes_weights<Dim>(in.grid, in.solids, phi, kRho, eta);
-  in.u_star = 0.2 * testing::random_vector(in.grid.num_faces(), 7);
-  in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).array() += -9.81 * kDt;
+  testing::fill_tank_liquid(in, kRho, eta);
   in.contacts = detect_contacts<Dim>(in.bodies, testing::unit_box_walls<Dim>(mu), 0.3 * dx);
-  in.contact_params.dt = kDt;
-  in.contact_params.dx = dx;
   return in;
-}
-
-template <int Dim>
-MonolithicSystem<Dim> make_system(const CoupledStepInput<Dim>& in, Backend backend) {
-  const ContactSystem<Dim> contacts(in.bodies, in.contacts, in.contact_params);
-  return MonolithicSystem<Dim>(in.grid, StressForm::reduced, in.weights, in.dt, in.u_star,
-                               in.bodies, in.solids, contacts, backend);
-}
-
-/// M^-1 densely (column by column through apply).
-Eigen::MatrixXd dense(const Preconditioner& m) {
-  const int n = m.size();
-  Eigen::MatrixXd d(n, n);
-  VectorX e = VectorX::Zero(n), z;
-  for (int k = 0; k < n; ++k) {
-    e.setZero();
-    e[k] = 1.0;
-    m.apply(e, z);
-    d.col(k) = z;
-  }
-  return d;
 }
 
 template <int Dim>
 void check_spd(int n, double eta) {
   INFO(Dim << "D n=" << n << " eta " << eta);
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
-  const MonolithicSystem<Dim> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<Dim> s = testing::make_system(in, Backend::matrix_free);
   REQUIRE(s.num_stress() > 0);
   REQUIRE(s.num_contacts() > 0);
   REQUIRE(s.num_body_dofs() == 2 * kBodyDofs<Dim>);
@@ -113,7 +87,7 @@ void check_spd(int n, double eta) {
   const CoupledPreconditioner<Dim> mp(s, true, contact_diagonal, without);
   REQUIRE(mc.body_correction());
   REQUIRE(!mp.body_correction());
-  const Eigen::MatrixXd dc = dense(mc), dp = dense(mp);
+  const Eigen::MatrixXd dc = testing::dense(mc), dp = testing::dense(mp);
   for (const Eigen::MatrixXd* d : {&dc, &dp}) {
     const double asym = (*d - d->transpose()).norm() / d->norm();
     CHECK(asym < 1e-9);
@@ -150,8 +124,8 @@ template <int Dim>
 void check_fluid_body_solve(int n, double eta) {
   INFO(Dim << "D n=" << n << " eta " << eta);
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
-  const MonolithicSystem<Dim> e = make_system(in, Backend::explicit_matrices);
-  const MonolithicSystem<Dim> m = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<Dim> e = testing::make_system(in, Backend::explicit_matrices);
+  const MonolithicSystem<Dim> m = testing::make_system(in, Backend::matrix_free);
   const FluidBodyOperator<Dim> oe(e), om(m);
   const VectorX b = m.fluid_rhs(VectorX(), VectorX());
   // the dense solution (A_ff is SPD here: open top)
@@ -226,7 +200,7 @@ void check_mprgp(int n, double eta) {
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
   double worst_diff = 0.0;
   for (Backend backend : {Backend::explicit_matrices, Backend::matrix_free}) {
-    const MonolithicSystem<Dim> s = make_system(in, backend);
+    const MonolithicSystem<Dim> s = testing::make_system(in, backend);
     REQUIRE(s.num_contacts() > 0);
     StaggeredSettings settings;
     settings.mprgp.tolerance = 1e-9;
@@ -273,7 +247,7 @@ template <int Dim>
 void check_exact_contacts(int n, double eta) {
   INFO(Dim << "D n=" << n << " eta " << eta);
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
-  const MonolithicSystem<Dim> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<Dim> s = testing::make_system(in, Backend::matrix_free);
   const int nf = s.num_fluid(), nc = s.num_contacts(), nt = nf + nc;
   REQUIRE(nc >= 1);
   const MonolithicOperator<Dim> op(s, 1e-4);
@@ -282,14 +256,10 @@ void check_exact_contacts(int n, double eta) {
   const CoupledPreconditioner<Dim> m(s, true, contact_diagonal);
   REQUIRE(m.body_correction());
   REQUIRE(m.has_exact_contacts());
-  const CoupledPreconditioner<Dim> q(s, false, VectorX());
-  const Eigen::MatrixXd qd = dense(q);
   // M = A with Q^-1 in the fluid block's place
-  Eigen::MatrixXd md = a;
-  md.topLeftCorner(nf, nf) = (0.5 * (qd + qd.transpose())).inverse();
-  const Eigen::MatrixXd schur = a.bottomRightCorner(nc, nc) -
-                                a.bottomLeftCorner(nc, nf) * qd * a.topRightCorner(nf, nc);
-  const double serr = (m.contact_schur() - schur).norm() / schur.norm();
+  const CoupledPreconditioner<Dim> q(s, false, VectorX());
+  const testing::ContactElimination ref = testing::contact_elimination(a, testing::dense(q), nf);
+  const double serr = (m.contact_schur() - ref.schur).norm() / ref.schur.norm();
   CHECK(serr < 1e-8);
   // free sets: every contact, none, every other one (the same as none with one contact)
   double worst = 0.0;
@@ -297,23 +267,10 @@ void check_exact_contacts(int n, double eta) {
     std::vector<char> free(nt, 1);
     for (int i = 0; i < nc; ++i)
       free[nf + i] = pattern == 0 ? 1 : pattern == 1 ? 0 : static_cast<char>(i % 2);
-    std::vector<int> f;
-    for (int i = 0; i < nt; ++i)
-      if (free[i]) f.push_back(i);
-    const int k = static_cast<int>(f.size());
-    Eigen::MatrixXd mff(k, k), zd(k, k);
-    for (int r = 0; r < k; ++r)
-      for (int c = 0; c < k; ++c) mff(r, c) = md(f[r], f[c]);
-    VectorX e = VectorX::Zero(nt), z;
-    for (int c = 0; c < k; ++c) {
-      e.setZero();
-      e[f[c]] = 1.0;
-      m.apply_in_face(e, free, z);
-      for (int i = 0; i < nt; ++i)
-        if (!free[i]) CHECK(z[i] == 0.0);
-      for (int r = 0; r < k; ++r) zd(r, c) = z[f[r]];
-    }
-    const Eigen::MatrixXd expected = mff.inverse();
+    const testing::InFaceMaps maps = testing::in_face_maps(m, ref.m, free);
+    CHECK(maps.outside == 0);
+    const Eigen::MatrixXd& zd = maps.applied;
+    const Eigen::MatrixXd& expected = maps.expected;
     const double err = (zd - expected).norm() / expected.norm();
     worst = std::max(worst, err);
     CHECK(err < 1e-6);

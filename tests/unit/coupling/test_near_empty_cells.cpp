@@ -32,6 +32,7 @@
 #include "reference/coupling/monolithic_system.hpp"
 #include "reference/solvers/pcg.hpp"
 #include "tests/support/body_helpers.hpp"
+#include "tests/support/coupled_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -86,34 +87,9 @@ CoupledStepInput<2> tank_with_closed_cells(int n, double eta, double open, int c
       in.solids.fluid_face[f] = open;
     }
   }
-  const VectorX phi = testing::sample_lattice<2>(half_lattice(in.grid),
-                                                 [&](const Vec<2>& x) { return x[1] - 0.55; });
-  in.weights = coupled_stokes_weights<2>(in.grid, in.solids, phi, kRho, eta);
-  in.u_star = 0.2 * testing::random_vector(in.grid.num_faces(), 7);
-  in.u_star.segment(in.grid.face_offset(1), in.grid.num_faces(1)).array() += -9.81 * kDt;
+  testing::fill_tank_liquid(in, kRho, eta);
   if (ball) in.contacts = detect_contacts<2>(in.bodies, testing::unit_box_walls<2>(0.0), 0.3 * dx);
-  in.contact_params.dt = kDt;
-  in.contact_params.dx = dx;
   return in;
-}
-
-MonolithicSystem<2> make_system(const CoupledStepInput<2>& in, Backend backend) {
-  const ContactSystem<2> contacts(in.bodies, in.contacts, in.contact_params);
-  return MonolithicSystem<2>(in.grid, StressForm::reduced, in.weights, in.dt, in.u_star, in.bodies,
-                             in.solids, contacts, backend);
-}
-
-Eigen::MatrixXd dense(const Preconditioner& m) {
-  const int n = m.size();
-  Eigen::MatrixXd d(n, n);
-  VectorX e = VectorX::Zero(n), z;
-  for (int k = 0; k < n; ++k) {
-    e.setZero();
-    e[k] = 1.0;
-    m.apply(e, z);
-    d.col(k) = z;
-  }
-  return d;
 }
 
 struct Quality {
@@ -128,7 +104,7 @@ Quality measure(const MonolithicSystem<2>& s, const CoupledPreconditioner<2>& m)
   Quality q;
   const FluidBodyOperator<2> op(s);
   const Eigen::MatrixXd a = op.dense_matrix();
-  const Eigen::MatrixXd d = dense(m);
+  const Eigen::MatrixXd d = testing::dense(m);
   q.asymmetry = (d - d.transpose()).norm() / d.norm();
   const Eigen::MatrixXd sym = 0.5 * (d + d.transpose());
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(sym, Eigen::EigenvaluesOnly);
@@ -191,7 +167,7 @@ TEST_CASE("cells closed between a light floating body and a static solid: solved
   INFO("eta " << eta << " cut " << cut << " cells " << count);
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(24, eta, 1e-10, count, false, false, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   REQUIRE(s.num_stress() > 0);
   REQUIRE(s.num_body_dofs() == kBodyDofs<2>);
   CoupledPreconditionerOptions exact, jacobi, kept;
@@ -241,7 +217,7 @@ TEST_CASE("a cell closed by the body alone keeps its volume under rigid motion: 
           "[coupled_preconditioner][near_empty]") {
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(24, 100.0, 1e-10, 1, true, false, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   CoupledPreconditionerOptions options, any;
   options.fluid.max_coarse = any.fluid.max_coarse = 40;
   any.empty_cell_body_ratio = 0.0;  // section 21's rule: every cell below 1e-4 of the median
@@ -258,7 +234,7 @@ TEST_CASE("near-empty cells with contacts in face: M_FF^-1 of A with Q^-1 in the
           "[coupled_preconditioner][near_empty]") {
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(16, 100.0, 1e-10, 3, false, true, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   const int nf = s.num_fluid(), nc = s.num_contacts(), nt = nf + nc;
   REQUIRE(nc >= 1);
   const MonolithicOperator<2> op(s, 1e-4);
@@ -268,32 +244,16 @@ TEST_CASE("near-empty cells with contacts in face: M_FF^-1 of A with Q^-1 in the
   REQUIRE(m.has_exact_contacts());
   REQUIRE(m.fluid().empty_cells().size() == 3);
   const CoupledPreconditioner<2> q(s, false, VectorX());
-  const Eigen::MatrixXd qd = dense(q);
-  Eigen::MatrixXd md = a;
-  md.topLeftCorner(nf, nf) = (0.5 * (qd + qd.transpose())).inverse();
-  const Eigen::MatrixXd schur = a.bottomRightCorner(nc, nc) - a.bottomLeftCorner(nc, nf) * qd * a.topRightCorner(nf, nc);
-  CHECK((m.contact_schur() - schur).norm() / schur.norm() < 1e-8);
+  const testing::ContactElimination ref = testing::contact_elimination(a, testing::dense(q), nf);
+  CHECK((m.contact_schur() - ref.schur).norm() / ref.schur.norm() < 1e-8);
   double worst = 0.0;
   for (int pattern = 0; pattern < 2; ++pattern) {
     std::vector<char> free(nt, 1);
     if (pattern == 1) free[nf] = 0;
-    std::vector<int> f;
-    for (int i = 0; i < nt; ++i)
-      if (free[i]) f.push_back(i);
-    const int k = static_cast<int>(f.size());
-    Eigen::MatrixXd mff(k, k), zd(k, k);
-    for (int r = 0; r < k; ++r)
-      for (int c = 0; c < k; ++c) mff(r, c) = md(f[r], f[c]);
-    VectorX e = VectorX::Zero(nt), z;
-    for (int c = 0; c < k; ++c) {
-      e.setZero();
-      e[f[c]] = 1.0;
-      m.apply_in_face(e, free, z);
-      for (int i = 0; i < nt; ++i)
-        if (!free[i]) CHECK(z[i] == 0.0);
-      for (int r = 0; r < k; ++r) zd(r, c) = z[f[r]];
-    }
-    const Eigen::MatrixXd expected = mff.inverse();
+    const testing::InFaceMaps maps = testing::in_face_maps(m, ref.m, free);
+    CHECK(maps.outside == 0);
+    const Eigen::MatrixXd& zd = maps.applied;
+    const Eigen::MatrixXd& expected = maps.expected;
     const double err = (zd - expected).norm() / expected.norm();
     worst = std::max(worst, err);
     CHECK(err < 1e-6);
@@ -307,7 +267,7 @@ TEST_CASE("near-empty cells with contacts in face: M_FF^-1 of A with Q^-1 in the
 TEST_CASE("near-empty cells: 1 and 2 threads give the same bits", "[coupled_preconditioner][near_empty]") {
   std::vector<int> cells;
   const CoupledStepInput<2> in = tank_with_closed_cells(24, 100.0, 1e-10, 3, false, true, cells);
-  const MonolithicSystem<2> s = make_system(in, Backend::matrix_free);
+  const MonolithicSystem<2> s = testing::make_system(in, Backend::matrix_free);
   const int nt = s.num_fluid() + s.num_contacts();
   const MonolithicOperator<2> op(s, 1e-4);
   const VectorX contact_diagonal = op.diagonal().tail(s.num_contacts());

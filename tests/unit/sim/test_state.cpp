@@ -147,6 +147,40 @@ TEST_CASE("a restored simulation continues bit for bit, also from inside a frame
   }
 }
 
+TEST_CASE("with the surface deficits handed to the solve, a restored simulation continues bit for bit", "[unit]") {
+  // SurfaceDeficits::to_solve: the deficits the last density projection listed are the next
+  // step's divergence source (Simulation::volume_source), so they are part of the state; a
+  // simulation restored after a frame or inside one must read them as the straight run does
+  StageSwitches switches;
+  switches.density_projection_surface_deficits = SurfaceDeficits::to_solve;
+  const SceneFile scene = small_scene("bunnies-onto-pool-2d", "[32,32]");
+  auto straight = make_simulation(scene, switches);
+  std::vector<FrameStats> expected;
+  for (int k = 0; k < 3; ++k) expected.push_back(straight->advance_frame());
+  // after frame 1
+  auto first = make_simulation(scene, switches);
+  first->advance_frame();
+  const std::vector<char> after_frame = first->save_state();
+  // stopped inside frame 2 (after its first step)
+  volatile std::sig_atomic_t stop = 1;
+  first->set_stop_flag(&stop);
+  first->advance_frame();
+  REQUIRE(first->mid_frame());
+  const std::vector<char> inside_frame = first->save_state();
+  auto from_frame = make_simulation(scene, switches);
+  from_frame->load_state(after_frame);
+  check_same_stats(from_frame->advance_frame(), expected[1]);
+  check_same_stats(from_frame->advance_frame(), expected[2]);
+  auto from_inside = make_simulation(scene, switches);
+  from_inside->load_state(inside_frame);
+  check_same_stats(from_inside->advance_frame(), expected[1]);
+  check_same_stats(from_inside->advance_frame(), expected[2]);
+  // a state restored and saved again is the same bytes
+  auto again = make_simulation(scene, switches);
+  again->load_state(inside_frame);
+  CHECK(again->save_state() == inside_frame);
+}
+
 TEST_CASE("the preconditioner's fallbacks booked before a stop inside a frame survive the state", "[unit]") {
   // A viscous liquid under "auto" with max_iterations and tolerance such that each block-preconditioned
   // solve misses its attempt budget and is redone with SSOR (docs/preconditioners.md section 20):

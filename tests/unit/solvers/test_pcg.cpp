@@ -8,6 +8,7 @@
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/solvers/pcg.hpp"
+#include "tests/support/sparse_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -17,20 +18,7 @@ namespace {
 
 /// 2D five-point Laplacian on m x m nodes plus a positive random diagonal: SPD.
 SparseMatrix laplacian_plus_diagonal(int m, unsigned seed) {
-  const VectorX extra = (random_vector(m * m, seed).array() + 1.0) * 0.05;
-  std::vector<Triplet> t;
-  auto id = [m](int i, int j) { return i + m * j; };
-  for (int j = 0; j < m; ++j)
-    for (int i = 0; i < m; ++i) {
-      t.emplace_back(id(i, j), id(i, j), 4.0 + extra[id(i, j)]);
-      if (i > 0) t.emplace_back(id(i, j), id(i - 1, j), -1.0);
-      if (i < m - 1) t.emplace_back(id(i, j), id(i + 1, j), -1.0);
-      if (j > 0) t.emplace_back(id(i, j), id(i, j - 1), -1.0);
-      if (j < m - 1) t.emplace_back(id(i, j), id(i, j + 1), -1.0);
-    }
-  SparseMatrix a(m * m, m * m);
-  a.setFromTriplets(t.begin(), t.end());
-  return a;
+  return five_point_matrix(m, (random_vector(m * m, seed).array() + 1.0) * 0.05);
 }
 
 /// Pressure operators of a liquid pool with a free surface (both back ends).

@@ -8,6 +8,7 @@
 
 #include "reference/solvers/mprgp.hpp"
 #include "reference/solvers/pcg.hpp"
+#include "tests/support/sparse_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -16,21 +17,7 @@ using namespace monolith::testing;
 namespace {
 
 /// 2D five-point Laplacian on m x m nodes plus a small diagonal: SPD, condition about m^2.
-SparseMatrix laplacian(int m) {
-  std::vector<Triplet> t;
-  auto id = [m](int i, int j) { return i + m * j; };
-  for (int j = 0; j < m; ++j)
-    for (int i = 0; i < m; ++i) {
-      t.emplace_back(id(i, j), id(i, j), 4.0 + 1e-3);
-      if (i > 0) t.emplace_back(id(i, j), id(i - 1, j), -1.0);
-      if (i < m - 1) t.emplace_back(id(i, j), id(i + 1, j), -1.0);
-      if (j > 0) t.emplace_back(id(i, j), id(i, j - 1), -1.0);
-      if (j < m - 1) t.emplace_back(id(i, j), id(i, j + 1), -1.0);
-    }
-  SparseMatrix a(m * m, m * m);
-  a.setFromTriplets(t.begin(), t.end());
-  return a;
-}
+SparseMatrix laplacian(int m) { return five_point_matrix(m, VectorX::Constant(m * m, 1e-3)); }
 
 }  // namespace
 
