@@ -728,11 +728,14 @@ void parse_settings(SceneParser& p, const json& j, SceneFile& s) {
 
   // particles
   if (const json* pj = p.member(j, "particles", "", false, "")) {
-    if (p.expect_object(*pj, "particles", "an object with per_cell, seed, position_correction")) {
-      p.check_keys(*pj, "particles", {"per_cell", "seed", "position_correction"});
+    if (p.expect_object(*pj, "particles",
+                        "an object with per_cell, seed, position_correction, settle_steps")) {
+      p.check_keys(*pj, "particles", {"per_cell", "seed", "position_correction", "settle_steps"});
       p.opt_int(*pj, "particles", "per_cell", 1, 64, "an integer in 1..64", s.particles.per_cell);
       p.opt_int(*pj, "particles", "seed", 0, 4294967295LL, "an integer in 0..4294967295", s.particles.seed);
       p.opt_bool(*pj, "particles", "position_correction", s.particles.position_correction);
+      p.opt_int(*pj, "particles", "settle_steps", 0, 100000, "an integer in 0..100000",
+                s.particles.settle_steps);
     }
   }
 }

@@ -285,6 +285,17 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
                                  boundary_, kSeedProjectionIterations,
                                  switches_.density_projection_surface_deficits)
             .surface_deficits;
+  frame_zero();
+  if (scene.particles.settle_steps > 0 && !particles_.x.empty()) {
+    settle(scene.particles.settle_steps);
+    stats_ = FrameStats{};  // the settling steps' solver statistics are not frame 0's
+    frame_zero();
+  }
+  stats_.timing[FramePhase::total] = setup_watch.seconds();
+}
+
+template <int Dim>
+void Simulation<Dim>::frame_zero() {
   // frame 0: the seeded state on the grid (no pressure yet); the faces' densities become the
   // diagonal of P in place (as in every step, update_step_weights)
   particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
@@ -295,9 +306,76 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
   pressure_ = VectorX::Zero(grid_.num_cells());
   stats_.frame = 0;
   stats_.time = 0.0;
-  stats_.solver.scheme = scene.solver.scheme;
+  stats_.solver.scheme = scene_.solver.scheme;
   fill_state_stats(stats_);
-  stats_.timing[FramePhase::total] = setup_watch.seconds();
+}
+
+template <int Dim>
+void Simulation<Dim>::settle(int steps) {
+  // A settled start (particles.settle_steps; docs/particles.md, "A settled start"). The seeded
+  // particles are jittered, so the level set they reconstruct is rough and its weights are not
+  // the discrete hydrostatic equilibrium: liquid seeded at rest starts to move in its first
+  // steps, and an inviscid APIC liquid keeps that motion (a floating body then sways with it).
+  // Here whole steps run before t = 0 (gravity, the solve, the advection, line 15), each
+  // followed by zeroing the liquid's velocities (v, c and the grid's u_) and the dynamic bodies'
+  // ones: a pseudo-time relaxation in which everything moves only by what the imbalance drives
+  // within one step from rest (g dt^2 at most), so the rough surface flattens and the particles
+  // and the floating bodies reach the discrete equilibrium. Static and kinematic bodies keep the
+  // scene's pose; at the end every seeded particle velocity and body velocity is given back.
+  // Meant for scenes that start at rest: liquid or a body out of equilibrium (a dam break's
+  // column, a body dropped from above) would start to fall during it.
+  const std::vector<Vec<Dim>> v0 = particles_.v;
+  const auto c0 = particles_.c;
+  std::vector<char> bodies;
+  if (rigid_) {
+    StateWriter w;
+    rigid_->state_fields(w);
+    bodies = w.take();
+  }
+  // the scene's body state back, the dynamic bodies at the pose the settling gave them
+  const auto restore_bodies = [&](bool at_rest) {
+    if (!rigid_) return;
+    std::vector<Vec<Dim>> position;
+    std::vector<decltype(RigidBody<Dim>::orientation)> orientation;
+    for (const auto& b : rigid_->bodies()) {
+      position.push_back(b.position);
+      orientation.push_back(b.orientation);
+    }
+    StateReader r(bodies, "settle");
+    rigid_->state_fields(r);
+    r.finish();
+    auto& b = rigid_->bodies();
+    for (std::size_t i = 0; i < b.size(); ++i) {
+      if (b[i].motion != BodyMotion::dynamic) continue;
+      b[i].position = position[i];
+      b[i].orientation = orientation[i];
+      if (at_rest) {
+        b[i].velocity.setZero();
+        b[i].angular_velocity.setZero();
+      }
+    }
+    if (coupled_) {
+      rebuild_solid_field();
+      update_moving_solids();
+    }
+  };
+  const double dt = std::min(scene_.time.max_dt, 1.0 / scene_.time.fps);
+  for (int k = 0; k < steps; ++k) {
+    for (auto& v : particles_.v) v.setZero();
+    for (auto& c : particles_.c) c.setZero();
+    u_.setZero();
+    restore_bodies(true);
+    step(dt);
+  }
+  if (particles_.v.size() != v0.size())
+    throw SimulationError("particles.settle_steps: particles left the domain while the liquid "
+                          "settled; settle only scenes whose liquid starts at rest");
+  particles_.v = v0;
+  particles_.c = c0;
+  u_.setZero();
+  restore_bodies(false);
+  line15_credit_ = 0.0;
+  frame_ledger_ = EnergyLedger{};
 }
 
 template <int Dim>

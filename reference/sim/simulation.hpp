@@ -307,6 +307,11 @@ class Simulation : public AnySimulation {
   void first_half_drift(double dt);
   /// Line 15: position correction and the particle density projection (when enabled).
   void correct_volume(double dt);
+  /// Frame 0's state on the grid and its statistics (the constructor, again after settle).
+  void frame_zero();
+  /// particles.settle_steps: `steps` whole steps before t = 0, the liquid's velocities zeroed
+  /// after each and the bodies held, then the seeded velocities given back.
+  void settle(int steps);
   /// StageSwitches::line15_energy: takes `gain` (J, > 0) of potential energy that line 15 added
   /// from the liquid's kinetic energy (uniform scaling of the particles' v and c; all of it if
   /// the kinetic energy holds less)

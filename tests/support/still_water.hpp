@@ -22,9 +22,10 @@ constexpr double kDepth = 0.5;  ///< mean water depth (m) in the unit tank
 
 /// The unit tank: walls all round but an open top, gravity -g e_y, water of mean depth kDepth
 /// whose surface is y = kDepth + slope (x - 1/2) (slope 0: at rest), inviscid, PVC-unified,
-/// `seconds` at 50 fps, probes at five points of the liquid.
+/// `seconds` at 50 fps, probes at five points of the liquid; `settle_steps` > 0: the scene's
+/// particles.settle_steps (a settled start, Simulation::settle).
 inline nlohmann::json tank(int dim, int cells, double seconds, const std::string& backend,
-                           double slope = 0.0) {
+                           double slope = 0.0, int settle_steps = 0) {
   using nlohmann::json;
   json j;
   j["format"] = "monolith-scene/1";
@@ -65,6 +66,7 @@ inline nlohmann::json tank(int dim, int cells, double seconds, const std::string
     j["probes"].push_back({{"name", "p" + std::to_string(k)}, {"position", x}});
   }
   j["render"] = {{"enabled", false}};
+  if (settle_steps > 0) j["particles"]["settle_steps"] = settle_steps;
   return j;
 }
 
@@ -84,10 +86,11 @@ struct RestResult {
   bool converged = true;
 };
 
-/// Runs the tank at rest for `seconds`.
-inline RestResult run_rest(int dim, int cells, double seconds, const std::string& backend) {
-  const auto sim =
-      make_simulation(parse_scene(tank(dim, cells, seconds, backend), "still-water.json", "."));
+/// Runs the tank at rest for `seconds` (after `settle_steps` settling steps, tank()).
+inline RestResult run_rest(int dim, int cells, double seconds, const std::string& backend,
+                           int settle_steps = 0) {
+  const auto sim = make_simulation(parse_scene(
+      tank(dim, cells, seconds, backend, 0.0, settle_steps), "still-water.json", "."));
   const FrameStats s0 = sim->current_stats();
   RestResult r;
   const int frames = static_cast<int>(std::lround(50 * seconds));

@@ -89,6 +89,8 @@ const BadCase kBadCases[] = {
     {2, R"({"particles": {"per_cell": 65}})", "particles.per_cell"},
     {2, R"({"particles": {"seed": -1}})", "particles.seed"},
     {2, R"({"particles": {"position_correction": "yes"}})", "particles.position_correction"},
+    {2, R"({"particles": {"settle_steps": -1}})", "particles.settle_steps"},
+    {2, R"({"particles": {"settle_steps": 2.5}})", "particles.settle_steps"},
     {2, R"({"render": {"size": [8, 512]}})", "render.size[0]"},
     {2, R"({"render": {"color_by": "rainbow"}})", "render.color_by"},
     {2, R"({"render": {"enabled": "true"}})", "render.enabled"},
@@ -349,7 +351,7 @@ TEST_CASE("every key, shape type and enum value is accepted", "[unit]") {
     "time": {"fps": 30, "frames": 0, "cfl": 1.0, "max_dt": 0.01},
     "solver": {"scheme": "PC-unified", "backend": "explicit", "tolerance": 1e-8, "max_iterations": 10,
       "staggered_iterations": 3, "preconditioner": "ssor", "baumgarte": 0.1, "contact_margin": 0.2, "shrink": 0.02, "diagonal_boost": 0},
-    "particles": {"per_cell": 27, "seed": 42, "position_correction": false},
+    "particles": {"per_cell": 27, "seed": 42, "position_correction": false, "settle_steps": 3},
     "liquids": [
       {"name": "hb", "shape": {"type": "bunny", "center": [0.5, 0.5, 0.5], "size": 0.3, "rotation": [0, 1, 0]},
        "density": 1200, "velocity": [1, 0, 0], "angular_velocity": [0, 0, 1],
@@ -378,6 +380,7 @@ TEST_CASE("every key, shape type and enum value is accepted", "[unit]") {
   CHECK(s.particles.per_cell == 27);
   CHECK(s.particles.seed == 42u);
   CHECK_FALSE(s.particles.position_correction);
+  CHECK(s.particles.settle_steps == 3);
   CHECK(s.liquids[0].viscosity.model == ViscosityModel::herschel_bulkley);
   CHECK(s.liquids[0].viscosity.tau0 == 10.0);
   CHECK(s.liquids[0].viscosity.is_viscous());
