@@ -3,11 +3,14 @@
 /// The coupled system of one step input and the dense maps the coupled preconditioner's tests
 /// compare (test_coupled_preconditioner.cpp, test_near_empty_cells.cpp): M^-1 column by column,
 /// the reference M of the exact contact elimination (A with Q^-1 in the fluid block's place)
-/// and apply_in_face on a free set against M_FF^-1.
+/// and apply_in_face on a free set against M_FF^-1 (check_in_face_inverse holds Catch assertions:
+/// for the tests only).
 
 #include <vector>
 
 #include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
+#include <catch2/catch.hpp>
 
 #include "reference/contact/contact_system.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
@@ -102,6 +105,24 @@ inline InFaceMaps in_face_maps(const FacePreconditioner& p, const Eigen::MatrixX
   }
   r.expected = mff.inverse();
   return r;
+}
+
+/// The checks of apply_in_face on one free set (Catch assertions): zero off the set, M_FF^-1 of
+/// the dense M to 1e-6 (relative, Frobenius), symmetric to 1e-9, positive definite. Returns the
+/// relative error.
+inline double check_in_face_inverse(const FacePreconditioner& p, const Eigen::MatrixXd& m,
+                                    const std::vector<char>& free) {
+  const InFaceMaps maps = in_face_maps(p, m, free);
+  CHECK(maps.outside == 0);
+  const Eigen::MatrixXd& zd = maps.applied;
+  const double err = (zd - maps.expected).norm() / maps.expected.norm();
+  CHECK(err < 1e-6);
+  const double asym = (zd - zd.transpose()).norm() / zd.norm();
+  CHECK(asym < 1e-9);
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (zd + zd.transpose()),
+                                                          Eigen::EigenvaluesOnly);
+  CHECK(es.eigenvalues().minCoeff() > 0.0);
+  return err;
 }
 
 }  // namespace monolith::testing
