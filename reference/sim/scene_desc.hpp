@@ -100,10 +100,11 @@ struct ParticleSpec {
   int per_cell = 0;                  ///< 0 = the default of the dimension (count_per_cell)
   unsigned seed = 1;                 ///< jitter seed: runs are reproducible
   bool position_correction = true;   ///< keep particles evenly spread (volume steady)
-  /// Steps of the whole simulation step run on the seeded liquid before t = 0, its velocities
-  /// zeroed after each and the bodies held where the scene puts them, so that liquid meant to
-  /// start at rest starts from the discrete equilibrium of its particles instead of the jittered
-  /// seeding's (Simulation::settle; docs/particles.md, "A settled start"). 0: none.
+  /// Steps of the whole simulation step run on the seeded liquid before t = 0, every velocity
+  /// (the liquid's, the dynamic bodies') zeroed before each, so that a scene meant to start at
+  /// rest starts from the discrete equilibrium of its particles and floating bodies instead of
+  /// the jittered seeding's; the initial velocities are given back at t = 0 (Simulation::settle;
+  /// docs/particles.md, "A settled start"). 0: none.
   int settle_steps = 0;
   /// Particles seeded per liquid cell: per_cell, or by default 4 in 2D and 8 in 3D.
   int count_per_cell(int dim) const { return per_cell > 0 ? per_cell : (dim == 2 ? 4 : 8); }

@@ -309,8 +309,9 @@ class Simulation : public AnySimulation {
   void correct_volume(double dt);
   /// Frame 0's state on the grid and its statistics (the constructor, again after settle).
   void frame_zero();
-  /// particles.settle_steps: `steps` whole steps before t = 0, the liquid's velocities zeroed
-  /// after each and the bodies held, then the seeded velocities given back.
+  /// particles.settle_steps: `steps` whole steps before t = 0, the liquid's and the dynamic
+  /// bodies' velocities zeroed before each (static and kinematic bodies at the scene's pose),
+  /// then the initial velocities given back.
   void settle(int steps);
   /// StageSwitches::line15_energy: takes `gain` (J, > 0) of potential energy that line 15 added
   /// from the liquid's kinetic energy (uniform scaling of the particles' v and c; all of it if
