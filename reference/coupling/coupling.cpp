@@ -138,6 +138,27 @@ bool body_phi_negative_box(const SampleLattice<Dim>& lattice, const Shape<Dim>& 
   return true;
 }
 
+/// The faces whose control volume (the face centre +- dx along every axis) can reach `box`
+/// (a bounded body's bounds): every face whose centre lies within 1.5 dx of the box, axis by
+/// axis in index order, into `near` (cleared first). The faces body_face_fractions and
+/// body_face_fractions_at evaluate; every other face's fraction is 0.
+template <int Dim>
+void faces_near_box(const MacGrid<Dim>& grid, const Box<Dim>& box, std::vector<int>& near) {
+  const double reach = 1.5 * grid.dx();
+  near.clear();
+  for (int axis = 0; axis < Dim; ++axis) {
+    const auto [lo, hi] = lattice_range<Dim>(grid, box, MacGrid<Dim>::face_shift(axis),
+                                             grid.face_dims(axis), reach + grid.dx());
+    for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
+      const Vec<Dim> x = grid.face_center(axis, coord);
+      if ((x.array() < box.min().array() - reach).any() ||
+          (x.array() > box.max().array() + reach).any())
+        return;
+      near.push_back(grid.face_index(axis, coord));
+    });
+  }
+}
+
 /// face_negative_fractions of a body's lattice phi, evaluated only on faces whose control
 /// volume (the face centre +- dx along every axis) can reach the body's bounds; the others are
 /// zero (their whole control volume lies where phi > 0). Same values, O(faces near the body):
@@ -152,19 +173,8 @@ void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lat
   }
   if (w.size() != grid.num_faces()) w.resize(grid.num_faces());
   w.setZero();
-  const double reach = 1.5 * grid.dx();
   std::vector<int> near;
-  for (int axis = 0; axis < Dim; ++axis) {
-    const auto [lo, hi] = lattice_range<Dim>(grid, box, MacGrid<Dim>::face_shift(axis),
-                                             grid.face_dims(axis), reach + grid.dx());
-    for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
-      const Vec<Dim> x = grid.face_center(axis, coord);
-      if ((x.array() < box.min().array() - reach).any() ||
-          (x.array() > box.max().array() + reach).any())
-        return;
-      near.push_back(grid.face_index(axis, coord));
-    });
-  }
+  faces_near_box<Dim>(grid, box, near);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int n = 0; n < static_cast<int>(near.size()); ++n) {
     const int f = near[n];
@@ -310,11 +320,7 @@ double cube_negative_fraction_at(const MacGrid<Dim>& grid, const VecI<Dim>& lowe
         negatives += v < 0.0;
       }
   }
-  if (negatives == 0) return 0.0;
-  if (negatives == kCorners * kCorners) return 1.0;
-  double sum = 0.0;
-  for (int sub = 0; sub < kCorners; ++sub) sum += lattice_cell_negative_fraction<Dim>(corners[sub]);
-  return sum / kCorners;
+  return sub_cubes_negative_fraction<Dim>(corners, negatives);
 }
 
 /// body_face_fractions of a bounded body whose lattice phi is read through phi(coordinate)
@@ -330,19 +336,7 @@ void body_face_fractions_at(const MacGrid<Dim>& grid, const Phi& phi, const Box<
     zero_all = true;
   }
   if (zero_all) w.setZero();
-  const double reach = 1.5 * grid.dx();
-  near.clear();
-  for (int axis = 0; axis < Dim; ++axis) {
-    const auto [lo, hi] = lattice_range<Dim>(grid, box, MacGrid<Dim>::face_shift(axis),
-                                             grid.face_dims(axis), reach + grid.dx());
-    for_range<Dim>(lo, hi, [&](const VecI<Dim>& coord) {
-      const Vec<Dim> x = grid.face_center(axis, coord);
-      if ((x.array() < box.min().array() - reach).any() ||
-          (x.array() > box.max().array() + reach).any())
-        return;
-      near.push_back(grid.face_index(axis, coord));
-    });
-  }
+  faces_near_box<Dim>(grid, box, near);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int n = 0; n < static_cast<int>(near.size()); ++n) {
     const int f = near[n];

@@ -171,11 +171,7 @@ double lattice_cube_negative_fraction(const MacGrid<Dim>& grid, const SampleLatt
       corners[sub][k] = v;
       negatives += v < 0.0;
     }
-  if (negatives == 0) return 0.0;
-  if (negatives == kCorners * kCorners) return 1.0;
-  double sum = 0.0;
-  for (int sub = 0; sub < kCorners; ++sub) sum += lattice_cell_negative_fraction<Dim>(corners[sub]);
-  return sum / kCorners;
+  return sub_cubes_negative_fraction<Dim>(corners, negatives);
 }
 
 namespace {

@@ -52,6 +52,22 @@ double simplex_negative_fraction<3>(const std::array<double, 4>& phi);
 template <int Dim>
 double lattice_cell_negative_fraction(const std::array<double, (1 << Dim)>& corner_phi);
 
+/// The mean negative fraction of a cube's 2^Dim lattice cells (sub-cube s has corner values
+/// corners[s], as lattice_cell_negative_fraction takes them), of whose corner values `negatives`
+/// are below 0: 0 or 1 without the Kuhn split when every corner has one sign (the same value as
+/// summing the sub-cubes' 0s or 1s). The last step of lattice_cube_negative_fraction and of the
+/// coupling's reads of a per-body level set (reference/coupling/coupling.cpp).
+template <int Dim>
+double sub_cubes_negative_fraction(
+    const std::array<std::array<double, (1 << Dim)>, (1 << Dim)>& corners, int negatives) {
+  constexpr int kCorners = 1 << Dim;
+  if (negatives == 0) return 0.0;
+  if (negatives == kCorners * kCorners) return 1.0;
+  double sum = 0.0;
+  for (int sub = 0; sub < kCorners; ++sub) sum += lattice_cell_negative_fraction<Dim>(corners[sub]);
+  return sum / kCorners;
+}
+
 /// The lattice cell standing for lattice cell l along one axis of `cells2` lattice cells (two per
 /// grid cell): wrapped on a periodic axis, mirrored across the ends otherwise, so control volumes
 /// that stick out of the domain see the mirror image (wall/open) or the other side (periodic).
