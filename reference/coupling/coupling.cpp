@@ -52,6 +52,49 @@ void for_range(const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&& fn) {
   }
 }
 
+/// body_phi_on_lattice's values of a bounded shape at the lattice points of the inclusive box
+/// [lo, hi] only, into `out` (the box's points, x fastest; sized by the caller): the closed form
+/// (box_offset_table, summed as box_offset_distance does) everywhere, the shape's distance where
+/// that is at most `far`. body_phi_on_lattice of a bounded shape is this over the whole lattice.
+template <int Dim>
+void body_phi_in_box(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
+                     double shrink_in_metres, double far, const VecI<Dim>& lo,
+                     const VecI<Dim>& hi, VectorX& out) {
+  if ((lo.array() > hi.array()).any()) return;
+  const Box<Dim> box = shape.bounds();
+  const VecI<Dim> box_dims = hi - lo + VecI<Dim>::Ones();
+  const int nx = box_dims[0];
+  VecI<Dim> row_dims = box_dims;
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+  std::array<std::vector<double>, Dim> offset;
+  box_offset_table<Dim>(lattice, box, offset);
+#pragma omp parallel for schedule(static) num_threads(team_threads(box_dims.prod()))
+  for (int q = 0; q < rows; ++q) {
+    VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+    double* o = out.data() + static_cast<std::size_t>(q) * nx;
+    // the squares of the row's other offsets
+    std::array<double, Dim> square;
+    for (int a = 1; a < Dim; ++a) square[a] = offset[a][c[a]] * offset[a][c[a]];
+    const auto outside = [&](int x) {
+      double sum = offset[0][x] * offset[0][x];
+      for (int a = 1; a < Dim; ++a) sum += square[a];
+      return std::sqrt(sum);
+    };
+    for (int i = 0; i < nx; ++i) o[i] = outside(lo[0] + i) + shrink_in_metres;
+    // a point within `far` has |t_a| <= far on every axis (the rounded sums only grow)
+    double rest = 0.0;
+    for (int a = 1; a < Dim; ++a) rest += square[a];
+    if (std::sqrt(rest) > far) continue;
+    for (int i = 0; i < nx; ++i) {
+      const int x = lo[0] + i;
+      if (std::abs(offset[0][x]) > far || outside(x) > far) continue;
+      c[0] = x;
+      o[i] = shape.distance(lattice.position(c)) + shrink_in_metres;
+    }
+  }
+}
+
 /// A body's SDF on the lattice shifted by zeta (solid_phi_on_lattice of one shape), evaluated
 /// only within 2 dx of its bounds: farther out the distance to the bounds box (plus zeta), a
 /// positive lower bound of the true distance, stands in. The fractions, which read only signs
@@ -68,46 +111,20 @@ void body_phi_on_lattice(const SampleLattice<Dim>& lattice, const Shape<Dim>& sh
   const Box<Dim> box = shape.bounds();
   const bool bounded = !box.isEmpty() && box.min().allFinite() && box.max().allFinite();
   if (phi.size() != lattice.size()) phi.resize(lattice.size());
+  if (bounded) {
+    body_phi_in_box<Dim>(lattice, shape, shrink_in_metres, far, VecI<Dim>::Zero(),
+                         lattice.dims - VecI<Dim>::Ones(), phi);
+    return;
+  }
   const int nx = lattice.dims[0];
   VecI<Dim> row_dims = lattice.dims;
   row_dims[0] = 1;
   const int rows = row_dims.prod();
-  // offsets from the box per axis: component a of p - clamp(p, box) at coordinate c
-  std::array<std::vector<double>, Dim> offset;
-  if (bounded)
-    for (int a = 0; a < Dim; ++a) {
-      offset[a].resize(lattice.dims[a]);
-      for (int c = 0; c < lattice.dims[a]; ++c) {
-        const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
-        offset[a][c] = (p - p.cwiseMax(box.min()).cwiseMin(box.max()))[a];
-      }
-    }
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int q = 0; q < rows; ++q) {
     VecI<Dim> c = lattice_coord<Dim>(q, row_dims);
     double* out = phi.data() + static_cast<std::size_t>(q) * nx;
-    if (!bounded) {
-      for (int x = 0; x < nx; ++x) {
-        c[0] = x;
-        out[x] = shape.distance(lattice.position(c)) + shrink_in_metres;
-      }
-      continue;
-    }
-    // the squares of the row's other offsets
-    std::array<double, Dim> square;
-    for (int a = 1; a < Dim; ++a) square[a] = offset[a][c[a]] * offset[a][c[a]];
-    const auto outside = [&](int x) {
-      double sum = offset[0][x] * offset[0][x];
-      for (int a = 1; a < Dim; ++a) sum += square[a];
-      return std::sqrt(sum);
-    };
-    for (int x = 0; x < nx; ++x) out[x] = outside(x) + shrink_in_metres;
-    // a point within `far` has |t_a| <= far on every axis (the rounded sums only grow)
-    double rest = 0.0;
-    for (int a = 1; a < Dim; ++a) rest += square[a];
-    if (std::sqrt(rest) > far) continue;
     for (int x = 0; x < nx; ++x) {
-      if (std::abs(offset[0][x]) > far || outside(x) > far) continue;
       c[0] = x;
       out[x] = shape.distance(lattice.position(c)) + shrink_in_metres;
     }
@@ -183,52 +200,6 @@ void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lat
     VecI<Dim> lower = 2 * coord;
     lower[axis] -= 1;
     w[f] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
-  }
-}
-
-/// body_phi_on_lattice's values at the lattice points of the inclusive box [lo, hi] only (a
-/// bounded shape), into `out` (the box's points, x fastest): per point the same operations, so
-/// the same bits as the dense vector there.
-template <int Dim>
-void body_phi_in_box(const SampleLattice<Dim>& lattice, const Shape<Dim>& shape,
-                     double shrink_in_metres, double far, const VecI<Dim>& lo,
-                     const VecI<Dim>& hi, VectorX& out) {
-  if ((lo.array() > hi.array()).any()) return;
-  const Box<Dim> box = shape.bounds();
-  const VecI<Dim> box_dims = hi - lo + VecI<Dim>::Ones();
-  const int nx = box_dims[0];
-  VecI<Dim> row_dims = box_dims;
-  row_dims[0] = 1;
-  const int rows = row_dims.prod();
-  std::array<std::vector<double>, Dim> offset;
-  for (int a = 0; a < Dim; ++a) {
-    offset[a].resize(lattice.dims[a]);
-    for (int c = 0; c < lattice.dims[a]; ++c) {
-      const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
-      offset[a][c] = (p - p.cwiseMax(box.min()).cwiseMin(box.max()))[a];
-    }
-  }
-#pragma omp parallel for schedule(static) num_threads(team_threads(box_dims.prod()))
-  for (int q = 0; q < rows; ++q) {
-    VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
-    double* o = out.data() + static_cast<std::size_t>(q) * nx;
-    std::array<double, Dim> square;
-    for (int a = 1; a < Dim; ++a) square[a] = offset[a][c[a]] * offset[a][c[a]];
-    const auto outside = [&](int x) {
-      double sum = offset[0][x] * offset[0][x];
-      for (int a = 1; a < Dim; ++a) sum += square[a];
-      return std::sqrt(sum);
-    };
-    for (int i = 0; i < nx; ++i) o[i] = outside(lo[0] + i) + shrink_in_metres;
-    double rest = 0.0;
-    for (int a = 1; a < Dim; ++a) rest += square[a];
-    if (std::sqrt(rest) > far) continue;
-    for (int i = 0; i < nx; ++i) {
-      const int x = lo[0] + i;
-      if (std::abs(offset[0][x]) > far || outside(x) > far) continue;
-      c[0] = x;
-      o[i] = shape.distance(lattice.position(c)) + shrink_in_metres;
-    }
   }
 }
 

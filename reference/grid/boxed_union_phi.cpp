@@ -17,33 +17,16 @@ bool BoxedUnionPhi<Dim>::assign(const SampleLattice<Dim>& lattice,
     if (box.isEmpty() || !box.min().allFinite() || !box.max().allFinite()) return false;
   dims_ = lattice.dims;
   shrink_ = shrink_in_metres;
-  // the offset tables of body_phi_on_lattice: component a of p - clamp(p, box) at coordinate c
+  // the offset tables of body_phi_on_lattice's closed form
   offset_.resize(bounds.size());
-  for (std::size_t i = 0; i < bounds.size(); ++i)
-    for (int a = 0; a < Dim; ++a) {
-      offset_[i][a].resize(lattice.dims[a]);
-      for (int c = 0; c < lattice.dims[a]; ++c) {
-        const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
-        offset_[i][a][c] = (p - p.cwiseMax(bounds[i].min()).cwiseMin(bounds[i].max()))[a];
-      }
-    }
-  // the box: every body's bounds grown by `far` and two lattice points (one for the rounding of
-  // the coordinates, one so that a point outside has an offset beyond far + spacing / 2 on some
-  // axis, which body_phi_on_lattice tests with rounded sums: it writes the closed form there)
+  for (std::size_t i = 0; i < bounds.size(); ++i) box_offset_table<Dim>(lattice, bounds[i], offset_[i]);
+  // the box: every body's far_point_box
   lo_ = lattice.dims;
   hi_ = -VecI<Dim>::Ones();
   for (const Box<Dim>& box : bounds) {
     VecI<Dim> lo, hi;
-    bool inside = true;
-    for (int a = 0; a < Dim; ++a) {
-      const double from = (box.min()[a] - far - lattice.origin[a]) / lattice.spacing;
-      const double to = (box.max()[a] + far - lattice.origin[a]) / lattice.spacing;
-      const double top = static_cast<double>(lattice.dims[a] - 1);
-      lo[a] = static_cast<int>(std::clamp(std::floor(from) - 2.0, 0.0, top + 1.0));
-      hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 2.0, -1.0, top));
-      inside = inside && lo[a] <= hi[a];
-    }
-    if (!inside) continue;  // the body is far from every point: the closed form everywhere
+    // a body far from every point: the closed form everywhere
+    if (!far_point_box<Dim>(lattice, box, far, lo, hi)) continue;
     lo_ = lo_.cwiseMin(lo);
     hi_ = hi_.cwiseMax(hi);
   }
@@ -78,13 +61,7 @@ template <int Dim>
 double BoxedUnionPhi<Dim>::far_value(const VecI<Dim>& c) const {
   double value = 0.0;
   for (std::size_t i = 0; i < offset_.size(); ++i) {
-    // sqrt((t_0^2 + t_1^2) + t_2^2) + zeta, as body_phi_on_lattice sums them
-    double sum = offset_[i][0][c[0]] * offset_[i][0][c[0]];
-    for (int a = 1; a < Dim; ++a) {
-      const double square = offset_[i][a][c[a]] * offset_[i][a][c[a]];
-      sum += square;
-    }
-    const double v = std::sqrt(sum) + shrink_;
+    const double v = box_offset_distance<Dim>(offset_[i], c) + shrink_;
     // the union is the first body's values, then the minimum with each further body's
     value = i == 0 ? v : std::min(value, v);
   }
@@ -127,25 +104,9 @@ void PartsUnionPhi<Dim>::add_boxed(const Box<Dim>& bounds, double far, VecI<Dim>
   if (count_ == static_cast<int>(parts_.size())) parts_.emplace_back();
   Part& part = parts_[count_++];
   part.dense = nullptr;
-  // the offset table of body_phi_on_lattice: component a of p - clamp(p, box) at coordinate c
-  for (int a = 0; a < Dim; ++a) {
-    part.offset[a].resize(dims_[a]);
-    for (int c = 0; c < dims_[a]; ++c) {
-      const Vec<Dim> p = lattice_.position(VecI<Dim>::Constant(c));
-      part.offset[a][c] = (p - p.cwiseMax(bounds.min()).cwiseMin(bounds.max()))[a];
-    }
-  }
-  // BoxedUnionPhi's box of one body: its bounds grown by `far` and two lattice points (outside
-  // it body_phi_on_lattice writes the closed form)
-  bool any = true;
-  for (int a = 0; a < Dim; ++a) {
-    const double from = (bounds.min()[a] - far - lattice_.origin[a]) / lattice_.spacing;
-    const double to = (bounds.max()[a] + far - lattice_.origin[a]) / lattice_.spacing;
-    const double top = static_cast<double>(dims_[a] - 1);
-    lo[a] = static_cast<int>(std::clamp(std::floor(from) - 2.0, 0.0, top + 1.0));
-    hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 2.0, -1.0, top));
-    any = any && lo[a] <= hi[a];
-  }
+  // the closed form's tables, and the points outside of which body_phi_on_lattice writes it
+  box_offset_table<Dim>(lattice_, bounds, part.offset);
+  const bool any = far_point_box<Dim>(lattice_, bounds, far, lo, hi);
   if (!any) {
     lo = VecI<Dim>::Zero();
     hi = -VecI<Dim>::Ones();
@@ -172,13 +133,7 @@ double PartsUnionPhi<Dim>::part_at(int i, const VecI<Dim>& c) const {
   if (part.dense) return (*part.dense)[lattice_index<Dim>(c, dims_)];
   if ((c.array() >= part.lo.array()).all() && (c.array() <= part.hi.array()).all())
     return part.values[lattice_index<Dim>(c - part.lo, part.box_dims)];
-  // sqrt((t_0^2 + t_1^2) + t_2^2) + zeta, as body_phi_on_lattice sums them
-  double sum = part.offset[0][c[0]] * part.offset[0][c[0]];
-  for (int a = 1; a < Dim; ++a) {
-    const double square = part.offset[a][c[a]] * part.offset[a][c[a]];
-    sum += square;
-  }
-  return std::sqrt(sum) + shrink_;
+  return box_offset_distance<Dim>(part.offset, c) + shrink_;
 }
 
 template <int Dim>

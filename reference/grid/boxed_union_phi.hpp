@@ -13,13 +13,63 @@
 /// same order as body_phi_on_lattice (per-axis offset tables; the squares summed in the order of
 /// Eigen's norm() of the offset vector; then + zeta), so every value has the dense vector's bits.
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <vector>
 
 #include "reference/core/common.hpp"
 #include "reference/grid/mac_grid.hpp"
 
 namespace monolith {
+
+/// The closed form's tables (body_phi_on_lattice's far value): per axis a and lattice
+/// coordinate c, component a of p - clamp(p, box) for the lattice point p = (c, ..., c).
+template <int Dim>
+void box_offset_table(const SampleLattice<Dim>& lattice, const Box<Dim>& box,
+                      std::array<std::vector<double>, Dim>& offset) {
+  for (int a = 0; a < Dim; ++a) {
+    offset[a].resize(lattice.dims[a]);
+    for (int c = 0; c < lattice.dims[a]; ++c) {
+      const Vec<Dim> p = lattice.position(VecI<Dim>::Constant(c));
+      offset[a][c] = (p - p.cwiseMax(box.min()).cwiseMin(box.max()))[a];
+    }
+  }
+}
+
+/// The distance of lattice point c from the box of `offset` (box_offset_table):
+/// sqrt((t_0^2 + t_1^2) + t_2^2), summed in the order of Eigen's norm() of the offset vector,
+/// as body_phi_on_lattice sums it.
+template <int Dim>
+double box_offset_distance(const std::array<std::vector<double>, Dim>& offset,
+                           const VecI<Dim>& c) {
+  double sum = offset[0][c[0]] * offset[0][c[0]];
+  for (int a = 1; a < Dim; ++a) {
+    const double square = offset[a][c[a]] * offset[a][c[a]];
+    sum += square;
+  }
+  return std::sqrt(sum);
+}
+
+/// The inclusive box of lattice points within `far` of `bounds` grown by two points (one for
+/// the rounding of the coordinates, one so that a point outside has an offset beyond far +
+/// spacing / 2 on some axis, which body_phi_on_lattice tests with rounded sums: it writes the
+/// closed form there), clamped to the lattice; false when it holds no point (then lo > hi on
+/// some axis).
+template <int Dim>
+bool far_point_box(const SampleLattice<Dim>& lattice, const Box<Dim>& bounds, double far,
+                   VecI<Dim>& lo, VecI<Dim>& hi) {
+  bool any = true;
+  for (int a = 0; a < Dim; ++a) {
+    const double from = (bounds.min()[a] - far - lattice.origin[a]) / lattice.spacing;
+    const double to = (bounds.max()[a] + far - lattice.origin[a]) / lattice.spacing;
+    const double top = static_cast<double>(lattice.dims[a] - 1);
+    lo[a] = static_cast<int>(std::clamp(std::floor(from) - 2.0, 0.0, top + 1.0));
+    hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 2.0, -1.0, top));
+    any = any && lo[a] <= hi[a];
+  }
+  return any;
+}
 
 template <int Dim>
 class BoxedUnionPhi {
