@@ -101,9 +101,11 @@ struct StokesPreconditionerOptions {
   /// (the pressure unknowns with W_L^p < 1 over all pressure unknowns) is below this [(P9)]. A
   /// liquid that fills its box (the 64^3 tank of the benchmark: share 0.035) gets the same PCG
   /// iterations from one cycle as from two at eta 100 and 2 more at eta 1000, at about 0.55x the
-  /// cost per iteration; the built-in 3D scenes (shares 0.37-0.76) need up to twice the
-  /// iterations with one cycle (docs/preconditioners.md sections 24-25). 0: off. Not applied in
-  /// 2D (not measured there).
+  /// cost per iteration; the small built-in 3D scenes with a free surface all round (shares
+  /// 0.37-0.76) need up to twice the iterations with one cycle, so they keep the rule above;
+  /// blocks of liquid filling the bottom of their box (bunny-into-block-bingham-3d,
+  /// -shear-thickening-3d) fall below it (docs/preconditioners.md sections 24-25). 0: off. Not
+  /// applied in 2D (not measured there).
   double lean_share = 0.15;
   int smoothing = 1;                 ///< patch sweeps before and after each coarse correction
   int outer_sweeps = 2;              ///< SOR sweeps of A before and after (0: none)
