@@ -145,13 +145,7 @@ bool body_phi_negative_box(const SampleLattice<Dim>& lattice, const Shape<Dim>& 
     return true;
   }
   if (!box.min().allFinite() || !box.max().allFinite()) return false;
-  for (int a = 0; a < Dim; ++a) {
-    const double from = (box.min()[a] - far - lattice.origin[a]) / lattice.spacing;
-    const double to = (box.max()[a] + far - lattice.origin[a]) / lattice.spacing;
-    const double top = static_cast<double>(lattice.dims[a] - 1);
-    lo[a] = static_cast<int>(std::clamp(std::floor(from) - 1.0, 0.0, top + 1.0));
-    hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 1.0, -1.0, top));
-  }
+  far_point_box<Dim>(lattice, box, far, 1, lo, hi);  // (an empty result is a valid answer)
   return true;
 }
 

@@ -26,7 +26,7 @@ bool BoxedUnionPhi<Dim>::assign(const SampleLattice<Dim>& lattice,
   for (const Box<Dim>& box : bounds) {
     VecI<Dim> lo, hi;
     // a body far from every point: the closed form everywhere
-    if (!far_point_box<Dim>(lattice, box, far, lo, hi)) continue;
+    if (!far_point_box<Dim>(lattice, box, far, 2, lo, hi)) continue;
     lo_ = lo_.cwiseMin(lo);
     hi_ = hi_.cwiseMax(hi);
   }
@@ -106,7 +106,7 @@ void PartsUnionPhi<Dim>::add_boxed(const Box<Dim>& bounds, double far, VecI<Dim>
   part.dense = nullptr;
   // the closed form's tables, and the points outside of which body_phi_on_lattice writes it
   box_offset_table<Dim>(lattice_, bounds, part.offset);
-  const bool any = far_point_box<Dim>(lattice_, bounds, far, lo, hi);
+  const bool any = far_point_box<Dim>(lattice_, bounds, far, 2, lo, hi);
   if (!any) {
     lo = VecI<Dim>::Zero();
     hi = -VecI<Dim>::Ones();

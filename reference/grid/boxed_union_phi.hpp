@@ -7,7 +7,7 @@
 /// solid_weights (reference/coupling) writes the union of bounded bodies' lattice phi, where
 /// each body's value farther than `far` from its bounds box is the distance to that box plus the
 /// shrink zeta (a positive lower bound of the true distance; body_phi_on_lattice). Outside a box
-/// around every body's bounds (grown by `far` and one lattice point) no body is evaluated, so
+/// around every body's bounds (grown by `far` and two lattice points) no body is evaluated, so
 /// the union there is min over the bodies of that closed form: this class stores the union's
 /// values in the box and evaluates the closed form outside it, with the same operations in the
 /// same order as body_phi_on_lattice (per-axis offset tables; the squares summed in the order of
@@ -51,21 +51,23 @@ double box_offset_distance(const std::array<std::vector<double>, Dim>& offset,
   return std::sqrt(sum);
 }
 
-/// The inclusive box of lattice points within `far` of `bounds` grown by two points (one for
-/// the rounding of the coordinates, one so that a point outside has an offset beyond far +
-/// spacing / 2 on some axis, which body_phi_on_lattice tests with rounded sums: it writes the
-/// closed form there), clamped to the lattice; false when it holds no point (then lo > hi on
-/// some axis).
+/// The inclusive box of lattice points within `far` of `bounds`, grown by `points` lattice
+/// points on every side and clamped to the lattice; false when it holds no point (then lo > hi
+/// on some axis). With two points (BoxedUnionPhi, PartsUnionPhi: one for the rounding of the
+/// coordinates, one so that a point outside has an offset beyond far + spacing / 2 on some axis,
+/// which body_phi_on_lattice tests with rounded sums) body_phi_on_lattice writes the closed form
+/// everywhere outside it.
 template <int Dim>
 bool far_point_box(const SampleLattice<Dim>& lattice, const Box<Dim>& bounds, double far,
-                   VecI<Dim>& lo, VecI<Dim>& hi) {
+                   int points, VecI<Dim>& lo, VecI<Dim>& hi) {
+  const double grow = static_cast<double>(points);
   bool any = true;
   for (int a = 0; a < Dim; ++a) {
     const double from = (bounds.min()[a] - far - lattice.origin[a]) / lattice.spacing;
     const double to = (bounds.max()[a] + far - lattice.origin[a]) / lattice.spacing;
     const double top = static_cast<double>(lattice.dims[a] - 1);
-    lo[a] = static_cast<int>(std::clamp(std::floor(from) - 2.0, 0.0, top + 1.0));
-    hi[a] = static_cast<int>(std::clamp(std::ceil(to) + 2.0, -1.0, top));
+    lo[a] = static_cast<int>(std::clamp(std::floor(from) - grow, 0.0, top + 1.0));
+    hi[a] = static_cast<int>(std::clamp(std::ceil(to) + grow, -1.0, top));
     any = any && lo[a] <= hi[a];
   }
   return any;
