@@ -441,7 +441,13 @@ int resume_run(const RunOptions& o, std::ostream& err, const SimulationFactory& 
       throw InputError(label + "the mesh file " + r.input_files[i] +
                        " changed (or went missing) since the checkpoint (a checkpoint continues only the scene it was taken of)");
   StopSignals signals;
-  std::unique_ptr<AnySimulation> sim = factory(scene);
+  // The simulation is built from the scene and then replaced by the checkpoint's state, so a
+  // settled start (particles.settle_steps) is not run again: its steps would be thrown away by
+  // load_state (the checkpoint holds the settled particles, the bodies' poses and what they
+  // carry). The run keeps the scene as given (its JSON, the summary, later checkpoints).
+  SceneFile built = scene;
+  built.particles.settle_steps = 0;
+  std::unique_ptr<AnySimulation> sim = factory(built);
   sim->load_state(r.state);
   // now the folder: stats rows and frames after the checkpoint belong to the stopped run
   make_output_folders(dir, scene.render.enabled);

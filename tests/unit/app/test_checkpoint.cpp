@@ -144,8 +144,11 @@ TEST_CASE("run N frames with checkpoints and resume to 2N: the same rows and fra
   struct Case {
     const char* scene;
     const char* cells;
+    int settle_steps = 0;
   };
-  // a liquid, a coupled scene with friction (and a viscous one), a non-Newtonian liquid; 2D and 3D
+  // a liquid, a coupled scene with friction (and a viscous one), a non-Newtonian liquid; 2D and 3D;
+  // a settled start (particles.settle_steps), which resume does not run again: the checkpoint's
+  // state replaces what the settling steps would build
   const Case cases[] = {
       {"dam-break-2d", "[32,16]"},
       {"bunnies-onto-pool-2d", "[32,32]"},
@@ -154,12 +157,14 @@ TEST_CASE("run N frames with checkpoints and resume to 2N: the same rows and fra
       {"dam-break-3d", "[16,8,8]"},
       {"bunnies-onto-pool-3d", "[12,12,12]"},
       {"liquid-drop-bingham-3d", "[12,12,12]"},
+      {"bunnies-onto-pool-2d", "[32,32]", 4},
   };
   const int n = 2;
   for (const auto& c : cases) {
-    INFO(c.scene);
-    const fs::path straight = temp_dir() / (std::string(c.scene) + "-straight");
-    const fs::path resumed = temp_dir() / (std::string(c.scene) + "-resumed");
+    INFO(c.scene << " settle_steps " << c.settle_steps);
+    const std::string tag = std::string(c.scene) + (c.settle_steps > 0 ? "-settled" : "");
+    const fs::path straight = temp_dir() / (tag + "-straight");
+    const fs::path resumed = temp_dir() / (tag + "-resumed");
     fs::remove_all(straight);
     fs::remove_all(resumed);
     std::vector<std::string> a{"run"}, b{"run"};
@@ -167,6 +172,8 @@ TEST_CASE("run N frames with checkpoints and resume to 2N: the same rows and fra
       a.push_back(s);
       b.push_back(s);
     }
+    if (c.settle_steps > 0)
+      for (auto* v : {&a, &b}) v->insert(v->end(), {"--set", "particles.settle_steps=" + std::to_string(c.settle_steps)});
     a.insert(a.end(), {"--frames", std::to_string(2 * n), "--out", straight.string()});
     b.insert(b.end(), {"--frames", std::to_string(n), "--out", resumed.string(), "--checkpoint-every", std::to_string(n)});
     const Result ra = cli(a);
