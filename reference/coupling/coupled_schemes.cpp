@@ -89,6 +89,9 @@ long fluid_solve(const MonolithicSystem<Dim>& s, const FluidBodyOperator<Dim>& o
   pcg.max_iterations = settings.mprgp.max_iterations;
   pcg.omega = settings.mprgp.omega;
   pcg.stagnation = settings.mprgp.stagnation;
+  // a right-hand side at the round-off of its terms (free flight) is zero: no solve, and both
+  // back ends give x = 0 (docs/preconditioners.md section 26)
+  pcg.zero_rhs = s.rhs_round_off();
   const PcgResult p = m ? pcg_solve(op, s.fluid_rhs(x.lambda, x.z), x.x_fluid, pcg, *m)
         : pcg_solve(op, s.fluid_rhs(x.lambda, x.z), x.x_fluid, pcg);
   if (p.breakdown) throw SimulationError("fluid solve: PCG broke down: " + p.message);

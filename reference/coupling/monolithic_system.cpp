@@ -116,6 +116,16 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   j_z_t_ = contacts.j_z.transpose();
 
   const VectorX v_one = group_velocities(bodies, BodyGroup::one_way);
+  // rhs_round_off(): the bound (2 Dim / dx) U on the terms of b1, b2 (header)
+  {
+    double speed = 0.0;
+    const VectorX& wf = w.pressure.fluid_face;
+    for (int f = 0; f < u_star.size(); ++f) speed = std::max(speed, std::abs(wf[f] * u_star[f]));
+    for (const VectorX* v : {&contacts.v_star, &v_one})
+      for (int k = 0; k < v->size(); ++k)
+        if (k % kBodyDofs<Dim> < Dim) speed = std::max(speed, std::abs((*v)[k]));
+    rhs_round_off_ = kRhsRoundOffUlps * kEpsilon * (2.0 * Dim / grid.dx()) * speed;
+  }
 
   if (matrix_free_) {
     // the fluid part by stencils; b = B^T W_F^u u* by the same stencils

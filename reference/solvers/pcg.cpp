@@ -87,7 +87,8 @@ PcgResult pcg_solve(const LinearOperator& a, const VectorX& b_in, VectorX& x,
     result.message = "non-finite right-hand side";
     return result;
   }
-  if (b_norm == 0.0) {
+  if (b_norm <= settings.zero_rhs) {
+    // b = 0, or zero to its round-off (PcgSettings::zero_rhs)
     x.setZero(n);
     result.converged = true;
     return result;

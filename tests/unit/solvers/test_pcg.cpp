@@ -116,6 +116,24 @@ TEST_CASE("PCG reports breakdown, zero right-hand side and the iteration cap", "
   CHECK(zero.converged);
   CHECK(zero.iterations == 0);
   CHECK(y.norm() == 0.0);
+  // PcgSettings::zero_rhs: a b at or below it counts as zero (x = 0, no iteration); above it
+  // the solve runs as before, bit for bit
+  const VectorX tiny = 1e-14 * random_vector(a.rows(), 3);
+  PcgSettings floor;
+  floor.zero_rhs = tiny.cwiseAbs().maxCoeff();
+  y.setOnes();
+  const PcgResult unsolved = pcg_solve(SparseMatrixOperator(a), tiny, y, floor);
+  CHECK(unsolved.converged);
+  CHECK(unsolved.iterations == 0);
+  CHECK(y.norm() == 0.0);
+  floor.zero_rhs = 0.99 * tiny.cwiseAbs().maxCoeff();
+  VectorX y1, y2;
+  const PcgResult solved = pcg_solve(SparseMatrixOperator(a), tiny, y1, floor);
+  const PcgResult plain = pcg_solve(SparseMatrixOperator(a), tiny, y2, PcgSettings{});
+  CHECK(solved.converged);
+  CHECK(solved.iterations > 0);
+  CHECK(solved.iterations == plain.iterations);
+  CHECK((y1 - y2).cwiseAbs().maxCoeff() == 0.0);
   // the cap: not converged, not a breakdown
   PcgSettings capped;
   capped.max_iterations = 2;
