@@ -6,6 +6,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -58,7 +59,7 @@ std::string builtin_text(const std::string& name) {
 
 /// The paper-resolution variants NAME-3d-paper of the 3D paper scenes and the grid each figure
 /// used in the paper (Tables 1-3, sections 6.4.1, 6.4.2, 6.5). Figs. 15 (240x96x96) and 16
-/// (225x150x150) have no variant: their built-in boxes have other proportions.
+/// (225x150x150) also change their box to the grid's proportions (checked below).
 const std::map<std::string, std::array<int, 3>> kPaperGrids = {
     {"liquid-bunny-into-bowl-3d", {256, 128, 256}},
     {"bunny-onto-floating-bowl-3d", {128, 128, 128}},
@@ -76,7 +77,31 @@ const std::map<std::string, std::array<int, 3>> kPaperGrids = {
     {"bunny-into-block-bingham-3d", {64, 64, 64}},
     {"hollow-spheres-inviscid-3d", {256, 256, 256}},
     {"hollow-spheres-viscous-3d", {128, 128, 128}},
+    {"boat-on-waves-3d", {240, 96, 96}},
+    {"bunnies-onto-pool-3d", {225, 150, 150}},
 };
+
+/// The top of a liquid box (its surface at rest).
+double box_top(const nlohmann::json& box) {
+  return box["center"][1].get<double>() + box["half_size"][1].get<double>();
+}
+
+/// The particles seeded for a single liquid box: per_cell (8 in 3D) times its cells.
+double box_particles(const nlohmann::json& box, double dx) {
+  double cells = 1.0;
+  for (int a = 0; a < 3; ++a) cells *= 2.0 * box["half_size"][a].get<double>() / dx;
+  return 8.0 * cells;
+}
+
+/// Every box of a body's shape (a box or a union of boxes, or the one shape itself).
+std::vector<nlohmann::json*> shape_parts(nlohmann::json& shape) {
+  std::vector<nlohmann::json*> v;
+  if (shape["type"] == "union")
+    for (auto& s : shape["shapes"]) v.push_back(&s);
+  else
+    v.push_back(&shape);
+  return v;
+}
 
 bool all_finite(const std::vector<double>& v) {
   return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
@@ -227,7 +252,8 @@ TEST_CASE("2D non-Newtonian scenes run their first frame through Algorithm 2", "
 TEST_CASE("paper-resolution variants are their scenes at the paper's grid", "[unit]") {
   // Only parsed and compared here: one frame of the largest takes minutes and gigabytes
   // (docs/benchmarks.md). Every built-in NAME-paper is listed, and differs from NAME only in its
-  // name, description and grid (for Fig. 2 also the box, widened at the same cell width).
+  // name, description and grid (for Fig. 2 also the box, widened at the same cell width; for
+  // Fig. 3 a shallower pool; for Figs. 15 and 16 the box's proportions and the liquid's depth).
   int variants = 0;
   for (const auto& f : embedded_scenes()) {
     const std::string name(f.name);
@@ -289,6 +315,74 @@ TEST_CASE("paper-resolution variants are their scenes at the paper's grid", "[un
         for (int k = 0; k < 2; ++k) (*j)["liquids"][0]["shape"]["shapes"][k].erase("center");
         (*j)["liquids"][0]["shape"]["shapes"][0].erase("half_size");
         for (int i = 0; i < 2; ++i) (*j)["bodies"][i]["shape"].erase("center");
+      }
+    }
+    if (base == "boat-on-waves-3d" || base == "bunnies-onto-pool-3d") {
+      // Figs. 15 and 16 (section 6.5): the box of the paper's grid proportions (2.5:1:1 and
+      // 1.5:1:1, 1 m high as the base's) and a shallower liquid, so that 8 particles per cell
+      // make about the paper's 2.8M and 8.2M; the dynamic bodies keep their place against the
+      // box's centre (x, z) and the liquid's surface (y). Fig. 15's board stays at the x- wall
+      // with the base's bottom and height above the surface, across the new width.
+      const bool boat = base == "boat-on-waves-3d";
+      CHECK(paper.dx() == Approx(boat ? 1.0 / 96.0 : 1.0 / 150.0).epsilon(1e-12));
+      for (int ax = 0; ax < 3; ++ax) CHECK(paper.domain.lower[ax] == own.domain.lower[ax]);
+      CHECK(paper.domain.upper[1] == own.domain.upper[1]);
+      const nlohmann::json& liquid_a = a["liquids"][0]["shape"];
+      const nlohmann::json& liquid_b = b["liquids"][0]["shape"];
+      CHECK(liquid_a["type"] == "box");
+      // the liquid fills the floor of the new box
+      for (int ax : {0, 2}) {
+        CHECK(liquid_a["center"][ax].get<double>() == Approx(0.5 * paper.domain.upper[ax]));
+        CHECK(liquid_a["half_size"][ax].get<double>() == Approx(0.5 * paper.domain.upper[ax]));
+      }
+      CHECK(liquid_a["center"][1].get<double>() == Approx(liquid_a["half_size"][1].get<double>()));
+      const double paper_particles = boat ? 2.8e6 : 8.2e6;
+      CHECK(std::abs(box_particles(liquid_a, paper.dx()) / paper_particles - 1.0) < 0.05);
+      const double drop = box_top(liquid_b) - box_top(liquid_a);
+      CHECK(drop > 0.0);
+      std::array<double, 3> shift = {
+          0.5 * (paper.domain.upper[0] - own.domain.upper[0]), -drop,
+          0.5 * (paper.domain.upper[2] - own.domain.upper[2])};
+      REQUIRE(a["bodies"].size() == b["bodies"].size());
+      for (size_t i = 0; i < a["bodies"].size(); ++i) {
+        nlohmann::json& sa = a["bodies"][i]["shape"];
+        nlohmann::json& sb = b["bodies"][i]["shape"];
+        INFO(a["bodies"][i]["name"].get<std::string>());
+        if (a["bodies"][i]["motion"] == "kinematic") {
+          // the board: same x, bottom and height above the surface; the whole new width
+          const auto bottom = [](const nlohmann::json& s) {
+            return s["center"][1].get<double>() - s["half_size"][1].get<double>();
+          };
+          const auto top = [](const nlohmann::json& s) {
+            return s["center"][1].get<double>() + s["half_size"][1].get<double>();
+          };
+          CHECK(sa["center"][0] == sb["center"][0]);
+          CHECK(sa["half_size"][0] == sb["half_size"][0]);
+          CHECK(bottom(sa) == Approx(bottom(sb)));
+          CHECK(top(sa) - box_top(liquid_a) == Approx(top(sb) - box_top(liquid_b)));
+          CHECK(sa["center"][2].get<double>() == Approx(0.5 * paper.domain.upper[2]));
+          CHECK(sa["half_size"][2].get<double>() == Approx(0.5 * paper.domain.upper[2]));
+          for (nlohmann::json* s : {&sa, &sb}) {
+            s->erase("center");
+            s->erase("half_size");
+          }
+          continue;
+        }
+        const auto parts_a = shape_parts(sa);
+        const auto parts_b = shape_parts(sb);
+        REQUIRE(parts_a.size() == parts_b.size());
+        for (size_t k = 0; k < parts_a.size(); ++k) {
+          for (int ax = 0; ax < 3; ++ax)
+            CHECK((*parts_a[k])["center"][ax].get<double>() ==
+                  Approx((*parts_b[k])["center"][ax].get<double>() + shift[ax]).margin(1e-12));
+          parts_a[k]->erase("center");
+          parts_b[k]->erase("center");
+        }
+      }
+      for (nlohmann::json* j : {&a, &b}) {
+        (*j)["domain"].erase("upper");
+        (*j)["liquids"][0]["shape"].erase("center");
+        (*j)["liquids"][0]["shape"].erase("half_size");
       }
     }
     CHECK(a == b);
