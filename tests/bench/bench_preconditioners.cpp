@@ -24,6 +24,7 @@
 #include <ctime>
 #include <cmath>
 #include <cstdio>
+#include <cstdint>
 #include <cstring>
 #include <memory>
 #include <sstream>
@@ -157,6 +158,7 @@ void run_case(const Config& cfg, int n, double eta) {
   double share = 0.0;
   long cut_entries = 0;
   int it_block = -1;
+  std::uint64_t digest = 0;
   bool conv_block = false;
   std::size_t bytes = 0;
   int levels = 0;
@@ -211,6 +213,16 @@ void run_case(const Config& cfg, int n, double eta) {
     share = m.free_surface_share();
     cut_entries = m.cut_factor_entries();
     it_block = res.iterations;
+    {
+      // a digest of the solution's bits (same preconditioner, same bits: compare across builds)
+      std::uint64_t h = 1469598103934665603ull;
+      for (int i = 0; i < x.size(); ++i) {
+        std::uint64_t bits;
+        std::memcpy(&bits, &x[i], sizeof bits);
+        h = (h ^ bits) * 1099511628211ull;
+      }
+      digest = h;
+    }
     conv_block = res.converged;
     bytes = m.memory_bytes();
     levels = m.velocity_multigrid().num_levels();
@@ -242,8 +254,9 @@ void run_case(const Config& cfg, int n, double eta) {
               conv_ssor ? " " : "!", t_ssor, it_block, conv_block ? " " : "!", t_setup, t_solve, levels,
               bytes / 1e6, cfg.ssor ? t_ssor / (t_setup + t_solve) : 0.0);
   std::printf("     cpu s: SSOR %.3f | block setup %.3f solve %.3f | speed-up %.1f | %d V-cycles (share %.3f) | cut block %d unknowns, "
-              "%ld factor entries\n",
-              c_ssor, c_setup, c_solve, cfg.ssor ? c_ssor / (c_setup + c_solve) : 0.0, cycles, share, cut_size, cut_entries);
+              "%ld factor entries | digest %016llx\n",
+              c_ssor, c_setup, c_solve, cfg.ssor ? c_ssor / (c_setup + c_solve) : 0.0, cycles, share, cut_size, cut_entries,
+              static_cast<unsigned long long>(digest));
   std::fflush(stdout);
 }
 
