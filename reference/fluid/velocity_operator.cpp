@@ -268,11 +268,18 @@ SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
   const int* t_outer = f.b_transpose.outerIndexPtr();
   const int* t_inner = f.b_transpose.innerIndexPtr();
   const double* t_value = f.b_transpose.valuePtr();
-#pragma omp parallel for schedule(static) if (nf > kParallelRows) num_threads(process_threads())
+#pragma omp parallel if (nf > kParallelRows) num_threads(process_threads())
+  {
+  // slot[g]: the position of column g in the current row (-1: none yet), the linear search's
+  // answer in one load; contributions are summed in the same order
+  std::vector<int> slot(static_cast<std::size_t>(nf), -1);
+#pragma omp for schedule(static)
   for (int r = 0; r < nf; ++r) {
     std::vector<std::pair<int, double>>& row = rows[r];
     row.clear();
+    row.reserve(32);
     row.emplace_back(r, 1.0 / f.c[r]);
+    slot[r] = 0;
     for (int q = b_outer[r]; q < b_outer[r + 1]; ++q) {
       const int i = b_inner[q];
       const double bri = b_value[q];
@@ -281,15 +288,18 @@ SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
         for (int p = t_outer[j]; p < t_outer[j + 1]; ++p) {
           const int g = t_inner[p];
           const double v = s * t_value[p];
-          auto it = std::find_if(row.begin(), row.end(), [g](const auto& e) { return e.first == g; });
-          if (it == row.end())
+          if (slot[g] < 0) {
+            slot[g] = static_cast<int>(row.size());
             row.emplace_back(g, v);
-          else
-            it->second += v;
+          } else {
+            row[slot[g]].second += v;
+          }
         }
       });
     }
+    for (const auto& e : row) slot[e.first] = -1;
     std::sort(row.begin(), row.end());
+  }
   }
   // the rows straight into compressed storage (each row's columns are distinct and sorted: the
   // matrix setFromTriplets would build, without its triplet list and transposed copy)

@@ -166,14 +166,16 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool ren
     for (int k = 0; k < ps.size(); ++k) {
       const int* idx = ps.index.data() + ps.start[k];
       const int m = ps.start[k + 1] - ps.start[k];
-      Eigen::MatrixXd block = Eigen::MatrixXd::Zero(m, m);
+      // (storage on the stack, at most kMaxPatchSize square: no allocation per patch)
+      using Block = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, PatchSet::kMaxPatchSize, PatchSet::kMaxPatchSize>;
+      Block block = Block::Zero(m, m);
       for (int i = 0; i < m; ++i) slot[idx[i]] = i;
       for (int i = 0; i < m; ++i)
         for (SparseMatrix::InnerIterator it(lv.a, idx[i]); it; ++it)
           if (slot[it.col()] >= 0) block(i, slot[it.col()]) = it.value();
       for (int i = 0; i < m; ++i) slot[idx[i]] = -1;
-      Eigen::LDLT<Eigen::MatrixXd> ldlt(block);
-      Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(m, m));
+      Eigen::LDLT<Block> ldlt(block);
+      Block inv = ldlt.solve(Block::Identity(m, m));
       inv = 0.5 * (inv + inv.transpose()).eval();  // exactly symmetric
       double* out = inverse_[l].data() + offset[k];
       for (int i = 0; i < m; ++i)

@@ -13,6 +13,7 @@
 //       [--two-term | --additive] [--schur cc|mobility|scaled (Sigma^-1 of the two-term form)]
 //       [--cycle-ratio R (0: --cycles always)]
 //       [--lean-share S (3D: one V-cycle fewer below this free-surface share; 0: off)]
+//       [--setup-only (the block preconditioner is built, not used: its set-up timed alone)]
 //
 // Scenes (unit box, walls, open top, rho = 1000, dt = 0.01, a smooth swirl plus one step of
 // gravity as u*):
@@ -68,6 +69,7 @@ struct Config {
   int ssor_max = 20000;
   bool ssor = true;
   int repeats = 1;
+  bool setup_only = false;  ///< --setup-only: build the block preconditioner, no solve with it
   double noise = 0.0;
   StokesPreconditionerOptions options;
 };
@@ -203,7 +205,7 @@ void run_case(const Config& cfg, int n, double eta) {
         rz = r.dot(z);
         p = z + beta * p;
       }
-    } else {
+    } else if (!cfg.setup_only) {
       res = pcg_solve(*op, b, x, settings, m);
     }
     t_solve += seconds_since(t1) / cfg.repeats;
@@ -281,6 +283,7 @@ int main(int argc, char** argv) {
     else if (a == "--ssor-max") cfg.ssor_max = std::atoi(next());
     else if (a == "--no-ssor") cfg.ssor = false;
     else if (a == "--repeats") cfg.repeats = std::atoi(next());
+    else if (a == "--setup-only") cfg.setup_only = true;
     else if (a == "--noise") cfg.noise = std::atof(next());
     else if (a == "--gamma") cfg.options.penalty_factor = std::atof(next());
     else if (a == "--cycles") cfg.options.velocity_cycles = std::atoi(next());
