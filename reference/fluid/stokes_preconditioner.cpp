@@ -339,7 +339,8 @@ void StokesPreconditioner<Dim>::build_cut_block() {
   factor->analyzePattern(acc);
   if (factor->info() != Eigen::Success || factor->analysed_entries() > 8 * velocity_.level(0).a.nonZeros())
     return;
-  factor->factorize(acc);
+  if (options_.cut_supernodal) factor->factorize_supernodal(acc);
+  else factor->factorize(acc);
   if (factor->info() != Eigen::Success || !factor->vectorD().allFinite() || factor->vectorD().minCoeff() <= 0.0)
     return;
   cut_ = std::move(list);

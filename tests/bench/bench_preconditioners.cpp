@@ -14,6 +14,7 @@
 //       [--cycle-ratio R (0: --cycles always)]
 //       [--lean-share S (3D: one V-cycle fewer below this free-surface share; 0: off)]
 //       [--setup-only (the block preconditioner is built, not used: its set-up timed alone)]
+//       [--cut-simplicial (the cut block factored by Eigen's simplicial LDL^T, not by supernodes)]
 //
 // Scenes (unit box, walls, open top, rho = 1000, dt = 0.01, a smooth swirl plus one step of
 // gravity as u*):
@@ -284,6 +285,7 @@ int main(int argc, char** argv) {
     else if (a == "--no-ssor") cfg.ssor = false;
     else if (a == "--repeats") cfg.repeats = std::atoi(next());
     else if (a == "--setup-only") cfg.setup_only = true;
+    else if (a == "--cut-simplicial") cfg.options.cut_supernodal = false;
     else if (a == "--noise") cfg.noise = std::atof(next());
     else if (a == "--gamma") cfg.options.penalty_factor = std::atof(next());
     else if (a == "--cycles") cfg.options.velocity_cycles = std::atoi(next());
