@@ -91,7 +91,10 @@ void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
         for (int r = 0; r < m; ++r) t(r, c) = ld[static_cast<Index>(c) * nrd + p + r] * m_diag[fd + c];
       Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> lrows(ld + p, k, wd, Eigen::OuterStride<>(nrd));
       Eigen::Map<Eigen::MatrixXd> u(update.data(), m, k);
-      u.noalias() = t * lrows.transpose();
+      // coefficient-based (lazyProduct): each entry's sum over the d's columns in order, on the
+      // calling thread; Eigen's blocked GEMM would split its depth by the thread count (bits that
+      // depend on it) and may start threads of its own
+      u.noalias() = t.lazyProduct(lrows.transpose());
       for (int c = 0; c < k; ++c) {
         double* col = x + static_cast<Index>(rows_of(d, p + c) - f) * nr;
         for (int r = c; r < m; ++r) col[pos[rows_of(d, p + r)]] -= u(r, c);
