@@ -155,21 +155,44 @@ std::vector<int> active_prolongation(const std::vector<int>& fine, const Weights
     weights(f, [&](int coarse, double w) { entries.emplace_back(coarse, w); });
     row_start.push_back(static_cast<int>(entries.size()));
   }
+  // the coarse unknowns: the coarse indices reached, increasing (a mark per global index rather
+  // than a sort of every entry)
+  int top = -1;
+  for (const auto& e : entries) top = std::max(top, e.first);
+  std::vector<int> local(static_cast<std::size_t>(top + 1), -1);
+  for (const auto& e : entries) local[e.first] = 0;
   std::vector<int> coarse;
-  coarse.reserve(entries.size());
-  for (const auto& e : entries) coarse.push_back(e.first);
-  std::sort(coarse.begin(), coarse.end());
-  coarse.erase(std::unique(coarse.begin(), coarse.end()), coarse.end());
-  std::vector<Triplet> t;
-  t.reserve(entries.size());
-  for (std::size_t r = 0; r + 1 < row_start.size(); ++r)
-    for (int q = row_start[r]; q < row_start[r + 1]; ++q) {
-      const int col = static_cast<int>(std::lower_bound(coarse.begin(), coarse.end(), entries[q].first) - coarse.begin());
-      t.emplace_back(static_cast<int>(r), col, entries[q].second);
+  for (int g = 0; g <= top; ++g)
+    if (local[g] == 0) {
+      local[g] = static_cast<int>(coarse.size());
+      coarse.push_back(g);
     }
-  p.resize(static_cast<int>(fine.size()), static_cast<int>(coarse.size()));
-  p.setFromTriplets(t.begin(), t.end());
-  p.makeCompressed();
+  // P straight into compressed storage: each row's entries sorted by column, repeated columns
+  // summed in the order given (what setFromTriplets did)
+  const int rows = static_cast<int>(fine.size());
+  p.resize(rows, static_cast<int>(coarse.size()));
+  p.resizeNonZeros(static_cast<Eigen::Index>(entries.size()));
+  int* outer = p.outerIndexPtr();
+  int* inner = p.innerIndexPtr();
+  double* value = p.valuePtr();
+  std::vector<std::pair<int, double>> row;
+  int pos = 0;
+  outer[0] = 0;
+  for (int r = 0; r < rows; ++r) {
+    row.clear();
+    for (int q = row_start[r]; q < row_start[r + 1]; ++q) row.emplace_back(local[entries[q].first], entries[q].second);
+    std::stable_sort(row.begin(), row.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    for (std::size_t q = 0; q < row.size(); ++q) {
+      if (q > 0 && row[q].first == row[q - 1].first) {
+        value[pos - 1] += row[q].second;
+        continue;
+      }
+      inner[pos] = row[q].first;
+      value[pos++] = row[q].second;
+    }
+    outer[r + 1] = pos;
+  }
+  p.resizeNonZeros(pos);
   return coarse;
 }
 
@@ -261,18 +284,20 @@ PatchSet face_level_patches(const MacGrid<Dim>& grid, const std::vector<int>& fa
     }
     bool operator==(const Key& o) const { return block == o.block && sub == o.sub && index == o.index; }
   };
-  std::vector<Key> cells;
-  cells.reserve(2 * faces.size());
+  // (each cell once: marked, then sorted; the same list as sorting the cells of every face)
+  std::vector<char> beside(static_cast<std::size_t>(grid.num_cells()), 0);
   for (int f : faces) {
     const auto [a, c] = grid.face_coord(f);
     for (int cell : {grid.face_cell_minus(a, c), grid.face_cell_plus(a, c)})
-      if (cell >= 0) {
-        const VecI<Dim> cc = grid.cell_coord(cell);
-        cells.push_back({layout.block_of(cc, grid.cells()), parity(cc), cell});
-      }
+      if (cell >= 0) beside[cell] = 1;
   }
+  std::vector<Key> cells;
+  for (int cell = 0; cell < grid.num_cells(); ++cell)
+    if (beside[cell]) {
+      const VecI<Dim> cc = grid.cell_coord(cell);
+      cells.push_back({layout.block_of(cc, grid.cells()), parity(cc), cell});
+    }
   std::sort(cells.begin(), cells.end());
-  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
   if (!cell_patches) cells.clear();
   std::vector<Key> extras;  // (block, kind and parity, patch number in extra)
   if (extra)
@@ -339,10 +364,11 @@ Multigrid face_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& face_
   if (static_cast<int>(face_of_unknown.size()) != a.rows())
     throw std::invalid_argument("face_multigrid: one face per unknown expected");
   std::vector<MultigridLevel> levels;
+  levels.reserve(static_cast<std::size_t>(std::max(1, options.max_levels)));  // no reallocation (it would copy the levels)
   MacGrid<Dim> g = grid;
   std::vector<int> faces = face_of_unknown;
   levels.emplace_back();
-  levels.back().a = std::move(a);
+  levels.back().a.swap(a);  // (Eigen 3.4's SparseMatrix has no move assignment: `= std::move` copies)
   while (static_cast<int>(faces.size()) > options.max_coarse &&
          static_cast<int>(levels.size()) < options.max_levels && can_coarsen(g)) {
     MultigridLevel& lv = levels.back();
@@ -357,7 +383,7 @@ Multigrid face_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& face_
     SparseMatrix ac = galerkin_product(lv.a, lv.prolongation);
     stabilise_coarse(ac);
     levels.emplace_back();
-    levels.back().a = std::move(ac);
+    levels.back().a.swap(ac);
     faces = std::move(coarse);
     g = gc;
   }
@@ -370,10 +396,11 @@ Multigrid cell_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& cell_
   if (static_cast<int>(cell_of_unknown.size()) != a.rows())
     throw std::invalid_argument("cell_multigrid: one cell per unknown expected");
   std::vector<MultigridLevel> levels;
+  levels.reserve(static_cast<std::size_t>(std::max(1, options.max_levels)));  // no reallocation (it would copy the levels)
   MacGrid<Dim> g = grid;
   std::vector<int> cells = cell_of_unknown;
   levels.emplace_back();
-  levels.back().a = std::move(a);
+  levels.back().a.swap(a);  // (Eigen 3.4's SparseMatrix has no move assignment: `= std::move` copies)
   while (static_cast<int>(cells.size()) > options.max_coarse &&
          static_cast<int>(levels.size()) < options.max_levels && can_coarsen(g)) {
     MultigridLevel& lv = levels.back();
@@ -384,7 +411,7 @@ Multigrid cell_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& cell_
     SparseMatrix ac = galerkin_product(lv.a, lv.prolongation);
     stabilise_coarse(ac);
     levels.emplace_back();
-    levels.back().a = std::move(ac);
+    levels.back().a.swap(ac);
     cells = std::move(coarse);
     g = gc;
   }

@@ -49,13 +49,24 @@ void multiply_rows(const SparseMatrix& m, int begin, int end, const double* x, d
   }
 }
 
+/// `m` marked so that Eigen 3.4 moves it: its SparseMatrix has no move constructor or move
+/// assignment (std::move alone copies), but its copy constructor and copy assignment swap from a
+/// matrix marked as an rvalue. `m` is left empty (or with the target's old content).
+SparseMatrix& moved(SparseMatrix& m) { return m.markAsRValue(); }
+
+/// `f` with its sparse matrices marked by moved(): std::move(f) then moves them too.
+StokesFactors& moved(StokesFactors& f) {
+  for (SparseMatrix* m : {&f.b, &f.b_transpose, &f.compliance, &f.compliance_exact}) moved(*m);
+  return f;
+}
+
 }  // namespace
 
 template <int Dim>
 StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const LinearOperator& a,
                                                 StokesFactors factors,
                                                 const StokesPreconditionerOptions& options)
-    : a_(a), f_(std::move(factors)), options_(options) {
+    : a_(a), f_(std::move(moved(factors))), options_(options) {
   ns_ = f_.num_stress;
   np_ = f_.num_pressure;
   n_ = ns_ + np_;
@@ -87,9 +98,12 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   }
   pressure_only_ = ns_ == 0;
   if (pressure_only_) {
-    if (np_ > 0) pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, a22, mg);
+    if (np_ > 0) pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, moved(a22), mg);
   } else {
-    kinv_ = block_diagonal_inverse(f_.compliance);
+    {
+      SparseMatrix kinv = block_diagonal_inverse(f_.compliance);
+      kinv_.swap(kinv);
+    }
     // Pi^-1 = gamma (eta / W_L^p + 1 / A22_ii)
     penalty_.resize(np_);
     schur_diagonal_.resize(np_);
@@ -200,14 +214,16 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     MacMultigridOptions vmg = mg;
     vmg.transverse_linear = options.transverse_linear;
     vmg.fine_cell_patches = options.fine_cell_patches;
-    velocity_ = face_multigrid<Dim>(grid, f_.face, std::move(v), vmg, options.element_patches ? &extra : nullptr);
+    velocity_ = face_multigrid<Dim>(grid, f_.face, moved(v), vmg, options.element_patches ? &extra : nullptr);
     if (np_ > 0 && (options.schur_correction || options.additive_pressure)) {
       // A22 is singular for enclosed liquid: the preconditioner inverts A22 + 1e-10 diag(A22)
       // (the scaled commutator's L = B_p^T W B_p in its place; with W = C it is A22)
-      SparseMatrix shifted = a22;
+      SparseMatrix shifted;
       if (commutator_ && options.schur == SchurApproximation::commutator_scaled) {
         shifted = SparseMatrix(bpt_ * sparse_diagonal(commutator_weight_)) * bp_;
         shifted.makeCompressed();
+      } else {
+        shifted.swap(a22);  // (a22 is not used after this)
       }
       for (int k = 0; k < np_; ++k) shifted.coeffRef(k, k) *= 1.0 + 1e-10;
       if (!empty_.empty()) {
@@ -223,7 +239,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
         for (int k : empty_) shifted.coeffRef(k, k) = fill;
         shifted.makeCompressed();
       }
-      pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, std::move(shifted), mg);
+      pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, moved(shifted), mg);
     }
   }
   if (!pressure_only_ && options.inner_cg > 0) velocity_finest_ = velocity_.finest_operator();
@@ -323,11 +339,12 @@ void StokesPreconditioner<Dim>::build_cut_block() {
   factor->analyzePattern(acc);
   if (factor->info() != Eigen::Success || factor->analysed_entries() > 8 * velocity_.level(0).a.nonZeros())
     return;
-  factor->factorize(acc);
+  if (options_.cut_supernodal) factor->factorize_supernodal(acc);
+  else factor->factorize(acc);
   if (factor->info() != Eigen::Success || !factor->vectorD().allFinite() || factor->vectorD().minCoeff() <= 0.0)
     return;
   cut_ = std::move(list);
-  cut_rows_ = std::move(rows);
+  cut_rows_.swap(rows);
   cut_factor_ = std::move(factor);
   cut_factor_->prepare_solve();
   cut_r_.setZero(m);

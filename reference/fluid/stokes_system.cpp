@@ -804,6 +804,7 @@ void MatrixFreeStokesOperator<Dim>::face_force_into(const VectorX& x, double* fo
 template <int Dim>
 std::vector<std::pair<int, double>> MatrixFreeStokesOperator<Dim>::stencil(int i) const {
   std::vector<std::pair<int, double>> column;
+  column.reserve(4 * Dim);  // (one allocation: at most two fields' faces)
   std::array<int, 2 * Dim> face;
   std::array<double, 2 * Dim> coef;
   const int loc = location_[i];
@@ -827,6 +828,7 @@ std::vector<std::pair<int, double>> MatrixFreeStokesOperator<Dim>::stencil(int i
   // merge repeated faces (a periodic axis of one or two cells)
   std::sort(column.begin(), column.end());
   std::vector<std::pair<int, double>> merged;
+  merged.reserve(column.size());
   for (const auto& entry : column) {
     if (!merged.empty() && merged.back().first == entry.first)
       merged.back().second += entry.second;

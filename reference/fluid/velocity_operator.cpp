@@ -178,13 +178,42 @@ StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& 
   const int n = f.size();
   std::vector<std::vector<std::pair<int, double>>> columns(n);
 #pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < n; ++i) columns[i] = op.stencil(i);
-  std::vector<Triplet> t;
-  t.reserve(static_cast<std::size_t>(n) * 2 * Dim);
-  for (int i = 0; i < n; ++i)
-    for (const auto& [face, coef] : columns[i])
-      if (active_of_face[face] >= 0 && coef != 0.0) t.emplace_back(i, active_of_face[face], coef);
-  finish_b(t, n, f);
+  for (int i = 0; i < n; ++i) {
+    // row i of B^T: the active faces, sorted, a repeated face summed in the stencil's order (the
+    // matrix setFromTriplets built from these entries, without the triplet list)
+    std::vector<std::pair<int, double>>& row = columns[i];
+    row = op.stencil(i);
+    std::size_t kept = 0;
+    for (const auto& [face, coef] : row)
+      if (active_of_face[face] >= 0 && coef != 0.0) row[kept++] = {active_of_face[face], coef};
+    row.resize(kept);
+    std::stable_sort(row.begin(), row.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    std::size_t out = 0;
+    for (std::size_t q = 0; q < row.size(); ++q) {
+      if (out > 0 && row[out - 1].first == row[q].first) row[out - 1].second += row[q].second;
+      else row[out++] = row[q];
+    }
+    row.resize(out);
+  }
+  SparseMatrix& bt = f.b_transpose;
+  bt.resize(n, static_cast<int>(f.face.size()));
+  int* outer = bt.outerIndexPtr();
+  outer[0] = 0;
+  for (int i = 0; i < n; ++i) outer[i + 1] = outer[i] + static_cast<int>(columns[i].size());
+  bt.resizeNonZeros(outer[n]);
+  int* inner = bt.innerIndexPtr();
+  double* value = bt.valuePtr();
+#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
+  for (int i = 0; i < n; ++i) {
+    int pos = outer[i];
+    for (const auto& [g, x] : columns[i]) {
+      inner[pos] = g;
+      value[pos++] = x;
+    }
+    std::vector<std::pair<int, double>>().swap(columns[i]);
+  }
+  f.b = f.b_transpose.transpose();
+  f.b.makeCompressed();
   return f;
 }
 
@@ -239,11 +268,18 @@ SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
   const int* t_outer = f.b_transpose.outerIndexPtr();
   const int* t_inner = f.b_transpose.innerIndexPtr();
   const double* t_value = f.b_transpose.valuePtr();
-#pragma omp parallel for schedule(static) if (nf > kParallelRows) num_threads(process_threads())
+#pragma omp parallel if (nf > kParallelRows) num_threads(process_threads())
+  {
+  // slot[g]: the position of column g in the current row (-1: none yet), the linear search's
+  // answer in one load; contributions are summed in the same order
+  std::vector<int> slot(static_cast<std::size_t>(nf), -1);
+#pragma omp for schedule(static)
   for (int r = 0; r < nf; ++r) {
     std::vector<std::pair<int, double>>& row = rows[r];
     row.clear();
+    row.reserve(32);
     row.emplace_back(r, 1.0 / f.c[r]);
+    slot[r] = 0;
     for (int q = b_outer[r]; q < b_outer[r + 1]; ++q) {
       const int i = b_inner[q];
       const double bri = b_value[q];
@@ -252,25 +288,37 @@ SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
         for (int p = t_outer[j]; p < t_outer[j + 1]; ++p) {
           const int g = t_inner[p];
           const double v = s * t_value[p];
-          auto it = std::find_if(row.begin(), row.end(), [g](const auto& e) { return e.first == g; });
-          if (it == row.end())
+          if (slot[g] < 0) {
+            slot[g] = static_cast<int>(row.size());
             row.emplace_back(g, v);
-          else
-            it->second += v;
+          } else {
+            row[slot[g]].second += v;
+          }
         }
       });
     }
+    for (const auto& e : row) slot[e.first] = -1;
     std::sort(row.begin(), row.end());
   }
-  std::vector<Triplet> t;
-  std::size_t nnz = 0;
-  for (const auto& row : rows) nnz += row.size();
-  t.reserve(nnz);
-  for (int r = 0; r < nf; ++r)
-    for (const auto& [g, v] : rows[r]) t.emplace_back(r, g, v);
+  }
+  // the rows straight into compressed storage (each row's columns are distinct and sorted: the
+  // matrix setFromTriplets would build, without its triplet list and transposed copy)
   SparseMatrix v(nf, nf);
-  v.setFromTriplets(t.begin(), t.end());
-  v.makeCompressed();
+  int* outer = v.outerIndexPtr();
+  outer[0] = 0;
+  for (int r = 0; r < nf; ++r) outer[r + 1] = outer[r] + static_cast<int>(rows[r].size());
+  v.resizeNonZeros(outer[nf]);
+  int* inner = v.innerIndexPtr();
+  double* value = v.valuePtr();
+#pragma omp parallel for schedule(static) if (nf > kParallelRows) num_threads(process_threads())
+  for (int r = 0; r < nf; ++r) {
+    int pos = outer[r];
+    for (const auto& [g, x] : rows[r]) {
+      inner[pos] = g;
+      value[pos++] = x;
+    }
+    std::vector<std::pair<int, double>>().swap(rows[r]);
+  }
   return v;
 }
 

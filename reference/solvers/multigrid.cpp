@@ -158,19 +158,29 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool ren
       offset[k + 1] = offset[k] + m * m;
     }
     inverse_[l].assign(offset.back(), 0.0);
-#pragma omp parallel for schedule(static) if (ps.size() > 1024) num_threads(process_threads())
+#pragma omp parallel if (ps.size() > 1024) num_threads(process_threads())
+    {
+    // the block gathered by one pass over each member's row (`slot`: member position of a column)
+    std::vector<int> slot(static_cast<std::size_t>(n), -1);
+#pragma omp for schedule(static)
     for (int k = 0; k < ps.size(); ++k) {
       const int* idx = ps.index.data() + ps.start[k];
       const int m = ps.start[k + 1] - ps.start[k];
-      Eigen::MatrixXd block(m, m);
+      // (storage on the stack, at most kMaxPatchSize square: no allocation per patch)
+      using Block = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, PatchSet::kMaxPatchSize, PatchSet::kMaxPatchSize>;
+      Block block = Block::Zero(m, m);
+      for (int i = 0; i < m; ++i) slot[idx[i]] = i;
       for (int i = 0; i < m; ++i)
-        for (int j = 0; j < m; ++j) block(i, j) = lv.a.coeff(idx[i], idx[j]);
-      Eigen::LDLT<Eigen::MatrixXd> ldlt(block);
-      Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(m, m));
+        for (SparseMatrix::InnerIterator it(lv.a, idx[i]); it; ++it)
+          if (slot[it.col()] >= 0) block(i, slot[it.col()]) = it.value();
+      for (int i = 0; i < m; ++i) slot[idx[i]] = -1;
+      Eigen::LDLT<Block> ldlt(block);
+      Block inv = ldlt.solve(Block::Identity(m, m));
       inv = 0.5 * (inv + inv.transpose()).eval();  // exactly symmetric
       double* out = inverse_[l].data() + offset[k];
       for (int i = 0; i < m; ++i)
         for (int j = 0; j < m; ++j) out[i * m + j] = inv(i, j);
+    }
     }
     for (double v : inverse_[l])
       if (!std::isfinite(v)) throw std::invalid_argument("Multigrid: singular patch block");
@@ -203,12 +213,16 @@ void Multigrid::renumber() {
   }
   for (int l = 0; l + 1 < num; ++l) {
     MultigridLevel& lv = levels_[l];
-    lv.a = permuted(lv.a, order_[l], inverse[l]);
+    // (swapped in: Eigen 3.4's SparseMatrix has no move assignment, `=` would copy)
+    SparseMatrix a = permuted(lv.a, order_[l], inverse[l]);
+    lv.a.swap(a);
     for (int& i : lv.patches.index) i = inverse[l][i];
     // prolongation: fine rows in the new order, coarse columns renumbered; restriction (the
     // transpose as Eigen stored it) the other way round
-    lv.prolongation = permuted(lv.prolongation, order_[l], inverse[l + 1]);
-    restriction_[l] = permuted(restriction_[l], order_[l + 1], inverse[l]);
+    SparseMatrix p = permuted(lv.prolongation, order_[l], inverse[l + 1]);
+    lv.prolongation.swap(p);
+    SparseMatrix r = permuted(restriction_[l], order_[l + 1], inverse[l]);
+    restriction_[l].swap(r);
   }
   if (!order_.empty() && !order_[0].empty()) {
     apply_in_.setZero(levels_[0].a.rows());
@@ -384,8 +398,12 @@ SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bo
     }
   }
   for (int i = 0; i < m; ++i) outer[static_cast<std::size_t>(i) + 1] += outer[i];
-  std::vector<int> inner(static_cast<std::size_t>(outer[m]));
-  std::vector<double> value(static_cast<std::size_t>(outer[m]));
+  // the result's own storage, written in place (no zero-filled staging arrays and no copy: fresh
+  // pages are touched once, by the rows that fill them)
+  SparseMatrix c(m, n);
+  c.resizeNonZeros(outer[m]);
+  int* inner = c.innerIndexPtr();
+  double* value = c.valuePtr();
   std::vector<int> kept(drop_zeros ? static_cast<std::size_t>(m) : 0);
   // pass 2: values, columns sorted per row (and the exact zeros dropped, compacted below)
 #pragma omp parallel if (parallel) num_threads(process_threads())
@@ -409,7 +427,7 @@ SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bo
           }
         }
       }
-      std::sort(inner.begin() + outer[i], inner.begin() + end);
+      std::sort(inner + outer[i], inner + end);
       int out = outer[i];
       for (int e = outer[i]; e < end; ++e) {
         const double v = sum[inner[e]];
@@ -420,25 +438,23 @@ SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bo
       if (drop_zeros) kept[i] = out - outer[i];
     }
   }
-  SparseMatrix c(m, n);
   if (drop_zeros) {
     // compact the rows (serial: a copy within the arrays, in increasing order)
     int pos = 0;
     for (int i = 0; i < m; ++i) {
       const int start = outer[i];
-      for (int e = 0; e < kept[i]; ++e) {
-        inner[pos + e] = inner[start + e];
-        value[pos + e] = value[start + e];
-      }
+      if (pos != start)
+        for (int e = 0; e < kept[i]; ++e) {
+          inner[pos + e] = inner[start + e];
+          value[pos + e] = value[start + e];
+        }
       outer[i] = pos;
       pos += kept[i];
     }
     outer[m] = pos;
+    c.resizeNonZeros(pos);  // shrinks the size only: the arrays stay
   }
-  c.resizeNonZeros(outer[m]);
   std::copy(outer.begin(), outer.end(), c.outerIndexPtr());
-  std::copy(inner.begin(), inner.begin() + outer[m], c.innerIndexPtr());
-  std::copy(value.begin(), value.begin() + outer[m], c.valuePtr());
   return c;
 }
 
@@ -446,13 +462,19 @@ SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p) {
   // P^T (A P), both products row by row; A P keeps its cancelled entries (as Eigen's product
   // did), P^T A P drops the exact zeros: the same matrix, bit for bit, as
   // prune(P^T * (A * P)) with Eigen's products (test_multigrid's check), at about half the cost
+  // (a and p copied only when they are not compressed: the finest operator holds millions of entries)
   SparseMatrix pt = p.transpose();
   pt.makeCompressed();
-  SparseMatrix ac = a;
-  ac.makeCompressed();
-  SparseMatrix pc = p;
-  pc.makeCompressed();
-  const SparseMatrix ap = sparse_row_product(ac, pc, false);
+  SparseMatrix ac, pc;
+  if (!a.isCompressed()) {
+    ac = a;
+    ac.makeCompressed();
+  }
+  if (!p.isCompressed()) {
+    pc = p;
+    pc.makeCompressed();
+  }
+  const SparseMatrix ap = sparse_row_product(a.isCompressed() ? a : ac, p.isCompressed() ? p : pc, false);
   return sparse_row_product(pt, ap, true);
 }
 

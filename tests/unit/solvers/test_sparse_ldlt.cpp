@@ -64,3 +64,76 @@ TEST_CASE("SparseLdlt::solve_into gives Eigen's solve bit for bit, also in place
     }
   }
 }
+
+namespace {
+
+/// A 3D 7-point Laplacian on n^3 with a random positive shift and a few random couplings of
+/// unknowns far apart (SPD by diagonal dominance): wide supernodes and a non-trivial tree.
+Eigen::SparseMatrix<double> shifted_laplacian_3d(int n, unsigned seed) {
+  const int size = n * n * n;
+  const VectorX shift = random_vector(size, seed).cwiseAbs();
+  const VectorX extra = random_vector(size, seed + 1);
+  std::vector<Eigen::Triplet<double>> t;
+  std::vector<double> diagonal(size, 0.0);
+  auto couple = [&](int p, int q, double v) {
+    t.emplace_back(p, q, v);
+    t.emplace_back(q, p, v);
+    diagonal[p] += std::abs(v);
+    diagonal[q] += std::abs(v);
+  };
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const int p = i + n * (j + n * k);
+        if (i + 1 < n) couple(p, p + 1, -1.0);
+        if (j + 1 < n) couple(p, p + n, -1.0);
+        if (k + 1 < n) couple(p, p + n * n, -1.0);
+        if (p % 7 == 3) couple(p, (p * 13 + 5) % size == p ? (p + 1) % size : (p * 13 + 5) % size, 0.5 * extra[p]);
+      }
+  for (int p = 0; p < size; ++p) t.emplace_back(p, p, diagonal[p] + 0.1 + shift[p]);
+  Eigen::SparseMatrix<double> a(size, size);
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
+}  // namespace
+
+TEST_CASE("SparseLdlt::factorize_supernodal: the simplicial factor to round-off, the same storage", "[unit]") {
+  for (int n : {1, 2, 5, 9}) {
+    const Eigen::SparseMatrix<double> a = n == 9 ? shifted_laplacian(30, 7) : shifted_laplacian_3d(n, 3 + n);
+    SparseLdlt simplicial, supernodal;
+    simplicial.analyzePattern(a);
+    supernodal.analyzePattern(a);
+    simplicial.factorize(a);
+    supernodal.factorize_supernodal(a);
+    REQUIRE(simplicial.info() == Eigen::Success);
+    REQUIRE(supernodal.info() == Eigen::Success);
+    // the same pattern of L, the same values and pivots to round-off
+    const Eigen::SparseMatrix<double>& ls = simplicial.matrixL().nestedExpression();
+    const Eigen::SparseMatrix<double>& lt = supernodal.matrixL().nestedExpression();
+    REQUIRE(ls.nonZeros() == lt.nonZeros());
+    for (Eigen::Index q = 0; q < ls.nonZeros(); ++q) {
+      REQUIRE(ls.innerIndexPtr()[q] == lt.innerIndexPtr()[q]);
+      CHECK(std::abs(ls.valuePtr()[q] - lt.valuePtr()[q]) <= 1e-12 * (1.0 + std::abs(ls.valuePtr()[q])));
+    }
+    const VectorX ds = simplicial.vectorD(), dt = supernodal.vectorD();
+    CHECK((ds - dt).cwiseAbs().maxCoeff() <= 1e-12 * ds.cwiseAbs().maxCoeff());
+    // and it solves: A x = b to round-off
+    supernodal.prepare_solve();
+    const VectorX b = random_vector(a.rows(), 5);
+    VectorX x(a.rows());
+    supernodal.solve_into(b, x);
+    CHECK((a * x - b).cwiseAbs().maxCoeff() <= 1e-11 * b.cwiseAbs().maxCoeff());
+  }
+  // a zero pivot is reported as the simplicial factorisation reports it
+  Eigen::SparseMatrix<double> singular = shifted_laplacian_3d(3, 2);
+  singular.coeffRef(0, 0) = 0.0;
+  for (Eigen::SparseMatrix<double>::InnerIterator it(singular, 0); it; ++it) it.valueRef() = 0.0;
+  for (int j = 0; j < singular.outerSize(); ++j)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(singular, j); it; ++it)
+      if (it.row() == 0) it.valueRef() = 0.0;
+  SparseLdlt f;
+  f.analyzePattern(singular);
+  f.factorize_supernodal(singular);
+  CHECK(f.info() == Eigen::NumericalIssue);
+}
