@@ -48,6 +48,12 @@ enum class Line15Energy {
   /// than it is paid with all of it, the rest not carried) and loses only what it did not take
   /// back
   balance,
+  /// `balance`'s credit and amount (kept over the whole liquid), but paid locally: the amount is
+  /// shared among the cells in proportion to line 15's net potential energy rise within
+  /// StageSwitches::line15_pay_reach cells of each, and each cell's share is taken from the
+  /// kinetic energy of the particles within that reach of it (Simulation::pay_line15_energy_locally;
+  /// what a neighbourhood without kinetic energy cannot pay is taken by the uniform scaling)
+  balance_local,
 };
 
 /// Stages of the step that a diagnosis can switch off or replace, to measure what each one
@@ -138,6 +144,12 @@ struct StageSwitches {
   /// projection) add is paid by the liquid's kinetic energy (Line15Energy; docs/particles.md,
   /// "Line 15's potential energy paid by the kinetic energy (slosh9)"). A measurement switch.
   Line15Energy line15_energy = Line15Energy::free;
+  /// With `balance` / `balance_local`: what the kinetic energy cannot pay (a rise larger than it)
+  /// stays owed (the credit may turn positive) instead of being dropped. A measurement switch
+  /// (docs/particles.md, slosh11).
+  bool line15_carry_debt = false;
+  /// Line15Energy::balance_local's neighbourhoods: boxes of (2 reach + 1)^Dim cells
+  int line15_pay_reach = 1;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
@@ -317,6 +329,9 @@ class Simulation : public AnySimulation {
   /// from the liquid's kinetic energy (uniform scaling of the particles' v and c; all of it if
   /// the kinetic energy holds less)
   void pay_line15_energy(double gain);
+  /// Line15Energy::balance_local: `gain` taken from the particles near line 15's rises, from
+  /// the positions before line 15's moves (docs/particles.md, slosh11)
+  void pay_line15_energy_locally(double gain, const std::vector<Vec<Dim>>& before);
   /// Line15Energy::balance: line 15's summed potential energy change not yet paid (<= 0, J)
   double line15_credit_ = 0.0;
   /// The energy ledger (only with StageSwitches::energy_ledger; otherwise nothing is measured):

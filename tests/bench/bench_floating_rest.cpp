@@ -62,6 +62,19 @@ std::vector<Variant> variants() {
       // line 15's potential energy paid by the liquid's kinetic energy (docs/particles.md, slosh9)
       {"paid", [](StageSwitches& s) { s.line15_energy = Line15Energy::per_step; }},
       {"balance", [](StageSwitches& s) { s.line15_energy = Line15Energy::balance; }},
+      // the same amount paid by the particles near line 15's rises (docs/particles.md, slosh11)
+      {"balance-local", [](StageSwitches& s) { s.line15_energy = Line15Energy::balance_local; }},
+      // what the kinetic energy cannot pay stays owed
+      {"balance-debt",
+       [](StageSwitches& s) {
+         s.line15_energy = Line15Energy::balance;
+         s.line15_carry_debt = true;
+       }},
+      {"balance-local-debt",
+       [](StageSwitches& s) {
+         s.line15_energy = Line15Energy::balance_local;
+         s.line15_carry_debt = true;
+       }},
       {"divergence-free-surface-volume-source",
        [](StageSwitches& s) {
          s.divergence_free_air = s.divergence_free_surface_cells = true;

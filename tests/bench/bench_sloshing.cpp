@@ -9,7 +9,8 @@
 //                  [--divergence-free-air] [--divergence-free-surface] [--no-step-projection]
 //                  [--no-surface-deficits] [--dead-band-deficits] [--seed N]
 //                  [--volume-source GAIN] [--pic] [--no-air-velocity] [--all-faces-trusted]
-//                  [--unreached-extrapolated] [--cfl-layers] [--pay-line15 per-step|balance] [--set KEY=VALUE]...
+//                  [--unreached-extrapolated] [--cfl-layers] [--pay-line15 per-step|balance|local] [--carry-debt]
+//                  [--pay-reach CELLS] [--set KEY=VALUE]...
 //
 // --set: a scene override as `monolith run --set` (e.g. domain.boundary.z-=periodic
 // domain.boundary.z+=periodic: a 3D tank without its side walls across the sloshing).
@@ -50,6 +51,8 @@ int main(int argc, char** argv) {
   bool pic = false, no_air_velocity = false, all_faces_trusted = false;
   bool unreached_extrapolated = false, cfl_layers = false;
   Line15Energy pay_line15 = Line15Energy::free;
+  bool carry_debt = false;
+  int pay_reach = 1;
   std::vector<std::string> overrides;
   double max_dt = 0.02;
   int seed = 0;
@@ -79,7 +82,9 @@ int main(int argc, char** argv) {
     else if (a == "--cfl-layers") cfl_layers = true;
     else if (a == "--volume-source") volume_source = std::atof(args.value().c_str());
     else if (a == "--pay-line15")
-      pay_line15 = args.value() == "balance" ? Line15Energy::balance : Line15Energy::per_step;
+      pay_line15 = bench::line15_energy(args.value());
+    else if (a == "--carry-debt") carry_debt = true;
+    else if (a == "--pay-reach") pay_reach = std::atoi(args.value().c_str());
     else if (a == "--seed") seed = std::atoi(args.value().c_str());
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
@@ -109,6 +114,8 @@ int main(int argc, char** argv) {
   if (unreached_extrapolated) switches.unreached_faces_keep_u_star = false;
   if (cfl_layers) switches.extrapolate_cfl_layers = true;
   switches.line15_energy = pay_line15;
+  switches.line15_carry_debt = carry_debt;
+  switches.line15_pay_reach = pay_reach;
   if (volume_source >= 0.0) {
     switches.density_projection_surface_deficits = SurfaceDeficits::to_solve;
     switches.volume_source_gain = volume_source;
