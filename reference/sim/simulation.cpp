@@ -1108,22 +1108,45 @@ void Simulation<Dim>::pay_line15_energy(double gain) {
   // The moves of line 15 are not the flow's: they correct the particles' spacing and volume, and
   // lifting particle volume into the surface (the density projection's corrections of a surface
   // band the flow disordered or spread) raises the potential energy by what no force paid for.
-  // Here the kinetic energy pays it: a uniform scaling of the liquid's velocities (the affine
-  // parts with them, so the next transfer's face momenta scale alike) by
-  //   s = sqrt(max(0, 1 - dPE / KE)),   KE = sum_p 1/2 m_p |v_p|^2,
-  // which lowers KE by dPE (by all of KE if it holds less). A drop of the potential energy is
-  // not given back (line 15 may lose energy, never create it).
-  const double kinetic = particle_kinetic_energy();
-  if (!(kinetic > 0.0) || !(gain > 0.0)) return;
-  const double s = std::sqrt(std::max(0.0, 1.0 - gain / kinetic));
+  // Here the kinetic energy pays it: the liquid's velocities relative to their mass-weighted mean
+  // vbar are scaled (the affine parts with them, so the next transfer's face momenta scale alike)
+  //   v_p <- vbar + s (v_p - vbar),   c_p <- s c_p,   s = sqrt(max(0, 1 - dPE / KE_rel)),
+  //   KE_rel = sum_p 1/2 m_p |v_p - vbar|^2,
+  // which lowers the kinetic energy by dPE (by all of KE_rel if it holds less) and keeps the
+  // liquid's momentum: a liquid in uniform motion (free fall) has nothing to pay with and keeps
+  // its motion exactly (scaling v itself slowed a falling blob against the body it carried,
+  // test_coupled_validation's Fig. 8 free fall; slosh11). A drop of the potential energy is not
+  // given back (line 15 may lose energy, never create it).
+  if (!(gain > 0.0)) return;
   const long np = static_cast<long>(particles_.size());
+  double mass = 0.0;
+  Vec<Dim> momentum = Vec<Dim>::Zero();
+  for (long p = 0; p < np; ++p) {
+    mass += particles_.mass[p];
+    momentum += particles_.mass[p] * particles_.v[p];
+  }
+  if (!(mass > 0.0)) return;
+  const Vec<Dim> mean = momentum / mass;
+  double relative = 0.0;
+  for (long p = 0; p < np; ++p)
+    relative += 0.5 * particles_.mass[p] * (particles_.v[p] - mean).squaredNorm();
+  if (!(relative > 0.0)) return;
+  const double s = std::sqrt(std::max(0.0, 1.0 - gain / relative));
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
-    particles_.v[p] *= s;
+    particles_.v[p] = mean + s * (particles_.v[p] - mean);
     particles_.c[p] *= s;
   }
   // the next step's first half drift reads u_ (the velocity the particles were given)
-  if (split_drift()) u_ *= s;
+  if (split_drift()) {
+    const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f) {
+      const auto [axis, fc] = grid_.face_coord(f);
+      // (the domain's walls keep their zero)
+      if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
+    }
+  }
 }
 
 namespace {
@@ -1848,8 +1871,8 @@ void Simulation<Dim>::state_fields(Archive& a) {
   a(cell_eta_);
   a(previous_shear_rate_);
   a(liquid_weights_current_);
-  // Line15Energy::balance's credit (only with that measurement switch: the format is otherwise
-  // unchanged)
+  // Line15Energy::balance's credit (the default since slosh11; absent under `free` and
+  // `per_step`)
   if (switches_.line15_energy == Line15Energy::balance ||
       switches_.line15_energy == Line15Energy::balance_local)
     a(line15_credit_);

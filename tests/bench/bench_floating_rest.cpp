@@ -34,6 +34,8 @@ using Variant = bench::StageVariant;
 std::vector<Variant> variants() {
   return {
       {"simulator", [](StageSwitches&) {}},
+      // the defaults before slosh11 (line 15's energy free; the box keeps the whole drift anyway)
+      {"before-slosh11", [](StageSwitches& s) { s.line15_energy = Line15Energy::free; }},
       {"no-correction", [](StageSwitches& s) { s.position_correction = false; }},
       {"no-projection", [](StageSwitches& s) { s.density_projection = false; }},
       {"no-line-15", [](StageSwitches& s) { s.position_correction = s.density_projection = false; }},

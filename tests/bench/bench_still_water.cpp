@@ -77,6 +77,11 @@ std::vector<Variant> variants() {
          s.split_advection = true;
          s.line15_energy = Line15Energy::balance;
        }},
+      {"before-slosh11", "the defaults before slosh11: whole drift, line 15's energy free",
+       [](StageSwitches& s) {
+         s.split_advection = false;
+         s.line15_energy = Line15Energy::free;
+       }},
       {"split-balance-local",
        "drift-kick-drift and line 15's potential energy paid near its rises, balance (slosh11)",
        [](StageSwitches& s) {
