@@ -1069,6 +1069,9 @@ void Simulation<Dim>::correct_volume(double dt) {
   ScopedTimer timer(stats_.timing[FramePhase::particles]);
   const bool pay = switches_.line15_energy != Line15Energy::free;
   const double potential_before = pay ? liquid_potential_energy() : 0.0;
+  const bool local = switches_.line15_energy == Line15Energy::balance_local;
+  std::vector<Vec<Dim>> before;
+  if (local) before = particles_.x;
   if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
   account(frame_ledger_.position_correction, [&] { return liquid_potential_energy(); });
   if (switches_.density_projection && switches_.density_projection_in_steps)
@@ -1079,7 +1082,7 @@ void Simulation<Dim>::correct_volume(double dt) {
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
   if (pay) {
     double gain = liquid_potential_energy() - potential_before;
-    if (switches_.line15_energy == Line15Energy::balance) {
+    if (switches_.line15_energy != Line15Energy::per_step) {
       // a drop is kept as credit against the next rises
       gain += line15_credit_;
       line15_credit_ = std::min(0.0, gain);
@@ -1087,7 +1090,14 @@ void Simulation<Dim>::correct_volume(double dt) {
     if (gain > 0.0) {
       // the ledger books the kinetic energy taken with the projection's column
       restart_ledger([&] { return particle_kinetic_energy(); });
-      pay_line15_energy(gain);
+      const double kinetic_before = switches_.line15_carry_debt ? particle_kinetic_energy() : 0.0;
+      if (local && before.size() == particles_.size())
+        pay_line15_energy_locally(gain, before);
+      else
+        pay_line15_energy(gain);
+      // what the kinetic energy could not pay stays owed, against the next drops and motion
+      if (switches_.line15_carry_debt && switches_.line15_energy != Line15Energy::per_step)
+        line15_credit_ += std::max(0.0, gain - (kinetic_before - particle_kinetic_energy()));
       account(frame_ledger_.density_projection, [&] { return particle_kinetic_energy(); });
     }
   }
@@ -1098,22 +1108,139 @@ void Simulation<Dim>::pay_line15_energy(double gain) {
   // The moves of line 15 are not the flow's: they correct the particles' spacing and volume, and
   // lifting particle volume into the surface (the density projection's corrections of a surface
   // band the flow disordered or spread) raises the potential energy by what no force paid for.
-  // Here the kinetic energy pays it: a uniform scaling of the liquid's velocities (the affine
-  // parts with them, so the next transfer's face momenta scale alike) by
-  //   s = sqrt(max(0, 1 - dPE / KE)),   KE = sum_p 1/2 m_p |v_p|^2,
-  // which lowers KE by dPE (by all of KE if it holds less). A drop of the potential energy is
-  // not given back (line 15 may lose energy, never create it).
-  const double kinetic = particle_kinetic_energy();
-  if (!(kinetic > 0.0) || !(gain > 0.0)) return;
-  const double s = std::sqrt(std::max(0.0, 1.0 - gain / kinetic));
+  // Here the kinetic energy pays it: the liquid's velocities relative to their mass-weighted mean
+  // vbar are scaled (the affine parts with them, so the next transfer's face momenta scale alike)
+  //   v_p <- vbar + s (v_p - vbar),   c_p <- s c_p,   s = sqrt(max(0, 1 - dPE / KE_rel)),
+  //   KE_rel = sum_p 1/2 m_p |v_p - vbar|^2,
+  // which lowers the kinetic energy by dPE (by all of KE_rel if it holds less) and keeps the
+  // liquid's momentum: a liquid in uniform motion (free fall) has nothing to pay with and keeps
+  // its motion exactly (scaling v itself slowed a falling blob against the body it carried,
+  // test_coupled_validation's Fig. 8 free fall; slosh11). A drop of the potential energy is not
+  // given back (line 15 may lose energy, never create it).
+  if (!(gain > 0.0)) return;
   const long np = static_cast<long>(particles_.size());
+  double mass = 0.0;
+  Vec<Dim> momentum = Vec<Dim>::Zero();
+  for (long p = 0; p < np; ++p) {
+    mass += particles_.mass[p];
+    momentum += particles_.mass[p] * particles_.v[p];
+  }
+  if (!(mass > 0.0)) return;
+  const Vec<Dim> mean = momentum / mass;
+  double relative = 0.0;
+  for (long p = 0; p < np; ++p)
+    relative += 0.5 * particles_.mass[p] * (particles_.v[p] - mean).squaredNorm();
+  if (!(relative > 0.0)) return;
+  const double s = std::sqrt(std::max(0.0, 1.0 - gain / relative));
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
-    particles_.v[p] *= s;
+    particles_.v[p] = mean + s * (particles_.v[p] - mean);
     particles_.c[p] *= s;
   }
   // the next step's first half drift reads u_ (the velocity the particles were given)
-  if (split_drift()) u_ *= s;
+  if (split_drift()) {
+    const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f) {
+      const auto [axis, fc] = grid_.face_coord(f);
+      // (the domain's walls keep their zero)
+      if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
+    }
+  }
+}
+
+namespace {
+
+/// out_c = sum of in over the cells within `reach` cells of c along every axis (a box of
+/// (2 reach + 1)^Dim cells, wrapped on periodic axes, cut at the walls): one pass per axis, each
+/// output summed in a fixed order (the same bits for any thread count)
+template <int Dim>
+std::vector<double> box_sum(const MacGrid<Dim>& grid, std::vector<double> in, int reach) {
+  const int nc = grid.num_cells();
+  std::vector<double> out(nc);
+  for (int a = 0; a < Dim; ++a) {
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int c = 0; c < nc; ++c) {
+      const VecI<Dim> cc = grid.cell_coord(c);
+      double sum = 0.0;
+      for (int k = -reach; k <= reach; ++k) {
+        VecI<Dim> n = cc;
+        n[a] += k;
+        const int i = grid.cell_index_or_outside(n);
+        if (i >= 0) sum += in[i];
+      }
+      out[c] = sum;
+    }
+    in.swap(out);
+  }
+  return in;
+}
+
+}  // namespace
+
+template <int Dim>
+void Simulation<Dim>::pay_line15_energy_locally(double gain, const std::vector<Vec<Dim>>& before) {
+  // balance's amount, paid where line 15 lifted the liquid. Per cell (of a particle's position
+  // after the moves): G_c = its particles' potential energy change -m g . (x' - x), K_c = their
+  // kinetic energy. Over the neighbourhoods N(c) of (2 R + 1)^Dim cells (R = std::max(0, switches_.line15_pay_reach)):
+  //   D_c = a max(0, sum_N(c) G),  a = gain / sum_c max(0, sum_N(c) G)     (a <= 1: gain is at
+  //         most the net rise, which is at most the sum of the positive parts)
+  //   f_p = min(1, sum_{c : p in N(c)} D_c / sum_N(c) K)
+  // and particle p keeps sqrt(1 - f_p) of its v and c, so each cell's share D_c is taken from the
+  // kinetic energy of the particles around it in proportion to theirs. A share whose
+  // neighbourhood holds no kinetic energy (or more than it holds) is paid by the uniform scaling
+  // (pay_line15_energy) from what is left.
+  if (!(gain > 0.0)) return;
+  const int nc = grid_.num_cells();
+  const long np = static_cast<long>(particles_.size());
+  std::vector<int> cell(np);
+  std::vector<double> rise(nc, 0.0), kinetic(nc, 0.0);
+  for (long p = 0; p < np; ++p) {
+    cell[p] = grid_.cell_index(grid_.cell_containing(particles_.x[p]));
+    rise[cell[p]] -= particles_.mass[p] * gravity_.dot(particles_.x[p] - before[p]);
+    kinetic[cell[p]] += 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
+  }
+  std::vector<double> near_rise = box_sum(grid_, std::move(rise), std::max(0, switches_.line15_pay_reach));
+  const std::vector<double> near_kinetic = box_sum(grid_, std::move(kinetic), std::max(0, switches_.line15_pay_reach));
+  double positive = 0.0;
+  for (int c = 0; c < nc; ++c) positive += std::max(0.0, near_rise[c]);
+  if (!(positive > 0.0)) {
+    pay_line15_energy(gain);
+    return;
+  }
+  const double share = std::min(1.0, gain / positive);
+  // near_rise becomes each cell's demand per joule of its neighbourhood's kinetic energy
+  for (int c = 0; c < nc; ++c) {
+    const double demand = share * std::max(0.0, near_rise[c]);
+    near_rise[c] = demand > 0.0 && near_kinetic[c] > 0.0 ? demand / near_kinetic[c] : 0.0;
+  }
+  const std::vector<double> fraction = box_sum(grid_, std::move(near_rise), std::max(0, switches_.line15_pay_reach));
+  double paid = 0.0;
+  for (long p = 0; p < np; ++p) {
+    const double f = std::min(1.0, fraction[cell[p]]);
+    if (!(f > 0.0)) continue;
+    paid += f * 0.5 * particles_.mass[p] * particles_.v[p].squaredNorm();
+    const double s = std::sqrt(1.0 - f);
+    particles_.v[p] *= s;
+    particles_.c[p] *= s;
+  }
+  // the next step's first half drift reads u_: each face scaled by the mean of its cells' factors
+  if (split_drift()) {
+    const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+    for (int f = 0; f < nf; ++f) {
+      const auto [axis, fc] = grid_.face_coord(f);
+      double sum = 0.0;
+      int count = 0;
+      for (int i : {grid_.face_cell_minus(axis, fc), grid_.face_cell_plus(axis, fc)})
+        if (i >= 0) {
+          sum += std::sqrt(1.0 - std::min(1.0, fraction[i]));
+          ++count;
+        }
+      if (count > 0) u_[f] *= sum / count;
+    }
+  }
+  if (gain - paid > 0.0) pay_line15_energy(gain - paid);
 }
 
 template <int Dim>
@@ -1744,9 +1871,11 @@ void Simulation<Dim>::state_fields(Archive& a) {
   a(cell_eta_);
   a(previous_shear_rate_);
   a(liquid_weights_current_);
-  // Line15Energy::balance's credit (only with that measurement switch: the format is otherwise
-  // unchanged)
-  if (switches_.line15_energy == Line15Energy::balance) a(line15_credit_);
+  // Line15Energy::balance's credit (the default since slosh11; absent under `free` and
+  // `per_step`)
+  if (switches_.line15_energy == Line15Energy::balance ||
+      switches_.line15_energy == Line15Energy::balance_local)
+    a(line15_credit_);
   // SurfaceDeficits::to_solve: the last density projection's listed deficits, the next step's
   // divergence source (empty under every other setting)
   a(volume_errors_);

@@ -37,17 +37,23 @@ namespace monolith {
 /// What pays for the potential energy line 15's moves (correct_positions, the density projection)
 /// add to the liquid (StageSwitches::line15_energy).
 enum class Line15Energy {
-  free,  ///< nothing: the moves change the energy as they do (the default)
+  free,  ///< nothing: the moves change the energy as they do (the default before slosh11)
   /// each step whose line 15 raises -sum m g . x by dPE > 0 takes dPE from the liquid's kinetic
   /// energy (every particle's v and c, and with split_advection the grid velocity the next half
   /// drift reads, scaled by sqrt(max(0, 1 - dPE / KE)), KE = sum 1/2 m |v|^2); a drop is lost
   per_step,
   /// the same, but a drop is banked: the kinetic energy pays only when line 15's summed change
   /// since the start would otherwise be positive (credit = min(0, credit + dPE), pay the rest),
-  /// so line 15 never adds energy over the run (while the kinetic energy can pay: a rise larger
-  /// than it is paid with all of it, the rest not carried) and loses only what it did not take
-  /// back
+  /// so line 15 never adds energy over the run (a rise larger than the kinetic energy is paid
+  /// with all of it, the rest carried as a debt with StageSwitches::line15_carry_debt, dropped
+  /// without) and loses only what it did not take back (the default)
   balance,
+  /// `balance`'s credit and amount (kept over the whole liquid), but paid locally: the amount is
+  /// shared among the cells in proportion to line 15's net potential energy rise within
+  /// StageSwitches::line15_pay_reach cells of each, and each cell's share is taken from the
+  /// kinetic energy of the particles within that reach of it (Simulation::pay_line15_energy_locally;
+  /// what a neighbourhood without kinetic energy cannot pay is taken by the uniform scaling)
+  balance_local,
 };
 
 /// Stages of the step that a diagnosis can switch off or replace, to measure what each one
@@ -84,12 +90,12 @@ struct StageSwitches {
   /// only the far air differs)
   bool extrapolate_cfl_layers = false;
   /// The particles drift half a step with the last step's velocity before the solve and half a
-  /// step with the new one after it (drift-kick-drift, second order in time); false (the
-  /// default): the whole step's drift after the solve (symplectic Euler). Off by default since
-  /// free fall then conserves energy exactly, and test_robustness's pour-into-bowl-2d (energy
-  /// never above its start) reads +5e-6 of it at frame 1: the small moves of line 15, which
-  /// test_robustness's split variant books apart (docs/particles.md, "Sloshing").
-  bool split_advection = false;
+  /// step with the new one after it (drift-kick-drift, second order in time; the default, in
+  /// scenes without moving bodies, which keep the whole drift); false: the whole step's drift
+  /// after the solve (symplectic Euler, the default before slosh11). With it free fall conserves
+  /// energy exactly, so line 15's small moves show in the total energy: line15_energy's default
+  /// pays them (docs/particles.md, "Sloshing" and "Line 15's energy paid: the defaults (slosh11)").
+  bool split_advection = true;
   /// After the extrapolation, the air cells beside the liquid get a divergence-free velocity
   /// (divergence_free_air_velocity; off: the extrapolated averages as they are). A measurement
   /// switch (docs/particles.md "Sloshing"): it halves the liquid's volume loss without the density
@@ -136,8 +142,17 @@ struct StageSwitches {
   bool extrapolate_everywhere = false;
   /// Whether the potential energy the moves of line 15 (correct_positions and the density
   /// projection) add is paid by the liquid's kinetic energy (Line15Energy; docs/particles.md,
-  /// "Line 15's potential energy paid by the kinetic energy (slosh9)"). A measurement switch.
-  Line15Energy line15_energy = Line15Energy::free;
+  /// "Line 15's potential energy paid by the kinetic energy (slosh9)"). Default `balance` since
+  /// slosh11 (with line15_carry_debt): line 15 never adds energy over a run; `free` is the
+  /// behaviour before.
+  Line15Energy line15_energy = Line15Energy::balance;
+  /// With `balance` / `balance_local`: what the kinetic energy cannot pay (a rise larger than it,
+  /// as in a liquid nearly at rest) stays owed (the credit may turn positive) and is paid by the
+  /// next drops and the later motion, instead of being dropped (false: dropped, slosh9's form).
+  /// On by default (docs/particles.md, slosh11: the floating box's pool at rest).
+  bool line15_carry_debt = true;
+  /// Line15Energy::balance_local's neighbourhoods: boxes of (2 reach + 1)^Dim cells
+  int line15_pay_reach = 1;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
@@ -317,6 +332,9 @@ class Simulation : public AnySimulation {
   /// from the liquid's kinetic energy (uniform scaling of the particles' v and c; all of it if
   /// the kinetic energy holds less)
   void pay_line15_energy(double gain);
+  /// Line15Energy::balance_local: `gain` taken from the particles near line 15's rises, from
+  /// the positions before line 15's moves (docs/particles.md, slosh11)
+  void pay_line15_energy_locally(double gain, const std::vector<Vec<Dim>>& before);
   /// Line15Energy::balance: line 15's summed potential energy change not yet paid (<= 0, J)
   double line15_credit_ = 0.0;
   /// The energy ledger (only with StageSwitches::energy_ledger; otherwise nothing is measured):

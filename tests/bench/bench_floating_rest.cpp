@@ -34,6 +34,8 @@ using Variant = bench::StageVariant;
 std::vector<Variant> variants() {
   return {
       {"simulator", [](StageSwitches&) {}},
+      // the defaults before slosh11 (line 15's energy free; the box keeps the whole drift anyway)
+      {"before-slosh11", [](StageSwitches& s) { s.line15_energy = Line15Energy::free; }},
       {"no-correction", [](StageSwitches& s) { s.position_correction = false; }},
       {"no-projection", [](StageSwitches& s) { s.density_projection = false; }},
       {"no-line-15", [](StageSwitches& s) { s.position_correction = s.density_projection = false; }},
@@ -62,6 +64,19 @@ std::vector<Variant> variants() {
       // line 15's potential energy paid by the liquid's kinetic energy (docs/particles.md, slosh9)
       {"paid", [](StageSwitches& s) { s.line15_energy = Line15Energy::per_step; }},
       {"balance", [](StageSwitches& s) { s.line15_energy = Line15Energy::balance; }},
+      // the same amount paid by the particles near line 15's rises (docs/particles.md, slosh11)
+      {"balance-local", [](StageSwitches& s) { s.line15_energy = Line15Energy::balance_local; }},
+      // what the kinetic energy cannot pay stays owed
+      {"balance-debt",
+       [](StageSwitches& s) {
+         s.line15_energy = Line15Energy::balance;
+         s.line15_carry_debt = true;
+       }},
+      {"balance-local-debt",
+       [](StageSwitches& s) {
+         s.line15_energy = Line15Energy::balance_local;
+         s.line15_carry_debt = true;
+       }},
       {"divergence-free-surface-volume-source",
        [](StageSwitches& s) {
          s.divergence_free_air = s.divergence_free_surface_cells = true;

@@ -9,7 +9,8 @@
 //                  [--divergence-free-air] [--divergence-free-surface] [--no-step-projection]
 //                  [--no-surface-deficits] [--dead-band-deficits] [--seed N]
 //                  [--volume-source GAIN] [--pic] [--no-air-velocity] [--all-faces-trusted]
-//                  [--unreached-extrapolated] [--cfl-layers] [--pay-line15 per-step|balance] [--set KEY=VALUE]...
+//                  [--unreached-extrapolated] [--cfl-layers] [--pay-line15 free|per-step|balance|local] [--carry-debt]
+//                  [--drop-debt] [--whole-drift] [--pay-reach CELLS] [--set KEY=VALUE]...
 //
 // --set: a scene override as `monolith run --set` (e.g. domain.boundary.z-=periodic
 // domain.boundary.z+=periodic: a 3D tank without its side walls across the sloshing).
@@ -18,8 +19,9 @@
 // set's volume over the particles' (SurfaceDeficits::beyond_dead_band, a measurement switch).
 // --volume-source GAIN: the surface band's deficits not moved but handed to the next solve as a
 // divergence source d = GAIN e / dt (SurfaceDeficits::to_solve, StageSwitches::volume_source_gain).
-// --pay-line15 per-step|balance: the potential energy line 15's moves add is taken from the
-// liquid's kinetic energy (StageSwitches::line15_energy, Line15Energy, a measurement switch).
+// --pay-line15 free|per-step|balance|local: what pays the potential energy line 15's moves add
+// (StageSwitches::line15_energy, Line15Energy; the default `balance` with the debt carried, as
+// the simulator since slosh11). --whole-drift: symplectic Euler (the default before slosh11).
 //
 // Each line also shows the energy ledger (EnergyLedger, as bench_still_water) summed since the
 // line before: which stage of the step changed the energy.
@@ -49,7 +51,11 @@ int main(int argc, char** argv) {
   double volume_source = -1.0;
   bool pic = false, no_air_velocity = false, all_faces_trusted = false;
   bool unreached_extrapolated = false, cfl_layers = false;
-  Line15Energy pay_line15 = Line15Energy::free;
+  // the simulator's defaults unless a flag says otherwise
+  Line15Energy pay_line15 = StageSwitches{}.line15_energy;
+  bool carry_debt = StageSwitches{}.line15_carry_debt;
+  bool whole_drift = false;
+  int pay_reach = 1;
   std::vector<std::string> overrides;
   double max_dt = 0.02;
   int seed = 0;
@@ -79,7 +85,11 @@ int main(int argc, char** argv) {
     else if (a == "--cfl-layers") cfl_layers = true;
     else if (a == "--volume-source") volume_source = std::atof(args.value().c_str());
     else if (a == "--pay-line15")
-      pay_line15 = args.value() == "balance" ? Line15Energy::balance : Line15Energy::per_step;
+      pay_line15 = bench::line15_energy(args.value());
+    else if (a == "--carry-debt") carry_debt = true;
+    else if (a == "--drop-debt") carry_debt = false;
+    else if (a == "--whole-drift") whole_drift = true;
+    else if (a == "--pay-reach") pay_reach = std::atoi(args.value().c_str());
     else if (a == "--seed") seed = std::atoi(args.value().c_str());
     else {
       std::cerr << "usage: bench_sloshing [--dim 2|3] [--cells N] [--seconds T] [--slope S] "
@@ -97,6 +107,7 @@ int main(int argc, char** argv) {
   if (no_projection) switches.density_projection = false;
   if (no_correction) switches.position_correction = false;
   if (split_drift) switches.split_advection = true;
+  if (whole_drift) switches.split_advection = false;
   if (divfree_air) switches.divergence_free_air = true;
   if (divfree_surface) switches.divergence_free_surface_cells = true;
   if (no_step_projection) switches.density_projection_in_steps = false;
@@ -109,6 +120,8 @@ int main(int argc, char** argv) {
   if (unreached_extrapolated) switches.unreached_faces_keep_u_star = false;
   if (cfl_layers) switches.extrapolate_cfl_layers = true;
   switches.line15_energy = pay_line15;
+  switches.line15_carry_debt = carry_debt;
+  switches.line15_pay_reach = pay_reach;
   if (volume_source >= 0.0) {
     switches.density_projection_surface_deficits = SurfaceDeficits::to_solve;
     switches.volume_source_gain = volume_source;

@@ -77,6 +77,24 @@ std::vector<Variant> variants() {
          s.split_advection = true;
          s.line15_energy = Line15Energy::balance;
        }},
+      {"before-slosh11", "the defaults before slosh11: whole drift, line 15's energy free",
+       [](StageSwitches& s) {
+         s.split_advection = false;
+         s.line15_energy = Line15Energy::free;
+       }},
+      {"split-balance-local",
+       "drift-kick-drift and line 15's potential energy paid near its rises, balance (slosh11)",
+       [](StageSwitches& s) {
+         s.split_advection = true;
+         s.line15_energy = Line15Energy::balance_local;
+       }},
+      {"split-balance-debt",
+       "drift-kick-drift, line 15 paid (balance), what the kinetic energy cannot pay owed (slosh11)",
+       [](StageSwitches& s) {
+         s.split_advection = true;
+         s.line15_energy = Line15Energy::balance;
+         s.line15_carry_debt = true;
+       }},
       {"split-volume-source", "split-divergence-free and the deficits as a divergence source",
        [](StageSwitches& s) {
          s.split_advection = s.divergence_free_air = s.divergence_free_surface_cells = true;

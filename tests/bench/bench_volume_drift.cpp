@@ -5,7 +5,7 @@
 //
 //   bench_volume_drift [--scene NAME] [--frames N] [--set KEY=VALUE]... [--split-drift]
 //                      [--divergence-free-surface] [--no-surface-deficits]
-//                      [--dead-band-deficits] [--volume-source GAIN] [--pay-line15 per-step|balance]
+//                      [--dead-band-deficits] [--volume-source GAIN] [--pay-line15 per-step|balance|local] [--carry-debt]
 //
 // Defaults: dam-break-2d at 64x32 for 60 frames (the test's first case); the test's 3D case is
 // --scene dam-break-3d --set domain.cells=[32,16,16] --frames 30. Prints the worst |drift|, its
@@ -23,6 +23,7 @@
 #include "reference/sim/frame_stats.hpp"
 #include "reference/sim/simulation.hpp"
 #include "tests/support/bench_args.hpp"
+#include "tests/support/stage_variants.hpp"
 
 using namespace monolith;
 
@@ -54,11 +55,13 @@ int main(int argc, char** argv) {
       switches.density_projection_surface_deficits = SurfaceDeficits::to_solve;
       switches.volume_source_gain = std::atof(args.value().c_str());
     } else if (a == "--pay-line15") {
-      switches.line15_energy = args.value() == "balance" ? Line15Energy::balance : Line15Energy::per_step;
+      switches.line15_energy = bench::line15_energy(args.value());
+    } else if (a == "--carry-debt") {
+      switches.line15_carry_debt = true;
     } else {
       std::cerr << "usage: bench_volume_drift [--scene NAME] [--frames N] [--set KEY=VALUE]... "
                    "[--split-drift] [--divergence-free-surface] [--no-surface-deficits] "
-                   "[--dead-band-deficits] [--volume-source GAIN] [--pay-line15 per-step|balance]\n";
+                   "[--dead-band-deficits] [--volume-source GAIN] [--pay-line15 per-step|balance|local] [--carry-debt]\n";
       return 2;
     }
   }

@@ -59,4 +59,13 @@ inline void accumulate(EnergyLedger& sum, const EnergyLedger& l) {
   sum.density_projection += l.density_projection;
 }
 
+/// The value of a `--pay-line15` flag: free, balance, local (Line15Energy::balance_local) or
+/// per-step (anything else), read once.
+inline Line15Energy line15_energy(const std::string& value) {
+  if (value == "free") return Line15Energy::free;
+  if (value == "balance") return Line15Energy::balance;
+  if (value == "local") return Line15Energy::balance_local;
+  return Line15Energy::per_step;
+}
+
 }  // namespace monolith::bench
