@@ -257,11 +257,11 @@ TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2
     refused(read_bytes(checkpoint_path(other)), "another scene");
   }
   SECTION("an older format version") {
-    // version 2 (before the state's listed volume deficits), the rest of the file as it was
+    // version 3 (before line 15's credit joined the default state), the rest of the file as it was
     std::string old = good;
-    const std::uint32_t version = 2;
+    const std::uint32_t version = 3;
     std::memcpy(&old[8], &version, 4);
-    refused(old, "checkpoint format version 2 (this build reads version 3");
+    refused(old, "checkpoint format version 3 (this build reads version 4");
   }
   SECTION("written by another build") {
     CheckpointRecord record = read_checkpoint(file);
