@@ -385,7 +385,8 @@ void Simulation<Dim>::update_liquid_weights() {
     // mirrored across the walls and the solids, so liquid against either reads as liquid up to
     // it (docs/particles.md, "Still water")
     // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
-    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_);
+    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
+                          liquid_band_);
   }
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
@@ -398,16 +399,29 @@ void Simulation<Dim>::update_liquid_weights() {
   const bool solids = !solid_shapes_.empty() || coupled_;
   const bool extend = solids && (solid_phi_.size() == liquid_phi_.size() ||
                                   solid_box_phi_.valid() || solid_scratch_.union_parts.valid());
+  // The liquid's band (issue 20): outside the box of the points liquid_phi_on_lattice wrote,
+  // the level set is its background value; when that is at least the extension's reach, the
+  // extension changes no point there (it changes points with phi < reach only) and the extended
+  // level set is not negative there (>= reach > 0): the extension and the search for negative
+  // points visit that box only (the same points changed, the same box found)
+  const double reach = kLiquidSolidReach * grid_.dx();
+  const bool banded = liquid_band_.background >= reach;
+  VecI<Dim> band_lo = VecI<Dim>::Zero(), band_hi = lattice_.dims - VecI<Dim>::Ones();
+  if (banded) {
+    band_lo = liquid_band_.lo;
+    band_hi = liquid_band_.hi;
+  }
   if (extend) {
-    const double reach = kLiquidSolidReach * grid_.dx(), dx = grid_.dx();
+    const double dx = grid_.dx();
     // liquid_extended_into_solid, which reads only the solids' sign (solid_negative_at)
-    overwrite_in_box<Dim>(lattice_, solid_lo_, solid_hi_, liquid_phi_, [&](int k) {
+    overwrite_in_box<Dim>(lattice_, solid_lo_.cwiseMax(band_lo), solid_hi_.cwiseMin(band_hi),
+                          liquid_phi_, [&](int k) {
       const double l = liquid_phi_[k];
       return l < reach && solid_negative_at(k) ? std::min(l, -0.5 * dx) : l;
     }, phi_undo_);
   }
   const VectorX& phi = liquid_phi_;
-  classify_lattice_cells(grid_, lattice_, phi, liquid_signs_);
+  classify_lattice_cells_searching(grid_, lattice_, phi, band_lo, band_hi, liquid_signs_);
   // the points where the extended level set is negative (the box of its non-positive cells)
   const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
   cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);

@@ -463,6 +463,9 @@ class Simulation : public AnySimulation {
   /// the points of liquid_phi_ that update_liquid_weights overwrites in place (the extension
   /// into the solids, then the reported volume's level set) with their values, per thread
   std::vector<std::vector<std::pair<int, double>>> phi_undo_;
+  /// the band of the last liquid level set (liquid_phi_on_lattice): its background value and
+  /// the box of the points it wrote
+  LiquidPhiBand<Dim> liquid_band_;
   LatticeSigns<Dim> liquid_signs_;
   // per-step buffers of the velocity stages: face flags (faces that carry mass, trusted faces)
   // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
