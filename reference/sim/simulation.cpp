@@ -417,7 +417,7 @@ void Simulation<Dim>::update_liquid_weights() {
   // level set is not negative there (>= reach > 0): the extension and the search for negative
   // points visit that box only (the same points changed, the same box found)
   const double reach = kLiquidSolidReach * grid_.dx();
-  const bool banded = liquid_band_.background >= reach;
+  const bool banded = switches_.restricted_passes && liquid_band_.background >= reach;
   VecI<Dim> band_lo = VecI<Dim>::Zero(), band_hi = lattice_.dims - VecI<Dim>::Ones();
   if (banded) {
     band_lo = liquid_band_.lo;
@@ -1602,7 +1602,7 @@ void Simulation<Dim>::find_faces_in_solids() {
   faces.clear();
   solid_face_fixed_.clear();
   const PartsUnionPhi<Dim>& parts = solid_scratch_.union_parts;
-  if (parts.valid()) {
+  if (parts.valid() && switches_.restricted_passes) {
     // The union kept per body (Fig. 17): the faces in the fixed bodies (dense parts) are found
     // once and kept while those parts are the same; each step searches only the moving bodies'
     // boxes of negative points for faces in them and in no fixed body. A face is in the union
@@ -1691,7 +1691,8 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
   // kept per fixed face with that nearest shape's gradient, and only the moving shapes are
   // searched again (the same comparisons in the same order, the same normal)
   const std::size_t fixed_shapes = solid_shapes_.size();
-  const bool split = !same_pose && fixed_faces_valid_ && fixed_shapes > 0 &&
+  const bool split = !same_pose && switches_.restricted_passes && fixed_faces_valid_ &&
+                     fixed_shapes > 0 &&
                      solid_field_shapes_.size() >= fixed_shapes &&
                      solid_face_fixed_.size() == faces.size();
   const double far = 2.0 * grid_.dx();

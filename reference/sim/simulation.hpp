@@ -138,6 +138,12 @@ struct StageSwitches {
   /// projection) add is paid by the liquid's kinetic energy (Line15Energy; docs/particles.md,
   /// "Line 15's potential energy paid by the kinetic energy (slosh9)"). A measurement switch.
   Line15Energy line15_energy = Line15Energy::free;
+  /// A test switch: false makes the per-step passes that follow the liquid and the moving bodies
+  /// dense again (issue 20, docs/benchmarks.md "eleventh part"): the faces in solids searched in
+  /// the whole union's box every step with every shape's normal evaluated, the liquid level
+  /// set's extension into the solids over the solids' box and its negative points searched over
+  /// the lattice. The same results either way (tests/unit/sim/test_restricted_passes.cpp).
+  bool restricted_passes = true;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
