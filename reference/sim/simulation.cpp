@@ -1662,12 +1662,30 @@ void Simulation<Dim>::find_faces_in_solids() {
     return;
   }
   fixed_faces_valid_ = false;
+  fixed_faces_key_.clear();
+  fixed_face_frame_.clear();
+  for (auto& list : fixed_faces_) list.clear();
   if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
-  for (int axis = 0; axis < Dim; ++axis)
+  std::array<std::size_t, Dim + 1> axis_start{};
+  for (int axis = 0; axis < Dim; ++axis) {
+    axis_start[axis] = faces.size();
     faces_with_centre(axis, solid_lo_, solid_hi_,
                       [&](const VecI<Dim>& k, int index) { return solid_negative_at(k, index); },
                       faces);
+  }
+  axis_start[Dim] = faces.size();
   solid_face_fixed_.assign(faces.size(), -1);
+  if (!rigid_ && switches_.restricted_passes) {
+    // static solids only (this call is the constructor's, before any body exists): the faces
+    // never change, so every one keeps its normal's static share (constrain_velocity_in_solids)
+    for (int axis = 0; axis < Dim; ++axis)
+      fixed_faces_[axis].assign(faces.begin() + static_cast<long>(axis_start[axis]),
+                                faces.begin() + static_cast<long>(axis_start[axis + 1]));
+    for (std::size_t j = 0; j < faces.size(); ++j) solid_face_fixed_[j] = static_cast<int>(j);
+    fixed_faces_valid_ = true;
+    // (a key no union of parts has: a later search of parts finds its own fixed faces)
+    fixed_faces_key_.push_back({nullptr, {VecI<Dim>::Zero(), VecI<Dim>::Zero()}});
+  }
 }
 
 template <int Dim>
