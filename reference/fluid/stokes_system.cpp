@@ -726,7 +726,11 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
   double* force = face_scratch_.data();
   bool zero = !force_current;
   for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
-  if (zero) std::fill(force, force + num_faces_, 0.0);
+  // (only the active face rows: the sweeps read and write the force only at faces with
+  // C_f != 0, which lie in them, and the other rows of the scratch are zero at all times (made
+  // zero with it, written by no pass but rhs, which zeroes every face again): the same scratch
+  // as a fill of every face, without a pass over the grid's faces per SSOR application)
+  if (zero) zero_active_face_rows(force);
   const bool recompute = !zero && !force_current;
   // the whole sweep in one parallel region (one fork and join per sweep, a barrier per colour
   // group), only with a valid colouring (otherwise the sweep is serial) and enough work; the
@@ -751,6 +755,15 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
           block < static_cast<int>(layout_field_.size()) ? layout_field_[block] : kCellField;
       sweep_block(field, reverse, rhs, x, omega, active);
     }
+  }
+}
+
+template <int Dim>
+void MatrixFreeStokesOperator<Dim>::zero_active_face_rows(double* force) const {
+  for (int a = 0; a < Dim; ++a) {
+    const Field& f = fields_[a];
+    const int n0 = f.dims[0];
+    for (int r : active_rows_[a]) std::fill(force + f.offset + r * n0, force + f.offset + (r + 1) * n0, 0.0);
   }
 }
 

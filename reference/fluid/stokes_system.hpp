@@ -215,6 +215,8 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// the previous sweep with nothing in between), so it is not recomputed.
   void sweep(bool reverse, const VectorX& rhs, VectorX& x, double omega,
              const std::vector<char>* active, bool force_current = false) const;
+  /// force = 0 on the faces of the active face rows (the rows a sweep can read or write).
+  void zero_active_face_rows(double* force) const;
 
   std::array<bool, Dim> periodic_{};
   std::array<Field, kFields> fields_{};

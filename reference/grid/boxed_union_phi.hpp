@@ -161,6 +161,33 @@ class PartsUnionPhi {
   /// The inclusive box of the union's negative points (lo > hi: none).
   void negative_box(VecI<Dim>& lo, VecI<Dim>& hi) const;
 
+  /// Part `i` is dense (a lattice-sized phi kept by the caller: a fixed body).
+  bool is_dense(int i) const { return parts_[i].dense != nullptr; }
+  /// Part `i`'s dense phi (nullptr for a boxed part).
+  const VectorX* dense_phi(int i) const { return parts_[i].dense; }
+  /// The inclusive box of part `i`'s negative points (lo > hi: none).
+  void part_negative_box(int i, VecI<Dim>& lo, VecI<Dim>& hi) const {
+    lo = parts_[i].neg_lo;
+    hi = parts_[i].neg_hi;
+  }
+  /// Whether some dense part is < 0 at lattice point k (the first half of negative()).
+  bool dense_negative(int k) const {
+    for (int i = 0; i < count_; ++i)
+      if (parts_[i].dense && (*parts_[i].dense)[k] < 0.0) return true;
+    return false;
+  }
+  /// Whether some boxed part is < 0 at lattice point c (the second half of negative()).
+  bool boxed_negative(const VecI<Dim>& c) const {
+    for (int i = 0; i < count_; ++i) {
+      const Part& part = parts_[i];
+      if (part.dense) continue;
+      if ((c.array() < part.neg_lo.array()).any() || (c.array() > part.neg_hi.array()).any())
+        continue;
+      if (part.values[lattice_index<Dim>(c - part.lo, part.box_dims)] < 0.0) return true;
+    }
+    return false;
+  }
+
  private:
   struct Part {
     const VectorX* dense = nullptr;

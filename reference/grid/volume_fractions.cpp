@@ -259,17 +259,32 @@ void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
 template <int Dim>
 std::pair<VecI<Dim>, VecI<Dim>> negative_point_box(const SampleLattice<Dim>& lattice,
                                                    const VectorX& phi) {
-  const int nx = lattice.dims[0];
-  VecI<Dim> row_dims = lattice.dims;
+  return negative_point_box_in<Dim>(lattice, phi, VecI<Dim>::Zero(),
+                               (lattice.dims - VecI<Dim>::Ones()).eval());
+}
+
+template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> negative_point_box_in(const SampleLattice<Dim>& lattice,
+                                                      const VectorX& phi, VecI<Dim> search_lo,
+                                                      VecI<Dim> search_hi) {
+  VecI<Dim> lo = lattice.dims, hi = -VecI<Dim>::Ones();
+  for (int a = 0; a < Dim; ++a) {
+    search_lo[a] = std::max(search_lo[a], 0);
+    search_hi[a] = std::min(search_hi[a], lattice.dims[a] - 1);
+    if (search_lo[a] > search_hi[a]) return {lo, hi};
+  }
+  // the rows along x of the search box, each from search_lo[0] to search_hi[0]
+  const int x0 = search_lo[0], nx = search_hi[0] - search_lo[0] + 1;
+  VecI<Dim> row_dims = search_hi - search_lo + VecI<Dim>::Ones();
   row_dims[0] = 1;
   const int rows = row_dims.prod();
-  VecI<Dim> lo = lattice.dims, hi = -VecI<Dim>::Ones();
 #pragma omp parallel num_threads(process_threads())
   {
     VecI<Dim> tlo = lattice.dims, thi = -VecI<Dim>::Ones();
 #pragma omp for schedule(static)
     for (int q = 0; q < rows; ++q) {
-      const double* row = phi.data() + static_cast<std::size_t>(q) * nx;
+      VecI<Dim> a = search_lo + lattice_coord<Dim>(q, row_dims);
+      const double* row = phi.data() + static_cast<std::size_t>(lattice.index(a));
       // a count first (no branch per point), the ends only in rows that hold a negative
       int negatives = 0;
       for (int x = 0; x < nx; ++x) negatives += row[x] < 0.0;
@@ -277,9 +292,9 @@ std::pair<VecI<Dim>, VecI<Dim>> negative_point_box(const SampleLattice<Dim>& lat
       int first = 0, last = nx - 1;
       while (!(row[first] < 0.0)) ++first;
       while (!(row[last] < 0.0)) --last;
-      VecI<Dim> a = lattice_coord<Dim>(q, row_dims), b = a;
-      a[0] = first;
-      b[0] = last;
+      VecI<Dim> b = a;
+      a[0] = x0 + first;
+      b[0] = x0 + last;
       tlo = tlo.cwiseMin(a);
       thi = thi.cwiseMax(b);
     }
@@ -297,6 +312,14 @@ template <int Dim>
 void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& phi, LatticeSigns<Dim>& signs) {
   const auto [lo, hi] = negative_point_box(lattice, phi);
+  classify_lattice_cells_in_box(grid, lattice, phi, lo, hi, signs);
+}
+
+template <int Dim>
+void classify_lattice_cells_searching(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                      const VectorX& phi, const VecI<Dim>& search_lo,
+                                      const VecI<Dim>& search_hi, LatticeSigns<Dim>& signs) {
+  const auto [lo, hi] = negative_point_box_in(lattice, phi, search_lo, search_hi);
   classify_lattice_cells_in_box(grid, lattice, phi, lo, hi, signs);
 }
 
@@ -650,6 +673,11 @@ void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& l
                                           const VectorX&, LatticeSigns<D>&);                      \
   template std::pair<VecI<D>, VecI<D>> negative_point_box<D>(const SampleLattice<D>&,             \
                                                              const VectorX&);                     \
+  template std::pair<VecI<D>, VecI<D>> negative_point_box_in<D>(const SampleLattice<D>&,          \
+                                                                const VectorX&, VecI<D>, VecI<D>); \
+  template void classify_lattice_cells_searching<D>(const MacGrid<D>&, const SampleLattice<D>&,   \
+                                                    const VectorX&, const VecI<D>&,               \
+                                                    const VecI<D>&, LatticeSigns<D>&);            \
   template void classify_lattice_cells_in_box<D>(const MacGrid<D>&, const SampleLattice<D>&,      \
                                                  const VectorX&, const VecI<D>&, const VecI<D>&,  \
                                                  LatticeSigns<D>&);                               \

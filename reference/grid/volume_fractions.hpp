@@ -147,11 +147,27 @@ template <int Dim>
 std::pair<VecI<Dim>, VecI<Dim>> negative_point_box(const SampleLattice<Dim>& lattice,
                                                    const VectorX& phi);
 
+/// The same box when phi is nowhere < 0 outside the inclusive point box [search_lo, search_hi]
+/// (clamped to the lattice): only that box is read (issue 20: the liquid's band instead of the
+/// lattice). Same box as negative_point_box, provided the promise holds.
+template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> negative_point_box_in(const SampleLattice<Dim>& lattice,
+                                                      const VectorX& phi, VecI<Dim> search_lo,
+                                                      VecI<Dim> search_hi);
+
 /// Fills `signs` from phi on the half lattice of grid: negative_point_box, then
 /// classify_lattice_cells_in_box (the class buffer is reused when it has the right size).
 template <int Dim>
 void classify_lattice_cells(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                             const VectorX& phi, LatticeSigns<Dim>& signs);
+
+/// The same classes when phi is nowhere < 0 outside the inclusive point box [search_lo,
+/// search_hi]: negative_point_box_in there, then classify_lattice_cells_in_box with its box (the
+/// same calls as classify_lattice_cells after the search).
+template <int Dim>
+void classify_lattice_cells_searching(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                      const VectorX& phi, const VecI<Dim>& search_lo,
+                                      const VecI<Dim>& search_hi, LatticeSigns<Dim>& signs);
 
 /// The same classes when the caller knows a box of lattice points [point_lo, point_hi]
 /// (inclusive, clamped to the lattice) outside which phi is nowhere < 0: only the lattice cells

@@ -2105,9 +2105,21 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
                            const SampleLattice<Dim>& lattice,
                            const std::array<BoundaryType, 2 * Dim>& boundary,
                            const SolidField<Dim>& solids, VectorX& phi) {
+  LiquidPhiBand<Dim> band;
+  liquid_phi_on_lattice(particles, grid, lattice, boundary, solids, phi, band);
+}
+
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, VectorX& phi,
+                           LiquidPhiBand<Dim>& band) {
   const int nl = lattice.size();
+  band = LiquidPhiBand<Dim>();
   if (particles.size() == 0) {
     phi.setConstant(nl, 3.0 * grid.dx());
+    band.background = 3.0 * grid.dx();
     return;
   }
   TiledLattice<Dim, double, Dim + 2> acc;
@@ -2116,12 +2128,27 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   // (every point outside the tiles)
   phi.resize(nl);
   fill_in_parallel(phi.data(), nl, max_support);
+  band.background = max_support;
   const int slots = acc.num_tile_slots();
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+  // the box of the points written, per thread then merged (a min and max: any split gives it)
+  const int threads = process_threads();
+  std::vector<VecI<Dim>> lo(threads, lattice.dims), hi(threads, -VecI<Dim>::Ones());
+#pragma omp parallel for schedule(static) num_threads(threads)
   for (int tile = 0; tile < slots; ++tile) {
+    VecI<Dim>& tlo = lo[omp_get_thread_num()];
+    VecI<Dim>& thi = hi[omp_get_thread_num()];
     acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
-      if (sum[0] > 0.0) phi[lattice.index(c)] = surface_phi(lattice, c, sum);
+      if (sum[0] > 0.0) {
+        phi[lattice.index(c)] = surface_phi(lattice, c, sum);
+        tlo = tlo.cwiseMin(c);
+        thi = thi.cwiseMax(c);
+      }
     });
+  }
+  band.lo = lattice.dims;
+  for (int t = 0; t < threads; ++t) {
+    band.lo = band.lo.cwiseMin(lo[t]);
+    band.hi = band.hi.cwiseMax(hi[t]);
   }
 }
 
@@ -2164,6 +2191,10 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                        const SampleLattice<D>&,                                    \
                                        const std::array<BoundaryType, 2 * D>&,                     \
                                        const SolidField<D>&, VectorX&);                            \
+  template void liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                     \
+                                       const SampleLattice<D>&,                                    \
+                                       const std::array<BoundaryType, 2 * D>&,                     \
+                                       const SolidField<D>&, VectorX&, LiquidPhiBand<D>&);         \
   template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
                                          const SampleLattice<D>&,                                  \
                                          const std::array<BoundaryType, 2 * D>&,                   \

@@ -218,6 +218,23 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
                            const std::array<BoundaryType, 2 * Dim>& boundary,
                            const SolidField<Dim>& solids, VectorX& phi);
 
+/// Where liquid_phi_on_lattice wrote a value of its own: every lattice point outside the
+/// inclusive box [lo, hi] (lo > hi on some axis: no point) holds `background` (the kernel
+/// support, or 3 dx without particles), so a reader that only looks for values below the
+/// background can scan the box instead of the lattice (issue 20: the liquid's band).
+template <int Dim>
+struct LiquidPhiBand {
+  double background = 0.0;
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones();
+  bool empty() const { return (lo.array() > hi.array()).any(); }
+};
+/// The same level set, with its band.
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, VectorX& phi, LiquidPhiBand<Dim>& band);
+
 /// Largest particle speed (for the CFL condition).
 template <int Dim>
 double max_particle_speed(const Particles<Dim>& particles);

@@ -109,6 +109,22 @@ double bounded_distance(const Shape<Dim>& shape, const Box<Dim>& box, double far
   return shape.distance(x);
 }
 
+/// The nearest of shapes [from, to) to x by bounded_distance (far), continuing a search whose
+/// nearest so far is `best` at distance d: the loop of make_solid_field's gradient, which a
+/// caller can split (the fixed solids' part kept, the moving ones' evaluated again).
+template <int Dim>
+void nearest_solid(const std::vector<ShapePtr<Dim>>& shapes, const std::vector<Box<Dim>>& boxes,
+                   double far, const Vec<Dim>& x, std::size_t from, std::size_t to, double& d,
+                   std::size_t& best) {
+  for (std::size_t k = from; k < to; ++k) {
+    const double dk = bounded_distance<Dim>(*shapes[k], boxes[k], far, x);
+    if (dk < d) {
+      d = dk;
+      best = k;
+    }
+  }
+}
+
 /// The SolidField of a set of solids: the union's distance (min over the shapes, each through
 /// bounded_distance with far = 2 dx) and the gradient of the nearest one. Empty for no shapes.
 template <int Dim>
@@ -127,13 +143,7 @@ SolidField<Dim> make_solid_field(const std::vector<ShapePtr<Dim>>& shapes, doubl
   field.gradient = [shapes, boxes, far](const Vec<Dim>& x) {
     std::size_t best = 0;
     double d = std::numeric_limits<double>::infinity();
-    for (std::size_t k = 0; k < shapes.size(); ++k) {
-      const double dk = bounded_distance<Dim>(*shapes[k], boxes[k], far, x);
-      if (dk < d) {
-        d = dk;
-        best = k;
-      }
-    }
+    nearest_solid<Dim>(shapes, boxes, far, x, 0, shapes.size(), d, best);
     return shapes[best]->gradient(x);
   };
   return field;
@@ -231,6 +241,8 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
       solid_shapes_.push_back(
           make_shape<Dim>(scene.bodies[i].shape, "bodies[" + std::to_string(i) + "].shape"));
   solids_ = make_solid_field<Dim>(solid_shapes_, grid_.dx());
+  solid_field_shapes_ = solid_shapes_;
+  for (const auto& sh : solid_shapes_) solid_field_boxes_.push_back(sh->bounds());
   // W_F^u from the solid level set shrunk by zeta (section 4.4.6)
   solid_phi_ =
       solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
@@ -385,7 +397,8 @@ void Simulation<Dim>::update_liquid_weights() {
     // mirrored across the walls and the solids, so liquid against either reads as liquid up to
     // it (docs/particles.md, "Still water")
     // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
-    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_);
+    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
+                          liquid_band_);
   }
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
@@ -398,16 +411,29 @@ void Simulation<Dim>::update_liquid_weights() {
   const bool solids = !solid_shapes_.empty() || coupled_;
   const bool extend = solids && (solid_phi_.size() == liquid_phi_.size() ||
                                   solid_box_phi_.valid() || solid_scratch_.union_parts.valid());
+  // The liquid's band (issue 20): outside the box of the points liquid_phi_on_lattice wrote,
+  // the level set is its background value; when that is at least the extension's reach, the
+  // extension changes no point there (it changes points with phi < reach only) and the extended
+  // level set is not negative there (>= reach > 0): the extension and the search for negative
+  // points visit that box only (the same points changed, the same box found)
+  const double reach = kLiquidSolidReach * grid_.dx();
+  const bool banded = switches_.restricted_passes && liquid_band_.background >= reach;
+  VecI<Dim> band_lo = VecI<Dim>::Zero(), band_hi = lattice_.dims - VecI<Dim>::Ones();
+  if (banded) {
+    band_lo = liquid_band_.lo;
+    band_hi = liquid_band_.hi;
+  }
   if (extend) {
-    const double reach = kLiquidSolidReach * grid_.dx(), dx = grid_.dx();
+    const double dx = grid_.dx();
     // liquid_extended_into_solid, which reads only the solids' sign (solid_negative_at)
-    overwrite_in_box<Dim>(lattice_, solid_lo_, solid_hi_, liquid_phi_, [&](int k) {
+    overwrite_in_box<Dim>(lattice_, solid_lo_.cwiseMax(band_lo), solid_hi_.cwiseMin(band_hi),
+                          liquid_phi_, [&](int k) {
       const double l = liquid_phi_[k];
       return l < reach && solid_negative_at(k) ? std::min(l, -0.5 * dx) : l;
     }, phi_undo_);
   }
   const VectorX& phi = liquid_phi_;
-  classify_lattice_cells(grid_, lattice_, phi, liquid_signs_);
+  classify_lattice_cells_searching(grid_, lattice_, phi, band_lo, band_hi, liquid_signs_);
   // the points where the extended level set is negative (the box of its non-positive cells)
   const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
   cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
@@ -972,6 +998,9 @@ void Simulation<Dim>::rebuild_solid_field() {
   for (const auto& b : rigid_->bodies())
     if (b.moves()) shapes.push_back(b.posed_shape());
   solids_ = make_solid_field<Dim>(shapes, grid_.dx());
+  solid_field_shapes_ = shapes;
+  solid_field_boxes_.clear();
+  for (const auto& sh : shapes) solid_field_boxes_.push_back(sh->bounds());
 }
 
 template <int Dim>
@@ -1668,30 +1697,121 @@ void Simulation<Dim>::note_unconverged(const std::string& what, long iterations,
 }
 
 template <int Dim>
+template <class Test>
+void Simulation<Dim>::faces_with_centre(int axis, const VecI<Dim>& point_lo,
+                                        const VecI<Dim>& point_hi, const Test& test,
+                                        std::vector<int>& faces) const {
+  // the centre of face (axis, coord) is lattice point 2 coord + 1 - e_axis of the half lattice,
+  // so only the faces of the box of the points [point_lo, point_hi] are tested (a loose range;
+  // the test decides), in face order
+  if ((point_lo.array() > point_hi.array()).any()) return;
+  const VecI<Dim> fdims = grid_.face_dims(axis);
+  VecI<Dim> lo, hi;
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = std::max(point_lo[a] / 2 - 1, 0);
+    hi[a] = std::min(point_hi[a] / 2 + 1, fdims[a] - 1);
+  }
+  if ((lo.array() > hi.array()).any()) return;
+  const VecI<Dim> box = hi - lo + VecI<Dim>::Ones();
+  for (int j = 0; j < box.prod(); ++j) {
+    const VecI<Dim> coord = lo + lattice_coord<Dim>(j, box);
+    VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
+    k[axis] -= 1;
+    if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
+    if (test(k, lattice_.index(k))) faces.push_back(grid_.face_index(axis, coord));
+  }
+}
+
+template <int Dim>
 void Simulation<Dim>::find_faces_in_solids() {
-  // the faces whose centre lies in a solid: the centre is lattice point 2 f + 1 - e_axis of the
-  // half lattice, so only the faces of the box of the solids' negative points are tested (a
-  // loose range; the test decides), axis by axis in face order
+  // the faces whose centre lies in a solid, axis by axis in face order
   std::vector<int>& faces = solid_faces_;
   faces.clear();
+  solid_face_fixed_.clear();
+  const PartsUnionPhi<Dim>& parts = solid_scratch_.union_parts;
+  if (parts.valid() && switches_.restricted_passes) {
+    // The union kept per body (Fig. 17): the faces in the fixed bodies (dense parts) are found
+    // once and kept while those parts are the same; each step searches only the moving bodies'
+    // boxes of negative points for faces in them and in no fixed body. A face is in the union
+    // iff it is in a fixed body or (not, and) in a moving one: the same faces, merged per axis
+    // into the same increasing order as one search of the union's box
+    std::vector<std::pair<const VectorX*, std::pair<VecI<Dim>, VecI<Dim>>>> key;
+    VecI<Dim> dense_lo = lattice_.dims, dense_hi = -VecI<Dim>::Ones();
+    for (int i = 0; i < parts.num_parts(); ++i) {
+      if (!parts.is_dense(i)) continue;
+      VecI<Dim> lo, hi;
+      parts.part_negative_box(i, lo, hi);
+      key.push_back({parts.dense_phi(i), {lo, hi}});
+      if ((lo.array() > hi.array()).any()) continue;
+      dense_lo = dense_lo.cwiseMin(lo);
+      dense_hi = dense_hi.cwiseMax(hi);
+    }
+    if (!fixed_faces_valid_ || key != fixed_faces_key_) {
+      fixed_faces_key_ = key;
+      fixed_faces_valid_ = true;
+      fixed_face_frame_.clear();
+      for (int axis = 0; axis < Dim; ++axis) {
+        fixed_faces_[axis].clear();
+        faces_with_centre(axis, dense_lo, dense_hi,
+                          [&](const VecI<Dim>&, int k) { return parts.dense_negative(k); },
+                          fixed_faces_[axis]);
+      }
+    }
+    int fixed_offset = 0;
+    std::vector<int>& moving = moving_faces_scratch_;
+    for (int axis = 0; axis < Dim; ++axis) {
+      moving.clear();
+      for (int i = 0; i < parts.num_parts(); ++i) {
+        if (parts.is_dense(i)) continue;
+        VecI<Dim> lo, hi;
+        parts.part_negative_box(i, lo, hi);
+        faces_with_centre(axis, lo, hi, [&](const VecI<Dim>& c, int k) {
+          return !parts.dense_negative(k) && parts.boxed_negative(c);
+        }, moving);
+      }
+      // (two moving bodies' boxes may share faces)
+      std::sort(moving.begin(), moving.end());
+      moving.erase(std::unique(moving.begin(), moving.end()), moving.end());
+      const std::vector<int>& fixed = fixed_faces_[axis];
+      std::size_t a = 0, b = 0;
+      while (a < fixed.size() || b < moving.size()) {
+        if (b == moving.size() || (a < fixed.size() && fixed[a] < moving[b])) {
+          faces.push_back(fixed[a]);
+          solid_face_fixed_.push_back(fixed_offset + static_cast<int>(a));
+          ++a;
+        } else {
+          faces.push_back(moving[b++]);
+          solid_face_fixed_.push_back(-1);
+        }
+      }
+      fixed_offset += static_cast<int>(fixed.size());
+    }
+    return;
+  }
+  fixed_faces_valid_ = false;
+  fixed_faces_key_.clear();
+  fixed_face_frame_.clear();
+  for (auto& list : fixed_faces_) list.clear();
   if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
+  std::array<std::size_t, Dim + 1> axis_start{};
   for (int axis = 0; axis < Dim; ++axis) {
-    const VecI<Dim> fdims = grid_.face_dims(axis);
-    VecI<Dim> lo, hi;
-    for (int a = 0; a < Dim; ++a) {
-      lo[a] = std::max(solid_lo_[a] / 2 - 1, 0);
-      hi[a] = std::min(solid_hi_[a] / 2 + 1, fdims[a] - 1);
-    }
-    if ((lo.array() > hi.array()).any()) continue;
-    const VecI<Dim> box = hi - lo + VecI<Dim>::Ones();
-    for (int j = 0; j < box.prod(); ++j) {
-      const VecI<Dim> coord = lo + lattice_coord<Dim>(j, box);
-      VecI<Dim> k = 2 * coord + VecI<Dim>::Ones();
-      k[axis] -= 1;
-      if (k[axis] >= lattice_.dims[axis]) k[axis] = 0;  // periodic seam
-      if (solid_negative_at(k, lattice_.index(k)))
-        faces.push_back(grid_.face_index(axis, coord));
-    }
+    axis_start[axis] = faces.size();
+    faces_with_centre(axis, solid_lo_, solid_hi_,
+                      [&](const VecI<Dim>& k, int index) { return solid_negative_at(k, index); },
+                      faces);
+  }
+  axis_start[Dim] = faces.size();
+  solid_face_fixed_.assign(faces.size(), -1);
+  if (!rigid_ && switches_.restricted_passes) {
+    // static solids only (this call is the constructor's, before any body exists): the faces
+    // never change, so every one keeps its normal's static share (constrain_velocity_in_solids)
+    for (int axis = 0; axis < Dim; ++axis)
+      fixed_faces_[axis].assign(faces.begin() + static_cast<long>(axis_start[axis]),
+                                faces.begin() + static_cast<long>(axis_start[axis + 1]));
+    for (std::size_t j = 0; j < faces.size(); ++j) solid_face_fixed_[j] = static_cast<int>(j);
+    fixed_faces_valid_ = true;
+    // (a key no union of parts has: a later search of parts finds its own fixed faces)
+    fixed_faces_key_.push_back({nullptr, {VecI<Dim>::Zero(), VecI<Dim>::Zero()}});
   }
 }
 
@@ -1710,12 +1830,55 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
   const bool keep = guards_reads() && !same_pose;
   if (keep) solid_frame_.resize(faces.size());
   const std::vector<Box<Dim>> bounds = coupled_ && !same_pose ? body_bounds() : std::vector<Box<Dim>>();
+  // The faces in the fixed bodies (find_faces_in_solids keeps them across steps) keep the fixed
+  // solids' share of the normal's search: solids_ lists the static shapes first, so its
+  // gradient's loop over them ends at the same (distance, nearest) at a face every step; it is
+  // kept per fixed face with that nearest shape's gradient, and only the moving shapes are
+  // searched again (the same comparisons in the same order, the same normal)
+  const std::size_t fixed_shapes = solid_shapes_.size();
+  const bool split = !same_pose && switches_.restricted_passes && fixed_faces_valid_ &&
+                     fixed_shapes > 0 &&
+                     solid_field_shapes_.size() >= fixed_shapes &&
+                     solid_face_fixed_.size() == faces.size();
+  const double far = 2.0 * grid_.dx();
+  if (split && fixed_face_frame_.empty()) {
+    int total = 0;
+    for (int a = 0; a < Dim; ++a) total += static_cast<int>(fixed_faces_[a].size());
+    fixed_face_frame_.resize(total);
+    std::vector<int> all;
+    all.reserve(total);
+    for (int a = 0; a < Dim; ++a) all.insert(all.end(), fixed_faces_[a].begin(), fixed_faces_[a].end());
+#pragma omp parallel for schedule(static) num_threads(team_threads(total))
+    for (int i = 0; i < total; ++i) {
+      const auto [axis, coord] = grid_.face_coord(all[i]);
+      const Vec<Dim> x = grid_.face_center(axis, coord);
+      FixedFaceFrame& frame = fixed_face_frame_[i];
+      frame.distance = std::numeric_limits<double>::infinity();
+      std::size_t best = 0;
+      nearest_solid<Dim>(solid_field_shapes_, solid_field_boxes_, far, x, 0, fixed_shapes,
+                         frame.distance, best);
+      frame.nearest = best;
+      frame.normal = solid_field_shapes_[best]->gradient(x);
+    }
+  }
 #pragma omp parallel for schedule(static) num_threads(team_threads(count))
   for (int j = 0; j < count; ++j) {
     const int f = faces[j];
     const auto [axis, coord] = grid_.face_coord(f);
     const Vec<Dim> x = grid_.face_center(axis, coord);
-    const Vec<Dim> n = same_pose ? solid_frame_[j].normal : solids_.gradient(x);
+    Vec<Dim> n;
+    if (same_pose) {
+      n = solid_frame_[j].normal;
+    } else if (split && solid_face_fixed_[j] >= 0) {
+      const FixedFaceFrame& frame = fixed_face_frame_[solid_face_fixed_[j]];
+      double d = frame.distance;
+      std::size_t best = frame.nearest;
+      nearest_solid<Dim>(solid_field_shapes_, solid_field_boxes_, far, x, fixed_shapes,
+                         solid_field_shapes_.size(), d, best);
+      n = best < fixed_shapes ? frame.normal : solid_field_shapes_[best]->gradient(x);
+    } else {
+      n = solids_.gradient(x);
+    }
     const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
                                   : (coupled_ ? solid_velocity(x, bounds) : Vec<Dim>::Zero());
     if (keep) solid_frame_[j] = {n, vs, u_[f]};

@@ -153,6 +153,12 @@ struct StageSwitches {
   bool line15_carry_debt = true;
   /// Line15Energy::balance_local's neighbourhoods: boxes of (2 reach + 1)^Dim cells
   int line15_pay_reach = 1;
+  /// A test switch: false makes the per-step passes that follow the liquid and the moving bodies
+  /// dense again (issue 20, docs/benchmarks.md "eleventh part"): the faces in solids searched in
+  /// the whole union's box every step with every shape's normal evaluated, the liquid level
+  /// set's extension into the solids over the solids' box and its negative points searched over
+  /// the lattice. The same results either way (tests/unit/sim/test_restricted_passes.cpp).
+  bool restricted_passes = true;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
@@ -379,6 +385,11 @@ class Simulation : public AnySimulation {
   /// The faces whose centre lies in a solid (solid_phi_ < 0 there) into solid_faces_, from the
   /// box of the solids' negative points: wherever solid_phi_ is made.
   void find_faces_in_solids();
+  /// Appends to `faces` the faces of `axis` whose centre point k (index) of the half lattice has
+  /// test(k, index), among those of the box of points [point_lo, point_hi], in face order.
+  template <class Test>
+  void faces_with_centre(int axis, const VecI<Dim>& point_lo, const VecI<Dim>& point_hi,
+                         const Test& test, std::vector<int>& faces) const;
   /// Sections 3.1.2, 4.4.6 with moving bodies: W_F^u, W_F^s and the solid level set from every
   /// body at its current pose (fixed bodies included, as one-way bodies), shrunk by zeta, and the
   /// SolidField of the particles (static shapes and posed bodies).
@@ -481,6 +492,9 @@ class Simulation : public AnySimulation {
   /// the points of liquid_phi_ that update_liquid_weights overwrites in place (the extension
   /// into the solids, then the reported volume's level set) with their values, per thread
   std::vector<std::vector<std::pair<int, double>>> phi_undo_;
+  /// the band of the last liquid level set (liquid_phi_on_lattice): its background value and
+  /// the box of the points it wrote
+  LiquidPhiBand<Dim> liquid_band_;
   LatticeSigns<Dim> liquid_signs_;
   // per-step buffers of the velocity stages: face flags (faces that carry mass, trusted faces)
   // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
@@ -494,6 +508,25 @@ class Simulation : public AnySimulation {
   int reached_layers_ = 0;
   long reread_particles_ = 0;
   std::vector<int> solid_faces_;
+  /// per face of solid_faces_: its index in the fixed faces (fixed_faces_, axis after axis), or -1
+  std::vector<int> solid_face_fixed_;
+  /// The faces whose centre lies in a fixed body (the union's dense parts), per axis in face
+  /// order, found once while fixed_faces_key_ (those parts' phi and boxes) is the same
+  std::array<std::vector<int>, Dim> fixed_faces_;
+  std::vector<std::pair<const VectorX*, std::pair<VecI<Dim>, VecI<Dim>>>> fixed_faces_key_;
+  bool fixed_faces_valid_ = false;
+  std::vector<int> moving_faces_scratch_;
+  /// per fixed face: the static shapes' part of the normal's search (make_solid_field's gradient
+  /// over solid_shapes_, which lead solids_): the least distance, its shape and its gradient
+  struct FixedFaceFrame {
+    double distance = 0.0;
+    std::size_t nearest = 0;
+    Vec<Dim> normal = Vec<Dim>::Zero();
+  };
+  std::vector<FixedFaceFrame> fixed_face_frame_;
+  /// the shapes of solids_ (static ones first) and their bounds, as make_solid_field has them
+  std::vector<ShapePtr<Dim>> solid_field_shapes_;
+  std::vector<Box<Dim>> solid_field_boxes_;
   std::vector<double> solid_values_;
   /// per face of solid_faces_ (with the guard of advect): the normal, the solid's velocity and the
   /// face's value before constrain_velocity_in_solids, as the step's first call had them

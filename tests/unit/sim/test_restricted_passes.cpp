@@ -1,0 +1,212 @@
+// The per-step passes restricted to the liquid's band and the moving bodies (issue 20, Fig. 17;
+// docs/benchmarks.md "eleventh part") against their dense forms: the search for negative points
+// in a box, the liquid level set's band, and whole simulations with StageSwitches::
+// restricted_passes on and off (faces in solids kept for the fixed bodies with their normals'
+// share, the extension into the solids and the classification in the liquid's band): the same
+// bits.
+#include <catch2/catch.hpp>
+
+#include <cstring>
+#include <memory>
+#include <random>
+
+#include "reference/app/scene_file.hpp"
+#include "reference/grid/volume_fractions.hpp"
+#include "reference/particles/particles.hpp"
+#include "reference/sim/simulation.hpp"
+#include "tests/support/test_helpers.hpp"
+
+using namespace monolith;
+using monolith::testing::all_boundaries;
+using monolith::testing::TestBall;
+using monolith::testing::unit_grid;
+
+namespace {
+
+bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+
+template <int Dim>
+LiquidSpec water_at(const Vec<Dim>& centre, double radius) {
+  LiquidSpec spec;
+  spec.name = "water";
+  spec.density = 1000.0;
+  spec.shape.type = ShapeType::sphere;
+  spec.shape.center.assign(centre.data(), centre.data() + Dim);
+  spec.shape.radius = radius;
+  return spec;
+}
+
+/// A field with negative values only in [lo, hi] (random signs there), positive elsewhere.
+template <int Dim>
+VectorX field_negative_in(const SampleLattice<Dim>& lattice, const VecI<Dim>& lo,
+                          const VecI<Dim>& hi, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  VectorX phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k) {
+    const VecI<Dim> c = lattice.coord(k);
+    const bool inside = (c.array() >= lo.array()).all() && (c.array() <= hi.array()).all();
+    const double v = u(rng);
+    phi[k] = inside && v < -0.6 ? v : std::abs(v) + 0.01;
+  }
+  return phi;
+}
+
+template <int Dim>
+void check_negative_point_search(int n) {
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  VecI<Dim> lo = VecI<Dim>::Constant(3), hi = VecI<Dim>::Constant(2 * n - 5);
+  hi[0] = n;  // not symmetric
+  const VectorX phi = field_negative_in<Dim>(lattice, lo, hi, 17u);
+  const auto [dense_lo, dense_hi] = negative_point_box(lattice, phi);
+  REQUIRE((dense_lo.array() <= dense_hi.array()).all());
+  // any search box that holds every negative point finds the same box
+  for (int grow : {0, 1, 5}) {
+    const auto [box_lo, box_hi] = negative_point_box_in<Dim>(
+        lattice, phi, (dense_lo - VecI<Dim>::Constant(grow)).eval(),
+        (dense_hi + VecI<Dim>::Constant(grow)).eval());
+    CHECK(box_lo == dense_lo);
+    CHECK(box_hi == dense_hi);
+  }
+  // a box that leaves out the last negative row finds less (the search reads only its box)
+  VecI<Dim> cut_hi = dense_hi;
+  cut_hi[Dim - 1] -= 1;
+  const auto [cut_lo2, cut_hi2] = negative_point_box_in<Dim>(lattice, phi, dense_lo, cut_hi);
+  CHECK(cut_hi2[Dim - 1] < dense_hi[Dim - 1]);
+  (void)cut_lo2;
+  // an empty search box finds nothing
+  const auto [none_lo, none_hi] =
+      negative_point_box_in<Dim>(lattice, phi, VecI<Dim>::Constant(2), VecI<Dim>::Constant(1));
+  CHECK((none_lo.array() > none_hi.array()).any());
+  // the classes of a search in the box equal those of the whole lattice
+  LatticeSigns<Dim> dense, searched;
+  classify_lattice_cells(grid, lattice, phi, dense);
+  classify_lattice_cells_searching(grid, lattice, phi, lo, hi, searched);
+  CHECK(searched.lo == dense.lo);
+  CHECK(searched.hi == dense.hi);
+  const VecI<Dim> cells = 2 * grid.cells();
+  long differ = 0;
+  for (int j = 0; j < cells.prod(); ++j) {
+    const VecI<Dim> l = lattice_coord<Dim>(j, cells);
+    differ += searched.class_of(l) != dense.class_of(l);
+  }
+  CHECK(differ == 0);
+}
+
+template <int Dim>
+void check_liquid_band(int n) {
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const Vec<Dim> centre = Vec<Dim>::Constant(0.3);
+  auto ball = std::make_shared<TestBall<Dim>>(centre, 0.12);
+  const Particles<Dim> particles = seed_particles<Dim>(
+      grid, {water_at<Dim>(centre, 0.12)}, {ball}, SolidField<Dim>{}, Dim == 2 ? 4 : 8, 3u);
+  REQUIRE(particles.size() > 0);
+  const auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+  const VectorX plain = liquid_phi_on_lattice(particles, grid, lattice, boundary);
+  VectorX phi;
+  LiquidPhiBand<Dim> band;
+  liquid_phi_on_lattice(particles, grid, lattice, boundary, SolidField<Dim>{}, phi, band);
+  REQUIRE(phi.size() == plain.size());
+  long differ = 0, outside = 0, outside_not_background = 0;
+  for (int k = 0; k < lattice.size(); ++k) {
+    differ += !same_bits(phi[k], plain[k]);
+    const VecI<Dim> c = lattice.coord(k);
+    if ((c.array() < band.lo.array()).any() || (c.array() > band.hi.array()).any()) {
+      ++outside;
+      outside_not_background += !same_bits(phi[k], band.background);
+    }
+  }
+  CHECK(differ == 0);
+  CHECK(outside_not_background == 0);
+  // the band is a small part of the lattice here, and covers the liquid
+  CHECK(outside > lattice.size() / 2);
+  CHECK(band.background >= kLiquidSolidReach * grid.dx());
+  const auto [neg_lo, neg_hi] = negative_point_box(lattice, phi);
+  CHECK((neg_lo.array() >= band.lo.array()).all());
+  CHECK((neg_hi.array() <= band.hi.array()).all());
+  // no particle: the background everywhere and an empty band
+  liquid_phi_on_lattice(Particles<Dim>{}, grid, lattice, boundary, SolidField<Dim>{}, phi, band);
+  CHECK(band.empty());
+  CHECK(same_bits(phi[0], band.background));
+}
+
+long differing(const VectorX& a, const VectorX& b) {
+  if (a.size() != b.size()) return -1;
+  long n = 0;
+  for (Eigen::Index i = 0; i < a.size(); ++i) n += !same_bits(a[i], b[i]);
+  return n;
+}
+
+template <int Dim>
+long differing(const std::vector<Vec<Dim>>& a, const std::vector<Vec<Dim>>& b) {
+  if (a.size() != b.size()) return -1;
+  long n = 0;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    for (int d = 0; d < Dim; ++d) n += !same_bits(a[i][d], b[i][d]);
+  return n;
+}
+
+/// Two simulations of a built-in scene, restricted passes on and off: after every frame the
+/// same statistics, particles, face velocities, pressures, liquid level set, W_F^u and bodies.
+template <int Dim>
+void check_scene(const std::string& name, const std::string& cells, int frames) {
+  INFO(name);
+  const SceneFile scene =
+      load_scene(name, {"domain.cells=" + cells, "render.enabled=false"});
+  StageSwitches dense;
+  dense.restricted_passes = false;
+  Simulation<Dim> restricted(scene), reference(scene, dense);
+  REQUIRE(!restricted.static_shapes().empty());
+  for (int f = 0; f < frames; ++f) {
+    const FrameStats a = restricted.advance_frame();
+    const FrameStats b = reference.advance_frame();
+    CHECK(a.steps == b.steps);
+    CHECK(a.solver.iterations == b.solver.iterations);
+    CHECK(same_bits(a.liquid_volume, b.liquid_volume));
+    CHECK(same_bits(a.kinetic_energy_liquid, b.kinetic_energy_liquid));
+    CHECK(same_bits(a.kinetic_energy_bodies, b.kinetic_energy_bodies));
+    const Particles<Dim>& pa = restricted.particles();
+    const Particles<Dim>& pb = reference.particles();
+    REQUIRE(pa.size() > 0);
+    CHECK(differing<Dim>(pa.x, pb.x) == 0);
+    CHECK(differing<Dim>(pa.v, pb.v) == 0);
+    CHECK(differing(restricted.velocity(), reference.velocity()) == 0);
+    CHECK(differing(restricted.pressure(), reference.pressure()) == 0);
+    CHECK(differing(restricted.liquid_phi(), reference.liquid_phi()) == 0);
+    CHECK(differing(restricted.weights().fluid_face, reference.weights().fluid_face) == 0);
+    CHECK(differing(restricted.weights().liquid_face, reference.weights().liquid_face) == 0);
+    if (!restricted.rigid_world()) continue;
+    const auto& ba = restricted.rigid_world()->bodies();
+    const auto& bb = reference.rigid_world()->bodies();
+    REQUIRE(ba.size() == bb.size());
+    for (std::size_t i = 0; i < ba.size(); ++i) {
+      const Vec<Dim> xa = ba[i].position, xb = bb[i].position;
+      for (int d = 0; d < Dim; ++d) CHECK(same_bits(xa[d], xb[d]));
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("negative points searched in a box: the dense box and classes", "[unit]") {
+  check_negative_point_search<2>(16);
+  check_negative_point_search<3>(10);
+}
+
+TEST_CASE("liquid level set band: same values, background outside", "[unit]") {
+  check_liquid_band<2>(32);
+  check_liquid_band<3>(20);
+}
+
+TEST_CASE("restricted passes give the dense passes' bits (Fig. 17)", "[unit]") {
+  check_scene<2>("hollow-spheres-inviscid-2d", "[40,40]", 10);
+  check_scene<3>("hollow-spheres-inviscid-3d", "[20,20,20]", 1);
+}
+
+TEST_CASE("static solids keep their normals: the dense passes' bits", "[unit]") {
+  // no body moves: every face in the bowl keeps its normal from the first step
+  check_scene<2>("default", "[48,32]", 8);
+  check_scene<2>("pour-into-bowl-2d", "[40,40]", 25);
+}
