@@ -84,6 +84,32 @@ void finish_b(std::vector<Triplet>& columns, int n, StokesFactors& f) {
   f.b.makeCompressed();
 }
 
+
+/// m = the row-major matrix whose row r holds rows[r]'s (column, value) pairs, each row's
+/// columns distinct and sorted (what setFromTriplets would build, written straight into the
+/// compressed storage without a triplet list or a transposed copy); rows' storage is released
+/// as it is copied. Rows are copied in parallel, each by one thread.
+void assign_sorted_rows(std::vector<std::vector<std::pair<int, double>>>& rows, int cols,
+                        SparseMatrix& m) {
+  const int n = static_cast<int>(rows.size());
+  m.resize(n, cols);
+  int* outer = m.outerIndexPtr();
+  outer[0] = 0;
+  for (int r = 0; r < n; ++r) outer[r + 1] = outer[r] + static_cast<int>(rows[r].size());
+  m.resizeNonZeros(outer[n]);
+  int* inner = m.innerIndexPtr();
+  double* value = m.valuePtr();
+#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
+  for (int r = 0; r < n; ++r) {
+    int pos = outer[r];
+    for (const auto& [g, x] : rows[r]) {
+      inner[pos] = g;
+      value[pos++] = x;
+    }
+    std::vector<std::pair<int, double>>().swap(rows[r]);
+  }
+}
+
 }  // namespace
 
 template <int Dim>
@@ -195,23 +221,7 @@ StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& 
     }
     row.resize(out);
   }
-  SparseMatrix& bt = f.b_transpose;
-  bt.resize(n, static_cast<int>(f.face.size()));
-  int* outer = bt.outerIndexPtr();
-  outer[0] = 0;
-  for (int i = 0; i < n; ++i) outer[i + 1] = outer[i] + static_cast<int>(columns[i].size());
-  bt.resizeNonZeros(outer[n]);
-  int* inner = bt.innerIndexPtr();
-  double* value = bt.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < n; ++i) {
-    int pos = outer[i];
-    for (const auto& [g, x] : columns[i]) {
-      inner[pos] = g;
-      value[pos++] = x;
-    }
-    std::vector<std::pair<int, double>>().swap(columns[i]);
-  }
+  assign_sorted_rows(columns, static_cast<int>(f.face.size()), f.b_transpose);
   f.b = f.b_transpose.transpose();
   f.b.makeCompressed();
   return f;
@@ -303,22 +313,8 @@ SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
   }
   // the rows straight into compressed storage (each row's columns are distinct and sorted: the
   // matrix setFromTriplets would build, without its triplet list and transposed copy)
-  SparseMatrix v(nf, nf);
-  int* outer = v.outerIndexPtr();
-  outer[0] = 0;
-  for (int r = 0; r < nf; ++r) outer[r + 1] = outer[r] + static_cast<int>(rows[r].size());
-  v.resizeNonZeros(outer[nf]);
-  int* inner = v.innerIndexPtr();
-  double* value = v.valuePtr();
-#pragma omp parallel for schedule(static) if (nf > kParallelRows) num_threads(process_threads())
-  for (int r = 0; r < nf; ++r) {
-    int pos = outer[r];
-    for (const auto& [g, x] : rows[r]) {
-      inner[pos] = g;
-      value[pos++] = x;
-    }
-    std::vector<std::pair<int, double>>().swap(rows[r]);
-  }
+  SparseMatrix v;
+  assign_sorted_rows(rows, nf, v);
   return v;
 }
 

@@ -147,24 +147,7 @@ double PartsUnionPhi<Dim>::at(const VecI<Dim>& c) const {
 template <int Dim>
 bool PartsUnionPhi<Dim>::negative(const VecI<Dim>& c, int k) const {
   // the dense parts by index first, then the boxed parts in their boxes of negative points
-  bool boxed = false;
-  for (int i = 0; i < count_; ++i) {
-    const Part& part = parts_[i];
-    if (!part.dense) {
-      boxed = true;
-      continue;
-    }
-    if ((*part.dense)[k] < 0.0) return true;
-  }
-  if (!boxed) return false;
-  for (int i = 0; i < count_; ++i) {
-    const Part& part = parts_[i];
-    if (part.dense) continue;
-    if ((c.array() < part.neg_lo.array()).any() || (c.array() > part.neg_hi.array()).any())
-      continue;
-    if (part.values[lattice_index<Dim>(c - part.lo, part.box_dims)] < 0.0) return true;
-  }
-  return false;
+  return dense_negative(k) || boxed_negative(c);
 }
 
 template <int Dim>
