@@ -4,6 +4,7 @@
 /// code under test plus these exact, independent definitions.
 
 #include <algorithm>
+#include <cstring>
 #include <random>
 #include <string>
 #include <vector>
@@ -19,6 +20,17 @@
 namespace monolith::testing {
 
 constexpr double kPi = 3.14159265358979323846;
+
+/// Whether two doubles have the same bits (+0 and -0 differ, a NaN equals its own bits).
+inline bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+
+/// How many entries of a and b differ in their bits; -1 when the sizes differ.
+inline long differing(const VectorX& a, const VectorX& b) {
+  if (a.size() != b.size()) return -1;
+  long n = 0;
+  for (Eigen::Index i = 0; i < a.size(); ++i) n += !same_bits(a[i], b[i]);
+  return n;
+}
 
 /// The unit square / cube split into n cells per axis (periodic along x when asked).
 template <int Dim>

@@ -16,17 +16,10 @@ using monolith::testing::all_boundaries;
 using monolith::testing::TestBall;
 using monolith::testing::TestBox;
 using monolith::testing::unit_grid;
+using monolith::testing::same_bits;
+using monolith::testing::differing;
 
 namespace {
-
-bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
-
-long differing(const VectorX& a, const VectorX& b) {
-  if (a.size() != b.size()) return -1;
-  long n = 0;
-  for (Eigen::Index i = 0; i < a.size(); ++i) n += !same_bits(a[i], b[i]);
-  return n;
-}
 
 template <int Dim>
 CouplingBody<Dim> ball(const Vec<Dim>& c, double r, bool two_way = true) {

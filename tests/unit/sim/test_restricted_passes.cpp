@@ -20,10 +20,9 @@ using namespace monolith;
 using monolith::testing::all_boundaries;
 using monolith::testing::TestBall;
 using monolith::testing::unit_grid;
+using monolith::testing::same_bits;
 
 namespace {
-
-bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
 
 template <int Dim>
 LiquidSpec water_at(const Vec<Dim>& centre, double radius) {
@@ -132,12 +131,7 @@ void check_liquid_band(int n) {
   CHECK(same_bits(phi[0], band.background));
 }
 
-long differing(const VectorX& a, const VectorX& b) {
-  if (a.size() != b.size()) return -1;
-  long n = 0;
-  for (Eigen::Index i = 0; i < a.size(); ++i) n += !same_bits(a[i], b[i]);
-  return n;
-}
+using monolith::testing::differing;  // and, for particle positions:
 
 template <int Dim>
 long differing(const std::vector<Vec<Dim>>& a, const std::vector<Vec<Dim>>& b) {
