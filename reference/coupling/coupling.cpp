@@ -170,6 +170,23 @@ void faces_near_box(const MacGrid<Dim>& grid, const Box<Dim>& box, std::vector<i
   }
 }
 
+/// w[f] = fraction(lower) for every face f in `near`, lower the half-lattice corner of f's
+/// control volume (which starts half a cell before the face along its normal): the one loop of
+/// body_face_fractions and body_face_fractions_at, which read the cube's fraction differently.
+/// One face per iteration, so any thread count gives the same values.
+template <int Dim, class CubeFraction>
+void face_fractions_of_cubes(const MacGrid<Dim>& grid, const std::vector<int>& near, VectorX& w,
+                             const CubeFraction& fraction) {
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int n = 0; n < static_cast<int>(near.size()); ++n) {
+    const int f = near[n];
+    const auto [axis, coord] = grid.face_coord(f);
+    VecI<Dim> lower = 2 * coord;
+    lower[axis] -= 1;
+    w[f] = fraction(lower);
+  }
+}
+
 /// face_negative_fractions of a body's lattice phi, evaluated only on faces whose control
 /// volume (the face centre +- dx along every axis) can reach the body's bounds; the others are
 /// zero (their whole control volume lies where phi > 0). Same values, O(faces near the body):
@@ -186,15 +203,9 @@ void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lat
   w.setZero();
   std::vector<int> near;
   faces_near_box<Dim>(grid, box, near);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int n = 0; n < static_cast<int>(near.size()); ++n) {
-    const int f = near[n];
-    const auto [axis, coord] = grid.face_coord(f);
-    // the face control volume starts half a cell before the face along its normal
-    VecI<Dim> lower = 2 * coord;
-    lower[axis] -= 1;
-    w[f] = lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
-  }
+  face_fractions_of_cubes<Dim>(grid, near, w, [&](const VecI<Dim>& lower) {
+    return lattice_cube_negative_fraction<Dim>(grid, lattice, lower, phi);
+  });
 }
 
 /// The inclusive box of the points c in [lo, hi] where value(c) < 0 (lo > hi: none); any
@@ -302,14 +313,9 @@ void body_face_fractions_at(const MacGrid<Dim>& grid, const Phi& phi, const Box<
   }
   if (zero_all) w.setZero();
   faces_near_box<Dim>(grid, box, near);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int n = 0; n < static_cast<int>(near.size()); ++n) {
-    const int f = near[n];
-    const auto [axis, coord] = grid.face_coord(f);
-    VecI<Dim> lower = 2 * coord;
-    lower[axis] -= 1;
-    w[f] = cube_negative_fraction_at<Dim>(grid, lower, phi);
-  }
+  face_fractions_of_cubes<Dim>(grid, near, w, [&](const VecI<Dim>& lower) {
+    return cube_negative_fraction_at<Dim>(grid, lower, phi);
+  });
 }
 
 }  // namespace
