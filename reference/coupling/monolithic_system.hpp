@@ -19,6 +19,7 @@
 /// The products B_i^T M_r^-1 B_j x are evaluated right to left (sequential multiplication,
 /// section 4.4.3); the dense n x n blocks exist only in dense_matrix(), for small tests.
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -275,7 +276,7 @@ class MonolithicSystem {
   VectorX b1_, b2_;
   /// rhs_round_off(): multiples of eps of the bound on (b1, b2)'s terms, and the bound itself.
   static constexpr double kRhsRoundOffUlps = 16.0;
-  static constexpr double kEpsilon = 2.220446049250313e-16;  // 2^-52
+  static constexpr double kEpsilon = std::numeric_limits<double>::epsilon();  // 2^-52
   double rhs_round_off_ = 0.0;
 };
 
