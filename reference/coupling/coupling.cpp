@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -318,6 +319,195 @@ void body_face_fractions_at(const MacGrid<Dim>& grid, const Phi& phi, const Box<
   });
 }
 
+
+/// Whether every lattice point next to a negative point of `phi` (the 3^Dim points around it,
+/// clamped to the lattice: every corner of a lattice cell with a negative corner) holds a value
+/// of at most `far` (NaN fails), the negative points lying in the inclusive box [neg_lo,
+/// neg_hi]. Then at every corner of a lattice cell where phi changes sign, phi is below a moving
+/// body's far value (> far outside its box), so the union's value there is phi's. The same
+/// answer for any thread count.
+template <int Dim>
+bool corners_of_negative_cells_within(const SampleLattice<Dim>& lattice, const VectorX& phi,
+                                      const VecI<Dim>& neg_lo, const VecI<Dim>& neg_hi,
+                                      double far) {
+  if ((neg_lo.array() > neg_hi.array()).any()) return true;
+  const VecI<Dim> box_dims = neg_hi - neg_lo + VecI<Dim>::Ones();
+  VecI<Dim> row_dims = box_dims;
+  row_dims[0] = 1;
+  const int rows = row_dims.prod();
+  int failed = 0;
+#pragma omp parallel for schedule(static) num_threads(team_threads(box_dims.prod())) reduction(|| : failed)
+  for (int q = 0; q < rows; ++q) {
+    if (failed) continue;
+    VecI<Dim> c = neg_lo + lattice_coord<Dim>(q, row_dims);
+    for (int x = neg_lo[0]; x <= neg_hi[0] && !failed; ++x) {
+      c[0] = x;
+      if (!(phi[lattice.index(c)] < 0.0)) continue;
+      VecI<Dim> lo, hi;
+      for (int a = 0; a < Dim; ++a) {
+        lo[a] = std::max(c[a] - 1, 0);
+        hi[a] = std::min(c[a] + 1, lattice.dims[a] - 1);
+      }
+      for_range<Dim>(lo, hi, [&](const VecI<Dim>& n) {
+        if (!(phi[lattice.index(n)] <= far)) failed = 1;
+      });
+    }
+  }
+  return !failed;
+}
+
+/// W_F^s with the union of the solids kept per body (SolidWeightsScratch::union_in_parts, the
+/// W_F^s paragraph): at most one body never moves (`fixed_body`, -1 none), `part_of` gives each
+/// moving body's part of scratch.union_parts. Writes w.fluid_stress with the values of
+/// stress_fluid_weights of the dense union.
+template <int Dim>
+void stress_weights_in_parts(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const std::vector<CouplingBody<Dim>>& bodies, int fixed_body,
+                             const std::vector<int>& part_of,
+                             const std::array<BoundaryType, 2 * Dim>& boundary, double far,
+                             SolidWeights<Dim>& w, SolidWeightsScratch<Dim>& scratch) {
+  const StressGrid<Dim> stress(grid);
+  const int ns = stress.num_dofs();
+  const PartsUnionPhi<Dim>& parts = scratch.union_parts;
+  std::vector<char> fixed_flags(bodies.size(), 0);
+  for (std::size_t i = 0; i < bodies.size(); ++i)
+    fixed_flags[i] = i < scratch.fixed.size() && scratch.fixed[i];
+  const bool was_kept = scratch.kept_stress;
+  scratch.kept_stress = false;
+  bool within = true;
+  if (fixed_body >= 0) {
+    char& test = scratch.fixed_stress_test[fixed_body];
+    if (test == 0)
+      test = corners_of_negative_cells_within<Dim>(lattice, scratch.fixed_phi[fixed_body],
+                                                   scratch.fixed_neg_lo[fixed_body],
+                                                   scratch.fixed_neg_hi[fixed_body], far)
+                 ? 1
+                 : 2;
+    within = test == 1;
+  }
+  if (!within) {
+    // the dense union from its parts (the same bits), then W_F^s from it as without parts
+    VectorX& union_phi = w.lattice_phi;
+    if (union_phi.size() != lattice.size()) union_phi.resize(lattice.size());
+    VecI<Dim> lo, hi;
+    parts.negative_box(lo, hi);
+    for_each_lattice_point_in_box<Dim>(lattice, VecI<Dim>::Zero(),
+                                       lattice.dims - VecI<Dim>::Ones(),
+                                       [&](int k) { union_phi[k] = parts(k); });
+    classify_lattice_cells_in_box(grid, lattice, union_phi, lo, hi, scratch.signs);
+    stress_fluid_weights(stress, lattice, union_phi, scratch.signs, boundary, w.fluid_stress);
+    return;
+  }
+  const bool incremental = was_kept && w.fluid_stress.size() == ns &&
+                           w.fluid_stress.data() == scratch.kept_fluid_stress &&
+                           scratch.kept_boundary == boundary &&
+                           scratch.kept_stress_fixed == fixed_flags &&
+                           scratch.stress_near.size() == bodies.size();
+  scratch.stress_near.resize(bodies.size());
+  // the fixed body's fraction of the control volume with lower lattice corner `lower` (0 without
+  // a fixed body): lattice_cube_negative_fraction, the value stress_fluid_weights' classified
+  // pass gives
+  const VectorX* fixed_phi = fixed_body >= 0 ? &scratch.fixed_phi[fixed_body] : nullptr;
+  if (incremental) {
+    // the last call's DOFs near a moving body get the fixed body's value again (those near a
+    // moving body in this call are made below)
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      const std::vector<int>& list = scratch.stress_near[i];
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<int>(list.size())))
+      for (int n = 0; n < static_cast<int>(list.size()); ++n) {
+        const int d = list[n];
+        const auto [k, c] = stress.coord(d);
+        const double fraction =
+            fixed_phi ? lattice_cube_negative_fraction<Dim>(
+                            grid, lattice, stress_control_volume_lower<Dim>(stress, d), *fixed_phi)
+                      : 0.0;
+        w.fluid_stress[d] = stress_fluid_weight<Dim>(stress, boundary, k, c, fraction);
+      }
+    }
+  } else if (fixed_phi) {
+    // the fixed body's W_F^s everywhere (its classes in the box of its negative points)
+    classify_lattice_cells_in_box(grid, lattice, *fixed_phi, scratch.fixed_neg_lo[fixed_body],
+                                  scratch.fixed_neg_hi[fixed_body], scratch.signs);
+    stress_fluid_weights(stress, lattice, *fixed_phi, scratch.signs, boundary, w.fluid_stress);
+  } else {
+    // no fixed body: no solid outside the moving bodies' boxes (fraction 0)
+    LatticeSigns<Dim> none;
+    none.cells = 2 * grid.cells();
+    stress_fluid_weights(stress, lattice, VectorX(), none, boundary, w.fluid_stress);
+  }
+  // the DOFs whose control volume (lattice points 2 c + o .. 2 c + o + 2, o = 2 shift - 1;
+  // mirrored at walls into the same range) reaches a moving body's box: the union read there
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    std::vector<int>& list = scratch.stress_near[i];
+    list.clear();
+    if (part_of[i] < 0) continue;
+    VecI<Dim> lo, hi;
+    parts.boxed_values(part_of[i], lo, hi);
+    if ((lo.array() > hi.array()).any()) continue;
+    // the union's values in the box grown by two points (every corner such a control volume
+    // reads, off periodic axes), read directly by the fractions
+    VecI<Dim> ulo, uhi;
+    for (int a = 0; a < Dim; ++a) {
+      ulo[a] = std::max(lo[a] - 2, 0);
+      uhi[a] = std::min(hi[a] + 2, lattice.dims[a] - 1);
+    }
+    const VecI<Dim> udims = uhi - ulo + VecI<Dim>::Ones();
+    VectorX& values = scratch.stress_union;
+    values.resize(udims.prod());
+    {
+      VecI<Dim> row_dims = udims;
+      row_dims[0] = 1;
+      const int rows = row_dims.prod();
+#pragma omp parallel for schedule(static) num_threads(team_threads(udims.prod()))
+      for (int q = 0; q < rows; ++q) {
+        VecI<Dim> c = ulo + lattice_coord<Dim>(q, row_dims);
+        double* o = values.data() + static_cast<std::size_t>(q) * udims[0];
+        for (int x = 0; x < udims[0]; ++x) {
+          c[0] = ulo[0] + x;
+          o[x] = parts.at(c);
+        }
+      }
+    }
+    for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
+      const Vec<Dim> shift = StressGrid<Dim>::shift(k);
+      const VecI<Dim>& dims = stress.dims(k);
+      VecI<Dim> from, to;
+      bool any = true;
+      for (int a = 0; a < Dim; ++a) {
+        from[a] = 0;
+        to[a] = dims[a] - 1;
+        if (grid.periodic(a)) continue;
+        const int o = static_cast<int>(2.0 * shift[a]) - 1;
+        // 2 c + o + 2 >= lo and 2 c + o <= hi
+        const int need = lo[a] - 2 - o;
+        from[a] = std::max(from[a], need >= 0 ? (need + 1) / 2 : -((-need) / 2));
+        const int top = hi[a] - o;
+        to[a] = std::min(to[a], top >= 0 ? top / 2 : -((1 - top) / 2));
+        any = any && from[a] <= to[a];
+      }
+      if (any) for_range<Dim>(from, to, [&](const VecI<Dim>& c) { list.push_back(stress.index(k, c)); });
+    }
+    struct UnionPhi {
+      const PartsUnionPhi<Dim>* parts;
+      const VectorX* values;
+      VecI<Dim> lo, hi;
+      double operator()(const VecI<Dim>& c) const { return parts->at(c); }
+    };
+    const UnionPhi phi{&parts, &values, ulo, uhi};
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<int>(list.size())))
+    for (int n = 0; n < static_cast<int>(list.size()); ++n) {
+      const int d = list[n];
+      const auto [k, c] = stress.coord(d);
+      const double fraction = cube_negative_fraction_at<Dim>(
+          grid, stress_control_volume_lower<Dim>(stress, d), phi);
+      w.fluid_stress[d] = stress_fluid_weight<Dim>(stress, boundary, k, c, fraction);
+    }
+  }
+  scratch.kept_stress = true;
+  scratch.kept_fluid_stress = w.fluid_stress.data();
+  scratch.kept_boundary = boundary;
+  scratch.kept_stress_fixed = fixed_flags;
+}
 }  // namespace
 
 template <int Dim>
@@ -371,14 +561,23 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   scratch.fixed_neg_known.resize(bodies.size(), 0);
   // the union kept per part (issue 20): the bodies that never move by their kept phi, the
   // others by their values in their box; no lattice-sized pass per call
-  bool in_parts = scratch.union_in_parts && static_solids.empty() && !scratch.stress &&
+  // (with W_F^s at most one body that never moves: stress_weights_in_parts)
+  bool in_parts = scratch.union_in_parts && static_solids.empty() &&
                   shrink_in_metres >= 0.0 && !bodies.empty();
+  int fixed_body = -1, fixed_count = 0;
   for (std::size_t i = 0; i < bodies.size() && in_parts; ++i) {
     const bool fixed = i < scratch.fixed.size() && scratch.fixed[i];
     const Box<Dim> box = bodies[i].shape->bounds();
     if (!fixed && (box.isEmpty() || !box.min().allFinite() || !box.max().allFinite()))
       in_parts = false;
+    if (fixed) {
+      fixed_body = static_cast<int>(i);
+      ++fixed_count;
+    }
   }
+  if (scratch.stress && fixed_count > 1) in_parts = false;
+  scratch.fixed_stress_test.resize(bodies.size(), 0);
+  std::vector<int> part_of(bodies.size(), -1);
   scratch.union_parts.clear();
   // The faces' weights of the last call kept (the same bodies, every output where this call
   // left it: its buffers, not reallocated): only the faces near a moving body, now or in the
@@ -432,6 +631,7 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
           body_face_fractions<Dim>(grid, lattice, scratch.fixed_phi[i], body.shape->bounds(),
                                    scratch.fixed_face[i]);
           scratch.fixed_neg_known[i] = 0;
+          scratch.fixed_stress_test[i] = 0;
         }
         if (!scratch.fixed_neg_known[i]) {
           const VectorX& phi = scratch.fixed_phi[i];
@@ -451,6 +651,7 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
         continue;
       }
       const int part = scratch.union_parts.num_parts();
+      part_of[i] = part;
       VecI<Dim> lo, hi;
       scratch.union_parts.add_boxed(body.shape->bounds(), far, lo, hi);
       VectorX& values = scratch.union_parts.boxed_values(part);
@@ -517,6 +718,7 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
       scratch.fixed_phi[i] = body_phi;
       scratch.fixed_face[i] = w.body_face[i];
       scratch.fixed_neg_known[i] = 0;
+      scratch.fixed_stress_test[i] = 0;
     }
     if (have_union) union_phi = union_phi.cwiseMin(body_phi);
     have_union = true;
@@ -592,9 +794,14 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     }
   }
   if (in_parts) {
+    // W_F^s from the parts (its classes, if any, are made in scratch.signs and dropped below)
+    if (scratch.stress)
+      stress_weights_in_parts<Dim>(grid, lattice, bodies, fixed_body, part_of, boundary, far, w,
+                                   scratch);
+    else
+      w.fluid_stress = VectorX();
     // no classes: the box of the lattice cells with a negative corner (the cells l with
-    // l <= p <= l + 1 for a negative point p), as classify_lattice_cells_in_box finds it; W_F^s
-    // is not made (scratch.stress false)
+    // l <= p <= l + 1 for a negative point p), as classify_lattice_cells_in_box finds it
     LatticeSigns<Dim>& signs = scratch.signs;
     signs.cells = 2 * grid.cells();
     signs.written_lo = VecI<Dim>::Zero();
@@ -618,9 +825,9 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
       signs.lo = signs.cells;
       signs.hi = -VecI<Dim>::Ones();
     }
-    w.fluid_stress = VectorX();
     return;
   }
+  scratch.kept_stress = false;
   // W_F^s from the union of all solids (its classes in the bodies' box when there is one)
   if (union_box)
     classify_lattice_cells_in_box(grid, lattice, union_phi, union_lo, union_hi, scratch.signs);
@@ -762,6 +969,20 @@ BodyCouplingOperator<Dim>::BodyCouplingOperator(const MacGrid<Dim>& grid,
       std::sort(surface_cells_[i].begin(), surface_cells_[i].end());
     }
     if (!columns.stress) continue;
+    if (columns.stress_dofs) {
+      // the listed DOFs in their component's range, in increasing order (the order of the sort
+      // below)
+      std::array<VecI<Dim>, StressGrid<Dim>::kComponents> slo, shi;
+      for (int k = 0; k < StressGrid<Dim>::num_components(); ++k)
+        std::tie(slo[k], shi[k]) = lattice_range<Dim>(grid_, bounds, StressGrid<Dim>::shift(k),
+                                                      stress_.dims(k), margin);
+      for (const int dof : *columns.stress_dofs) {
+        const auto [k, c] = stress_.coord(dof);
+        if ((c.array() < slo[k].array()).any() || (c.array() > shi[k].array()).any()) continue;
+        if (stress_column(body, dof, column)) surface_stress_[i].push_back(dof);
+      }
+      continue;
+    }
     for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
       const auto [slo, shi] = lattice_range<Dim>(grid_, bounds, StressGrid<Dim>::shift(k), stress_.dims(k), margin);
       for_range<Dim>(slo, shi, [&](const VecI<Dim>& c) {

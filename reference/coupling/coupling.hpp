@@ -108,15 +108,28 @@ struct SolidWeightsScratch {
   bool parts = true;
   /// Set by the caller: false when it reads no SolidWeights::fluid_stress (W_F^s), which is then
   /// left empty (the simulation's inviscid coupled steps: at the paper's 256x128x256 grid 400 MB
-  /// made and dropped every step). The union's lattice-cell classes (signs) are made either way.
+  /// made and dropped every step). The union's lattice-cell classes (signs) are made either way
+  /// unless the union is kept per body.
   bool stress = true;
   /// Set by the caller: the union of the solids may be kept per body in `union_parts` (the
   /// kept phi of the bodies that never move, each moving body's values in its box: no
   /// lattice-sized pass per call) instead of written into SolidWeights::lattice_phi, which is
-  /// then left as it was. Taken when there is no static solid, W_F^s is not made (`stress`
-  /// false), zeta >= 0 and every moving body is bounded; else the union is written as before and
-  /// union_parts is not valid. The union's lattice-cell classes are then not made either:
-  /// `signs` holds only the box of the lattice cells with a negative corner (signs.lo, hi).
+  /// then left as it was (but for the fallback of W_F^s below). Taken when there is no static
+  /// solid, zeta >= 0, every moving body is bounded and, when W_F^s is made (`stress`), at most
+  /// one body never moves; else the union is written as before and union_parts is not valid.
+  /// The union's lattice-cell classes are then not made either: `signs` holds only the box of
+  /// the lattice cells with a negative corner (signs.lo, hi).
+  ///
+  /// W_F^s with the union kept per body (issue 20, Fig. 18's viscous steps): the fixed body's
+  /// W_F^s (its kept phi's stress fractions) everywhere but at the stress DOFs whose control
+  /// volume reaches a moving body's box, which read the union there (the dense union's values,
+  /// the same fractions). That holds when no moving body's far value (> far outside its box)
+  /// can be the union's value at a corner of a lattice cell where the fixed body's phi changes
+  /// sign: every such corner's value is at most far (tested once per kept phi,
+  /// `fixed_stress_test`). Else the union is written into SolidWeights::lattice_phi from its
+  /// parts (the same bits) and W_F^s made from it as without parts. Given the same W_F^s buffer
+  /// back (same data pointer and size, boundary and fixed bodies) and nothing written into it,
+  /// the next call makes again only the DOFs near a moving body in that call or this one.
   bool union_in_parts = false;
   PartsUnionPhi<Dim> union_parts;  ///< the union per part (valid() when taken)
   /// per body that never moves: the box of its kept phi's negative points (with fixed_phi)
@@ -133,6 +146,15 @@ struct SolidWeightsScratch {
   std::vector<std::vector<int>> near;  ///< per moving body: the faces of its fractions
   std::vector<std::uint8_t> face_mark;  ///< face-sized, 0 between calls
   std::vector<int> touched;
+  /// W_F^s kept per body (see union_in_parts): the state of the last call's W_F^s
+  bool kept_stress = false;
+  const double* kept_fluid_stress = nullptr;
+  std::array<BoundaryType, 2 * Dim> kept_boundary{};
+  std::vector<char> kept_stress_fixed;
+  std::vector<std::vector<int>> stress_near;  ///< per moving body: the stress DOFs it made
+  /// per body that never moves: the test of its kept phi (0 not yet made, 1 passed, 2 failed)
+  std::vector<char> fixed_stress_test;
+  VectorX stress_union;  ///< the union's values in a moving body's box (per call)
 };
 
 /// The same into `w`, whose vectors (and the scratch buffers) are reused when they have the
@@ -195,14 +217,19 @@ class BodyCouplingOperator {
     /// Whether J_s is wanted at all (false: a system without stress unknowns; no stress
     /// surface is searched and J_s has no column).
     bool stress = true;
+    /// With `stress`: the StressGrid DOFs whose J_s columns are wanted, increasing (a viscous
+    /// system's stress unknowns' DOFs and, in the reduced form, the eliminated component's DOF
+    /// of every cell with a diagonal unknown: MonolithicSystem); null: every DOF. DOFs not
+    /// listed get no column (every listed DOF's column is the one of the full operator).
+    const std::vector<int>* stress_dofs = nullptr;
   };
 
   BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
                        const SolidWeights<Dim>& weights, BodyGroup group);
   /// The same restricted to the columns of `columns`: the surface is searched only among the
-  /// listed cells (time in proportion to the unknowns, not to the bodies' boxes: Fig. 17's basin
-  /// spans half the lattice) and, without stress, not among the stress DOFs. The columns kept
-  /// are those of the full operator bit for bit.
+  /// listed cells and stress DOFs (time in proportion to the unknowns, not to the bodies' boxes:
+  /// Fig. 17's and Fig. 18's basin spans half the lattice) and, without stress, not among the
+  /// stress DOFs. The columns kept are those of the full operator bit for bit.
   BodyCouplingOperator(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>>& bodies,
                        const SolidWeights<Dim>& weights, BodyGroup group, const Columns& columns);
   /// A temporary's weights would not outlive the operator.

@@ -105,9 +105,33 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   // system reads no other column (add_body_rhs and build_rigid_columns select the unknowns; the
   // explicit products go through S_p^T and S_tau), and the surface search then costs the
   // unknowns, not the bodies' boxes (issue 20: Fig. 17's basin spans half the lattice)
+  //
+  // Likewise J_s's columns only at the stress DOFs the system reads (issue 20, Fig. 18): the
+  // stress unknowns' DOFs and, in the reduced form, the eliminated component's DOF of each
+  // cell with a diagonal unknown (add_body_rhs reads it through E^T, build_rigid_columns
+  // through E's row of that DOF); every other column meets no unknown in E S_tau^T.
+  std::vector<int> stress_wanted;
+  if (num_stress() > 0) {
+    const bool reduced = layout_.form() == StressForm::reduced;
+    const int eliminated = stress_.offset(Dim - 1);
+    stress_wanted.reserve(static_cast<std::size_t>(num_stress()) * (reduced ? 2 : 1));
+    for (int k = 0; k < num_stress(); ++k) {
+      const int u = dofs_.unknown_of_dof[k];
+      const int d = layout_.dof_of_unknown(u);
+      stress_wanted.push_back(d);
+      const int comp = layout_.component(layout_.component_of_unknown(u));
+      if (reduced && StressGrid<Dim>::is_diagonal(comp))
+        stress_wanted.push_back(eliminated + (d - stress_.offset(comp)));
+    }
+    std::sort(stress_wanted.begin(), stress_wanted.end());
+    stress_wanted.erase(std::unique(stress_wanted.begin(), stress_wanted.end()),
+                        stress_wanted.end());
+  }
   typename BodyCouplingOperator<Dim>::Columns wanted;
   wanted.cells = &dofs_.pressure.cell_of_dof;
   wanted.stress = num_stress() > 0;
+  wanted.stress_dofs = &stress_wanted;
+  if (search_every_column) wanted = typename BodyCouplingOperator<Dim>::Columns{};
   const BodyCouplingOperator<Dim> two(grid, view, solids, BodyGroup::two_way, wanted);
   const BodyCouplingOperator<Dim> one(grid, view, solids, BodyGroup::one_way, wanted);
   if (two.num_rows() != nd)

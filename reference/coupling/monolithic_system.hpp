@@ -86,6 +86,12 @@ class MonolithicSystem {
                    const ContactSystem<Dim>& contacts, Backend backend,
                    StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
 
+  /// Test switch (tests only; not thread-safe): true makes every system built afterwards search
+  /// the bodies' whole boxes for J_p and J_s columns (BodyCouplingOperator without Columns)
+  /// instead of the unknowns' cells and stress DOFs only, which must give the same system bit
+  /// for bit.
+  static inline bool search_every_column = false;
+
   int num_stress() const { return dofs_.num_stress(); }
   int num_pressure() const { return dofs_.num_pressure(); }
   int num_fluid() const { return dofs_.size(); }

@@ -68,6 +68,33 @@ void stress_fluid_weights(const StressGrid<Dim>& stress, const SampleLattice<Dim
                           const VectorX& solid_phi, const LatticeSigns<Dim>& signs,
                           const std::array<BoundaryType, 2 * Dim>& boundary, VectorX& out);
 
+/// W_F^s of one stress DOF (component k, coordinate c) whose control volume has the solid
+/// fraction `fraction`: 1 - fraction, then the wall and open rules of stress_fluid_weights in
+/// its order (axis a's layers before axis b's, side 0 before side 1). The value
+/// stress_fluid_weights gives that DOF when its fraction is this one (issue 20: the DOFs near
+/// the moving bodies made again per step, reference/coupling/coupling.cpp).
+template <int Dim>
+double stress_fluid_weight(const StressGrid<Dim>& stress,
+                           const std::array<BoundaryType, 2 * Dim>& boundary, int k,
+                           const VecI<Dim>& c, double fraction) {
+  double w = 1.0 - fraction;
+  if (StressGrid<Dim>::is_diagonal(k)) return w;
+  const MacGrid<Dim>& grid = stress.grid();
+  const auto [a, b] = StressGrid<Dim>::component_axes(k);
+  for (int axis : {a, b}) {
+    if (grid.periodic(axis)) continue;
+    for (int side = 0; side < 2; ++side) {
+      const int layer = side == 0 ? 0 : grid.cells()[axis];
+      if (layer >= stress.dims(k)[axis] || c[axis] != layer) continue;
+      if (boundary[2 * axis + side] == BoundaryType::wall)
+        w *= 0.5;
+      else
+        w = 0.0;
+    }
+  }
+  return w;
+}
+
 /// W_L^s (section 3.1.2): diagonal, num_stress_dofs x num_stress_dofs, stored as its diagonal:
 /// the liquid fraction of each stress control volume (mirrored/wrapped outside the domain, no
 /// clamping: W_L^s only multiplies, it is never inverted in eq. (8)).

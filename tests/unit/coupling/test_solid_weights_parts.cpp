@@ -108,11 +108,19 @@ void check_parts(int n, double shrink_cells) {
     CHECK(value_differs == 0);
     CHECK(sign_differs == 0);
   }
-  // W_F^s wanted: the union is written densely, not kept per part
+  // W_F^s wanted: the union is still kept per part (test_stress_weights_parts.cpp compares
+  // W_F^s with the dense union's), with two fixed bodies written densely
   scratch.stress = true;
   const std::vector<CouplingBody<Dim>> one = {ball<Dim>(Vec<Dim>::Constant(0.5), 0.2)};
   scratch.fixed = {0};
+  kept.lattice_phi = VectorX();
   solid_weights<Dim>(grid, one, {}, boundary, shrink, kept, scratch);
+  CHECK(scratch.union_parts.valid());
+  CHECK(kept.lattice_phi.size() == 0);
+  const std::vector<CouplingBody<Dim>> two = {ball<Dim>(Vec<Dim>::Constant(0.3), 0.1, false),
+                                              ball<Dim>(Vec<Dim>::Constant(0.7), 0.1, false)};
+  scratch.fixed = {1, 1};
+  solid_weights<Dim>(grid, two, {}, boundary, shrink, kept, scratch);
   CHECK_FALSE(scratch.union_parts.valid());
   CHECK(kept.lattice_phi.size() == lattice.size());
 }
