@@ -125,8 +125,8 @@ void check_parts(int n, double shrink_cells) {
   CHECK(kept.lattice_phi.size() == lattice.size());
 }
 
-/// The operator restricted to listed cells and without stress: the listed cells' columns of
-/// the full operator, bit for bit, and nothing else.
+/// The operator restricted to listed cells and without stress, and to listed stress DOFs: the
+/// listed cells' and DOFs' columns of the full operator, bit for bit, and nothing else.
 template <int Dim>
 void check_restricted_operator() {
   const MacGrid<Dim> grid = unit_grid<Dim>(12);
@@ -166,6 +166,32 @@ void check_restricted_operator() {
     CHECK(matched == expected);
     CHECK(part.stress_columns().empty());
     CHECK_FALSE(full.stress_columns().empty());
+    // J_s at every third stress DOF (listed, increasing): those columns of the full operator
+    std::vector<int> dofs;
+    for (int k = 0; k < full.num_stress_dofs(); k += 3) dofs.push_back(k);
+    wanted.stress = true;
+    wanted.stress_dofs = &dofs;
+    const BodyCouplingOperator<Dim> listed(grid, bodies, w, group, wanted);
+    const auto all_s = full.stress_columns();
+    const auto some_s = listed.stress_columns();
+    std::size_t expected_s = 0, matched_s = 0, k = 0;
+    for (const auto& c : all_s) {
+      if (c.index % 3 != 0) continue;
+      ++expected_s;
+      if (k < some_s.size() && some_s[k].body == c.body && some_s[k].index == c.index &&
+          some_s[k].row == c.row) {
+        bool same = true;
+        for (int r = 0; r < kBodyDofs<Dim>; ++r)
+          same = same && same_bits(some_s[k].column[r], c.column[r]);
+        matched_s += same;
+      }
+      ++k;
+    }
+    CHECK(expected_s > 0);
+    CHECK(expected_s < all_s.size());
+    CHECK(some_s.size() == expected_s);
+    CHECK(matched_s == expected_s);
+    wanted.stress_dofs = nullptr;
     // the same with every cell listed: the full operator's surface
     std::vector<int> every(grid.num_cells());
     for (int c = 0; c < grid.num_cells(); ++c) every[c] = c;
