@@ -9,6 +9,7 @@
 #include <string>
 
 #include "reference/solvers/linear_operator.hpp"
+#include "reference/solvers/row_sums.hpp"
 
 namespace monolith {
 
@@ -17,91 +18,14 @@ namespace {
 /// Below this many rows a loop runs on one thread (a parallel region costs more than it saves).
 constexpr int kParallelRows = 4096;
 
-/// One term of a row sum: s - a x (a residual's) or s + a x (a product's).
-template <bool Subtract>
-inline double term(double s, double a, double x) {
-  return Subtract ? s - a * x : s + a * x;
-}
-
-/// The sums of `count` rows of a CSR matrix: out[t] = start[t] -/+ sum_q a_{row_t q} x_q over
-/// row `rows[t]`'s entries in their stored order, each row its own chain of dependent
-/// additions (the same operations per row as a plain row loop, hence the same bits). A row's
-/// sum is a chain whose latency, not the loads, bounds a row-by-row loop (about 15 terms per row
-/// on the finest velocity level, the next row's chain started only after the previous row's
-/// loop exit); four rows advanced together over their common length give the processor four
-/// independent chains and one loop instead of four, then pairs, then single rows.
-template <bool Subtract>
-inline void row_sums(const int* outer, const int* inner, const double* value, const double* x,
-                     const int* rows, int count, double* out) {
-  int t = 0;
-  for (; t + 4 <= count; t += 4) {
-    int q0 = outer[rows[t]], q1 = outer[rows[t + 1]], q2 = outer[rows[t + 2]], q3 = outer[rows[t + 3]];
-    const int e0 = outer[rows[t] + 1], e1 = outer[rows[t + 1] + 1], e2 = outer[rows[t + 2] + 1],
-              e3 = outer[rows[t + 3] + 1];
-    double s0 = out[t], s1 = out[t + 1], s2 = out[t + 2], s3 = out[t + 3];
-    const int common = std::min(std::min(e0 - q0, e1 - q1), std::min(e2 - q2, e3 - q3));
-    for (int c = 0; c < common; ++c) {
-      s0 = term<Subtract>(s0, value[q0 + c], x[inner[q0 + c]]);
-      s1 = term<Subtract>(s1, value[q1 + c], x[inner[q1 + c]]);
-      s2 = term<Subtract>(s2, value[q2 + c], x[inner[q2 + c]]);
-      s3 = term<Subtract>(s3, value[q3 + c], x[inner[q3 + c]]);
-    }
-    for (q0 += common; q0 < e0; ++q0) s0 = term<Subtract>(s0, value[q0], x[inner[q0]]);
-    for (q1 += common; q1 < e1; ++q1) s1 = term<Subtract>(s1, value[q1], x[inner[q1]]);
-    for (q2 += common; q2 < e2; ++q2) s2 = term<Subtract>(s2, value[q2], x[inner[q2]]);
-    for (q3 += common; q3 < e3; ++q3) s3 = term<Subtract>(s3, value[q3], x[inner[q3]]);
-    out[t] = s0;
-    out[t + 1] = s1;
-    out[t + 2] = s2;
-    out[t + 3] = s3;
-  }
-  for (; t + 2 <= count; t += 2) {
-    int q0 = outer[rows[t]], q1 = outer[rows[t + 1]];
-    const int e0 = outer[rows[t] + 1], e1 = outer[rows[t + 1] + 1];
-    double s0 = out[t], s1 = out[t + 1];
-    const int common = std::min(e0 - q0, e1 - q1);
-    for (int c = 0; c < common; ++c) {
-      s0 = term<Subtract>(s0, value[q0 + c], x[inner[q0 + c]]);
-      s1 = term<Subtract>(s1, value[q1 + c], x[inner[q1 + c]]);
-    }
-    for (q0 += common; q0 < e0; ++q0) s0 = term<Subtract>(s0, value[q0], x[inner[q0]]);
-    for (q1 += common; q1 < e1; ++q1) s1 = term<Subtract>(s1, value[q1], x[inner[q1]]);
-    out[t] = s0;
-    out[t + 1] = s1;
-  }
-  for (; t < count; ++t) {
-    double s = out[t];
-    for (int q = outer[rows[t]]; q < outer[rows[t] + 1]; ++q) s = term<Subtract>(s, value[q], x[inner[q]]);
-    out[t] = s;
-  }
-}
-
-/// Rows handed to row_sums together by the row-parallel loops below (one writer per entry;
-/// blocks of consecutive rows, so the thread count changes nothing).
-constexpr int kRowBlock = 8;
-
-/// y = A x (Subtract false) or y = b - A x (Subtract true), row-parallel on large matrices.
+/// y = A x (Subtract false) or y = b - A x (Subtract true), row-parallel on large matrices
+/// (blocks of consecutive rows, one writer per entry: any thread count gives the same bits).
 template <bool Subtract>
 void row_sums_all(const SparseMatrix& a, const VectorX* b, const VectorX& x, VectorX& y) {
   const int n = static_cast<int>(a.rows());
   y.resize(n);
-  const int* outer = a.outerIndexPtr();
-  const int* inner = a.innerIndexPtr();
-  const double* value = a.valuePtr();
-  const int blocks = (n + kRowBlock - 1) / kRowBlock;
-#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int blk = 0; blk < blocks; ++blk) {
-    const int first = blk * kRowBlock;
-    const int count = std::min(kRowBlock, n - first);
-    std::array<int, kRowBlock> rows;
-    std::array<double, kRowBlock> out;
-    for (int t = 0; t < count; ++t) {
-      rows[t] = first + t;
-      out[t] = Subtract ? (*b)[first + t] : 0.0;
-    }
-    row_sums<Subtract>(outer, inner, value, x.data(), rows.data(), count, out.data());
-    for (int t = 0; t < count; ++t) y[first + t] = out[t];
-  }
+  csr_row_sums<Subtract>(a.outerIndexPtr(), a.innerIndexPtr(), a.valuePtr(), 0, n, b ? b->data() : nullptr, x.data(),
+                         y.data(), n > kParallelRows);
 }
 
 /// y = A x, row-parallel (one writer per entry) on large matrices.
