@@ -1,5 +1,6 @@
 #include "reference/fluid/stokes_preconditioner.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/solvers/row_sums.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -22,31 +23,16 @@ double lower_median(std::vector<double> values) {
 
 constexpr int kParallelRows = 4096;
 
-/// y = M x for a row-major sparse M, row-parallel.
+/// y = M x for a row-major sparse M, row-parallel (rows side by side, the bits of a plain loop).
 void multiply(const SparseMatrix& m, const double* x, double* y) {
   const int n = static_cast<int>(m.rows());
-  const int* outer = m.outerIndexPtr();
-  const int* inner = m.innerIndexPtr();
-  const double* value = m.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < n; ++i) {
-    double s = 0.0;
-    for (int k = outer[i]; k < outer[i + 1]; ++k) s += value[k] * x[inner[k]];
-    y[i] = s;
-  }
+  csr_row_sums<false>(m.outerIndexPtr(), m.innerIndexPtr(), m.valuePtr(), 0, n, nullptr, x, y, n > kParallelRows);
 }
 
 /// y = M x on the rows [begin, end) of a row-major sparse M (y sized end - begin).
 void multiply_rows(const SparseMatrix& m, int begin, int end, const double* x, double* y) {
-  const int* outer = m.outerIndexPtr();
-  const int* inner = m.innerIndexPtr();
-  const double* value = m.valuePtr();
-#pragma omp parallel for schedule(static) if (end - begin > kParallelRows) num_threads(process_threads())
-  for (int i = begin; i < end; ++i) {
-    double s = 0.0;
-    for (int k = outer[i]; k < outer[i + 1]; ++k) s += value[k] * x[inner[k]];
-    y[i - begin] = s;
-  }
+  csr_row_sums<false>(m.outerIndexPtr(), m.innerIndexPtr(), m.valuePtr(), begin, end, nullptr, x, y,
+                      end - begin > kParallelRows);
 }
 
 /// `m` marked so that Eigen 3.4 moves it: its SparseMatrix has no move constructor or move

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "reference/solvers/linear_operator.hpp"
+#include "reference/solvers/row_sums.hpp"
 
 namespace monolith {
 
@@ -17,33 +18,60 @@ namespace {
 /// Below this many rows a loop runs on one thread (a parallel region costs more than it saves).
 constexpr int kParallelRows = 4096;
 
-/// y = A x, row-parallel (one writer per entry) on large matrices.
-void product(const SparseMatrix& a, const VectorX& x, VectorX& y) {
+/// y = A x (Subtract false) or y = b - A x (Subtract true), row-parallel on large matrices
+/// (blocks of consecutive rows, one writer per entry: any thread count gives the same bits).
+template <bool Subtract>
+void row_sums_all(const SparseMatrix& a, const VectorX* b, const VectorX& x, VectorX& y) {
   const int n = static_cast<int>(a.rows());
   y.resize(n);
-  const int* outer = a.outerIndexPtr();
-  const int* inner = a.innerIndexPtr();
-  const double* value = a.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < n; ++i) {
-    double s = 0.0;
-    for (int k = outer[i]; k < outer[i + 1]; ++k) s += value[k] * x[inner[k]];
-    y[i] = s;
-  }
+  csr_row_sums<Subtract>(a.outerIndexPtr(), a.innerIndexPtr(), a.valuePtr(), 0, n, b ? b->data() : nullptr, x.data(),
+                         y.data(), n > kParallelRows);
 }
+
+/// y = A x, row-parallel (one writer per entry) on large matrices.
+void product(const SparseMatrix& a, const VectorX& x, VectorX& y) { row_sums_all<false>(a, nullptr, x, y); }
 
 /// r = b - A x, row-parallel.
 void residual(const SparseMatrix& a, const VectorX& b, const VectorX& x, VectorX& r) {
-  const int n = static_cast<int>(a.rows());
-  r.resize(n);
-  const int* outer = a.outerIndexPtr();
-  const int* inner = a.innerIndexPtr();
-  const double* value = a.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < n; ++i) {
-    double s = b[i];
-    for (int k = outer[i]; k < outer[i + 1]; ++k) s -= value[k] * x[inner[k]];
-    r[i] = s;
+  row_sums_all<true>(a, &b, x, r);
+}
+
+/// d = inv r for a patch's dense row-major m x m inverse: four rows of inv at a time (then
+/// pairs, then single rows), each d_i summed over j in order from 0 (the bits of the plain loop).
+inline void patch_correction(const double* inv, const double* r, int m, double* d) {
+  int i = 0;
+  for (; i + 4 <= m; i += 4) {
+    const double* a0 = inv + i * m;
+    const double* a1 = a0 + m;
+    const double* a2 = a1 + m;
+    const double* a3 = a2 + m;
+    double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
+    for (int j = 0; j < m; ++j) {
+      d0 += a0[j] * r[j];
+      d1 += a1[j] * r[j];
+      d2 += a2[j] * r[j];
+      d3 += a3[j] * r[j];
+    }
+    d[i] = d0;
+    d[i + 1] = d1;
+    d[i + 2] = d2;
+    d[i + 3] = d3;
+  }
+  for (; i + 2 <= m; i += 2) {
+    const double* a0 = inv + i * m;
+    const double* a1 = a0 + m;
+    double d0 = 0.0, d1 = 0.0;
+    for (int j = 0; j < m; ++j) {
+      d0 += a0[j] * r[j];
+      d1 += a1[j] * r[j];
+    }
+    d[i] = d0;
+    d[i + 1] = d1;
+  }
+  for (; i < m; ++i) {
+    double s = 0.0;
+    for (int j = 0; j < m; ++j) s += inv[i * m + j] * r[j];
+    d[i] = s;
   }
 }
 
@@ -257,19 +285,13 @@ void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const 
   auto relax = [&](int k) {
     const int* idx = ps.index.data() + ps.start[k];
     const int m = ps.start[k + 1] - ps.start[k];
-    std::array<double, PatchSet::kMaxPatchSize> r;
-    for (int i = 0; i < m; ++i) {
-      const int row = idx[i];
-      double s = b[row];
-      for (int q = outer[row]; q < outer[row + 1]; ++q) s -= value[q] * xs[inner[q]];
-      r[i] = s;
-    }
-    const double* inv = inverse + offset[k];
-    for (int i = 0; i < m; ++i) {
-      double d = 0.0;
-      for (int j = 0; j < m; ++j) d += inv[i * m + j] * r[j];
-      xs[idx[i]] += d;
-    }
+    // r_P = (b - A x)_P, then x_P += A_PP^-1 r_P (d depends on r only, so all of x_P is
+    // updated after d is complete, as the row-by-row loop did)
+    std::array<double, PatchSet::kMaxPatchSize> r, d;
+    for (int i = 0; i < m; ++i) r[i] = b[idx[i]];
+    row_sums<true>(outer, inner, value, xs, idx, m, r.data());
+    patch_correction(inverse + offset[k], r.data(), m, d.data());
+    for (int i = 0; i < m; ++i) xs[idx[i]] += d[i];
   };
   const int num_colours = static_cast<int>(ps.colours.size());
   for (int step = 0; step < num_colours; ++step) {

@@ -231,9 +231,31 @@ void run_case(const Config& cfg, int n, double eta) {
     levels = m.velocity_multigrid().num_levels();
     if (std::getenv("MG_INFO")) {
       for (const Multigrid* mg : {&m.velocity_multigrid(), &m.pressure_multigrid()}) {
-        for (int l = 0; l < mg->num_levels(); ++l)
-          std::printf("   level %d: %ld unknowns, %ld nnz, %d patches, %zu colours\n", l, (long)mg->level(l).a.rows(),
-                      (long)mg->level(l).a.nonZeros(), mg->level(l).patches.size(), mg->level(l).patches.colours.size());
+        for (int l = 0; l < mg->num_levels(); ++l) {
+          const MultigridLevel& lv = mg->level(l);
+          const PatchSet& ps = lv.patches;
+          long gathered = 0, dense = 0;  // row entries read and patch-inverse entries per sweep
+          for (int k = 0; k < ps.size(); ++k) {
+            const long pm = ps.start[k + 1] - ps.start[k];
+            dense += pm * pm;
+            for (int q = ps.start[k]; q < ps.start[k + 1]; ++q)
+              gathered += lv.a.outerIndexPtr()[ps.index[q] + 1] - lv.a.outerIndexPtr()[ps.index[q]];
+          }
+          std::printf("   level %d: %ld unknowns, %ld nnz, %d patches, %zu colours, %ld row entries and %ld inverse entries per sweep",
+                      l, (long)lv.a.rows(), (long)lv.a.nonZeros(), ps.size(), ps.colours.size(), gathered, dense);
+          if (l + 1 < mg->num_levels()) {
+            VectorX bl = VectorX::Ones(lv.a.rows()), xl = VectorX::Zero(lv.a.rows());
+            double best = 1e9;
+            for (int rep = 0; rep < 5; ++rep) {
+              const double c0 = cpu_seconds();
+              for (int k = 0; k < 4; ++k) mg->sweep(l, bl, xl, k % 2 == 1);
+              best = std::min(best, (cpu_seconds() - c0) / 4 * 1e3);
+            }
+            std::printf(", %.2f", best);
+            std::printf(" ms CPU per sweep (min of 5)");
+          }
+          std::printf("\n");
+        }
         VectorX bb = VectorX::Ones(mg->size()), xx;
         auto t0 = Clock::now();
         for (int k = 0; k < 5; ++k) mg->apply(bb, xx, 1);
