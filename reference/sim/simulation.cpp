@@ -907,8 +907,10 @@ bool Simulation<Dim>::extend_extrapolation() {
 #pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int f = 0; f < nf; ++f)
       if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = given[f];
-    const int count = static_cast<int>(solid_faces_.size());
-    for (int j = 0; j < count && !solids_.empty(); ++j) {
+    // (the rows the step's constrain evaluated: a row it left keeps +0 in u_ and in given)
+    const int count = static_cast<int>(constrained_rows_.size());
+    for (int r = 0; r < count && !solids_.empty(); ++r) {
+      const int j = constrained_rows_[r];
       const int f = solid_faces_[j];
       if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = solid_frame_[j].before;
     }
@@ -1750,6 +1752,7 @@ void Simulation<Dim>::find_faces_in_solids() {
       fixed_faces_key_ = key;
       fixed_faces_valid_ = true;
       fixed_face_frame_.clear();
+      fixed_face_deep_.clear();
       for (int axis = 0; axis < Dim; ++axis) {
         fixed_faces_[axis].clear();
         faces_with_centre(axis, dense_lo, dense_hi,
@@ -1791,6 +1794,7 @@ void Simulation<Dim>::find_faces_in_solids() {
   fixed_faces_valid_ = false;
   fixed_faces_key_.clear();
   fixed_face_frame_.clear();
+  fixed_face_deep_.clear();
   for (auto& list : fixed_faces_) list.clear();
   if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
   std::array<std::size_t, Dim + 1> axis_start{};
@@ -1861,8 +1865,108 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
       frame.normal = solid_field_shapes_[best]->gradient(x);
     }
   }
-#pragma omp parallel for schedule(static) num_threads(team_threads(count))
-  for (int j = 0; j < count; ++j) {
+  // The rows evaluated (issue 20): a fixed face deep in a fixed solid, far from every moving
+  // body, is left out. Every face g its interpolation reads has W_F^u = 0 or is a wall's, so
+  // apply_wall_and_solid_velocities has just set u_[g] to the solid's velocity there, which is
+  // +0 outside every moving body's bounds (solid_velocity), or to +0 (walls); extend_extrapolation
+  // gives those faces the same values again before its call at the same pose. The interpolation
+  // sums w * (+-0) from +0.0 with w >= 0: +0 in every component; v_s = 0, so v_n = +-0 is not
+  // negative and the new value is +0, which u_[f] (one of the faces read) holds already. The
+  // flags are made once per set of fixed faces, with W_F^u at a time when no moving body's
+  // bounds came within kDeepMargin of the face's centre, and a face is left out only while none
+  // does: the faces read lie within one dx of the centre per axis, and W_F^u there reads the
+  // solids' union within one more dx, where a moving body (its level set no lower than the
+  // distance to its bounds) does not change the fixed solids' value
+  std::vector<int>& rows = constrained_rows_;
+  if (!same_pose) {
+    rows.clear();
+    const int fixed_total = [&] {
+      int total = 0;
+      for (int a = 0; a < Dim; ++a) total += static_cast<int>(fixed_faces_[a].size());
+      return total;
+    }();
+    bool periodic = false;
+    for (int a = 0; a < Dim; ++a) periodic = periodic || grid_.periodic(a);
+    const bool skip_deep = switches_.restricted_passes && fixed_faces_valid_ && !periodic &&
+                           fixed_total > 0 && solid_face_fixed_.size() == faces.size() &&
+                           weights_.fluid_face.size() == grid_.num_faces();
+    // the moving bodies' bounds grown by the margin; a body without finite bounds: none skipped
+    constexpr double kDeepMargin = 4.0;
+    std::vector<Box<Dim>> near;
+    bool unbounded = false;
+    if (skip_deep && rigid_) {
+      const auto& bodies = rigid_->bodies();
+      for (const auto& b : bodies) {
+        if (!b.moves()) continue;
+        const Box<Dim> box = b.bounds();
+        if (!box.min().allFinite() || !box.max().allFinite()) {
+          unbounded = true;
+          continue;
+        }
+        const Vec<Dim> grow = Vec<Dim>::Constant(kDeepMargin * grid_.dx());
+        near.emplace_back(box.min() - grow, box.max() + grow);
+      }
+    }
+    const auto far_from_bodies = [&](const Vec<Dim>& x) {
+      if (unbounded) return false;
+      for (const Box<Dim>& box : near)
+        if (!((x.array() < box.min().array()).any() || (x.array() > box.max().array()).any()))
+          return false;
+      return true;
+    };
+    if (skip_deep && !unbounded && static_cast<int>(fixed_face_deep_.size()) != fixed_total) {
+      std::vector<int> all;
+      all.reserve(fixed_total);
+      for (int a = 0; a < Dim; ++a)
+        all.insert(all.end(), fixed_faces_[a].begin(), fixed_faces_[a].end());
+      fixed_face_deep_.assign(fixed_total, 0);
+#pragma omp parallel for schedule(static) num_threads(team_threads(fixed_total))
+      for (int i = 0; i < fixed_total; ++i) {
+        const auto [axis, coord] = grid_.face_coord(all[i]);
+        if (!far_from_bodies(grid_.face_center(axis, coord))) continue;
+        bool deep = true;
+        for (int c = 0; c < Dim && deep; ++c) {
+          // MacGrid::axis_stencil at the centre on component c's lattice (non-periodic): along
+          // axis a the samples i0, i0 + 1 with i0 = min(floor(clamp(s, 0, n - 1)), n - 2),
+          // s = coord[a] + (a == c) / 2 - (a == axis) / 2 (in halves: s2 = 2 s)
+          const VecI<Dim> fdims = grid_.face_dims(c);
+          VecI<Dim> lo, hi;
+          for (int a = 0; a < Dim; ++a) {
+            const int n = fdims[a];
+            if (n == 1) {
+              lo[a] = hi[a] = 0;
+              continue;
+            }
+            const int s2 = 2 * coord[a] + (a == c ? 1 : 0) - (a == axis ? 1 : 0);
+            const int i0 = std::min(std::clamp(s2, 0, 2 * (n - 1)) / 2, n - 2);
+            lo[a] = i0;
+            hi[a] = i0 + 1;
+          }
+          const VecI<Dim> box = hi - lo + VecI<Dim>::Ones();
+          for (int k = 0; k < box.prod() && deep; ++k) {
+            const int g = grid_.face_index(c, lo + lattice_coord<Dim>(k, box));
+            deep = weights_.fluid_face[g] == 0.0 || wall_face(g);
+          }
+        }
+        fixed_face_deep_[i] = deep;
+      }
+    }
+    const bool use_deep =
+        skip_deep && !unbounded && static_cast<int>(fixed_face_deep_.size()) == fixed_total;
+    rows.reserve(faces.size());
+    for (int j = 0; j < count; ++j) {
+      const int i = use_deep ? solid_face_fixed_[j] : -1;
+      if (i >= 0 && fixed_face_deep_[i]) {
+        const auto [axis, coord] = grid_.face_coord(faces[j]);
+        if (far_from_bodies(grid_.face_center(axis, coord))) continue;
+      }
+      rows.push_back(j);
+    }
+  }
+  const int nrows = static_cast<int>(rows.size());
+#pragma omp parallel for schedule(static) num_threads(team_threads(nrows))
+  for (int r = 0; r < nrows; ++r) {
+    const int j = rows[r];
     const int f = faces[j];
     const auto [axis, coord] = grid_.face_coord(f);
     const Vec<Dim> x = grid_.face_center(axis, coord);
@@ -1889,7 +1993,7 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     // comparison above would drop it)
     values[j] = std::isnan(vn) ? vn : v[axis];
   }
-  for (int j = 0; j < count; ++j) u_[faces[j]] = values[j];
+  for (int r = 0; r < nrows; ++r) u_[faces[rows[r]]] = values[rows[r]];
 }
 
 template <int Dim>

@@ -524,6 +524,15 @@ class Simulation : public AnySimulation {
     Vec<Dim> normal = Vec<Dim>::Zero();
   };
   std::vector<FixedFaceFrame> fixed_face_frame_;
+  /// per fixed face: 1 if every face that the interpolation of the velocity at its centre reads
+  /// (each component's 2^Dim stencil of MacGrid::axis_stencil) had W_F^u = 0 (or
+  /// was a wall's) while no moving body came near (constrain_velocity_in_solids); built with
+  /// the fixed faces, dropped with them
+  std::vector<char> fixed_face_deep_;
+  /// the rows j of solid_faces_ that the step's constrain_velocity_in_solids evaluates (the
+  /// others keep +0, their value already); the call at the same pose and the restore of
+  /// extend_extrapolation read the same rows
+  std::vector<int> constrained_rows_;
   /// the shapes of solids_ (static ones first) and their bounds, as make_solid_field has them
   std::vector<ShapePtr<Dim>> solid_field_shapes_;
   std::vector<Box<Dim>> solid_field_boxes_;
