@@ -436,11 +436,24 @@ void Simulation<Dim>::update_liquid_weights() {
   classify_lattice_cells_searching(grid_, lattice_, phi, band_lo, band_hi, liquid_signs_);
   // the points where the extended level set is negative (the box of its non-positive cells)
   const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
-  cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
+  // W_L^p and W_L^u are reset where the last step wrote them, not over the grid (issue 20:
+  // WrittenBox; nothing else writes these vectors, which the solve borrows and gives back)
+  const bool sparse = switches_.restricted_passes;
+  cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell,
+                          sparse ? &liquid_cell_box_ : nullptr);
   // W_L^u clamped in place: the trust test of trusted_face reads it instead of the unclamped
   // fractions (the same faces, kept no longer in a face-sized vector of their own)
-  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_face);
-  clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
+  face_negative_fractions<Dim>(grid_, lattice_, phi, liquid_signs_, weights_.liquid_face,
+                               sparse ? &liquid_face_boxes_ : nullptr);
+  if (sparse)
+    clamp_liquid_face_weights_in_place<Dim>(grid_, weights_.liquid_face, weights_.liquid_cell,
+                                            liquid_cell_box_, liquid_face_boxes_);
+  else
+    clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
+  if (!sparse) {
+    liquid_cell_box_.valid = false;
+    for (auto& box : liquid_face_boxes_) box.valid = false;
+  }
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
     stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
@@ -546,11 +559,34 @@ double Simulation<Dim>::cfl_dt() const {
   if (u_.size() == faces && weights_.fluid_face.size() == faces &&
       weights_.liquid_face.size() == faces &&
       mass_faces_.size() == static_cast<std::size_t>(grid_.num_faces())) {
-    // (a maximum: the same for any split of the faces)
-    const int nf = grid_.num_faces();
+    // (a maximum: the same for any split of the faces, and over any set that holds the
+    // trusted faces: the boxes outside which none is, trusted_boxes)
+    FaceBoxes boxes;
+    if (trusted_boxes(boxes)) {
+      for (int axis = 0; axis < Dim; ++axis) {
+        const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
+        if ((lo.array() > hi.array()).any()) continue;
+        const VecI<Dim> fdims = grid_.face_dims(axis);
+        VecI<Dim> rows_box = hi - lo + VecI<Dim>::Ones();
+        const int nx = rows_box[0];
+        rows_box[0] = 1;
+        const int rows = rows_box.prod(), offset = grid_.face_offset(axis);
+        double speed = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : speed) \
+    num_threads(team_threads(static_cast<long>(rows) * nx))
+        for (int r = 0; r < rows; ++r) {
+          const int first = offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
+          for (int f = first; f < first + nx; ++f)
+            if (trusted_face(f)) speed = std::max(speed, std::abs(u_[f]));
+        }
+        grid_speed = std::max(grid_speed, speed);
+      }
+    } else {
+      const int nf = grid_.num_faces();
 #pragma omp parallel for schedule(static) reduction(max : grid_speed) num_threads(process_threads())
-    for (int f = 0; f < nf; ++f)
-      if (trusted_face(f)) grid_speed = std::max(grid_speed, std::abs(u_[f]));
+      for (int f = 0; f < nf; ++f)
+        if (trusted_face(f)) grid_speed = std::max(grid_speed, std::abs(u_[f]));
+    }
   }
   const double speed = std::max(max_particle_speed(particles_), grid_speed);
   const double max_dt = scene_.time.max_dt;
@@ -616,9 +652,118 @@ double Simulation<Dim>::grid_and_body_kinetic_energy() const {
 }
 
 template <int Dim>
-void Simulation<Dim>::mark_faces_with_mass() {
-  mass_faces_.resize(grid_.num_faces());
+typename Simulation<Dim>::FaceBoxes Simulation<Dim>::particle_face_boxes() const {
+  // the particles' bounds (a minimum and maximum per axis: the same for any split)
+  Vec<Dim> lo = Vec<Dim>::Constant(std::numeric_limits<double>::infinity());
+  Vec<Dim> hi = -lo;
+  const long np = static_cast<long>(particles_.size());
+  for (int a = 0; a < Dim; ++a) {
+    double mn = lo[a], mx = hi[a];
+    bool finite = true;
+#pragma omp parallel for schedule(static) reduction(min : mn) reduction(max : mx) \
+    reduction(&& : finite) num_threads(team_threads(np))
+    for (long p = 0; p < np; ++p) {
+      const double x = grid_.wrap_position(particles_.x[p])[a];
+      finite = finite && std::isfinite(x);
+      mn = std::min(mn, x);
+      mx = std::max(mx, x);
+    }
+    lo[a] = finite ? mn : -std::numeric_limits<double>::infinity();
+    hi[a] = finite ? mx : std::numeric_limits<double>::infinity();
+  }
+  // a particle in cell c (clamped) reaches the samples c - 1 .. c + 1 of every face lattice
+  // (pic_velocity_on_faces's note on axis_stencil); two more cells either side
+  FaceBoxes boxes;
+  for (int c = 0; c < Dim; ++c) {
+    const VecI<Dim> fdims = grid_.face_dims(c);
+    for (int a = 0; a < Dim; ++a) {
+      const int cells = grid_.cells()[a];
+      int clo = 0, chi = fdims[a] - 1;
+      if (np > 0 && !grid_.periodic(a) && std::isfinite(lo[a]) && std::isfinite(hi[a])) {
+        const double slo = std::floor((lo[a] - grid_.origin()[a]) / grid_.dx());
+        const double shi = std::floor((hi[a] - grid_.origin()[a]) / grid_.dx());
+        const int cl = static_cast<int>(std::clamp(slo, 0.0, cells - 1.0));
+        const int ch = static_cast<int>(std::clamp(shi, 0.0, cells - 1.0));
+        clo = std::max(cl - 3, 0);
+        chi = std::min(ch + 3, fdims[a] - 1);
+      } else if (np == 0) {
+        clo = 0;
+        chi = -1;
+      }
+      boxes.lo[c][a] = clo;
+      boxes.hi[c][a] = chi;
+    }
+  }
+  return boxes;
+}
+
+template <int Dim>
+template <class Fn>
+void Simulation<Dim>::for_faces_in_boxes(const FaceBoxes& boxes, Fn&& fn) const {
+  for (int axis = 0; axis < Dim; ++axis) {
+    const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
+    if ((lo.array() > hi.array()).any()) continue;
+    const VecI<Dim> fdims = grid_.face_dims(axis);
+    VecI<Dim> rows_box = hi - lo + VecI<Dim>::Ones();
+    const int nx = rows_box[0];
+    rows_box[0] = 1;
+    const int rows = rows_box.prod(), offset = grid_.face_offset(axis);
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(rows) * nx))
+    for (int r = 0; r < rows; ++r) {
+      const int first = offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
+      for (int x = 0; x < nx; ++x) fn(first + x);
+    }
+  }
+}
+
+template <int Dim>
+bool Simulation<Dim>::trusted_boxes(FaceBoxes& boxes) const {
+  // a trusted face has W_L^u > 0 (0 outside liquid_face_boxes_) or mass (0 outside mass_boxes_)
   const int nf = grid_.num_faces();
+  if (!switches_.restricted_passes || !mass_boxes_valid_ || mass_faces_.data() != mass_boxes_data_ ||
+      mass_faces_.size() != static_cast<std::size_t>(nf) || weights_.liquid_face.size() != nf)
+    return false;
+  for (int a = 0; a < Dim; ++a) {
+    const WrittenBox<Dim>& lb = liquid_face_boxes_[a];
+    if (!lb.valid_for(weights_.liquid_face.data() + grid_.face_offset(a),
+                      grid_.face_dims(a).prod()))
+      return false;
+    const bool mass_empty = (mass_boxes_.lo[a].array() > mass_boxes_.hi[a].array()).any();
+    const bool liquid_empty = (lb.lo.array() > lb.hi.array()).any();
+    if (mass_empty) {
+      boxes.lo[a] = lb.lo;
+      boxes.hi[a] = lb.hi;
+    } else if (liquid_empty) {
+      boxes.lo[a] = mass_boxes_.lo[a];
+      boxes.hi[a] = mass_boxes_.hi[a];
+    } else {
+      boxes.lo[a] = mass_boxes_.lo[a].cwiseMin(lb.lo);
+      boxes.hi[a] = mass_boxes_.hi[a].cwiseMax(lb.hi);
+    }
+  }
+  return true;
+}
+
+template <int Dim>
+void Simulation<Dim>::mark_faces_with_mass() {
+  const int nf = grid_.num_faces();
+  if (switches_.restricted_passes) {
+    // face_mass_ > 0 only where a particle's stencil reaches: the flags of the last step's
+    // boxes are cleared and the new boxes marked (every other flag is 0 already)
+    const bool kept = mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_ &&
+                      mass_faces_.size() == static_cast<std::size_t>(nf);
+    if (kept)
+      for_faces_in_boxes(mass_boxes_, [&](int f) { mass_faces_[f] = 0; });
+    else
+      mass_faces_.assign(nf, 0);
+    mass_boxes_ = particle_face_boxes();
+    for_faces_in_boxes(mass_boxes_, [&](int f) { mass_faces_[f] = face_mass_[f] > 0.0; });
+    mass_boxes_data_ = mass_faces_.data();
+    mass_boxes_valid_ = true;
+    return;
+  }
+  mass_boxes_valid_ = false;
+  mass_faces_.resize(grid_.num_faces());
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) mass_faces_[f] = face_mass_[f] > 0.0;
 }
@@ -642,10 +787,23 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   restart_ledger([&] { return grid_and_body_kinetic_energy(); });
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   // (per face, on several threads: each face written once)
+  // (the faces with mass lie in mass_boxes_ when those are kept)
   const int nf = grid_.num_faces();
+  if (switches_.restricted_passes && mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_) {
+    for (int axis = 0; axis < Dim; ++axis) {
+      FaceBoxes one = mass_boxes_;
+      for (int a = 0; a < Dim; ++a)
+        if (a != axis) one.hi[a] = one.lo[a] - VecI<Dim>::Ones();
+      const double g = dt * gravity_[axis];
+      for_faces_in_boxes(one, [&](int f) {
+        if (mass_faces_[f]) u_[f] += g;
+      });
+    }
+  } else {
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f)
-    if (mass_faces_[f]) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+    for (int f = 0; f < nf; ++f)
+      if (mass_faces_[f]) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+  }
   if (coupled_) rigid_->apply_gravity(dt, gravity_);
 }
 
@@ -784,8 +942,15 @@ void Simulation<Dim>::trusted_faces(std::vector<char>& trusted) const {
   // faces with fluid whose weight W_F^u W_L^u (W_L^u before the clamp) reaches
   // kTrustedLiquidFaceFraction, and faces that carry mass outside the liquid's weights (the
   // stage switches, for diagnosis only, can drop the second kind or trust every liquid face)
-  trusted.resize(grid_.num_faces());
   const int nf = grid_.num_faces();
+  FaceBoxes boxes;
+  if (trusted_boxes(boxes)) {
+    // no face outside the boxes is trusted: a zero fill of the flags and the test in the boxes
+    trusted.assign(nf, 0);
+    for_faces_in_boxes(boxes, [&](int f) { trusted[f] = trusted_face(f); });
+    return;
+  }
+  trusted.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) trusted[f] = trusted_face(f);
 }
@@ -956,13 +1121,29 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   // static solids), then remove the inflow into solids. The fully solid faces are found by
   // their weight alone (a compare per face, on several threads: each face written once), the
   // walls by their layers of faces.
-  const int nf = grid_.num_faces();
   const std::vector<Box<Dim>> bounds = body_bounds();  // (posed once, not per face)
+  // row by row of each axis's face lattice (x fastest), the coordinates counted along the row
+  // instead of divided out of the index per face (wall_face, face_coord): the same faces written
+  // with the same values
+  for (int axis = 0; axis < Dim; ++axis) {
+    const VecI<Dim> fdims = grid_.face_dims(axis);
+    const int nx = fdims[0], rows = fdims.prod() / nx, offset = grid_.face_offset(axis);
+    const bool walls = !grid_.periodic(axis);
+    const bool wall_lo = walls && boundary_[2 * axis] == BoundaryType::wall;
+    const bool wall_hi = walls && boundary_[2 * axis + 1] == BoundaryType::wall;
+    const int top = grid_.cells()[axis];
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f) {
-    if (weights_.fluid_face[f] != 0.0 || wall_face(f)) continue;
-    const auto [axis, coord] = grid_.face_coord(f);
-    u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord), bounds)[axis] : 0.0;
+    for (int r = 0; r < rows; ++r) {
+      VecI<Dim> coord = lattice_coord<Dim>(r * nx, fdims);
+      const int first = offset + r * nx;
+      for (int x = 0; x < nx; ++x) {
+        const int f = first + x;
+        if (weights_.fluid_face[f] != 0.0) continue;
+        coord[0] = x;
+        if ((wall_lo && coord[axis] == 0) || (wall_hi && coord[axis] == top)) continue;
+        u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord), bounds)[axis] : 0.0;
+      }
+    }
   }
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
