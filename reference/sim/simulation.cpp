@@ -312,7 +312,7 @@ void Simulation<Dim>::frame_zero() {
   // diagonal of P in place (as in every step, update_step_weights)
   particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
   mark_faces_with_mass();
-  density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
+  density_diagonal_in_place_after_transfer();
   update_liquid_weights();
   liquid_weights_current_ = true;
   pressure_ = VectorX::Zero(grid_.num_cells());
@@ -745,6 +745,17 @@ bool Simulation<Dim>::trusted_boxes(FaceBoxes& boxes) const {
 }
 
 template <int Dim>
+void Simulation<Dim>::density_diagonal_in_place_after_transfer() {
+  // particles_to_grid's densities are positive only on faces with mass, which lie in
+  // mass_boxes_ (kept by mark_faces_with_mass right after it)
+  if (switches_.restricted_passes && mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_)
+    density_diagonal_in_place<Dim>(grid_, weights_.face_density, reference_density_,
+                                   mass_boxes_.lo, mass_boxes_.hi);
+  else
+    density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
+}
+
+template <int Dim>
 void Simulation<Dim>::mark_faces_with_mass() {
   const int nf = grid_.num_faces();
   if (switches_.restricted_passes) {
@@ -890,7 +901,7 @@ void Simulation<Dim>::update_step_weights() {
   liquid_weights_current_ = false;
   {
     ScopedTimer timer(stats_.timing[FramePhase::weights]);
-    density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
+    density_diagonal_in_place_after_transfer();
   }
 }
 
@@ -2143,6 +2154,7 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
       }
       rows.push_back(j);
     }
+    constrained_left_out_ += count - static_cast<long>(rows.size());
   }
   const int nrows = static_cast<int>(rows.size());
 #pragma omp parallel for schedule(static) num_threads(team_threads(nrows))

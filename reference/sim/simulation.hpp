@@ -273,6 +273,9 @@ class Simulation : public AnySimulation {
   /// Particles transferred or moved again after a deeper extrapolation since the start
   /// (StageSwitches::extend_to_every_read), counted once per pass; for tests.
   long reread_particles() const { return reread_particles_; }
+  /// Faces in solids that constrain_velocity_in_solids left out (deep in a fixed solid, far from
+  /// the moving bodies: their value stays +0) since the start; for tests.
+  long constrained_faces_left_out() const { return constrained_left_out_; }
 
  private:
   /// One step of Algorithm 1 of length dt: the liquid with its solids and bodies (the coupled
@@ -537,6 +540,7 @@ class Simulation : public AnySimulation {
   /// others keep +0, their value already); the call at the same pose and the restore of
   /// extend_extrapolation read the same rows
   std::vector<int> constrained_rows_;
+  long constrained_left_out_ = 0;
   /// the shapes of solids_ (static ones first) and their bounds, as make_solid_field has them
   std::vector<ShapePtr<Dim>> solid_field_shapes_;
   std::vector<Box<Dim>> solid_field_boxes_;
@@ -611,6 +615,8 @@ class Simulation : public AnySimulation {
   const char* mass_boxes_data_ = nullptr;
   bool mass_boxes_valid_ = false;
   bool trusted_boxes(FaceBoxes& boxes) const;
+  /// density_diagonal_in_place of the faces' densities that particles_to_grid just wrote
+  void density_diagonal_in_place_after_transfer();
   /// Something reads face_mass_ after the solve: the energy ledger's grid kinetic energy.
   bool masses_read_after_solve() const;
   PcgSettings pcg_settings_;
