@@ -93,21 +93,50 @@ VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
 
 template <int Dim>
 void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density) {
+  std::array<VecI<Dim>, Dim> lo, hi;
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = VecI<Dim>::Zero();
+    hi[a] = grid.face_dims(a) - VecI<Dim>::Ones();
+  }
+  density_diagonal_in_place<Dim>(grid, rho, fallback_density, lo, hi);
+}
+
+template <int Dim>
+void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density,
+                               const std::array<VecI<Dim>, Dim>& lo,
+                               const std::array<VecI<Dim>, Dim>& hi) {
   const int nf = grid.num_faces();
   // a face without a density whose cells have no face with one gets the fallback: that is every
   // such face except those next to the faces with a density, which are collected from those
   // (work in proportion to the liquid, not the box: issue 20). The means are taken from the
   // input values before any face is written (the faces near the liquid have none themselves),
   // so writing in place gives the values of a separate output.
-  // (on several threads in blocks of faces: the sorted, unique list and every value are the same
-  // for any team size)
-  std::vector<int> near = gather_in_order<int>(nf, [&](int f, std::vector<int>& out) {
-    if (!(rho[f] > 0.0)) return;
-    const auto [axis, coord] = grid.face_coord(f);
-    for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
-      if (cell < 0) continue;
-      for (int g : cell_faces<Dim>(grid, cell).face)
-        if (!(rho[g] > 0.0)) out.push_back(g);
+  // (on several threads in blocks of rows of the boxes, which hold every face with a density:
+  // the sorted, unique list and every value are the same for any team size and any boxes)
+  std::array<int, Dim + 1> row_start{};
+  std::array<VecI<Dim>, Dim> rows_box;
+  for (int a = 0; a < Dim; ++a) {
+    rows_box[a] = hi[a] - lo[a] + VecI<Dim>::Ones();
+    const bool empty = (rows_box[a].array() <= 0).any();
+    const int rows = empty ? 0 : rows_box[a].prod() / rows_box[a][0];
+    row_start[a + 1] = row_start[a] + rows;
+  }
+  std::vector<int> near = gather_in_order<int>(row_start[Dim], [&](int r, std::vector<int>& out) {
+    int axis = 0;
+    while (r >= row_start[axis + 1]) ++axis;
+    VecI<Dim> one_row = rows_box[axis];
+    const int nx = one_row[0];
+    one_row[0] = 1;
+    VecI<Dim> coord = lo[axis] + lattice_coord<Dim>(r - row_start[axis], one_row);
+    const int first = grid.face_index(axis, coord);
+    for (int x = 0; x < nx; ++x) {
+      if (!(rho[first + x] > 0.0)) continue;
+      coord[0] = lo[axis][0] + x;
+      for (int cell : {grid.face_cell_minus(axis, coord), grid.face_cell_plus(axis, coord)}) {
+        if (cell < 0) continue;
+        for (int g : cell_faces<Dim>(grid, cell).face)
+          if (!(rho[g] > 0.0)) out.push_back(g);
+      }
     }
   });
   std::sort(near.begin(), near.end());
@@ -586,6 +615,9 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
 #define MONOLITH_INSTANTIATE(D)                                                                  \
   template VectorX density_diagonal<D>(const MacGrid<D>&, const VectorX&, double);               \
   template void density_diagonal_in_place<D>(const MacGrid<D>&, VectorX&, double);               \
+  template void density_diagonal_in_place<D>(const MacGrid<D>&, VectorX&, double,        \
+                                             const std::array<VecI<D>, D>&,                         \
+                                             const std::array<VecI<D>, D>&);                        \
   template PressureDofs select_pressure_dofs<D>(const MacGrid<D>&, const PressureWeights&,       \
                                                 double);                                         \
   template ExplicitPressureSystem assemble_explicit_pressure<D>(                                 \

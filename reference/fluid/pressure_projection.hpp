@@ -43,6 +43,13 @@ VectorX density_diagonal(const MacGrid<Dim>& grid, const VectorX& face_density,
 /// same values; no second face-sized vector).
 template <int Dim>
 void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density);
+/// The same where every face with a density (rho > 0) lies in the box [lo[a], hi[a]] of axis
+/// a's face lattice (inclusive; empty when some lo > hi): the faces next to them are searched
+/// in the boxes only (issue 20: particles_to_grid's faces), with the same result.
+template <int Dim>
+void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density,
+                               const std::array<VecI<Dim>, Dim>& lo,
+                               const std::array<VecI<Dim>, Dim>& hi);
 
 /// Active pressure DOFs (Algorithm 1, line 7) and the null space of A.
 struct PressureDofs {

@@ -420,10 +420,35 @@ template <int Dim>
 void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                        const VectorX& phi, const LatticeSigns<Dim>& signs,
                                        const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
-                                       double* out) {
+                                       double* out, WrittenBox<Dim>* written) {
   using Signs = LatticeSigns<Dim>;
   constexpr int kCorners = 1 << Dim;
-  fill_in_parallel(out, dims.prod(), 0.0);
+  if (written && written->valid_for(out, dims.prod())) {
+    // zero only what the last call wrote (the rest is 0 already)
+    VecI<Dim> zlo = written->lo.cwiseMax(VecI<Dim>::Zero());
+    VecI<Dim> zhi = written->hi.cwiseMin(dims - VecI<Dim>::Ones());
+    if ((zlo.array() <= zhi.array()).all()) {
+      const int nx = zhi[0] - zlo[0] + 1;
+      VecI<Dim> rows_box = zhi - zlo + VecI<Dim>::Ones();
+      rows_box[0] = 1;
+      const int rows = rows_box.prod();
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(rows) * nx))
+      for (int r = 0; r < rows; ++r) {
+        const VecI<Dim> c = zlo + lattice_coord<Dim>(r, rows_box);
+        std::fill_n(out + lattice_index<Dim>(c, dims), nx, 0.0);
+      }
+    }
+  } else {
+    fill_in_parallel(out, dims.prod(), 0.0);
+  }
+  if (written) {
+    // nothing visited unless set below
+    written->lo = VecI<Dim>::Zero();
+    written->hi = -VecI<Dim>::Ones();
+    written->data = out;
+    written->size = dims.prod();
+    written->valid = true;
+  }
   if (!signs.any_negative()) return;
   // the mixed lattice cells' fractions made with the classes (when made from this level set)
   const bool memo = signs.phi_data == phi.data() && signs.phi_size == static_cast<long>(phi.size());
@@ -437,6 +462,10 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
     from[a] = std::max(from[a], floor_half(signs.lo[a] - lower_offset[a] - 1));
     to[a] = std::min(to[a], floor_half(signs.hi[a] - lower_offset[a] + 1));
     if (from[a] > to[a]) return;
+  }
+  if (written) {
+    written->lo = from;
+    written->hi = to;
   }
   VecI<Dim> pstride, ostride;
   pstride[0] = ostride[0] = 1;
@@ -509,23 +538,26 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
 
 template <int Dim>
 void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out) {
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             WrittenBox<Dim>* written) {
   if (out.size() != grid.num_cells()) out.resize(grid.num_cells());
   // the cell control volume is the 2^Dim lattice cells starting at lattice point 2c
   control_volume_negative_fractions<Dim>(grid, lattice, phi, signs, grid.cells(),
-                                         VecI<Dim>::Zero(), out.data());
+                                         VecI<Dim>::Zero(), out.data(), written);
 }
 
 template <int Dim>
 void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out) {
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             std::array<WrittenBox<Dim>, Dim>* written) {
   if (out.size() != grid.num_faces()) out.resize(grid.num_faces());
   // the face control volume starts half a cell before the face along its normal
   for (int axis = 0; axis < Dim; ++axis) {
     VecI<Dim> offset = VecI<Dim>::Zero();
     offset[axis] = -1;
     control_volume_negative_fractions<Dim>(grid, lattice, phi, signs, grid.face_dims(axis), offset,
-                                           out.data() + grid.face_offset(axis));
+                                           out.data() + grid.face_offset(axis),
+                                           written ? &(*written)[axis] : nullptr);
   }
 }
 
@@ -598,6 +630,54 @@ void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
         double& v = w[grid.face_index(axis, f)];
         v = std::max(v, kMinLiquidFaceFraction);
       }
+    }
+  }
+}
+
+template <int Dim>
+void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
+                                        const VectorX& liquid_cell_weights,
+                                        const WrittenBox<Dim>& cells,
+                                        std::array<WrittenBox<Dim>, Dim>& faces) {
+  const bool boxed = cells.valid_for(liquid_cell_weights.data(), liquid_cell_weights.size());
+  bool faces_kept = true;
+  for (int axis = 0; axis < Dim; ++axis)
+    faces_kept = faces_kept && faces[axis].valid_for(w.data() + grid.face_offset(axis),
+                                                     grid.face_dims(axis).prod());
+  if (!boxed || !faces_kept) {
+    clamp_liquid_face_weights_in_place(grid, w, liquid_cell_weights);
+    for (auto& box : faces) box.valid = false;  // (the clamp's faces are not known)
+    return;
+  }
+  if ((cells.lo.array() > cells.hi.array()).any()) return;  // no cell with liquid
+  // the same raise (a maximum per face: the order of the cells does not matter) over the cells
+  // of the box, outside which every cell fraction is 0
+  const VecI<Dim> box = cells.hi - cells.lo + VecI<Dim>::Ones();
+  for (int j = 0; j < box.prod(); ++j) {
+    const VecI<Dim> c = cells.lo + lattice_coord<Dim>(j, box);
+    if (!(liquid_cell_weights[grid.cell_index(c)] > 0.0)) continue;
+    for (int axis = 0; axis < Dim; ++axis) {
+      VecI<Dim> f = c;
+      for (int s = 0; s < 2; ++s) {
+        f[axis] = c[axis] + s;
+        if (grid.periodic(axis) && f[axis] == grid.cells()[axis]) f[axis] = 0;  // the seam face
+        double& v = w[grid.face_index(axis, f)];
+        v = std::max(v, kMinLiquidFaceFraction);
+      }
+    }
+  }
+  // the faces of the box's cells: c and c + e_axis along axis (the seam face 0 of a periodic
+  // axis lies in the box, which spans that axis whole)
+  for (int axis = 0; axis < Dim; ++axis) {
+    VecI<Dim> lo = cells.lo, hi = cells.hi;
+    hi[axis] = std::min(hi[axis] + 1, grid.face_dims(axis)[axis] - 1);
+    WrittenBox<Dim>& fb = faces[axis];
+    if ((fb.lo.array() > fb.hi.array()).any()) {
+      fb.lo = lo;
+      fb.hi = hi;
+    } else {
+      fb.lo = fb.lo.cwiseMin(lo);
+      fb.hi = fb.hi.cwiseMax(hi);
     }
   }
 }
@@ -683,13 +763,19 @@ void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& l
                                                  LatticeSigns<D>&);                               \
   template void control_volume_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,  \
                                                      const VectorX&, const LatticeSigns<D>&,      \
-                                                     const VecI<D>&, const VecI<D>&, double*);    \
+                                                     const VecI<D>&, const VecI<D>&, double*,     \
+                                                     WrittenBox<D>*);                             \
   template void cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
-                                           const VectorX&, const LatticeSigns<D>&, VectorX&);     \
+                                           const VectorX&, const LatticeSigns<D>&, VectorX&,      \
+                                           WrittenBox<D>*);                                       \
   template void face_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
-                                           const VectorX&, const LatticeSigns<D>&, VectorX&);     \
+                                           const VectorX&, const LatticeSigns<D>&, VectorX&,      \
+                                           std::array<WrittenBox<D>, D>*);                        \
   template void clamp_liquid_face_weights_in_place<D>(const MacGrid<D>&, VectorX&,                \
-                                                      const VectorX&);
+                                                      const VectorX&);                            \
+  template void clamp_liquid_face_weights_in_place<D>(const MacGrid<D>&, VectorX&,                \
+                                                      const VectorX&, const WrittenBox<D>&,       \
+                                                      std::array<WrittenBox<D>, D>&);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

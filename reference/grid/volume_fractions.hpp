@@ -179,16 +179,32 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
                                    const VectorX& phi, const VecI<Dim>& point_lo,
                                    const VecI<Dim>& point_hi, LatticeSigns<Dim>& signs);
 
+/// The box of control volumes [lo, hi] (inclusive; empty when some lo > hi) outside which a
+/// fraction output kept across calls holds 0, for a sparse reset (issue 20): a call given a box
+/// that is valid for the same storage (data, size) zeroes that box only instead of the whole
+/// output, and records the box it writes. The caller keeps the output zero outside the box
+/// between calls (it writes nothing there, or grows the box: clamp_liquid_face_weights_in_place).
+template <int Dim>
+struct WrittenBox {
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones();
+  const double* data = nullptr;
+  long size = 0;
+  bool valid = false;
+  bool valid_for(const double* out, long n) const { return valid && data == out && size == n; }
+};
+
 /// The fraction where phi < 0 of the control volumes c in [0, dims) (x fastest) whose cube of
 /// 2^Dim lattice cells has lower corner 2 c + lower_offset (lower_offset 0 on cell-centred axes,
 /// -1 on node-aligned ones), i.e. lattice_cube_negative_fraction of each, written to
 /// out[0 .. prod(dims)). Only the control volumes that reach the box of `signs` (plus one
 /// lattice cell for the mirror at walls; whole periodic axes) are visited; the others are 0.
+/// With `written` (see WrittenBox) only its box is zeroed first when it is valid for out, and it
+/// returns with the box of the control volumes visited.
 template <int Dim>
 void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                        const VectorX& phi, const LatticeSigns<Dim>& signs,
                                        const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
-                                       double* out);
+                                       double* out, WrittenBox<Dim>* written = nullptr);
 
 /// Signed distance to the union of the solids, shifted inward by the shrinkage zeta of section
 /// 4.4.6: returns min_k d_k(x) + shrink_in_metres at every lattice point (positive outside the
@@ -214,13 +230,17 @@ VectorX face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Di
 
 /// cell_negative_fractions / face_negative_fractions with phi's classes computed by the caller
 /// (shared by several fraction sets of one level set) into `out` (resized when needed, so a
-/// buffer kept across steps is not allocated again).
+/// buffer kept across steps is not allocated again). With `written` (one box for the cells, one
+/// per axis for the faces, in each axis's face lattice) a kept buffer is reset sparsely
+/// (WrittenBox).
 template <int Dim>
 void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out);
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             WrittenBox<Dim>* written = nullptr);
 template <int Dim>
 void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out);
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             std::array<WrittenBox<Dim>, Dim>* written = nullptr);
 
 /// W_F^u (section 3.1.2): diagonal, num_faces x num_faces, stored as its diagonal. The fluid
 /// (non-solid) fraction of each face control volume, in [0, 1]; 0 on `wall` boundary faces, the
@@ -255,6 +275,15 @@ VectorX clamp_liquid_face_weights(const MacGrid<Dim>& grid, VectorX raw_face_fra
 template <int Dim>
 void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
                                         const VectorX& liquid_cell_weights);
+/// The same where the cell fractions are 0 outside `cells` (valid for them: the box
+/// cell_negative_fractions recorded): only the cells of that box are visited, and each face
+/// box of `faces` (valid for w) grows to cover the faces of those cells (which the clamp may
+/// raise), so that w stays 0 outside it.
+template <int Dim>
+void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
+                                        const VectorX& liquid_cell_weights,
+                                        const WrittenBox<Dim>& cells,
+                                        std::array<WrittenBox<Dim>, Dim>& faces);
 
 /// Reach of the liquid level set into static solids, in units of dx (see extend_liquid_into_solids).
 inline constexpr double kLiquidSolidReach = 1.0;

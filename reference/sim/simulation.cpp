@@ -312,7 +312,7 @@ void Simulation<Dim>::frame_zero() {
   // diagonal of P in place (as in every step, update_step_weights)
   particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
   mark_faces_with_mass();
-  density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
+  density_diagonal_in_place_after_transfer();
   update_liquid_weights();
   liquid_weights_current_ = true;
   pressure_ = VectorX::Zero(grid_.num_cells());
@@ -436,11 +436,24 @@ void Simulation<Dim>::update_liquid_weights() {
   classify_lattice_cells_searching(grid_, lattice_, phi, band_lo, band_hi, liquid_signs_);
   // the points where the extended level set is negative (the box of its non-positive cells)
   const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
-  cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell);
+  // W_L^p and W_L^u are reset where the last step wrote them, not over the grid (issue 20:
+  // WrittenBox; nothing else writes these vectors, which the solve borrows and gives back)
+  const bool sparse = switches_.restricted_passes;
+  cell_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_cell,
+                          sparse ? &liquid_cell_box_ : nullptr);
   // W_L^u clamped in place: the trust test of trusted_face reads it instead of the unclamped
   // fractions (the same faces, kept no longer in a face-sized vector of their own)
-  face_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_face);
-  clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
+  face_negative_fractions<Dim>(grid_, lattice_, phi, liquid_signs_, weights_.liquid_face,
+                               sparse ? &liquid_face_boxes_ : nullptr);
+  if (sparse)
+    clamp_liquid_face_weights_in_place<Dim>(grid_, weights_.liquid_face, weights_.liquid_cell,
+                                            liquid_cell_box_, liquid_face_boxes_);
+  else
+    clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
+  if (!sparse) {
+    liquid_cell_box_.valid = false;
+    for (auto& box : liquid_face_boxes_) box.valid = false;
+  }
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
   if (sequence_ != SolveSequence::pressure) {
     stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
@@ -546,11 +559,34 @@ double Simulation<Dim>::cfl_dt() const {
   if (u_.size() == faces && weights_.fluid_face.size() == faces &&
       weights_.liquid_face.size() == faces &&
       mass_faces_.size() == static_cast<std::size_t>(grid_.num_faces())) {
-    // (a maximum: the same for any split of the faces)
-    const int nf = grid_.num_faces();
+    // (a maximum: the same for any split of the faces, and over any set that holds the
+    // trusted faces: the boxes outside which none is, trusted_boxes)
+    FaceBoxes boxes;
+    if (trusted_boxes(boxes)) {
+      for (int axis = 0; axis < Dim; ++axis) {
+        const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
+        if ((lo.array() > hi.array()).any()) continue;
+        const VecI<Dim> fdims = grid_.face_dims(axis);
+        VecI<Dim> rows_box = hi - lo + VecI<Dim>::Ones();
+        const int nx = rows_box[0];
+        rows_box[0] = 1;
+        const int rows = rows_box.prod(), offset = grid_.face_offset(axis);
+        double speed = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : speed) \
+    num_threads(team_threads(static_cast<long>(rows) * nx))
+        for (int r = 0; r < rows; ++r) {
+          const int first = offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
+          for (int f = first; f < first + nx; ++f)
+            if (trusted_face(f)) speed = std::max(speed, std::abs(u_[f]));
+        }
+        grid_speed = std::max(grid_speed, speed);
+      }
+    } else {
+      const int nf = grid_.num_faces();
 #pragma omp parallel for schedule(static) reduction(max : grid_speed) num_threads(process_threads())
-    for (int f = 0; f < nf; ++f)
-      if (trusted_face(f)) grid_speed = std::max(grid_speed, std::abs(u_[f]));
+      for (int f = 0; f < nf; ++f)
+        if (trusted_face(f)) grid_speed = std::max(grid_speed, std::abs(u_[f]));
+    }
   }
   const double speed = std::max(max_particle_speed(particles_), grid_speed);
   const double max_dt = scene_.time.max_dt;
@@ -616,9 +652,129 @@ double Simulation<Dim>::grid_and_body_kinetic_energy() const {
 }
 
 template <int Dim>
-void Simulation<Dim>::mark_faces_with_mass() {
-  mass_faces_.resize(grid_.num_faces());
+typename Simulation<Dim>::FaceBoxes Simulation<Dim>::particle_face_boxes() const {
+  // the particles' bounds (a minimum and maximum per axis: the same for any split)
+  Vec<Dim> lo = Vec<Dim>::Constant(std::numeric_limits<double>::infinity());
+  Vec<Dim> hi = -lo;
+  const long np = static_cast<long>(particles_.size());
+  for (int a = 0; a < Dim; ++a) {
+    double mn = lo[a], mx = hi[a];
+    bool finite = true;
+#pragma omp parallel for schedule(static) reduction(min : mn) reduction(max : mx) \
+    reduction(&& : finite) num_threads(team_threads(np))
+    for (long p = 0; p < np; ++p) {
+      const double x = grid_.wrap_position(particles_.x[p])[a];
+      finite = finite && std::isfinite(x);
+      mn = std::min(mn, x);
+      mx = std::max(mx, x);
+    }
+    lo[a] = finite ? mn : -std::numeric_limits<double>::infinity();
+    hi[a] = finite ? mx : std::numeric_limits<double>::infinity();
+  }
+  // a particle in cell c (clamped) reaches the samples c - 1 .. c + 1 of every face lattice
+  // (pic_velocity_on_faces's note on axis_stencil); two more cells either side
+  FaceBoxes boxes;
+  for (int c = 0; c < Dim; ++c) {
+    const VecI<Dim> fdims = grid_.face_dims(c);
+    for (int a = 0; a < Dim; ++a) {
+      const int cells = grid_.cells()[a];
+      int clo = 0, chi = fdims[a] - 1;
+      if (np > 0 && !grid_.periodic(a) && std::isfinite(lo[a]) && std::isfinite(hi[a])) {
+        const double slo = std::floor((lo[a] - grid_.origin()[a]) / grid_.dx());
+        const double shi = std::floor((hi[a] - grid_.origin()[a]) / grid_.dx());
+        const int cl = static_cast<int>(std::clamp(slo, 0.0, cells - 1.0));
+        const int ch = static_cast<int>(std::clamp(shi, 0.0, cells - 1.0));
+        clo = std::max(cl - 3, 0);
+        chi = std::min(ch + 3, fdims[a] - 1);
+      } else if (np == 0) {
+        clo = 0;
+        chi = -1;
+      }
+      boxes.lo[c][a] = clo;
+      boxes.hi[c][a] = chi;
+    }
+  }
+  return boxes;
+}
+
+template <int Dim>
+template <class Fn>
+void Simulation<Dim>::for_faces_in_boxes(const FaceBoxes& boxes, Fn&& fn) const {
+  for (int axis = 0; axis < Dim; ++axis) {
+    const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
+    if ((lo.array() > hi.array()).any()) continue;
+    const VecI<Dim> fdims = grid_.face_dims(axis);
+    VecI<Dim> rows_box = hi - lo + VecI<Dim>::Ones();
+    const int nx = rows_box[0];
+    rows_box[0] = 1;
+    const int rows = rows_box.prod(), offset = grid_.face_offset(axis);
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(rows) * nx))
+    for (int r = 0; r < rows; ++r) {
+      const int first = offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
+      for (int x = 0; x < nx; ++x) fn(first + x);
+    }
+  }
+}
+
+template <int Dim>
+bool Simulation<Dim>::trusted_boxes(FaceBoxes& boxes) const {
+  // a trusted face has W_L^u > 0 (0 outside liquid_face_boxes_) or mass (0 outside mass_boxes_)
   const int nf = grid_.num_faces();
+  if (!switches_.restricted_passes || !mass_boxes_valid_ || mass_faces_.data() != mass_boxes_data_ ||
+      mass_faces_.size() != static_cast<std::size_t>(nf) || weights_.liquid_face.size() != nf)
+    return false;
+  for (int a = 0; a < Dim; ++a) {
+    const WrittenBox<Dim>& lb = liquid_face_boxes_[a];
+    if (!lb.valid_for(weights_.liquid_face.data() + grid_.face_offset(a),
+                      grid_.face_dims(a).prod()))
+      return false;
+    const bool mass_empty = (mass_boxes_.lo[a].array() > mass_boxes_.hi[a].array()).any();
+    const bool liquid_empty = (lb.lo.array() > lb.hi.array()).any();
+    if (mass_empty) {
+      boxes.lo[a] = lb.lo;
+      boxes.hi[a] = lb.hi;
+    } else if (liquid_empty) {
+      boxes.lo[a] = mass_boxes_.lo[a];
+      boxes.hi[a] = mass_boxes_.hi[a];
+    } else {
+      boxes.lo[a] = mass_boxes_.lo[a].cwiseMin(lb.lo);
+      boxes.hi[a] = mass_boxes_.hi[a].cwiseMax(lb.hi);
+    }
+  }
+  return true;
+}
+
+template <int Dim>
+void Simulation<Dim>::density_diagonal_in_place_after_transfer() {
+  // particles_to_grid's densities are positive only on faces with mass, which lie in
+  // mass_boxes_ (kept by mark_faces_with_mass right after it)
+  if (switches_.restricted_passes && mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_)
+    density_diagonal_in_place<Dim>(grid_, weights_.face_density, reference_density_,
+                                   mass_boxes_.lo, mass_boxes_.hi);
+  else
+    density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
+}
+
+template <int Dim>
+void Simulation<Dim>::mark_faces_with_mass() {
+  const int nf = grid_.num_faces();
+  if (switches_.restricted_passes) {
+    // face_mass_ > 0 only where a particle's stencil reaches: the flags of the last step's
+    // boxes are cleared and the new boxes marked (every other flag is 0 already)
+    const bool kept = mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_ &&
+                      mass_faces_.size() == static_cast<std::size_t>(nf);
+    if (kept)
+      for_faces_in_boxes(mass_boxes_, [&](int f) { mass_faces_[f] = 0; });
+    else
+      mass_faces_.assign(nf, 0);
+    mass_boxes_ = particle_face_boxes();
+    for_faces_in_boxes(mass_boxes_, [&](int f) { mass_faces_[f] = face_mass_[f] > 0.0; });
+    mass_boxes_data_ = mass_faces_.data();
+    mass_boxes_valid_ = true;
+    return;
+  }
+  mass_boxes_valid_ = false;
+  mass_faces_.resize(grid_.num_faces());
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) mass_faces_[f] = face_mass_[f] > 0.0;
 }
@@ -642,10 +798,23 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
   restart_ledger([&] { return grid_and_body_kinetic_energy(); });
   // (2) add external force (gravity) on the faces that carry mass; (3) on the dynamic bodies
   // (per face, on several threads: each face written once)
+  // (the faces with mass lie in mass_boxes_ when those are kept)
   const int nf = grid_.num_faces();
+  if (switches_.restricted_passes && mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_) {
+    for (int axis = 0; axis < Dim; ++axis) {
+      FaceBoxes one = mass_boxes_;
+      for (int a = 0; a < Dim; ++a)
+        if (a != axis) one.hi[a] = one.lo[a] - VecI<Dim>::Ones();
+      const double g = dt * gravity_[axis];
+      for_faces_in_boxes(one, [&](int f) {
+        if (mass_faces_[f]) u_[f] += g;
+      });
+    }
+  } else {
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f)
-    if (mass_faces_[f]) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+    for (int f = 0; f < nf; ++f)
+      if (mass_faces_[f]) u_[f] += dt * gravity_[grid_.face_coord(f).first];
+  }
   if (coupled_) rigid_->apply_gravity(dt, gravity_);
 }
 
@@ -732,7 +901,7 @@ void Simulation<Dim>::update_step_weights() {
   liquid_weights_current_ = false;
   {
     ScopedTimer timer(stats_.timing[FramePhase::weights]);
-    density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
+    density_diagonal_in_place_after_transfer();
   }
 }
 
@@ -784,8 +953,15 @@ void Simulation<Dim>::trusted_faces(std::vector<char>& trusted) const {
   // faces with fluid whose weight W_F^u W_L^u (W_L^u before the clamp) reaches
   // kTrustedLiquidFaceFraction, and faces that carry mass outside the liquid's weights (the
   // stage switches, for diagnosis only, can drop the second kind or trust every liquid face)
-  trusted.resize(grid_.num_faces());
   const int nf = grid_.num_faces();
+  FaceBoxes boxes;
+  if (trusted_boxes(boxes)) {
+    // no face outside the boxes is trusted: a zero fill of the flags and the test in the boxes
+    trusted.assign(nf, 0);
+    for_faces_in_boxes(boxes, [&](int f) { trusted[f] = trusted_face(f); });
+    return;
+  }
+  trusted.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) trusted[f] = trusted_face(f);
 }
@@ -907,8 +1083,10 @@ bool Simulation<Dim>::extend_extrapolation() {
 #pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int f = 0; f < nf; ++f)
       if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = given[f];
-    const int count = static_cast<int>(solid_faces_.size());
-    for (int j = 0; j < count && !solids_.empty(); ++j) {
+    // (the rows the step's constrain evaluated: a row it left keeps +0 in u_ and in given)
+    const int count = static_cast<int>(constrained_rows_.size());
+    for (int r = 0; r < count && !solids_.empty(); ++r) {
+      const int j = constrained_rows_[r];
       const int f = solid_faces_[j];
       if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = solid_frame_[j].before;
     }
@@ -954,13 +1132,29 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   // static solids), then remove the inflow into solids. The fully solid faces are found by
   // their weight alone (a compare per face, on several threads: each face written once), the
   // walls by their layers of faces.
-  const int nf = grid_.num_faces();
   const std::vector<Box<Dim>> bounds = body_bounds();  // (posed once, not per face)
+  // row by row of each axis's face lattice (x fastest), the coordinates counted along the row
+  // instead of divided out of the index per face (wall_face, face_coord): the same faces written
+  // with the same values
+  for (int axis = 0; axis < Dim; ++axis) {
+    const VecI<Dim> fdims = grid_.face_dims(axis);
+    const int nx = fdims[0], rows = fdims.prod() / nx, offset = grid_.face_offset(axis);
+    const bool walls = !grid_.periodic(axis);
+    const bool wall_lo = walls && boundary_[2 * axis] == BoundaryType::wall;
+    const bool wall_hi = walls && boundary_[2 * axis + 1] == BoundaryType::wall;
+    const int top = grid_.cells()[axis];
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f) {
-    if (weights_.fluid_face[f] != 0.0 || wall_face(f)) continue;
-    const auto [axis, coord] = grid_.face_coord(f);
-    u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord), bounds)[axis] : 0.0;
+    for (int r = 0; r < rows; ++r) {
+      VecI<Dim> coord = lattice_coord<Dim>(r * nx, fdims);
+      const int first = offset + r * nx;
+      for (int x = 0; x < nx; ++x) {
+        const int f = first + x;
+        if (weights_.fluid_face[f] != 0.0) continue;
+        coord[0] = x;
+        if ((wall_lo && coord[axis] == 0) || (wall_hi && coord[axis] == top)) continue;
+        u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord), bounds)[axis] : 0.0;
+      }
+    }
   }
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
@@ -1750,6 +1944,7 @@ void Simulation<Dim>::find_faces_in_solids() {
       fixed_faces_key_ = key;
       fixed_faces_valid_ = true;
       fixed_face_frame_.clear();
+      fixed_face_deep_.clear();
       for (int axis = 0; axis < Dim; ++axis) {
         fixed_faces_[axis].clear();
         faces_with_centre(axis, dense_lo, dense_hi,
@@ -1791,6 +1986,7 @@ void Simulation<Dim>::find_faces_in_solids() {
   fixed_faces_valid_ = false;
   fixed_faces_key_.clear();
   fixed_face_frame_.clear();
+  fixed_face_deep_.clear();
   for (auto& list : fixed_faces_) list.clear();
   if ((solid_lo_.array() > solid_hi_.array()).any()) return;  // no lattice point in a solid
   std::array<std::size_t, Dim + 1> axis_start{};
@@ -1861,8 +2057,109 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
       frame.normal = solid_field_shapes_[best]->gradient(x);
     }
   }
-#pragma omp parallel for schedule(static) num_threads(team_threads(count))
-  for (int j = 0; j < count; ++j) {
+  // The rows evaluated (issue 20): a fixed face deep in a fixed solid, far from every moving
+  // body, is left out. Every face g its interpolation reads has W_F^u = 0 or is a wall's, so
+  // apply_wall_and_solid_velocities has just set u_[g] to the solid's velocity there, which is
+  // +0 outside every moving body's bounds (solid_velocity), or to +0 (walls); extend_extrapolation
+  // gives those faces the same values again before its call at the same pose. The interpolation
+  // sums w * (+-0) from +0.0 with w >= 0: +0 in every component; v_s = 0, so v_n = +-0 is not
+  // negative and the new value is +0, which u_[f] (one of the faces read) holds already. The
+  // flags are made once per set of fixed faces, with W_F^u at a time when no moving body's
+  // bounds came within kDeepMargin of the face's centre, and a face is left out only while none
+  // does: the faces read lie within one dx of the centre per axis, and W_F^u there reads the
+  // solids' union within one more dx, where a moving body (its level set no lower than the
+  // distance to its bounds) does not change the fixed solids' value
+  std::vector<int>& rows = constrained_rows_;
+  if (!same_pose) {
+    rows.clear();
+    const int fixed_total = [&] {
+      int total = 0;
+      for (int a = 0; a < Dim; ++a) total += static_cast<int>(fixed_faces_[a].size());
+      return total;
+    }();
+    bool periodic = false;
+    for (int a = 0; a < Dim; ++a) periodic = periodic || grid_.periodic(a);
+    const bool skip_deep = switches_.restricted_passes && fixed_faces_valid_ && !periodic &&
+                           fixed_total > 0 && solid_face_fixed_.size() == faces.size() &&
+                           weights_.fluid_face.size() == grid_.num_faces();
+    // the moving bodies' bounds grown by the margin; a body without finite bounds: none skipped
+    constexpr double kDeepMargin = 4.0;
+    std::vector<Box<Dim>> near;
+    bool unbounded = false;
+    if (skip_deep && rigid_) {
+      const auto& bodies = rigid_->bodies();
+      for (const auto& b : bodies) {
+        if (!b.moves()) continue;
+        const Box<Dim> box = b.bounds();
+        if (!box.min().allFinite() || !box.max().allFinite()) {
+          unbounded = true;
+          continue;
+        }
+        const Vec<Dim> grow = Vec<Dim>::Constant(kDeepMargin * grid_.dx());
+        near.emplace_back(box.min() - grow, box.max() + grow);
+      }
+    }
+    const auto far_from_bodies = [&](const Vec<Dim>& x) {
+      if (unbounded) return false;
+      for (const Box<Dim>& box : near)
+        if (!((x.array() < box.min().array()).any() || (x.array() > box.max().array()).any()))
+          return false;
+      return true;
+    };
+    if (skip_deep && !unbounded && static_cast<int>(fixed_face_deep_.size()) != fixed_total) {
+      std::vector<int> all;
+      all.reserve(fixed_total);
+      for (int a = 0; a < Dim; ++a)
+        all.insert(all.end(), fixed_faces_[a].begin(), fixed_faces_[a].end());
+      fixed_face_deep_.assign(fixed_total, 0);
+#pragma omp parallel for schedule(static) num_threads(team_threads(fixed_total))
+      for (int i = 0; i < fixed_total; ++i) {
+        const auto [axis, coord] = grid_.face_coord(all[i]);
+        if (!far_from_bodies(grid_.face_center(axis, coord))) continue;
+        bool deep = true;
+        for (int c = 0; c < Dim && deep; ++c) {
+          // MacGrid::axis_stencil at the centre on component c's lattice (non-periodic): along
+          // axis a the samples i0, i0 + 1 with i0 = min(floor(clamp(s, 0, n - 1)), n - 2),
+          // s = coord[a] + (a == c) / 2 - (a == axis) / 2 (in halves: s2 = 2 s)
+          const VecI<Dim> fdims = grid_.face_dims(c);
+          VecI<Dim> lo, hi;
+          for (int a = 0; a < Dim; ++a) {
+            const int n = fdims[a];
+            if (n == 1) {
+              lo[a] = hi[a] = 0;
+              continue;
+            }
+            const int s2 = 2 * coord[a] + (a == c ? 1 : 0) - (a == axis ? 1 : 0);
+            const int i0 = std::min(std::clamp(s2, 0, 2 * (n - 1)) / 2, n - 2);
+            lo[a] = i0;
+            hi[a] = i0 + 1;
+          }
+          const VecI<Dim> box = hi - lo + VecI<Dim>::Ones();
+          for (int k = 0; k < box.prod() && deep; ++k) {
+            const int g = grid_.face_index(c, lo + lattice_coord<Dim>(k, box));
+            deep = weights_.fluid_face[g] == 0.0 || wall_face(g);
+          }
+        }
+        fixed_face_deep_[i] = deep;
+      }
+    }
+    const bool use_deep =
+        skip_deep && !unbounded && static_cast<int>(fixed_face_deep_.size()) == fixed_total;
+    rows.reserve(faces.size());
+    for (int j = 0; j < count; ++j) {
+      const int i = use_deep ? solid_face_fixed_[j] : -1;
+      if (i >= 0 && fixed_face_deep_[i]) {
+        const auto [axis, coord] = grid_.face_coord(faces[j]);
+        if (far_from_bodies(grid_.face_center(axis, coord))) continue;
+      }
+      rows.push_back(j);
+    }
+    constrained_left_out_ += count - static_cast<long>(rows.size());
+  }
+  const int nrows = static_cast<int>(rows.size());
+#pragma omp parallel for schedule(static) num_threads(team_threads(nrows))
+  for (int r = 0; r < nrows; ++r) {
+    const int j = rows[r];
     const int f = faces[j];
     const auto [axis, coord] = grid_.face_coord(f);
     const Vec<Dim> x = grid_.face_center(axis, coord);
@@ -1889,7 +2186,7 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     // comparison above would drop it)
     values[j] = std::isnan(vn) ? vn : v[axis];
   }
-  for (int j = 0; j < count; ++j) u_[faces[j]] = values[j];
+  for (int r = 0; r < nrows; ++r) u_[faces[rows[r]]] = values[rows[r]];
 }
 
 template <int Dim>

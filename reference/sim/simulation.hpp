@@ -273,6 +273,9 @@ class Simulation : public AnySimulation {
   /// Particles transferred or moved again after a deeper extrapolation since the start
   /// (StageSwitches::extend_to_every_read), counted once per pass; for tests.
   long reread_particles() const { return reread_particles_; }
+  /// Faces in solids that constrain_velocity_in_solids left out (deep in a fixed solid, far from
+  /// the moving bodies: their value stays +0) since the start; for tests.
+  long constrained_faces_left_out() const { return constrained_left_out_; }
 
  private:
   /// One step of Algorithm 1 of length dt: the liquid with its solids and bodies (the coupled
@@ -524,6 +527,20 @@ class Simulation : public AnySimulation {
     Vec<Dim> normal = Vec<Dim>::Zero();
   };
   std::vector<FixedFaceFrame> fixed_face_frame_;
+  /// the boxes of W_L^p and W_L^u (per axis) that the last update_liquid_weights wrote: the
+  /// next one zeroes only those (WrittenBox)
+  WrittenBox<Dim> liquid_cell_box_;
+  std::array<WrittenBox<Dim>, Dim> liquid_face_boxes_;
+  /// per fixed face: 1 if every face that the interpolation of the velocity at its centre reads
+  /// (each component's 2^Dim stencil of MacGrid::axis_stencil) had W_F^u = 0 (or
+  /// was a wall's) while no moving body came near (constrain_velocity_in_solids); built with
+  /// the fixed faces, dropped with them
+  std::vector<char> fixed_face_deep_;
+  /// the rows j of solid_faces_ that the step's constrain_velocity_in_solids evaluates (the
+  /// others keep +0, their value already); the call at the same pose and the restore of
+  /// extend_extrapolation read the same rows
+  std::vector<int> constrained_rows_;
+  long constrained_left_out_ = 0;
   /// the shapes of solids_ (static ones first) and their bounds, as make_solid_field has them
   std::vector<ShapePtr<Dim>> solid_field_shapes_;
   std::vector<Box<Dim>> solid_field_boxes_;
@@ -579,6 +596,27 @@ class Simulation : public AnySimulation {
   /// themselves are dead after them (masses_read_after_solve) and their storage is reused
   std::vector<char> mass_faces_;
   void mark_faces_with_mass();
+  /// Boxes of faces per axis (inclusive; empty when some lo > hi), for the passes that follow
+  /// the liquid (issue 20)
+  struct FaceBoxes {
+    std::array<VecI<Dim>, Dim> lo, hi;
+  };
+  /// The faces a particle's stencil in particles_to_grid can reach (the cells of the particles'
+  /// bounds grown by two, each face lattice's whole axis where it is periodic or the bounds are
+  /// not finite): face_mass_ is 0 outside them
+  FaceBoxes particle_face_boxes() const;
+  /// fn(f) for every face of the boxes, on several threads (rows of each box; fn of distinct
+  /// faces must be independent)
+  template <class Fn>
+  void for_faces_in_boxes(const FaceBoxes& boxes, Fn&& fn) const;
+  /// the boxes outside which mass_faces_ is 0 (valid for the storage mass_boxes_data_), and
+  /// with W_L^u's boxes those outside which no face is trusted; false when not known
+  FaceBoxes mass_boxes_;
+  const char* mass_boxes_data_ = nullptr;
+  bool mass_boxes_valid_ = false;
+  bool trusted_boxes(FaceBoxes& boxes) const;
+  /// density_diagonal_in_place of the faces' densities that particles_to_grid just wrote
+  void density_diagonal_in_place_after_transfer();
   /// Something reads face_mass_ after the solve: the energy ledger's grid kinetic energy.
   bool masses_read_after_solve() const;
   PcgSettings pcg_settings_;

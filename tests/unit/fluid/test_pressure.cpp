@@ -311,6 +311,42 @@ TEMPLATE_TEST_CASE_SIG(
     density_diagonal_in_place(grid, in_place, fallback);
     REQUIRE(in_place.size() == got.size());
     for (int f = 0; f < grid.num_faces(); ++f) CHECK(in_place[f] == got[f]);
+    // with boxes that hold every face with a density (issue 20: particles_to_grid's faces) the
+    // same bits: densities only in a box of each axis's face lattice (one at the seam of a
+    // periodic x, one at the upper end), the whole lattice and those boxes as the given boxes;
+    // boxes that leave out one face with a density give other values
+    VectorX boxed_rho = VectorX::Zero(grid.num_faces());
+    std::array<VecI<Dim>, Dim> lo, hi, all_lo, all_hi;
+    for (int a = 0; a < Dim; ++a) {
+      const VecI<Dim> fdims = grid.face_dims(a);
+      all_lo[a] = VecI<Dim>::Zero();
+      all_hi[a] = fdims - VecI<Dim>::Ones();
+      lo[a] = VecI<Dim>::Constant(a == 0 ? 0 : 2);
+      hi[a] = (fdims - VecI<Dim>::Ones()).cwiseMin(lo[a] + VecI<Dim>::Constant(a == 1 ? 20 : 3));
+    }
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      const auto [axis, coord] = grid.face_coord(f);
+      const bool in = !((coord.array() < lo[axis].array()).any() || (coord.array() > hi[axis].array()).any());
+      if (in && rho[f] != 0.0) boxed_rho[f] = rho[f];
+    }
+    const int top_density = grid.face_index(0, hi[0]);  // the box's far corner has a density
+    boxed_rho[top_density] = 950.0;
+    VectorX dense = boxed_rho;
+    density_diagonal_in_place(grid, dense, fallback);
+    for (const bool whole : {false, true}) {
+      VectorX boxed = boxed_rho;
+      density_diagonal_in_place<Dim>(grid, boxed, fallback, whole ? all_lo : lo, whole ? all_hi : hi);
+      CHECK(monolith::testing::differing(boxed, dense) == 0);
+    }
+    // a box one layer short along the last axis of axis 0's lattice misses a face with a density
+    std::array<VecI<Dim>, Dim> short_hi = hi;
+    short_hi[0][Dim - 1] -= 1;
+    VectorX single = VectorX::Zero(grid.num_faces());
+    single[top_density] = boxed_rho[top_density];
+    VectorX single_dense = single, missed = single;
+    density_diagonal_in_place(grid, single_dense, fallback);
+    density_diagonal_in_place<Dim>(grid, missed, fallback, lo, short_hi);
+    CHECK(monolith::testing::differing(missed, single_dense) > 0);
   }
 }
 

@@ -418,3 +418,82 @@ TEMPLATE_TEST_CASE_SIG("the mixed lattice cells' fractions made with the classes
   cell_negative_fractions(grid, lattice, phi, signs, cells_phi);
   CHECK(cells_phi != cells_scaled);  // the check above can tell the two apart
 }
+
+TEMPLATE_TEST_CASE_SIG("fraction buffers kept across level sets are reset where the last call "
+                       "wrote them (WrittenBox) and equal fresh ones bit for bit",
+                       "[unit][property]", ((int Dim), Dim), 2, 3) {
+  // W_L^p and W_L^u as update_liquid_weights keeps them (issue 20): one cell buffer and one face
+  // buffer with their boxes across a sequence of level sets whose negative region moves, grows,
+  // vanishes and covers everything (periodic x too), the faces clamped over the cells' box.
+  // After each call both equal a fresh evaluation with the plain clamp, and every non-zero value
+  // lies in the recorded boxes. A value planted outside the boxes stays (the reset is sparse).
+  const int n = Dim == 2 ? 16 : 8;
+  for (int periodic_x = 0; periodic_x < 2; ++periodic_x) {
+    const MacGrid<Dim> grid = unit_grid<Dim>(n, periodic_x == 1);
+    const SampleLattice<Dim> lattice = half_lattice(grid);
+    std::vector<VectorX> cases;
+    for (double cx : {0.2, 0.8, 0.97, 0.5})
+      for (double r : {0.06, 0.3}) {
+        Vec<Dim> c = Vec<Dim>::Constant(0.45);
+        c[0] = cx;
+        cases.push_back(sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) { return (x - c).norm() - r; }));
+      }
+    cases.push_back(VectorX::Constant(lattice.size(), 2.0));
+    cases.push_back(VectorX::Constant(lattice.size(), -1.0));
+    cases.push_back(cases[2]);
+    VectorX cells, faces;
+    WrittenBox<Dim> cell_box;
+    std::array<WrittenBox<Dim>, Dim> face_boxes;
+    for (std::size_t k = 0; k < cases.size(); ++k) {
+      INFO("periodic x " << periodic_x << ", case " << k);
+      const VectorX& phi = cases[k];
+      LatticeSigns<Dim> signs;
+      classify_lattice_cells(grid, lattice, phi, signs);
+      cell_negative_fractions(grid, lattice, phi, signs, cells, &cell_box);
+      face_negative_fractions<Dim>(grid, lattice, phi, signs, faces, &face_boxes);
+      clamp_liquid_face_weights_in_place<Dim>(grid, faces, cells, cell_box, face_boxes);
+      VectorX fresh_cells, fresh_faces;
+      cell_negative_fractions(grid, lattice, phi, signs, fresh_cells);
+      face_negative_fractions(grid, lattice, phi, signs, fresh_faces);
+      clamp_liquid_face_weights_in_place(grid, fresh_faces, fresh_cells);
+      CHECK(monolith::testing::differing(cells, fresh_cells) == 0);
+      CHECK(monolith::testing::differing(faces, fresh_faces) == 0);
+      REQUIRE(cell_box.valid);
+      int outside = 0;
+      for (int i = 0; i < grid.num_cells(); ++i) {
+        const VecI<Dim> c = grid.cell_coord(i);
+        const bool in = !((c.array() < cell_box.lo.array()).any() || (c.array() > cell_box.hi.array()).any());
+        outside += !in && cells[i] != 0.0;
+      }
+      for (int f = 0; f < grid.num_faces(); ++f) {
+        const auto [axis, c] = grid.face_coord(f);
+        REQUIRE(face_boxes[axis].valid);
+        const bool in = !((c.array() < face_boxes[axis].lo.array()).any() ||
+                          (c.array() > face_boxes[axis].hi.array()).any());
+        outside += !in && faces[f] != 0.0;
+      }
+      CHECK(outside == 0);
+    }
+    // the last level set again, with a value planted outside the cells' box: the sparse reset
+    // does not reach it (the contract: the caller keeps the buffer 0 there)
+    int planted = -1;
+    for (int i = 0; i < grid.num_cells() && planted < 0; ++i) {
+      const VecI<Dim> c = grid.cell_coord(i);
+      if ((c.array() < cell_box.lo.array()).any() || (c.array() > cell_box.hi.array()).any())
+        planted = i;
+    }
+    REQUIRE(planted >= 0);
+    cells[planted] = 0.5;
+    const VectorX& phi = cases.back();
+    LatticeSigns<Dim> signs;
+    classify_lattice_cells(grid, lattice, phi, signs);
+    cell_negative_fractions(grid, lattice, phi, signs, cells, &cell_box);
+    CHECK(cells[planted] == 0.5);
+    // another buffer (a different storage) is filled whole
+    VectorX other = VectorX::Constant(grid.num_cells(), 0.25);
+    cell_negative_fractions(grid, lattice, phi, signs, other, &cell_box);
+    VectorX fresh;
+    cell_negative_fractions(grid, lattice, phi, signs, fresh);
+    CHECK(monolith::testing::differing(other, fresh) == 0);
+  }
+}
