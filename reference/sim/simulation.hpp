@@ -140,6 +140,11 @@ struct StageSwitches {
   /// A test switch: the extrapolation after the solve reaches every face it can (as many layers
   /// as the face lattices' diameter), whatever the step's speed.
   bool extrapolate_everywhere = false;
+  /// A test switch: n > 0: the extrapolation after the solve reaches n layers whatever the step's
+  /// speed (scenes without moving bodies), so that the guards of the particles' reads
+  /// (extend_to_every_read: advect and, with split_advection, the next first half drift) must
+  /// extend it (tests/validation/test_unreached_faces.cpp); 0: the step's reach.
+  int extrapolation_layers = 0;
   /// Whether the potential energy the moves of line 15 (correct_positions and the density
   /// projection) add is paid by the liquid's kinetic energy (Line15Energy; docs/particles.md,
   /// "Line 15's potential energy paid by the kinetic energy (slosh9)"). Default `balance` since
@@ -273,6 +278,8 @@ class Simulation : public AnySimulation {
   /// Particles transferred or moved again after a deeper extrapolation since the start
   /// (StageSwitches::extend_to_every_read), counted once per pass; for tests.
   long reread_particles() const { return reread_particles_; }
+  /// Of those, the particles moved again in first half drifts (drift_guarded).
+  long drift_reread_particles() const { return drift_reread_particles_; }
 
  private:
   /// One step of Algorithm 1 of length dt: the liquid with its solids and bodies (the coupled
@@ -314,7 +321,22 @@ class Simulation : public AnySimulation {
   /// deep (from the solve's velocity, reached_u_), then the walls' and solids' velocities; faces
   /// already reached keep their values bit for bit. Returns false once the extrapolation reaches
   /// every face it can (then unreached faces hold the solve's value, unless poisoned).
-  bool extend_extrapolation();
+  /// `drift`: for the next step's first half drift (drift_guarded): from the trusted faces the
+  /// step kept (drift_trusted_), and the deeper values then scaled as line 15's payments since
+  /// scaled u_ (drift_rescales_).
+  bool extend_extrapolation(bool drift = false);
+  /// Whether the next step's first half drift reads u_ through the guard of advect (the faces
+  /// the extrapolation did not reach NaN, a particle that reads one moved again after a deeper
+  /// extrapolation), so that the extrapolation after the solve needs only the step's reach:
+  /// split_drift with extend_to_every_read, without moving bodies, divergence_free_air or
+  /// Line15Energy::balance_local (whose payment scales u_ face by face).
+  bool drift_guarded() const;
+  /// The guard's state for the next first half drift dropped (its memory back to the heap).
+  void drop_drift_guard();
+  /// drift_resolved_: the velocity the next first half drift would read through its guard with
+  /// every face extended (for a checkpoint: the resumed drift reads it bit for bit as the
+  /// guarded one reads u_ and its deeper extrapolations).
+  void resolve_drift_velocity();
   /// Line 13: the bodies' poses (coupled scenes) and the particles' SolidField at the new pose.
   void move_bodies(double dt);
   /// The particles' SolidField from the static shapes and the posed moving bodies.
@@ -506,7 +528,15 @@ class Simulation : public AnySimulation {
   VectorX reached_u_, extended_u_;
   std::vector<char> extended_flags_, unread_;
   int reached_layers_ = 0;
-  long reread_particles_ = 0;
+  // the guard of the next step's first half drift (drift_guarded; valid while drift_guard_): the
+  // trusted faces of the step's extrapolation, the faces it and advect's deeper ones reached
+  // (reached_u_ and reached_layers_ kept with them), the payments of line 15 that scaled u_
+  // since (vbar, s of pay_line15_energy, in order); a restored checkpoint's drift velocity
+  bool drift_guard_ = false;
+  std::vector<char> drift_trusted_, drift_reached_;
+  std::vector<std::pair<Vec<Dim>, double>> drift_rescales_;
+  VectorX drift_resolved_;
+  long reread_particles_ = 0, drift_reread_particles_ = 0;
   std::vector<int> solid_faces_;
   /// per face of solid_faces_: its index in the fixed faces (fixed_faces_, axis after axis), or -1
   std::vector<int> solid_face_fixed_;
