@@ -393,7 +393,7 @@ void Simulation<Dim>::settle(int steps) {
 }
 
 template <int Dim>
-void Simulation<Dim>::update_liquid_weights() {
+void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
   {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
     // mirrored across the walls and the solids, so liquid against either reads as liquid up to
@@ -444,7 +444,7 @@ void Simulation<Dim>::update_liquid_weights() {
   face_negative_fractions(grid_, lattice_, phi, liquid_signs_, weights_.liquid_face);
   clamp_liquid_face_weights_in_place(grid_, weights_.liquid_face, weights_.liquid_cell);
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
-  if (sequence_ != SolveSequence::pressure) {
+  if (sequence_ != SolveSequence::pressure && stress) {
     stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
     // (a non-Newtonian liquid's eta here is 0, and the only liquid's fractions are 1: constants
     // without the splat, the same bits)
@@ -498,7 +498,7 @@ void Simulation<Dim>::update_liquid_weights() {
   // box and one point around it and undone after its fractions. Outside, liquid_phi_ has the
   // signs the extended level set had there, >= 0, and no value of it is read)
   if (extend) restore_points(liquid_phi_, phi_undo_);
-  if (solids) {
+  if (volume && solids) {
     VecI<Dim> lo = liquid_lo, hi = liquid_hi;
     if (liquid_signs_.any_negative())
       for (int a = 0; a < Dim; ++a) {
@@ -519,7 +519,8 @@ void Simulation<Dim>::update_liquid_weights() {
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
     if (extend) restore_points(liquid_phi_, phi_undo_);
   }
-  liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
+  if (volume)
+    liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
   // (read by nothing else: a cell-sized vector, 64 MiB at the paper's 256x128x256 grid, that
   // the solve's vectors reuse instead of keeping it alive through the step)
   volume_cells_ = VectorX();
@@ -727,9 +728,10 @@ void Simulation<Dim>::update_step_weights() {
   // (5) volume fractions: W_F^u, W_F^s from the solids at the bodies' pose (section 4.4.6),
   // W_L^p, W_L^u, W_L^s from the liquid; the particles and bodies have not moved since the end
   // of the last frame if that is where we are
+  // (the volume is read at a frame's end only, where advance_frame makes the weights again)
   if (!liquid_weights_current_) {
     if (coupled_) update_moving_solids();
-    update_liquid_weights();
+    update_liquid_weights(/*stress=*/true, /*volume=*/false);
   }
   liquid_weights_current_ = false;
   {
@@ -2074,10 +2076,14 @@ FrameStats Simulation<Dim>::advance_frame() {
   stats_.frame = frame_;
   stats_.time = frame_end;
   if (stats_.steps == 0) stats_.dt_min = 0.0;
-  // the solid and liquid weights of the final state (reused by the next step)
+  // the solid and liquid weights of the final state (reused by the next step, unless its first
+  // half drift moves the particles first: then the stress weights, which only the solve reads,
+  // are left for that step's own weights; the level set (pictures), the volume (statistics) and
+  // W_L^u (the next step's CFL limit reads the trusted faces) are made as before)
   if (coupled_) update_moving_solids();
-  update_liquid_weights();
-  liquid_weights_current_ = true;
+  const bool reused = !split_drift();
+  update_liquid_weights(reused);
+  liquid_weights_current_ = reused;
   fill_state_stats(stats_);
   ledger_ = frame_ledger_;
   stats_.timing[FramePhase::total] += frame_watch.seconds();

@@ -394,7 +394,11 @@ class Simulation : public AnySimulation {
   /// kBodyCellFraction dx / (largest |v| + |omega| R of a body point).
   double cfl_dt() const;
   /// Liquid level set and the liquid weights W_L^p, W_L^u from the particles (lines 4-5).
-  void update_liquid_weights();
+  /// `stress` false: without W_L^s and eta per stress DOF (read by the solve only), for a
+  /// frame's end whose weights no step reuses (split_drift: the next step's first half drift
+  /// moves the particles and its weights are made again). `volume` false: liquid_volume_ is left
+  /// as it was (it is read at a frame's end only: fill_state_stats).
+  void update_liquid_weights(bool stress = true, bool volume = true);
   /// On faces whose centre lies inside a solid, removes the velocity component into the solid
   /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
   /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
