@@ -385,13 +385,15 @@ void Simulation<Dim>::settle(int steps) {
   particles_.v = v0;
   particles_.c = c0;
   u_.setZero();
+  drop_drift_guard();
+  reached_u_ = VectorX();
   restore_bodies(false);
   line15_credit_ = 0.0;
   frame_ledger_ = EnergyLedger{};
 }
 
 template <int Dim>
-void Simulation<Dim>::update_liquid_weights() {
+void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
   {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
     // mirrored across the walls and the solids, so liquid against either reads as liquid up to
@@ -455,7 +457,7 @@ void Simulation<Dim>::update_liquid_weights() {
     for (auto& box : liquid_face_boxes_) box.valid = false;
   }
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
-  if (sequence_ != SolveSequence::pressure) {
+  if (sequence_ != SolveSequence::pressure && stress) {
     stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
     // (a non-Newtonian liquid's eta here is 0, and the only liquid's fractions are 1: constants
     // without the splat, the same bits)
@@ -509,7 +511,7 @@ void Simulation<Dim>::update_liquid_weights() {
   // box and one point around it and undone after its fractions. Outside, liquid_phi_ has the
   // signs the extended level set had there, >= 0, and no value of it is read)
   if (extend) restore_points(liquid_phi_, phi_undo_);
-  if (solids) {
+  if (volume && solids) {
     VecI<Dim> lo = liquid_lo, hi = liquid_hi;
     if (liquid_signs_.any_negative())
       for (int a = 0; a < Dim; ++a) {
@@ -530,7 +532,8 @@ void Simulation<Dim>::update_liquid_weights() {
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
     if (extend) restore_points(liquid_phi_, phi_undo_);
   }
-  liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
+  if (volume)
+    liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
   // (read by nothing else: a cell-sized vector, 64 MiB at the paper's 256x128x256 grid, that
   // the solve's vectors reuse instead of keeping it alive through the step)
   volume_cells_ = VectorX();
@@ -894,9 +897,10 @@ void Simulation<Dim>::update_step_weights() {
   // (5) volume fractions: W_F^u, W_F^s from the solids at the bodies' pose (section 4.4.6),
   // W_L^p, W_L^u, W_L^s from the liquid; the particles and bodies have not moved since the end
   // of the last frame if that is where we are
+  // (the volume is read at a frame's end only, where advance_frame makes the weights again)
   if (!liquid_weights_current_) {
     if (coupled_) update_moving_solids();
-    update_liquid_weights();
+    update_liquid_weights(/*stress=*/true, /*volume=*/false);
   }
   liquid_weights_current_ = false;
   {
@@ -996,16 +1000,20 @@ int Simulation<Dim>::extrapolation_layers(double dt) const {
   // for the 0.05 dx, and two for the interpolation stencils around the particles' starting
   // cells, as before; never more than the cfl bound. Scenes with moving bodies (whose motion
   // and push-out the bound does not cover: measured, bunnies-onto-pool-2d differed at frame 10),
-  // the drift of the next step (split_advection) and divergence_free_air (whose band is these
-  // layers) keep the cfl bound
+  // the drift of the next step (split_advection) unless its reads are guarded as advect's are
+  // (drift_guarded: then a particle of that drift that reads a face beyond the reach is moved
+  // again after a deeper extrapolation) and divergence_free_air (whose band is these layers)
+  // keep the cfl bound
   const int cfl_layers = static_cast<int>(std::ceil(scene_.time.cfl)) + 2;
   if (switches_.extrapolate_everywhere) {
     int diameter = 0;  // in layers: steps of one face along one axis
     for (int a = 0; a < Dim; ++a) diameter += grid_.cells()[a] + 1;
     return diameter;
   }
-  if (switches_.extrapolate_cfl_layers || coupled_ || rigid_ || split_drift() ||
-      switches_.divergence_free_air)
+  if (switches_.extrapolation_layers > 0 && !coupled_ && !rigid_)
+    return switches_.extrapolation_layers;
+  if (switches_.extrapolate_cfl_layers || coupled_ || rigid_ ||
+      (split_drift() && !drift_guarded()) || switches_.divergence_free_air)
     return cfl_layers;
   // the largest trusted speed (a maximum: the same for any split of the faces)
   double speed = 0.0;
@@ -1024,6 +1032,10 @@ void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   trusted_faces(face_flags_);
   reached_layers_ = extrapolation_layers(dt);
+  // (the next step's first half drift extends from the same trusted faces; the weights they
+  // come from are made again before it, at the frame's end)
+  drop_drift_guard();
+  if (drift_guarded()) drift_trusted_ = face_flags_;
   extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
   if (!guards_reads()) return;
   // a copy for a deeper extrapolation (which reads only the trusted faces and the layers it fills
@@ -1046,7 +1058,7 @@ bool Simulation<Dim>::guards_reads() const {
 }
 
 template <int Dim>
-bool Simulation<Dim>::extend_extrapolation() {
+bool Simulation<Dim>::extend_extrapolation(bool drift) {
   if (!switches_.extend_to_every_read) return false;
   // a face lattice's diameter in extrapolation layers (steps of one face along one axis)
   int diameter = 0;
@@ -1065,7 +1077,10 @@ bool Simulation<Dim>::extend_extrapolation() {
   for (int f = 0; f < nf; ++f) extended_u_[f] = reached_u_[f];
   u_.swap(extended_u_);
   face_flags_.swap(extended_flags_);
-  trusted_faces(face_flags_);
+  if (drift)
+    face_flags_ = drift_trusted_;
+  else
+    trusted_faces(face_flags_);
   extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
   // unreached even now (no trusted face of that component to reach them from): the solve's value
   // as before the guard, unless the test switch keeps them NaN
@@ -1077,12 +1092,14 @@ bool Simulation<Dim>::extend_extrapolation() {
   // the walls and the fully solid faces as the step set them before it constrained the faces
   // in solids (extended_u_ holds the step's velocity now; a face in a solid its value before),
   // then the faces in solids constrained at the pose of the step's solve (the bodies have moved
-  // since: move_bodies)
+  // since: move_bodies). For the drift (no moving bodies) the step's velocity has been scaled by
+  // line 15's payments since: the value apply_wall_and_solid_velocities set, zero, scaled below
+  // with the rest
   {
     const VectorX& given = extended_u_;
 #pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int f = 0; f < nf; ++f)
-      if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = given[f];
+      if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = drift ? 0.0 : given[f];
     // (the rows the step's constrain evaluated: a row it left keeps +0 in u_ and in given)
     const int count = static_cast<int>(constrained_rows_.size());
     for (int r = 0; r < count && !solids_.empty(); ++r) {
@@ -1092,6 +1109,16 @@ bool Simulation<Dim>::extend_extrapolation() {
     }
   }
   constrain_velocity_in_solids(true);
+  // line 15's payments as they scaled u_ after the step (pay_line15_energy), in their order:
+  // the deeper values are those u_ would hold had the step's extrapolation reached this far
+  if (drift)
+    for (const auto& [mean, s] : drift_rescales_) {
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+      for (int f = 0; f < nf; ++f) {
+        const auto [axis, fc] = grid_.face_coord(f);
+        if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
+      }
+    }
   stats_.timing[FramePhase::extrapolation] += watch.seconds();
   divergence_free_air();  // (timed as extrapolation)
   const Stopwatch rest;
@@ -1239,10 +1266,16 @@ void Simulation<Dim>::advect(double dt) {
   if (guard) {
     // the faces no particle read get the solve's value back (what a probe or checkpoint of the
     // grid velocity read before the guard)
+    // (with drift_guarded, the faces reached are kept for the next step's first half drift)
     const int nf = grid_.num_faces();
+    const bool keep = drift_guarded();
+    if (keep) drift_reached_.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (int f = 0; f < nf; ++f)
-      if (std::isnan(u_[f])) u_[f] = reached_u_[f];
+    for (int f = 0; f < nf; ++f) {
+      const bool unreached = std::isnan(u_[f]);
+      if (keep) drift_reached_[f] = !unreached;
+      if (unreached) u_[f] = reached_u_[f];
+    }
     // left flagged only when poisoned (StageSwitches::poison_unreached_faces): a read of a face
     // the extrapolation did not reach
     const auto left = std::find(unread_.begin(), unread_.end(), 1);
@@ -1255,8 +1288,15 @@ void Simulation<Dim>::advect(double dt) {
     // the guard's copies are dead until the next step's extrapolation writes them again (u_ has
     // no NaN left, so face_kinetic_energy does not read reached_u_): their memory goes back to
     // the heap, where the next step's solids' weights take it (the union's lattice-sized level
-    // set was the step's live peak at Fig. 2's paper grid, with this face-sized copy beside it)
-    reached_u_ = VectorX();
+    // set was the step's live peak at Fig. 2's paper grid, with this face-sized copy beside it);
+    // with drift_guarded the next step's first half drift extends from reached_u_ (scenes
+    // without moving bodies, whose weights take no union)
+    if (keep) {
+      drift_guard_ = true;
+      drift_rescales_.clear();
+    } else {
+      reached_u_ = VectorX();
+    }
     extended_u_ = VectorX();
   }
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
@@ -1276,12 +1316,97 @@ void Simulation<Dim>::first_half_drift(double dt) {
   // of the same time: the energy error of the splitting is second order in dt instead of first
   // (sloshing tank, docs/particles.md "Sloshing"). The very first step has no solved velocity
   // yet and starts with the kick.
-  if (!split_drift() || !(time_ > 0.0)) return;
-  ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+  // With drift_guarded the last step extrapolated only as far as its own velocity reaches: the
+  // faces it did not reach are NaN while the particles drift (as in advect), and a particle that
+  // reads one is moved again after a deeper extrapolation from the last step's trusted faces
+  // (extend_extrapolation(true)), whose values are scaled by line 15's payments as u_ was. A face
+  // the particles read holds what u_ would hold had the step extrapolated to the cfl bound. A
+  // restored checkpoint brings that velocity fully extended (drift_resolved_).
+  if (!split_drift() || !(time_ > 0.0)) {
+    drop_drift_guard();
+    return;
+  }
   restart_ledger([&] { return liquid_potential_energy(); });
-  advect_particles(particles_, grid_, u_, 0.5 * dt, solids_, boundary_);
+  const double h = 0.5 * dt;
+  const auto flagged = [&] { return std::count(unread_.begin(), unread_.end(), 1); };
+  const int nf = grid_.num_faces();
+  if (drift_guard_ && drift_reached_.size() == static_cast<std::size_t>(nf)) {
+    VectorX kept;
+    {
+      ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+      kept = u_;  // (u_ as the step left it: back in place after the drift)
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+      for (int f = 0; f < nf; ++f)
+        if (!drift_reached_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
+      unread_.clear();
+      advect_particles(particles_, grid_, u_, h, solids_, boundary_, &unread_);
+    }
+    for (long n = flagged(); n > 0 && extend_extrapolation(true); n = flagged()) {
+      reread_particles_ += n;
+      drift_reread_particles_ += n;
+      ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+      advect_particles(particles_, grid_, u_, h, solids_, boundary_, &unread_);
+    }
+    u_.swap(kept);
+  } else if (drift_resolved_.size() == u_.size()) {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    unread_.clear();
+    advect_particles(particles_, grid_, drift_resolved_, h, solids_, boundary_, &unread_);
+  } else {
+    ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
+    unread_.clear();
+    advect_particles(particles_, grid_, u_, h, solids_, boundary_);
+  }
+  // left flagged only when poisoned (StageSwitches::poison_unreached_faces)
+  const auto left = std::find(unread_.begin(), unread_.end(), 1);
+  if (left != unread_.end()) {
+    std::ostringstream msg;
+    msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): particle "
+        << (left - unread_.begin()) << " read a face the extrapolation did not reach (first half drift)";
+    throw SimulationError(msg.str());
+  }
+  drop_drift_guard();
+  reached_u_ = VectorX();  // (advect's copy, kept for the drift, dead until the next step's)
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
   liquid_weights_current_ = false;
+}
+
+template <int Dim>
+bool Simulation<Dim>::drift_guarded() const {
+  return split_drift() && !rigid_ && guards_reads() && switches_.extend_to_every_read &&
+         !switches_.divergence_free_air && switches_.line15_energy != Line15Energy::balance_local;
+}
+
+template <int Dim>
+void Simulation<Dim>::drop_drift_guard() {
+  drift_guard_ = false;
+  drift_trusted_.clear();
+  drift_reached_.clear();
+  drift_rescales_.clear();
+  drift_resolved_ = VectorX();
+  // (reached_u_ is the guard's too once advect is done; during a step, before advect ends, it is
+  // advect's and is not released here)
+}
+
+template <int Dim>
+void Simulation<Dim>::resolve_drift_velocity() {
+  if (!drift_guard_ || drift_reached_.size() != static_cast<std::size_t>(grid_.num_faces()))
+    return;
+  // the drift's guarded read with every deeper extrapolation it may ask for done at once (the
+  // values of each face as the guarded drift would find them); the step's state left as it was
+  const int layers = reached_layers_;
+  const auto timing = stats_.timing;
+  const int nf = grid_.num_faces();
+  VectorX kept = u_;
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f)
+    if (!drift_reached_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
+  while (extend_extrapolation(true)) {
+  }
+  drift_resolved_.swap(u_);
+  u_.swap(kept);
+  reached_layers_ = layers;
+  stats_.timing = timing;
 }
 
 template <int Dim>
@@ -1369,6 +1494,8 @@ void Simulation<Dim>::pay_line15_energy(double gain) {
       // (the domain's walls keep their zero)
       if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
     }
+    // (a deeper extrapolation for that drift is scaled alike: extend_extrapolation(true))
+    if (drift_guard_) drift_rescales_.emplace_back(mean, s);
   }
 }
 
@@ -2246,10 +2373,14 @@ FrameStats Simulation<Dim>::advance_frame() {
   stats_.frame = frame_;
   stats_.time = frame_end;
   if (stats_.steps == 0) stats_.dt_min = 0.0;
-  // the solid and liquid weights of the final state (reused by the next step)
+  // the solid and liquid weights of the final state (reused by the next step, unless its first
+  // half drift moves the particles first: then the stress weights, which only the solve reads,
+  // are left for that step's own weights; the level set (pictures), the volume (statistics) and
+  // W_L^u (the next step's CFL limit reads the trusted faces) are made as before)
   if (coupled_) update_moving_solids();
-  update_liquid_weights();
-  liquid_weights_current_ = true;
+  const bool reused = !split_drift();
+  update_liquid_weights(reused);
+  liquid_weights_current_ = reused;
   fill_state_stats(stats_);
   ledger_ = frame_ledger_;
   stats_.timing[FramePhase::total] += frame_watch.seconds();
@@ -2339,6 +2470,11 @@ void Simulation<Dim>::state_fields(Archive& a) {
   // SurfaceDeficits::to_solve: the last density projection's listed deficits, the next step's
   // divergence source (empty under every other setting)
   a(volume_errors_);
+  // the velocity the next step's first half drift reads, extended to every face it can read
+  // (drift_guarded: resolve_drift_velocity; absent when nothing is kept for that drift)
+  bool drift = drift_resolved_.size() > 0;
+  a(drift);
+  if (drift) a(drift_resolved_);
   // the bodies: poses, velocities, the last contacts and forces (RigidWorld::state_fields)
   bool bodies = rigid_ != nullptr;
   a(bodies);
@@ -2349,14 +2485,23 @@ void Simulation<Dim>::state_fields(Archive& a) {
 
 template <int Dim>
 std::vector<char> Simulation<Dim>::save_state() const {
+  // the guarded first half drift's velocity, fully extended, goes into the checkpoint; the run
+  // itself goes on with its guard (the same values read either way)
+  auto* self = const_cast<Simulation*>(this);
+  const bool resolve = drift_guard_;
+  self->resolve_drift_velocity();
   StateWriter w;
-  const_cast<Simulation*>(this)->state_fields(w);
+  self->state_fields(w);
+  if (resolve) self->drift_resolved_ = VectorX();
   return w.take();
 }
 
 template <int Dim>
 void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
   StateReader r(bytes, "checkpoint");
+  // (the guard's state of the run before is not this state's: the checkpoint brings its own)
+  drop_drift_guard();
+  reached_u_ = VectorX();
   state_fields(r);
   r.finish();
   const std::size_t n = particles_.x.size();
@@ -2364,7 +2509,8 @@ void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
       particles_.density.size() != n || particles_.liquid.size() != n ||
       u_.size() != grid_.num_faces() || pressure_.size() != grid_.num_cells() ||
       (stress_.size() != stress_grid_.num_dofs() &&
-       !(stress_.size() == 0 && sequence_ == SolveSequence::pressure)))
+       !(stress_.size() == 0 && sequence_ == SolveSequence::pressure)) ||
+      (drift_resolved_.size() != 0 && drift_resolved_.size() != grid_.num_faces()))
     r.fail("sizes that do not match the scene's grid or particles");
   for (const auto& deficit : volume_errors_)
     if (deficit.first < 0 || deficit.first >= grid_.num_cells())

@@ -140,6 +140,11 @@ struct StageSwitches {
   /// A test switch: the extrapolation after the solve reaches every face it can (as many layers
   /// as the face lattices' diameter), whatever the step's speed.
   bool extrapolate_everywhere = false;
+  /// A test switch: n > 0: the extrapolation after the solve reaches n layers whatever the step's
+  /// speed (scenes without moving bodies), so that the guards of the particles' reads
+  /// (extend_to_every_read: advect and, with split_advection, the next first half drift) must
+  /// extend it (tests/validation/test_unreached_faces.cpp); 0: the step's reach.
+  int extrapolation_layers = 0;
   /// Whether the potential energy the moves of line 15 (correct_positions and the density
   /// projection) add is paid by the liquid's kinetic energy (Line15Energy; docs/particles.md,
   /// "Line 15's potential energy paid by the kinetic energy (slosh9)"). Default `balance` since
@@ -276,6 +281,8 @@ class Simulation : public AnySimulation {
   /// Faces in solids that constrain_velocity_in_solids left out (deep in a fixed solid, far from
   /// the moving bodies: their value stays +0) since the start; for tests.
   long constrained_faces_left_out() const { return constrained_left_out_; }
+  /// Of those, the particles moved again in first half drifts (drift_guarded).
+  long drift_reread_particles() const { return drift_reread_particles_; }
 
  private:
   /// One step of Algorithm 1 of length dt: the liquid with its solids and bodies (the coupled
@@ -317,7 +324,22 @@ class Simulation : public AnySimulation {
   /// deep (from the solve's velocity, reached_u_), then the walls' and solids' velocities; faces
   /// already reached keep their values bit for bit. Returns false once the extrapolation reaches
   /// every face it can (then unreached faces hold the solve's value, unless poisoned).
-  bool extend_extrapolation();
+  /// `drift`: for the next step's first half drift (drift_guarded): from the trusted faces the
+  /// step kept (drift_trusted_), and the deeper values then scaled as line 15's payments since
+  /// scaled u_ (drift_rescales_).
+  bool extend_extrapolation(bool drift = false);
+  /// Whether the next step's first half drift reads u_ through the guard of advect (the faces
+  /// the extrapolation did not reach NaN, a particle that reads one moved again after a deeper
+  /// extrapolation), so that the extrapolation after the solve needs only the step's reach:
+  /// split_drift with extend_to_every_read, without moving bodies, divergence_free_air or
+  /// Line15Energy::balance_local (whose payment scales u_ face by face).
+  bool drift_guarded() const;
+  /// The guard's state for the next first half drift dropped (its memory back to the heap).
+  void drop_drift_guard();
+  /// drift_resolved_: the velocity the next first half drift would read through its guard with
+  /// every face extended (for a checkpoint: the resumed drift reads it bit for bit as the
+  /// guarded one reads u_ and its deeper extrapolations).
+  void resolve_drift_velocity();
   /// Line 13: the bodies' poses (coupled scenes) and the particles' SolidField at the new pose.
   void move_bodies(double dt);
   /// The particles' SolidField from the static shapes and the posed moving bodies.
@@ -375,7 +397,11 @@ class Simulation : public AnySimulation {
   /// kBodyCellFraction dx / (largest |v| + |omega| R of a body point).
   double cfl_dt() const;
   /// Liquid level set and the liquid weights W_L^p, W_L^u from the particles (lines 4-5).
-  void update_liquid_weights();
+  /// `stress` false: without W_L^s and eta per stress DOF (read by the solve only), for a
+  /// frame's end whose weights no step reuses (split_drift: the next step's first half drift
+  /// moves the particles and its weights are made again). `volume` false: liquid_volume_ is left
+  /// as it was (it is read at a frame's end only: fill_state_stats).
+  void update_liquid_weights(bool stress = true, bool volume = true);
   /// On faces whose centre lies inside a solid, removes the velocity component into the solid
   /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
   /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
@@ -509,7 +535,15 @@ class Simulation : public AnySimulation {
   VectorX reached_u_, extended_u_;
   std::vector<char> extended_flags_, unread_;
   int reached_layers_ = 0;
-  long reread_particles_ = 0;
+  // the guard of the next step's first half drift (drift_guarded; valid while drift_guard_): the
+  // trusted faces of the step's extrapolation, the faces it and advect's deeper ones reached
+  // (reached_u_ and reached_layers_ kept with them), the payments of line 15 that scaled u_
+  // since (vbar, s of pay_line15_energy, in order); a restored checkpoint's drift velocity
+  bool drift_guard_ = false;
+  std::vector<char> drift_trusted_, drift_reached_;
+  std::vector<std::pair<Vec<Dim>, double>> drift_rescales_;
+  VectorX drift_resolved_;
+  long reread_particles_ = 0, drift_reread_particles_ = 0;
   std::vector<int> solid_faces_;
   /// per face of solid_faces_: its index in the fixed faces (fixed_faces_, axis after axis), or -1
   std::vector<int> solid_face_fixed_;

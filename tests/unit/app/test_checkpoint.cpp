@@ -257,11 +257,12 @@ TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2
     refused(read_bytes(checkpoint_path(other)), "another scene");
   }
   SECTION("an older format version") {
-    // version 3 (before line 15's credit joined the default state), the rest of the file as it was
+    // version 4 (before the first half drift's velocity joined the state), the rest of the file
+    // as it was
     std::string old = good;
-    const std::uint32_t version = 3;
+    const std::uint32_t version = 4;
     std::memcpy(&old[8], &version, 4);
-    refused(old, "checkpoint format version 3 (this build reads version 4");
+    refused(old, "checkpoint format version 4 (this build reads version 5");
   }
   SECTION("written by another build") {
     CheckpointRecord record = read_checkpoint(file);
