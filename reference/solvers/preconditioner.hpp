@@ -51,7 +51,7 @@ struct EnumNames<PreconditionerChoice> {
 /// (its set-up is nothing; docs/preconditioners.md section 28).
 constexpr int kAutoSsorIterationLimit = 60;
 
-/// (P9) The estimated number of SSOR-PCG iterations of a unified / viscosity solve to 1e-6, from
+/// (P10) The estimated number of SSOR-PCG iterations of a unified / viscosity solve to 1e-6, from
 /// the dimension, the stiffness s = eta_max dt / (rho dx^2) and the grid's largest cell count n
 /// along an axis: c_d n (1 + k_d sqrt(s)), c_2 = 1.75, k_2 = 5, c_3 = 3, k_3 = 10. SSOR on the
 /// pressure (Poisson) part takes about c_d n iterations (SSOR-PCG's condition number grows like

@@ -308,7 +308,7 @@ TEST_CASE("the scheme decides the solves: unified, decoupled or pressure only", 
 TEST_CASE("solver.preconditioner auto: SSOR where its estimated count is within 60 iterations, "
           "multigrid above; the choice is booked per solve",
           "[unit]") {
-  // source: docs/preconditioners.md section 28 ((P9): SSOR iff c_d n (1 + k_d sqrt(s)) <= 60,
+  // source: docs/preconditioners.md section 28 ((P10): SSOR iff c_d n (1 + k_d sqrt(s)) <= 60,
   // c_2 = 1.75, k_2 = 5, c_3 = 3, k_3 = 10, n the grid's largest cell count)
   CHECK(estimated_ssor_iterations(3, 0.0, 16) == Approx(48.0));
   CHECK(estimated_ssor_iterations(2, 0.04, 10) == Approx(17.5 * 2.0));
@@ -383,7 +383,7 @@ TEST_CASE("solver.preconditioner auto: every unified solve of a low-stiffness 3D
           "[unit]") {
   // source: issue 15's goal (at most 60 iterations per solve) and docs/preconditioners.md
   // section 28. A 3D box of liquid at stiffness s = eta dt / (rho dx^2) of about 0.04, below
-  // the former 3D threshold 0.3 (which took SSOR here), on 20^3 cells: (P9) estimates SSOR at
+  // the former 3D threshold 0.3 (which took SSOR here), on 20^3 cells: (P10) estimates SSOR at
   // 3 * 20 * (1 + 10 sqrt(0.04)) = 180 iterations, so auto takes the block preconditioner.
   // On 8^3 with eta 0.1 (s about 1e-4) the estimate is 27 and auto keeps SSOR, within 60.
   struct Case {
