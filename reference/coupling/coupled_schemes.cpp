@@ -44,7 +44,7 @@ void record_mprgp(const MprgpResult& m, CoupledSolveResult& r, const char* what)
 
 /// The preconditioner of one system's coupled solves (CoupledSchemeOptions::preconditioner):
 /// systems without stress unknowns follow pressure_preconditioner; the others the choice, auto
-/// by the system's stiffness as the liquid-only unified solves (choose_preconditioner), booked
+/// by the system's stiffness and grid as the liquid-only unified solves (choose_preconditioner), booked
 /// in r.
 template <int Dim>
 PreconditionerKind coupled_preconditioner_kind(const MonolithicSystem<Dim>& s,
@@ -57,7 +57,8 @@ PreconditionerKind coupled_preconditioner_kind(const MonolithicSystem<Dim>& s,
   const double stiffness = o.liquid_density > 0.0
                                ? solve_stiffness(eta_max, s.dt(), o.liquid_density, s.grid().dx())
                                : 0.0;
-  const PreconditionerKind kind = choose_preconditioner(o.preconditioner, Dim, stiffness);
+  const PreconditionerKind kind =
+      choose_preconditioner(o.preconditioner, Dim, stiffness, s.grid().cells().maxCoeff());
   (kind == PreconditionerKind::multigrid ? r.multigrid_systems : r.ssor_systems) += 1;
   r.max_stiffness = std::max(r.max_stiffness, stiffness);
   return kind;

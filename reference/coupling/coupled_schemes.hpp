@@ -144,7 +144,7 @@ struct CoupledSchemeOptions {
   /// A_ff and MPRGP on (26); docs/preconditioners.md, "The coupled systems"): ssor (the paper's,
   /// the default here so that the library call keeps its iterates), multigrid (the block
   /// preconditioner of coupled_preconditioner.hpp), or auto (choose_preconditioner with the
-  /// system's stiffness eta_max dt / (rho dx^2), rho = liquid_density: the rule of the
+  /// system's stiffness eta_max dt / (rho dx^2), rho = liquid_density, and its grid: the rule of the
   /// liquid-only unified solves). The simulator passes solver.preconditioner.
   PreconditionerChoice preconditioner = PreconditionerChoice::ssor;
   /// The same for the systems without stress unknowns (the P solves): solver.pressure_preconditioner.

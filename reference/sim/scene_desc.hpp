@@ -65,8 +65,9 @@ struct SolverSpec {
   int staggered_iterations = 2;
   Backend backend = Backend::matrix_free;
   /// The preconditioner of the liquid's unified solves without bodies (eq. (8) in (tau, p), the
-  /// stress-only viscosity solve of PC-VC-PC): "auto" (default: per solve, multigrid in 2D and
-  /// in 3D at a stiffness eta_max dt / (rho dx^2) >= 0.3, else SSOR; choose_preconditioner),
+  /// stress-only viscosity solve of PC-VC-PC): "auto" (default: per solve, SSOR where its
+  /// estimated iteration count from the stiffness eta_max dt / (rho dx^2) and the grid is within
+  /// 60, else multigrid; choose_preconditioner),
   /// "multigrid", or the paper's "ssor" (docs/preconditioners.md). The coupled systems (24)/(26)
   /// with bodies and stress unknowns follow the same choice (the block preconditioner of
   /// coupled_preconditioner.hpp, docs/preconditioners.md "The coupled systems"); the

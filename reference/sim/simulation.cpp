@@ -1876,7 +1876,8 @@ StokesSolveOptions Simulation<Dim>::stokes_options(const VectorX& eta, double dt
   const double eta_max = eta.size() > 0 ? std::max(0.0, eta.maxCoeff()) : 0.0;
   const double stiffness = rho > 0.0 ? solve_stiffness(eta_max, dt, rho, grid_.dx()) : 0.0;
   StokesSolveOptions o;
-  o.preconditioner = choose_preconditioner(scene_.solver.preconditioner, Dim, stiffness);
+  o.preconditioner =
+      choose_preconditioner(scene_.solver.preconditioner, Dim, stiffness, grid_.cells().maxCoeff());
   o.fallback_to_ssor = scene_.solver.preconditioner == PreconditionerChoice::automatic;
   stats_.solver.add_stokes_preconditioner(o.preconditioner, stiffness);
   if (o.preconditioner != PreconditionerKind::ssor && scene_.solver.stokes_warm_start) {

@@ -656,8 +656,8 @@ class Simulation : public AnySimulation {
   PcgSettings pcg_settings_;
   /// The preconditioner and initial guess of a solve_stokes call with viscosities eta and time
   /// step dt: solver.preconditioner, "auto" resolved by the solve's stiffness
-  /// eta_max dt / (rho dx^2) (choose_preconditioner); the choice and the stiffness are booked in
-  /// the frame's solver stats.
+  /// eta_max dt / (rho dx^2) and the grid's largest cell count (choose_preconditioner); the
+  /// choice and the stiffness are booked in the frame's solver stats.
   StokesSolveOptions stokes_options(const VectorX& eta, double dt);
   /// The coupled solve's weights carry no stress vectors (StokesWeights::inviscid) and W_F^s is
   /// not kept: the scene has no stress solves and no system export is requested.

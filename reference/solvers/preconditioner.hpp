@@ -6,6 +6,7 @@
 /// preconditioner of eq. (8) (docs/preconditioners.md).
 
 #include <algorithm>
+#include <cmath>
 #include <functional>
 #include <memory>
 #include <string>
@@ -43,13 +44,27 @@ struct EnumNames<PreconditionerChoice> {
        {PreconditionerChoice::ssor, "ssor"}}};
 };
 
-/// The stiffness eta_max dt / (rho dx^2) of a unified / viscosity solve at and above which
-/// "auto" takes multigrid in 3D. Measured on the 3D "tank" (docs/preconditioners.md sections 6
-/// and 8, 1 thread, set-up included): multigrid 0.3-0.6x of SSOR's speed at stiffness 0.01 and
-/// below, 0.9x at 0.1, 1.5x at 1, 2.3-4.2x at 10-51; 0.3 is the geometric middle of the
-/// bracketing 0.1 and 1. In 2D multigrid was never slower (1.0x at 0.004, 1.4-7.5x above), so
-/// "auto" takes it at every stiffness there.
-constexpr double kAutoMultigridStiffness3d = 0.3;
+/// The iteration count per solve that "auto" holds the paper's SSOR to: the issue's goal of at
+/// most 60 iterations per solve at any viscosity and grid (issue 15). The block preconditioner
+/// meets it on every measured system (at most 6 per solve on the tank, 16^3-96^3 and 16^2-128^2,
+/// eta 0.1-5000); SSOR only on small grids at low stiffness, where it is also the faster one
+/// (its set-up is nothing; docs/preconditioners.md section 29).
+constexpr int kAutoSsorIterationLimit = 60;
+
+/// (P10) The estimated number of SSOR-PCG iterations of a unified / viscosity solve to 1e-6, from
+/// the dimension, the stiffness s = eta_max dt / (rho dx^2) and the grid's largest cell count n
+/// along an axis: c_d n (1 + k_d sqrt(s)), c_2 = 1.75, k_2 = 5, c_3 = 3, k_3 = 10. SSOR on the
+/// pressure (Poisson) part takes about c_d n iterations (SSOR-PCG's condition number grows like
+/// n^2); the stress block adds a factor that grows with the stiffness (section 2 of
+/// docs/preconditioners.md). Fitted to the tank of bench_preconditioners (2D n = 16-64,
+/// 3D n = 8-16, eta 0.1-1000, dt 0.01: c_d is the count at eta 0.1 divided by n, k_d bounds the
+/// growth with sqrt(s) from above on the small grids where the estimate meets the limit) and
+/// above the measured counts of the 3D built-in scenes at 24^3 and 64^3 (section 29), so that
+/// a wrong estimate errs towards the block preconditioner.
+inline double estimated_ssor_iterations(int dim, double stiffness, int cells) {
+  const double c = dim == 2 ? 1.75 : 3.0, k = dim == 2 ? 5.0 : 10.0;
+  return c * cells * (1.0 + k * std::sqrt(std::max(0.0, stiffness)));
+}
 
 /// The stiffness eta_max dt / (rho dx^2) of a solve: the ratio of the viscous to the inertial
 /// term of the velocity operator M + dt D^T eta D at the grid scale (section 2 of
@@ -60,16 +75,20 @@ inline double solve_stiffness(double eta_max, double dt, double rho, double dx) 
 }
 
 /// The preconditioner a solve uses under `solver.preconditioner` = choice: fixed for "multigrid"
-/// and "ssor"; for "auto" multigrid in 2D, and in 3D multigrid iff the stiffness is at least
-/// kAutoMultigridStiffness3d (SSOR below: cheaper than multigrid's set-up there).
-inline PreconditionerKind choose_preconditioner(PreconditionerChoice choice, int dim, double stiffness) {
+/// and "ssor"; for "auto" the paper's SSOR iff its estimated iteration count
+/// (estimated_ssor_iterations; `cells` the grid's largest cell count along an axis) is within
+/// kAutoSsorIterationLimit, else multigrid (the block preconditioner). The same rule in 2D and
+/// 3D (docs/preconditioners.md section 29).
+inline PreconditionerKind choose_preconditioner(PreconditionerChoice choice, int dim, double stiffness,
+                                                int cells) {
   switch (choice) {
     case PreconditionerChoice::multigrid: return PreconditionerKind::multigrid;
     case PreconditionerChoice::ssor: return PreconditionerKind::ssor;
     case PreconditionerChoice::automatic: break;
   }
-  if (dim == 2 || stiffness >= kAutoMultigridStiffness3d) return PreconditionerKind::multigrid;
-  return PreconditionerKind::ssor;
+  if (estimated_ssor_iterations(dim, stiffness, cells) <= kAutoSsorIterationLimit)
+    return PreconditionerKind::ssor;
+  return PreconditionerKind::multigrid;
 }
 
 /// The iterations a solve preconditioned by the project's multigrid/block preconditioner may
