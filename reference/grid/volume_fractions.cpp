@@ -614,6 +614,25 @@ VectorX liquid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& 
                                    liquid_cell_weights);
 }
 
+namespace {
+
+/// The faces of cell c raised to at least kMinLiquidFaceFraction (a face's minus cell is
+/// f - e_axis, its plus cell f; the periodic seam's face once)
+template <int Dim>
+void raise_faces_of_cell(const MacGrid<Dim>& grid, VectorX& w, const VecI<Dim>& c) {
+  for (int axis = 0; axis < Dim; ++axis) {
+    VecI<Dim> f = c;
+    for (int s = 0; s < 2; ++s) {
+      f[axis] = c[axis] + s;
+      if (grid.periodic(axis) && f[axis] == grid.cells()[axis]) f[axis] = 0;  // the seam face
+      double& v = w[grid.face_index(axis, f)];
+      v = std::max(v, kMinLiquidFaceFraction);
+    }
+  }
+}
+
+}  // namespace
+
 template <int Dim>
 void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
                                         const VectorX& liquid_cell_weights) {
@@ -622,15 +641,7 @@ void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
   for (int i = 0; i < grid.num_cells(); ++i) {
     if (!(liquid_cell_weights[i] > 0.0)) continue;
     const VecI<Dim> c = grid.cell_coord(i);
-    for (int axis = 0; axis < Dim; ++axis) {
-      VecI<Dim> f = c;
-      for (int s = 0; s < 2; ++s) {
-        f[axis] = c[axis] + s;
-        if (grid.periodic(axis) && f[axis] == grid.cells()[axis]) f[axis] = 0;  // the seam face
-        double& v = w[grid.face_index(axis, f)];
-        v = std::max(v, kMinLiquidFaceFraction);
-      }
-    }
+    raise_faces_of_cell(grid, w, c);
   }
 }
 
@@ -656,15 +667,7 @@ void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
   for (int j = 0; j < box.prod(); ++j) {
     const VecI<Dim> c = cells.lo + lattice_coord<Dim>(j, box);
     if (!(liquid_cell_weights[grid.cell_index(c)] > 0.0)) continue;
-    for (int axis = 0; axis < Dim; ++axis) {
-      VecI<Dim> f = c;
-      for (int s = 0; s < 2; ++s) {
-        f[axis] = c[axis] + s;
-        if (grid.periodic(axis) && f[axis] == grid.cells()[axis]) f[axis] = 0;  // the seam face
-        double& v = w[grid.face_index(axis, f)];
-        v = std::max(v, kMinLiquidFaceFraction);
-      }
-    }
+    raise_faces_of_cell(grid, w, c);
   }
   // the faces of the box's cells: c and c + e_axis along axis (the seam face 0 of a periodic
   // axis lies in the box, which spans that axis whole)

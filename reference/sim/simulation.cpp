@@ -567,18 +567,14 @@ double Simulation<Dim>::cfl_dt() const {
     FaceBoxes boxes;
     if (trusted_boxes(boxes)) {
       for (int axis = 0; axis < Dim; ++axis) {
-        const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
-        if ((lo.array() > hi.array()).any()) continue;
-        const VecI<Dim> fdims = grid_.face_dims(axis);
-        VecI<Dim> rows_box = hi - lo + VecI<Dim>::Ones();
-        const int nx = rows_box[0];
-        rows_box[0] = 1;
-        const int rows = rows_box.prod(), offset = grid_.face_offset(axis);
+        const FaceRows face_rows_of_box = face_rows(boxes, axis);
+        const int rows = face_rows_of_box.rows(), nx = face_rows_of_box.nx;
+        if (rows == 0) continue;
         double speed = 0.0;
 #pragma omp parallel for schedule(static) reduction(max : speed) \
     num_threads(team_threads(static_cast<long>(rows) * nx))
         for (int r = 0; r < rows; ++r) {
-          const int first = offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
+          const int first = face_rows_of_box.first(r);
           for (int f = first; f < first + nx; ++f)
             if (trusted_face(f)) speed = std::max(speed, std::abs(u_[f]));
         }
@@ -701,19 +697,31 @@ typename Simulation<Dim>::FaceBoxes Simulation<Dim>::particle_face_boxes() const
 }
 
 template <int Dim>
+typename Simulation<Dim>::FaceRows Simulation<Dim>::face_rows(const FaceBoxes& boxes,
+                                                               int axis) const {
+  FaceRows rows;
+  const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
+  if ((lo.array() > hi.array()).any()) return rows;
+  rows.lo = lo;
+  rows.fdims = grid_.face_dims(axis);
+  rows.rows_box = hi - lo + VecI<Dim>::Ones();
+  rows.nx = rows.rows_box[0];
+  rows.rows_box[0] = 1;
+  rows.count = rows.rows_box.prod();
+  rows.offset = grid_.face_offset(axis);
+  return rows;
+}
+
+template <int Dim>
 template <class Fn>
 void Simulation<Dim>::for_faces_in_boxes(const FaceBoxes& boxes, Fn&& fn) const {
   for (int axis = 0; axis < Dim; ++axis) {
-    const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
-    if ((lo.array() > hi.array()).any()) continue;
-    const VecI<Dim> fdims = grid_.face_dims(axis);
-    VecI<Dim> rows_box = hi - lo + VecI<Dim>::Ones();
-    const int nx = rows_box[0];
-    rows_box[0] = 1;
-    const int rows = rows_box.prod(), offset = grid_.face_offset(axis);
+    const FaceRows face_rows_of_box = face_rows(boxes, axis);
+    const int rows = face_rows_of_box.rows(), nx = face_rows_of_box.nx;
+    if (rows == 0) continue;
 #pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(rows) * nx))
     for (int r = 0; r < rows; ++r) {
-      const int first = offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
+      const int first = face_rows_of_box.first(r);
       for (int x = 0; x < nx; ++x) fn(first + x);
     }
   }

@@ -635,6 +635,17 @@ class Simulation : public AnySimulation {
   struct FaceBoxes {
     std::array<VecI<Dim>, Dim> lo, hi;
   };
+  /// One box of FaceBoxes as rows along x: rows() rows of nx faces each, row r's first face
+  /// first(r) (face indices of the whole grid); no rows where the box is empty
+  struct FaceRows {
+    VecI<Dim> lo, rows_box, fdims;
+    int nx = 0, offset = 0, count = 0;
+    int rows() const { return count; }
+    int first(int r) const {
+      return offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
+    }
+  };
+  FaceRows face_rows(const FaceBoxes& boxes, int axis) const;
   /// The faces a particle's stencil in particles_to_grid can reach (the cells of the particles'
   /// bounds grown by two, each face lattice's whole axis where it is periodic or the bounds are
   /// not finite): face_mass_ is 0 outside them

@@ -163,4 +163,13 @@ StokesWeights stokes_weights(const MacGrid<Dim>& grid, const VectorX& solid_phi,
   return uniform_stokes_weights(grid, solid_phi, liquid_phi, boundary, rho, eta);
 }
 
+/// The point (x, y) of the unit box, in 3D at the box's middle along z (0.5).
+template <int Dim>
+Vec<Dim> centre_at(double x, double y) {
+  Vec<Dim> p = Vec<Dim>::Constant(0.5);
+  p[0] = x;
+  p[1] = y;
+  return p;
+}
+
 }  // namespace monolith::testing

@@ -25,6 +25,16 @@ std::unique_ptr<Simulation<Dim>> scene_run(const std::string& name,
   return std::make_unique<Simulation<Dim>>(load_scene(name, overrides), switches);
 }
 
+/// The same particles bit for bit: count, positions, velocities and affine matrices.
+template <int Dim>
+void require_same_particles(const Particles<Dim>& p, const Particles<Dim>& q) {
+  REQUIRE(p.size() == q.size());
+  long differing = 0;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    differing += !(p.x[i] == q.x[i] && p.v[i] == q.v[i] && p.c[i] == q.c[i]);
+  REQUIRE(differing == 0);
+}
+
 /// The scene for `frames` frames three ways: (1) the faces not reached poisoned (NaN, no fallback
 /// to the solve's value): no particle may read one, and the deeper extrapolations must have been
 /// needed (or the scene tests nothing); (2) the extrapolation over every face it can reach: the
@@ -54,13 +64,7 @@ void check_every_read_reached(const std::string& name, const std::vector<std::st
     const FrameStats b = reference->advance_frame();
     REQUIRE(a.steps == b.steps);
     REQUIRE(a.dt_min == b.dt_min);
-    const Particles<Dim>& p = guarded->particles();
-    const Particles<Dim>& q = reference->particles();
-    REQUIRE(p.size() == q.size());
-    long differing = 0;
-    for (std::size_t i = 0; i < p.size(); ++i)
-      differing += !(p.x[i] == q.x[i] && p.v[i] == q.v[i] && p.c[i] == q.c[i]);
-    REQUIRE(differing == 0);
+    require_same_particles(guarded->particles(), reference->particles());
     CHECK(a.kinetic_energy_liquid == b.kinetic_energy_liquid);
   }
   CHECK(guarded->reread_particles() > 0);
@@ -170,13 +174,7 @@ void check_drift_reads_reached(const std::string& name, const std::vector<std::s
     }
     REQUIRE(a.steps == b.steps);
     REQUIRE(a.dt_min == b.dt_min);
-    const Particles<Dim>& p = guarded->particles();
-    const Particles<Dim>& q = reference->particles();
-    REQUIRE(p.size() == q.size());
-    long differing = 0;
-    for (std::size_t i = 0; i < p.size(); ++i)
-      differing += !(p.x[i] == q.x[i] && p.v[i] == q.v[i] && p.c[i] == q.c[i]);
-    REQUIRE(differing == 0);
+    require_same_particles(guarded->particles(), reference->particles());
     CHECK(a.kinetic_energy_liquid == b.kinetic_energy_liquid);
     CHECK(a.liquid_volume == b.liquid_volume);
   }

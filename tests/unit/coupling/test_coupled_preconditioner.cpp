@@ -36,14 +36,6 @@ namespace {
 constexpr double kRho = 1000.0;
 constexpr double kDt = 0.01;
 
-template <int Dim>
-Vec<Dim> at(double x, double y) {
-  Vec<Dim> p = Vec<Dim>::Constant(0.5);
-  p[0] = x;
-  p[1] = y;
-  return p;
-}
-
 /// A coupled step in the unit tank (walls, open top): a liquid of viscosity eta below y = 0.55
 /// with a random u* plus gravity; a dynamic box floating half in the liquid, a dynamic ball on
 /// the floor 0.1 dx into it (contacts with the floor wall), friction mu.
@@ -54,8 +46,9 @@ CoupledStepInput<Dim> tank(int n, double eta, double mu) {
   ShapeSpec ball;
   ball.type = ShapeType::sphere;
   ball.radius = 0.15;
-  ball.center = testing::as_std<Dim>(at<Dim>(0.7, 0.15 - 0.1 * dx));
-  in.bodies = {testing::make_box<Dim>(at<Dim>(0.3, 0.55), Vec<Dim>::Constant(0.12), 600.0, mu),
+  ball.center = testing::as_std<Dim>(testing::centre_at<Dim>(0.7, 0.15 - 0.1 * dx));
+  in.bodies = {testing::make_box<Dim>(testing::centre_at<Dim>(0.3, 0.55), Vec<Dim>::Constant(0.12),
+                                      600.0, mu),
                make_body<Dim>(ball, 2500.0, mu)};
   for (int b = 0; b < 2; ++b) {
     BodyVec<Dim> v = BodyVec<Dim>::Zero();

@@ -150,14 +150,6 @@ void check_stress_parts(int n, double shrink_cells, const std::array<BoundaryTyp
   if (fixed == Fixed::slab || fixed == Fixed::none) CHECK(made_again > 0);
 }
 
-template <int Dim>
-Vec<Dim> at(double x, double y) {
-  Vec<Dim> p = Vec<Dim>::Constant(0.5);
-  p[0] = x;
-  p[1] = y;
-  return p;
-}
-
 /// A viscous coupled step (eta 50, liquid below y = 0.55, walls and an open top) with a fixed
 /// floor slab reaching a third of the way up, a dynamic ball half in the liquid and a dynamic
 /// box at its surface: the system built from W_F^s kept per body (the second pose of a scratch
@@ -173,14 +165,15 @@ void check_system(int n) {
   ShapeSpec ball;
   ball.type = ShapeType::sphere;
   ball.radius = 0.17;
-  ball.center = testing::as_std<Dim>(at<Dim>(0.62, 0.52));
+  ball.center = testing::as_std<Dim>(testing::centre_at<Dim>(0.62, 0.52));
   // the floor slab (y from -0.2 to 0.3, wider than the domain), the ball, the box
   Vec<Dim> floor_half = Vec<Dim>::Constant(0.6);
   floor_half[1] = 0.25;
   std::vector<RigidBody<Dim>> bodies = {
-      testing::make_box<Dim>(at<Dim>(0.5, 0.05), floor_half, 1000.0, 0.0, BodyMotion::fixed),
+      testing::make_box<Dim>(testing::centre_at<Dim>(0.5, 0.05), floor_half, 1000.0, 0.0,
+                             BodyMotion::fixed),
       testing::make_body<Dim>(ball, 2500.0),
-      testing::make_box<Dim>(at<Dim>(0.27, 0.55), Vec<Dim>::Constant(0.1), 600.0)};
+      testing::make_box<Dim>(testing::centre_at<Dim>(0.27, 0.55), Vec<Dim>::Constant(0.1), 600.0)};
   for (int b = 1; b < 3; ++b) {
     BodyVec<Dim> v = BodyVec<Dim>::Zero();
     v[0] = 0.05 * b;
@@ -204,7 +197,9 @@ void check_system(int n) {
   scratch.union_in_parts = true;
   std::vector<CouplingBody<Dim>> before = view;
   for (std::size_t i = 1; i < before.size(); ++i) {
-    ShapeSpec s = i == 1 ? ball : testing::box_spec<Dim>(at<Dim>(0.27, 0.55), Vec<Dim>::Constant(0.1));
+    ShapeSpec s = i == 1 ? ball
+                         : testing::box_spec<Dim>(testing::centre_at<Dim>(0.27, 0.55),
+                                                  Vec<Dim>::Constant(0.1));
     s.center = testing::as_std<Dim>(Vec<Dim>(Eigen::Map<const Vec<Dim>>(s.center.data()) +
                                              Vec<Dim>::Constant(0.06)));
     before[i].shape = make_shape<Dim>(s, "test");
