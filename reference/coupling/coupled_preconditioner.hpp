@@ -49,6 +49,10 @@
 /// out). W' takes W's place in S_c and the body columns, so S_c and apply_in_face keep their form
 /// (docs/preconditioners.md section 23).
 ///
+/// (P11): on a contact-free system (with_contacts false) whose P marks no near-empty cell the
+/// correction is left out by default, Q = P (CoupledPreconditionerOptions::contact_free_correction;
+/// docs/preconditioners.md section 30).
+///
 /// SPD whenever P is; apply allocates nothing and is deterministic for any thread count (P's
 /// applications are, the body correction runs over rows in fixed order).
 
