@@ -100,6 +100,10 @@ CoupledPreconditioner<Dim>::CoupledPreconditioner(const MonolithicSystem<Dim>& s
       system.grid(), system.stokes_operator(),
       coupled_stokes_factors(system, options.fluid.min_fluid_fraction), fluid_options);
   if (!correct) return;
+  // (P11) no correction on a contact-free system whose P marks no near-empty cell: the body
+  // term is left to PCG (docs/preconditioners.md section 30)
+  if (coupled && !with_contacts && !options.contact_free_correction && fluid_->empty_cells().empty())
+    return;
   // the near-empty cells E, solved exactly with the body term: P = blkdiag(P_r, 0) and
   // Q^-1 = blkdiag(P_r^-1, F_EE) + B_f^T W B_f, inverted by block elimination of E (the file
   // comment; docs/preconditioners.md section 23)

@@ -49,6 +49,10 @@
 /// out). W' takes W's place in S_c and the body columns, so S_c and apply_in_face keep their form
 /// (docs/preconditioners.md section 23).
 ///
+/// (P11): on a contact-free system (with_contacts false) whose P marks no near-empty cell the
+/// correction is left out by default, Q = P (CoupledPreconditionerOptions::contact_free_correction;
+/// docs/preconditioners.md section 30).
+///
 /// SPD whenever P is; apply allocates nothing and is deterministic for any thread count (P's
 /// applications are, the body correction runs over rows in fixed order).
 
@@ -71,6 +75,14 @@ struct CoupledPreconditionerOptions {
   /// The Woodbury correction of the body term B_f^T W B_f (false: Q = P, the body term is left to
   /// the Krylov method).
   bool body_correction = true;
+  /// The correction also on the contact-free systems (with_contacts false: PCG on A_ff, the
+  /// unified solves without contacts and the partitioned schemes' fluid solves) where P marks no
+  /// near-empty cell. false (since section 30 of docs/preconditioners.md): Q = P there, the body
+  /// term left to PCG; its set-up cost one application of P per body DOF touching the liquid
+  /// and saved about two iterations of 4-6 (bunnies-into-floating-bowl-viscous-3d). The MLCP
+  /// systems (with_contacts true, where section 20's stalls were) and the systems with
+  /// near-empty cells (P8, sections 21 and 23) keep it.
+  bool contact_free_correction = false;
   /// Above this many body DOFs the correction is skipped (its set-up costs one application of P
   /// per body DOF).
   int max_body_dofs = 96;

@@ -113,9 +113,13 @@ void check_spd(int n, double eta) {
 
 /// PCG on A_ff with the block preconditioner against the dense solution and SSOR-PCG; both
 /// back ends; 1 and 2 threads bitwise.
+/// correction: CoupledPreconditionerOptions::contact_free_correction (false: Q = P on these
+/// contact-free systems without near-empty cells, docs/preconditioners.md section 30).
 template <int Dim>
-void check_fluid_body_solve(int n, double eta) {
-  INFO(Dim << "D n=" << n << " eta " << eta);
+void check_fluid_body_solve(int n, double eta, bool correction) {
+  INFO(Dim << "D n=" << n << " eta " << eta << " body correction " << correction);
+  CoupledPreconditionerOptions options;
+  options.contact_free_correction = correction;
   const CoupledStepInput<Dim> in = tank<Dim>(n, eta, 0.0);
   const MonolithicSystem<Dim> e = testing::make_system(in, Backend::explicit_matrices);
   const MonolithicSystem<Dim> m = testing::make_system(in, Backend::matrix_free);
@@ -130,7 +134,12 @@ void check_fluid_body_solve(int n, double eta) {
   settings.max_iterations = 20000;
   VectorX x_ssor, x_e, x_m, x_m2;
   const PcgResult rs = pcg_solve(om, b, x_ssor, settings);
-  const CoupledPreconditioner<Dim> pe(e, false, VectorX()), pm(m, false, VectorX());
+  const CoupledPreconditioner<Dim> pe(e, false, VectorX(), options), pm(m, false, VectorX(), options);
+  // (P11): on without the option only where P marks near-empty cells (kept exactly with (P4))
+  const bool on = correction || !pm.fluid().empty_cells().empty();
+  REQUIRE(pe.fluid().empty_cells() == pm.fluid().empty_cells());
+  REQUIRE(pm.body_correction() == on);
+  REQUIRE(pe.body_correction() == on);
   const PcgResult re = pcg_solve(oe, b, x_e, settings, pe);
   const PcgResult rm = pcg_solve(om, b, x_m, settings, pm);
   CHECK(rs.converged);
@@ -158,7 +167,7 @@ void check_fluid_body_solve(int n, double eta) {
   // 1 vs 2 threads, matrix-free: bitwise
   const int threads = omp_get_max_threads();
   omp_set_num_threads(2);
-  const CoupledPreconditioner<Dim> pm2(m, false, VectorX());
+  const CoupledPreconditioner<Dim> pm2(m, false, VectorX(), options);
   VectorX zm2;
   pm2.apply(r, zm2);
   const PcgResult rm2 = pcg_solve(om, b, x_m2, settings, pm2);
@@ -166,8 +175,9 @@ void check_fluid_body_solve(int n, double eta) {
   CHECK((zm2 - zm).cwiseAbs().maxCoeff() == 0.0);
   CHECK((x_m2 - x_m).cwiseAbs().maxCoeff() == 0.0);
   CHECK(rm2.iterations == rm.iterations);
-  std::printf("A_ff solve %dD n=%d eta %g: %d unknowns, SSOR %d iterations, block %d (explicit %d),"
-              " error vs dense %.1e, back ends' M r apart %.1e\n", Dim, n, eta, m.num_fluid(),
+  std::printf("A_ff solve %dD n=%d eta %g, body correction %s (%d near-empty cells): %d unknowns, SSOR %d"
+              " iterations, block %d (explicit %d), error vs dense %.1e, back ends' M r apart %.1e\n", Dim,
+              n, eta, on ? "on" : "off", static_cast<int>(pm.fluid().empty_cells().size()), m.num_fluid(),
               rs.iterations, rm.iterations, re.iterations, (x_m - exact).cwiseAbs().maxCoeff() / scale,
               agree);
 }
@@ -249,8 +259,12 @@ void check_exact_contacts(int n, double eta) {
   const CoupledPreconditioner<Dim> m(s, true, contact_diagonal);
   REQUIRE(m.body_correction());
   REQUIRE(m.has_exact_contacts());
-  // M = A with Q^-1 in the fluid block's place
-  const CoupledPreconditioner<Dim> q(s, false, VectorX());
+  // M = A with Q^-1 in the fluid block's place (Q with the body correction, which a contact-free
+  // system without near-empty cells leaves out by default: section 30)
+  CoupledPreconditionerOptions with_correction;
+  with_correction.contact_free_correction = true;
+  const CoupledPreconditioner<Dim> q(s, false, VectorX(), with_correction);
+  REQUIRE(q.body_correction());
   const testing::ContactElimination ref = testing::contact_elimination(a, testing::dense(q), nf);
   const double serr = (m.contact_schur() - ref.schur).norm() / ref.schur.norm();
   CHECK(serr < 1e-8);
@@ -293,8 +307,10 @@ TEST_CASE("the coupled block preconditioner is SPD and its body correction is Wo
 }
 
 TEST_CASE("PCG on A_ff with the coupled block preconditioner: dense and SSOR solution, back ends, threads", "[coupled_preconditioner]") {
-  for (double eta : {1.0, 1000.0}) check_fluid_body_solve<2>(24, eta);
-  check_fluid_body_solve<3>(8, 500.0);
+  for (bool correction : {false, true}) {
+    for (double eta : {1.0, 1000.0}) check_fluid_body_solve<2>(24, eta, correction);
+    check_fluid_body_solve<3>(8, 500.0, correction);
+  }
 }
 
 TEST_CASE("MPRGP on (26) preconditioned in face by the coupled block preconditioner: the KKT point of SSOR", "[coupled_preconditioner]") {

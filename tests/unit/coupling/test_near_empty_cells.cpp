@@ -177,6 +177,7 @@ TEST_CASE("cells closed between a light floating body and a static solid: solved
   exact.fluid.cut_threshold = jacobi.fluid.cut_threshold = kept.fluid.cut_threshold = cut;
   jacobi.exact_empty_cells = false;  // section 21: r_k / (A22_kk + d_k)
   kept.empty_cell_ratio = 0.0;       // before section 21
+  kept.contact_free_correction = true;  // (P4) without near-empty cells too (section 30)
   const CoupledPreconditioner<2> me(s, false, VectorX(), exact);
   const CoupledPreconditioner<2> mj(s, false, VectorX(), jacobi);
   const CoupledPreconditioner<2> mk(s, false, VectorX(), kept);
@@ -221,6 +222,7 @@ TEST_CASE("a cell closed by the body alone keeps its volume under rigid motion: 
   CoupledPreconditionerOptions options, any;
   options.fluid.max_coarse = any.fluid.max_coarse = 40;
   any.empty_cell_body_ratio = 0.0;  // section 21's rule: every cell below 1e-4 of the median
+  options.contact_free_correction = true;  // Q with (P4), as before section 30
   const CoupledPreconditioner<2> m(s, false, VectorX(), options);
   const CoupledPreconditioner<2> ma(s, false, VectorX(), any);
   CHECK(m.fluid().empty_cells().empty());
