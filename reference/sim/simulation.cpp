@@ -1120,13 +1120,7 @@ bool Simulation<Dim>::extend_extrapolation(bool drift) {
   // line 15's payments as they scaled u_ after the step (pay_line15_energy), in their order:
   // the deeper values are those u_ would hold had the step's extrapolation reached this far
   if (drift)
-    for (const auto& [mean, s] : drift_rescales_) {
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-      for (int f = 0; f < nf; ++f) {
-        const auto [axis, fc] = grid_.face_coord(f);
-        if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
-      }
-    }
+    for (const auto& [mean, s] : drift_rescales_) rescale_face_velocity(mean, s);
   stats_.timing[FramePhase::extrapolation] += watch.seconds();
   divergence_free_air();  // (timed as extrapolation)
   const Stopwatch rest;
@@ -1495,15 +1489,20 @@ void Simulation<Dim>::pay_line15_energy(double gain) {
   }
   // the next step's first half drift reads u_ (the velocity the particles were given)
   if (split_drift()) {
-    const int nf = grid_.num_faces();
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (int f = 0; f < nf; ++f) {
-      const auto [axis, fc] = grid_.face_coord(f);
-      // (the domain's walls keep their zero)
-      if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
-    }
+    rescale_face_velocity(mean, s);
     // (a deeper extrapolation for that drift is scaled alike: extend_extrapolation(true))
     if (drift_guard_) drift_rescales_.emplace_back(mean, s);
+  }
+}
+
+template <int Dim>
+void Simulation<Dim>::rescale_face_velocity(const Vec<Dim>& mean, double s) {
+  const int nf = grid_.num_faces();
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (int f = 0; f < nf; ++f) {
+    const auto [axis, fc] = grid_.face_coord(f);
+    // (the domain's walls keep their zero)
+    if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
   }
 }
 

@@ -542,6 +542,10 @@ class Simulation : public AnySimulation {
   bool drift_guard_ = false;
   std::vector<char> drift_trusted_, drift_reached_;
   std::vector<std::pair<Vec<Dim>, double>> drift_rescales_;
+  /// u_ <- mean + s (u_ - mean) on every face but the domain's walls: line 15's payment as
+  /// the next step's first half drift reads it (pay_line15_energy, and again after a deeper
+  /// extrapolation for that drift: extend_extrapolation)
+  void rescale_face_velocity(const Vec<Dim>& mean, double s);
   VectorX drift_resolved_;
   long reread_particles_ = 0, drift_reread_particles_ = 0;
   std::vector<int> solid_faces_;
