@@ -852,6 +852,37 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
   return removed;
 }
 
+template <int Dim>
+long drift_particles_own_velocity(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
+                                  const SolidField<Dim>& solids,
+                                  const std::array<BoundaryType, 2 * Dim>& boundary) {
+  const long np = static_cast<long>(particles.size());
+  const double max_move = kAdvectionSubstep * grid.dx();
+  std::vector<char> remove(np, 0);
+  long removed = 0;
+#pragma omp parallel for schedule(static) reduction(+ : removed) num_threads(process_threads())
+  for (long p = 0; p < np; ++p) {
+    const Vec<Dim> v = particles.v[p];
+    const double path = dt * v.norm();
+    if (!(path > 0.0)) continue;  // at rest (or no finite velocity): stays as seeded
+    const int n = std::clamp(static_cast<int>(std::ceil(path / max_move)), 1, kMaxAdvectionSubsteps);
+    const double h = dt / n;
+    Vec<Dim> x = particles.x[p];
+    bool inside = true;
+    for (int s = 0; s < n && inside; ++s) {
+      x += h * v;
+      inside = settle_position(grid, solids, boundary, true, x);
+    }
+    if (!inside) {
+      remove[p] = 1;
+      ++removed;
+    }
+    particles.x[p] = x;
+  }
+  if (removed > 0) particles.remove_flagged(remove);
+  return removed;
+}
+
 // --- position correction -------------------------------------------------------------------------
 
 namespace {
@@ -2234,6 +2265,9 @@ double max_particle_speed(const Particles<Dim>& particles) {
   template long advect_particles(Particles<D>&, const MacGrid<D>&, const VectorX&, double,         \
                                  const SolidField<D>&, const std::array<BoundaryType, 2 * D>&,     \
                                  std::vector<char>*);                                              \
+  template long drift_particles_own_velocity(Particles<D>&, const MacGrid<D>&, double,            \
+                                             const SolidField<D>&,                                 \
+                                             const std::array<BoundaryType, 2 * D>&);              \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
                                   const std::array<BoundaryType, 2 * D>&);                         \
   template DensityProjectionStats project_particle_density(                                        \

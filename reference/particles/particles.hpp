@@ -117,6 +117,17 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
                       const std::array<BoundaryType, 2 * Dim>& boundary,
                       std::vector<char>* unread = nullptr);
 
+/// Moves every particle along a straight line through its own velocity v for dt, in substeps of
+/// at most kAdvectionSubstep dx, each settled as in advect_particles (solids, walls, periodic
+/// wrap, removal beyond open faces). A particle at rest is not touched. The first half drift of
+/// the very first step (no grid velocity has been solved yet): the particles' velocities are then
+/// the scene's initial ones, and an APIC particle's velocity field at its own position is v.
+/// Returns how many particles were removed.
+template <int Dim>
+long drift_particles_own_velocity(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
+                                  const SolidField<Dim>& solids,
+                                  const std::array<BoundaryType, 2 * Dim>& boundary);
+
 /// Position correction that keeps particles evenly spread so the liquid volume stays steady
 /// (Algorithm 1, line 15); respects solids, walls and periodicity.
 template <int Dim>
