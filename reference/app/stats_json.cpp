@@ -37,6 +37,7 @@ json frame_stats_json(const FrameStats& s) {
   j["kinetic_energy"] = {{"liquid", number(s.kinetic_energy_liquid)}, {"bodies", number(s.kinetic_energy_bodies)}};
   j["potential_energy"] = {{"liquid", number(s.potential_energy_liquid)},
                            {"bodies", number(s.potential_energy_bodies)}};
+  j["line15_banked_energy"] = number(s.line15_banked_energy);
   // bodies and contacts
   json bs = json::array();
   for (const auto& b : s.bodies)

@@ -128,6 +128,11 @@ struct FrameStats {
   /// Gravitational potential energy -sum m g . x of the particles (liquid) and of the dynamic
   /// bodies' centres of mass (bodies), zero at the origin (J; 2D: J per metre of depth).
   double potential_energy_liquid = 0.0, potential_energy_bodies = 0.0;
+  /// Energy held by line 15's account (Line15Energy::balance, J; 2D: J/m): potential energy the
+  /// position corrections released and kept against their next rises (positive), less what the
+  /// kinetic energy could not pay yet (negative). Kinetic + potential + this is what the
+  /// scheme neither creates nor destroys by line 15.
+  double line15_banked_energy = 0.0;
   std::vector<BodyStats> bodies;
   int contact_count = 0;
   double max_penetration = 0.0;

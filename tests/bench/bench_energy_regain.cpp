@@ -58,6 +58,10 @@ std::vector<Variant> variants() {
       {"ballistic-pic-everywhere",
        [](StageSwitches& s) { s.ballistic_faces_pic_everywhere = true; }},
       {"split", [](StageSwitches& s) { s.split_advection = true; }},
+      {"whole-drift", [](StageSwitches& s) { s.split_advection = false; }},
+      // line 15's potential energy not paid by the kinetic energy (the default before slosh11)
+      {"line15-free", [](StageSwitches& s) { s.line15_energy = Line15Energy::free; }},
+      {"line15-no-debt", [](StageSwitches& s) { s.line15_carry_debt = false; }},
   };
 }
 

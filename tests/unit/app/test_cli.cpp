@@ -385,6 +385,7 @@ TEST_CASE("frame_stats_json has every key of the contract", "[unit]") {
   st.timing[FramePhase::particles] = 0.125;
   st.potential_energy_liquid = -2.5;
   st.potential_energy_bodies = 4.0;
+  st.line15_banked_energy = 0.75;
   st.max_penetration = std::numeric_limits<double>::quiet_NaN();
   const json j = frame_stats_json(st);
   CHECK(j["frame"] == 7);
@@ -392,6 +393,7 @@ TEST_CASE("frame_stats_json has every key of the contract", "[unit]") {
   for (const char* k : {"liquid", "bodies"}) CHECK(j["kinetic_energy"].contains(k));
   CHECK(j["potential_energy"]["liquid"] == -2.5);
   CHECK(j["potential_energy"]["bodies"] == 4.0);
+  CHECK(j["line15_banked_energy"] == 0.75);
   for (const char* k : {"name", "position", "orientation", "velocity", "angular_velocity"}) CHECK(j["bodies"][0].contains(k));
   CHECK(j["contacts"]["count"] == 0);
   CHECK(j["contacts"]["max_penetration"].is_null());  // non-finite numbers become null
