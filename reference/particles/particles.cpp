@@ -1728,7 +1728,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // non-zeros) over the process team, a parallel region per iteration around a few tens of
   // microseconds of work (the 64^3 viscous bunny: 8k rows, 54k non-zeros, ~45 iterations), and
   // the vector operations between them are serial anyway; the regions cost more than they saved
-  // on two threads (the CG's CPU time rose from 2.6 to 14 ms per frame). Each row's product is
+  // on two threads (the CG's CPU time rose from 2.6 to 14 ms per frame, measured at load 8;
+  // docs/benchmarks.md, threads14). Each row's product is
   // summed by one thread either way: the same bits.
   const int eigen_threads = Eigen::nbThreads();
   Eigen::setNbThreads(1);
