@@ -3,6 +3,7 @@
 
 #include "reference/fluid/viscosity_field.hpp"
 
+#include <algorithm>
 #include <array>
 
 #include "reference/core/parallel.hpp"
@@ -21,36 +22,85 @@ template <int Dim>
 VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const VecI<Dim>& dims,
                          const Particles<Dim>& particles, const std::vector<double>& liquid_eta) {
   constexpr int kCorners = 1 << Dim;
+  constexpr int kLast = Dim - 1;
   const int n = dims.prod();
-  // mass-weighted sums over the particles (serial: the cost is small beside the solve and the
-  // order of the sums stays fixed for any thread count)
-  VectorX mass = VectorX::Zero(n), mass_eta = VectorX::Zero(n);
-  double total_mass = 0.0, total_mass_eta = 0.0;
-  std::array<int, kCorners> idx;
-  std::array<double, kCorners> w;
-  for (std::size_t p = 0; p < particles.size(); ++p) {
-    const int liquid = particles.liquid[p];
-    const double eta =
-        liquid >= 0 && liquid < static_cast<int>(liquid_eta.size()) ? liquid_eta[liquid] : 0.0;
-    const double mp = particles.mass[p];
-    total_mass += mp;
-    total_mass_eta += mp * eta;
-    grid.stencil(grid.wrap_position(particles.x[p]), shift, dims, idx, w);
-    for (int k = 0; k < kCorners; ++k) {
-      if (w[k] == 0.0) continue;
-      mass[idx[k]] += w[k] * mp;
-      mass_eta[idx[k]] += w[k] * mp * eta;
+  const long np = static_cast<long>(particles.size());
+  // mass-weighted sums over the particles. On several threads (one called from the outside,
+  // not from stress_viscosity's components, which run side by side on one thread each): the
+  // samples are split into slabs of layers of the last axis (contiguous index ranges, the last
+  // axis being the slowest), one per thread; each thread walks all particles in order, skips
+  // those whose stencil misses its slab and adds only into its own samples, so every sample sums
+  // its particles in the order of the serial loop (the same bits for any team). The slabs cut
+  // the particles' layers into equal counts (any bounds give the same bits). The totals are
+  // summed in particle order by the first slab's thread.
+  const int layers = dims[kLast];
+  const long plane = n / std::max(1, layers);
+  const double shift_last = shift[kLast];
+  const auto last_stencil = [&](long p) {
+    const double xl = grid.wrap_position(particles.x[p])[kLast];
+    return grid.axis_stencil(kLast, (xl - grid.origin()[kLast]) / grid.dx() - shift_last, layers);
+  };
+  const int slabs = static_cast<int>(std::max(1L, std::min<long>(team_threads(np), layers)));
+  std::vector<int> slab_first(slabs + 1, 0);
+  slab_first[slabs] = layers;
+  if (slabs > 1) {
+    std::vector<int> layer_of(np);
+#pragma omp parallel for schedule(static) num_threads(slabs)
+    for (long p = 0; p < np; ++p) layer_of[p] = last_stencil(p).index[0];
+    std::vector<long> histogram(layers + 1, 0);
+    for (long p = 0; p < np; ++p) ++histogram[layer_of[p] + 1];
+    for (int l = 0; l < layers; ++l) histogram[l + 1] += histogram[l];
+    int l = 0;
+    for (int k = 1; k < slabs; ++k) {
+      // slab k starts at the first layer whose running count reaches k / slabs of np
+      while (l < layers && histogram[l + 1] * slabs < np * k) ++l;
+      slab_first[k] = std::max(l, slab_first[k - 1]);
     }
   }
-  VectorX eta = VectorX::Zero(n);
-  std::vector<char> known(n, 0);
-  std::vector<int> frontier;  // the samples made known in the last round
-  for (int i = 0; i < n; ++i)
+  VectorX mass(n), mass_eta(n);
+  double total_mass = 0.0, total_mass_eta = 0.0;
+#pragma omp parallel for schedule(static, 1) num_threads(slabs)
+  for (int slab = 0; slab < slabs; ++slab) {
+    const int first = slab_first[slab], end = slab_first[slab + 1];
+    std::fill(mass.data() + first * plane, mass.data() + end * plane, 0.0);
+    std::fill(mass_eta.data() + first * plane, mass_eta.data() + end * plane, 0.0);
+    const auto owned = [&](int layer) { return layer >= first && layer < end; };
+    std::array<int, kCorners> idx;
+    std::array<double, kCorners> w;
+    for (long p = 0; p < np; ++p) {
+      const int liquid = particles.liquid[p];
+      const double eta =
+          liquid >= 0 && liquid < static_cast<int>(liquid_eta.size()) ? liquid_eta[liquid] : 0.0;
+      const double mp = particles.mass[p];
+      if (slab == 0) {
+        total_mass += mp;
+        total_mass_eta += mp * eta;
+      }
+      if (slabs > 1) {
+        const auto st = last_stencil(p);
+        if (!owned(st.index[0]) && !owned(st.index[1])) continue;
+      }
+      grid.stencil(grid.wrap_position(particles.x[p]), shift, dims, idx, w);
+      for (int k = 0; k < kCorners; ++k) {
+        if (w[k] == 0.0 || !owned(static_cast<int>(idx[k] / plane))) continue;
+        mass[idx[k]] += w[k] * mp;
+        mass_eta[idx[k]] += w[k] * mp * eta;
+      }
+    }
+  }
+  VectorX eta(n);
+  std::vector<char> known(n);  // (each entry written below)
+  // the samples a particle reached, in index order (fixed blocks joined in order)
+  std::vector<int> frontier = gather_in_order<int>(n, [&](int i, std::vector<int>& out) {
     if (mass[i] > 0.0) {
       eta[i] = mass_eta[i] / mass[i];
       known[i] = 1;
-      frontier.push_back(i);
+      out.push_back(i);
+    } else {
+      eta[i] = 0.0;
+      known[i] = 0;
     }
+  });
   // the axis neighbour of c in direction s along a, -1 outside a non-periodic lattice
   auto neighbour = [&](const VecI<Dim>& c, int a, int s) {
     VecI<Dim> d = c;
@@ -103,6 +153,7 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
   }
   // the rest: the mean viscosity of the whole liquid
   const double mean = total_mass > 0.0 ? total_mass_eta / total_mass : 0.0;
+#pragma omp parallel for schedule(static) num_threads(team_threads(n))
   for (int i = 0; i < n; ++i)
     if (!known[i]) eta[i] = mean;
   return eta;
@@ -112,14 +163,32 @@ template <int Dim>
 VectorX stress_viscosity(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
                          const std::vector<double>& liquid_eta) {
   VectorX eta(stress.num_dofs());
-  // the components on several threads, each made whole by one thread (serially, as above), into
-  // its own segment: the same bits for any team size
+  // The diagonal components all sit at the cell centres (shift 1/2 on every axis, dims = the
+  // cells: StressGrid), so their samples are one splat, made once (component 0) and copied to the
+  // other Dim - 1 (the same bits: the same call). The distinct components (0, then the
+  // off-diagonal ones) on several threads, each made whole by one thread (serially, as above),
+  // into its own segment: the same bits for any team size. (In 3D, 4 splats instead of 6: two
+  // per thread on two threads.)
   constexpr int components = StressGrid<Dim>::num_components();
-#pragma omp parallel for schedule(dynamic, 1) num_threads(team_threads(static_cast<long>(particles.size()) * components))
-  for (int k = 0; k < components; ++k)
+  constexpr int distinct = components - (Dim - 1);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(team_threads(static_cast<long>(particles.size()) * distinct))
+  for (int i = 0; i < distinct; ++i) {
+    const int k = i == 0 ? 0 : Dim - 1 + i;
     eta.segment(stress.offset(k), stress.num_dofs(k)) =
         sample_viscosity(stress.grid(), StressGrid<Dim>::shift(k), stress.dims(k), particles,
                          liquid_eta);
+  }
+  // the copies in fixed blocks on several threads
+  const long n0 = stress.num_dofs(0);
+  constexpr long kBlock = 1L << 15;
+  const long blocks = (n0 + kBlock - 1) / kBlock;
+#pragma omp parallel for collapse(2) schedule(static) num_threads(team_threads(n0 * (Dim - 1)))
+  for (int k = 1; k < Dim; ++k)
+    for (long b = 0; b < blocks; ++b) {
+      const double* from = eta.data() + stress.offset(0);
+      std::copy(from + b * kBlock, from + std::min(n0, (b + 1) * kBlock),
+                eta.data() + stress.offset(k) + b * kBlock);
+    }
   return eta;
 }
 

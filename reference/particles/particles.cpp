@@ -1269,11 +1269,11 @@ int axis_runs(int lo, int hi, int n, bool periodic, std::array<std::array<int, 2
   return 2;
 }
 
-/// Makes the tiles of `tiles` under the box of runs `runs[a][0 .. count[a])` per axis (every
-/// combination of one run per axis).
-template <int Dim, class Tiles>
-void touch_runs(Tiles& tiles, const std::array<std::array<std::array<int, 2>, 2>, Dim>& runs,
-                const std::array<int, Dim>& count) {
+/// box(lo, hi) for every box of runs `runs[a][0 .. count[a])` per axis (every combination of
+/// one run per axis).
+template <int Dim, class Box>
+void for_each_run_box(const std::array<std::array<std::array<int, 2>, 2>, Dim>& runs,
+                      const std::array<int, Dim>& count, Box&& box) {
   for (int a = 0; a < Dim; ++a)
     if (count[a] == 0) return;
   std::array<int, Dim> k{};
@@ -1283,7 +1283,7 @@ void touch_runs(Tiles& tiles, const std::array<std::array<std::array<int, 2>, 2>
       lo[a] = runs[a][k[a]][0];
       hi[a] = runs[a][k[a]][1];
     }
-    tiles.touch_box(lo, hi);
+    box(lo, hi);
     int a = 0;
     for (; a < Dim; ++a) {
       if (++k[a] < count[a]) break;
@@ -1475,30 +1475,29 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p)
     particle_cell[p] = grid.cell_containing(grid.wrap_position(particles.x[p]));
-  TiledLattice<Dim, char> occupied(grid.cells(), 0);
-  std::vector<VecI<Dim>> occupied_cells;
-  for (long p = 0; p < np; ++p) {
-    const VecI<Dim>& c = particle_cell[p];
-    char* o = occupied.at(c);
-    if (*o) continue;
-    *o = 1;
-    occupied_cells.push_back(c);
-  }
+  // the tiles under the ring around every particle's cell, flagged on several threads (a particle
+  // in the cell of the one before it flags nothing new) and made in parallel: the same tiles for
+  // any team; `rho` has the same tiles (the same lattice and tile size)
   TiledLattice<Dim, double, kProjectionValues> values(grid.cells(), 0.0);
   TiledLattice<Dim, double> rho(grid.cells(), 0.0);
-  for (const VecI<Dim>& c : occupied_cells) {
+  std::vector<unsigned char> band_flags = values.tile_flags();
+#pragma omp parallel for schedule(static) num_threads(team_threads(np))
+  for (long p = 0; p < np; ++p) {
+    const VecI<Dim>& c = particle_cell[p];
+    if (p > 0 && particle_cell[p - 1] == c) continue;
     std::array<std::array<std::array<int, 2>, 2>, Dim> runs;
     std::array<int, Dim> count;
     for (int a = 0; a < Dim; ++a)
       count[a] = axis_runs(c[a] - ring, c[a] + ring, grid.cells()[a], periodic[a], runs[a]);
-    touch_runs<Dim>(values, runs, count);
+    for_each_run_box<Dim>(runs, count, [&](const VecI<Dim>& lo, const VecI<Dim>& hi) {
+      values.mark_box(lo, hi, band_flags);
+    });
   }
+  values.make_tiles(band_flags, process_threads());
+  rho.make_tiles(band_flags, process_threads());
   std::vector<int> band;  // the made tiles of `values` (and of `rho`)
   for (int t = 0; t < values.num_tile_slots(); ++t)
-    if (values.has_tile(t)) {
-      band.push_back(t);
-      rho.touch_box(values.tile_origin(t), values.tile_origin(t));
-    }
+    if (values.has_tile(t)) band.push_back(t);
   const int band_tiles = static_cast<int>(band.size());
 
   // particle volume fractions: each particle's volume spread as a box of its rest spacing and
@@ -1615,6 +1614,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // needed)
     TiledLattice<Dim, double> solid_distance(lattice.dims,
                                              std::numeric_limits<double>::quiet_NaN());
+    // (the tiles flagged serially, a few boxes per band tile, and made in parallel)
+    std::vector<unsigned char> distance_flags = solid_distance.tile_flags();
     for (int b = 0; b < band_tiles; ++b) {
       const VecI<Dim> t0 = values.tile_origin(band[b]);
       std::array<std::array<std::array<int, 2>, 2>, Dim> runs;
@@ -1625,8 +1626,11 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
                              2 * grid.cells()[a], periodic[a], runs[a]);
         for (int r = 0; r < count[a]; ++r) ++runs[a][r][1];
       }
-      touch_runs<Dim>(solid_distance, runs, count);
+      for_each_run_box<Dim>(runs, count, [&](const VecI<Dim>& lo, const VecI<Dim>& hi) {
+        solid_distance.mark_box(lo, hi, distance_flags);
+      });
     }
+    solid_distance.make_tiles(distance_flags, process_threads());
     const int slots = solid_distance.num_tile_slots();
 #pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
     for (int t = 0; t < slots; ++t)
@@ -1654,14 +1658,24 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   }
 
   // unknowns: cells holding particle volume or smoothed liquid, rows in cell order
+  // (tile by tile on several threads, joined in tile order, then sorted; each cell's row written
+  // by one thread)
   std::vector<int> cells;
-  for (int b = 0; b < band_tiles; ++b)
-    values.for_each_point_in_tile(band[b], [&](const VecI<Dim>& c, double* v) {
-      v[kRow] = -1.0;
-      if (*rho.find(c) > 0.0 || v[kTarget] > 0.0) cells.push_back(grid.cell_index(c));
-    });
+  {
+    const int parts = team_threads(static_cast<long>(band_tiles) * decltype(values)::kTilePoints);
+    std::vector<std::vector<int>> part(parts);
+#pragma omp parallel for schedule(static, 1) num_threads(parts)
+    for (int t = 0; t < parts; ++t)
+      for (int b = band_tiles * t / parts; b < band_tiles * (t + 1) / parts; ++b)
+        values.for_each_point_in_tile(band[b], [&](const VecI<Dim>& c, double* v) {
+          v[kRow] = -1.0;
+          if (*rho.find(c) > 0.0 || v[kTarget] > 0.0) part[t].push_back(grid.cell_index(c));
+        });
+    for (const auto& list : part) cells.insert(cells.end(), list.begin(), list.end());
+  }
   std::sort(cells.begin(), cells.end());
   const int n = static_cast<int>(cells.size());
+#pragma omp parallel for schedule(static) num_threads(team_threads(n))
   for (int r = 0; r < n; ++r) values.find(grid.cell_coord(cells[r]))[kRow] = r;
   // the row of cell c (coordinates, wrapped on periodic axes; -1 outside the domain, outside the
   // band or not an unknown)
@@ -1741,7 +1755,17 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   cg.setTolerance(kProjectionTolerance);
   cg.setMaxIterations(4 * n + 100);
   cg.compute(A);
+  // On one thread: Eigen would split each product of the CG (a row-major view above 20000
+  // non-zeros) over the process team, a parallel region per iteration around a few tens of
+  // microseconds of work (the 64^3 viscous bunny: 8k rows, 54k non-zeros, ~45 iterations), and
+  // the vector operations between them are serial anyway; the regions cost more than they saved
+  // on two threads (the CG's CPU time rose from 2.6 to 14 ms per frame, measured at load 8;
+  // docs/benchmarks.md, threads14). Each row's product is
+  // summed by one thread either way: the same bits.
+  const int eigen_threads = Eigen::nbThreads();
+  Eigen::setNbThreads(1);
   const VectorX psi = cg.solve(rhs);  // in units of dx^2
+  Eigen::setNbThreads(eigen_threads);
   stats.iterations = static_cast<int>(cg.iterations());
 
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
@@ -1880,18 +1904,47 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   const double reach_factor = solids.empty() ? 1.0 : 2.0;
   const int width = static_cast<int>(std::ceil(2.0 * reach_factor * max_support / h)) + 2;
   const int slabs = std::max(1, (lattice.dims[kLast] + width - 1) / width);
+  // The particles by slab, in particle order within a slab (a stable counting sort, whose result
+  // is unique: the same for any team), on several threads: fixed blocks of particles count their
+  // slabs, every block's share of a slab starts after the earlier slabs and the earlier blocks'
+  // share of it, and each block places its particles in order. The same pass counts the
+  // particles' lattice indices along axis 0 for the parts of the splat below (integer counts:
+  // any split gives them).
+  const int parts = std::max(1, std::min(process_threads(), lattice.dims[0]));
+  const int blocks = std::max(1, team_threads(np));
   std::vector<int> slab_of(np), slab_start(slabs + 1, 0), order(np);
-  for (long p = 0; p < np; ++p) {
-    const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
-    const int k = static_cast<int>(std::floor(s / width));
-    slab_of[p] = std::clamp(k, 0, slabs - 1);
-    ++slab_start[slab_of[p] + 1];
-  }
-  for (int k = 0; k < slabs; ++k) slab_start[k + 1] += slab_start[k];
+  std::vector<std::vector<int>> slab_count(blocks, std::vector<int>(slabs, 0));
+  std::vector<std::vector<long>> index_count(parts > 1 ? blocks : 0,
+                                             std::vector<long>(lattice.dims[0], 0));
+  const auto block_begin = [&](int b) { return np * b / blocks; };
+#pragma omp parallel for schedule(static, 1) num_threads(blocks)
+  for (int b = 0; b < blocks; ++b)
+    for (long p = block_begin(b); p < block_begin(b + 1); ++p) {
+      const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
+      const int k = static_cast<int>(std::floor(s / width));
+      slab_of[p] = std::clamp(k, 0, slabs - 1);
+      ++slab_count[b][slab_of[p]];
+      if (parts > 1) {
+        const double s0 = (particles.x[p][0] - lattice.origin[0]) / h;
+        ++index_count[b][std::clamp(static_cast<int>(std::floor(s0)), 0, lattice.dims[0] - 1)];
+      }
+    }
   {
-    std::vector<int> fill(slab_start.begin(), slab_start.end() - 1);
-    for (long p = 0; p < np; ++p) order[fill[slab_of[p]]++] = static_cast<int>(p);
+    int start = 0;
+    for (int k = 0; k < slabs; ++k) {
+      slab_start[k] = start;
+      for (int b = 0; b < blocks; ++b) {
+        const int c = slab_count[b][k];
+        slab_count[b][k] = start;
+        start += c;
+      }
+    }
+    slab_start[slabs] = start;
   }
+#pragma omp parallel for schedule(static, 1) num_threads(blocks)
+  for (int b = 0; b < blocks; ++b)
+    for (long p = block_begin(b); p < block_begin(b + 1); ++p)
+      order[slab_count[b][slab_of[p]]++] = static_cast<int>(p);
 
   // periodic images: shift by +-L on periodic axes; mirror images across wall faces
   std::array<double, Dim> period{};
@@ -2116,14 +2169,12 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // the serial order and adds only into its own points, so every point sums its contributions
   // in the same order as one thread does (the same bits for any team). The parts' bounds cut
   // the particles' axis-0 lattice indices into equal counts (any bounds give the same bits).
-  const int parts = std::max(1, std::min(process_threads(), lattice.dims[0]));
+  // (parts and the particles' axis-0 index counts: with the slabs above)
   std::vector<int> part_lo(parts, all_lo), part_hi(parts, all_hi);
   if (parts > 1) {
     std::vector<long> histogram(lattice.dims[0] + 1, 0);
-    for (long p = 0; p < np; ++p) {
-      const double s = (particles.x[p][0] - lattice.origin[0]) / h;
-      ++histogram[std::clamp(static_cast<int>(std::floor(s)), 0, lattice.dims[0] - 1) + 1];
-    }
+    for (int b = 0; b < blocks; ++b)
+      for (int i = 0; i < lattice.dims[0]; ++i) histogram[i + 1] += index_count[b][i];
     for (int i = 0; i < lattice.dims[0]; ++i) histogram[i + 1] += histogram[i];
     int i = 0;
     for (int k = 1; k < parts; ++k) {

@@ -457,7 +457,8 @@ void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
     for (auto& box : liquid_face_boxes_) box.valid = false;
   }
   // W_L^s from the same extended level set, eta per stress DOF and per cell from the particles
-  if (sequence_ != SolveSequence::pressure && stress) {
+  const bool stress_eta_made = sequence_ != SolveSequence::pressure && stress;
+  if (stress_eta_made) {
     stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
     // (a non-Newtonian liquid's eta here is 0, and the only liquid's fractions are 1: constants
     // without the splat, the same bits)
@@ -490,6 +491,14 @@ void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
         cell_eta_.setConstant(*c);
       else
         cell_eta_ = VectorX::Constant(grid_.num_cells(), *c);
+    } else if (stress_eta_made) {
+      // the cell centres are the diagonal stress DOFs' samples (stress_viscosity's component 0,
+      // the same sample_viscosity call as cell_viscosity): a copy instead of a second splat
+      const int nc = grid_.num_cells();
+      cell_eta_.resize(nc);
+      const double* from = stress_eta_.data() + stress_grid_.offset(0);
+#pragma omp parallel for schedule(static) num_threads(team_threads(nc))
+      for (int c = 0; c < nc; ++c) cell_eta_[c] = from[c];
     } else {
       cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
     }

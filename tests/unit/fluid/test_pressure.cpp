@@ -1,9 +1,12 @@
 // The variational pressure system of eq. (8) (A22 and b2 of eq. (24)): both back ends, SPD-ness,
 // the CHOLMOD oracle, the velocity update and enclosed liquids.
+#include <omp.h>
+
 #include <Eigen/Dense>
 #include <catch2/catch.hpp>
 #include <random>
 
+#include "reference/core/parallel.hpp"
 #include "reference/fluid/pressure_projection.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/oracle/cholmod_solver.hpp"
@@ -251,6 +254,54 @@ TEMPLATE_TEST_CASE_SIG("projection of a gradient field converges to the analytic
   CHECK(errors[2] < errors[1]);
   CHECK(order > 1.7);
   CHECK(errors[2] < 1e-3);
+}
+
+TEMPLATE_TEST_CASE_SIG(
+    "density_diagonal_in_place over ~1e5 faces (the faces near a ball of densities found and "
+    "sorted on several threads): identical with 1, 2, 3 and 5 threads",
+    "[density]", ((int Dim), Dim), 2, 3) {
+  const int n = Dim == 2 ? 200 : 40;
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  std::mt19937 rng(5 + Dim);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  // densities on most faces inside a ball (its surface's faces without one: the near list)
+  VectorX rho = VectorX::Zero(grid.num_faces());
+  std::array<VecI<Dim>, Dim> lo, hi;
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = grid.face_dims(a);
+    hi[a] = -VecI<Dim>::Ones();
+  }
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    const auto [axis, coord] = grid.face_coord(f);
+    if ((grid.face_center(axis, coord) - Vec<Dim>::Constant(0.5)).norm() < 0.35 && u(rng) < 0.9) {
+      rho[f] = 500.0 + 1000.0 * u(rng);
+      lo[axis] = lo[axis].cwiseMin(coord);
+      hi[axis] = hi[axis].cwiseMax(coord);
+    }
+  }
+  long box_faces = 0;
+  for (int a = 0; a < Dim; ++a) box_faces += (hi[a] - lo[a] + VecI<Dim>::Ones()).prod();
+  REQUIRE(box_faces > kParallelMinWork);
+  // the team exactly t threads (the core monitor would take fewer on a busy machine)
+  const bool monitor = core_monitor();
+  set_core_monitor(false);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  VectorX one = rho, one_boxed = rho;
+  density_diagonal_in_place(grid, one, 777.0);
+  density_diagonal_in_place<Dim>(grid, one_boxed, 777.0, lo, hi);
+  CHECK(differing(one_boxed, one) == 0);
+  for (int t : {2, 3, 5}) {
+    INFO(t << " threads");
+    omp_set_num_threads(t);
+    VectorX other = rho, other_boxed = rho;
+    density_diagonal_in_place(grid, other, 777.0);
+    density_diagonal_in_place<Dim>(grid, other_boxed, 777.0, lo, hi);
+    omp_set_num_threads(threads);
+    CHECK(differing(other, one) == 0);
+    CHECK(differing(other_boxed, one) == 0);
+  }
+  set_core_monitor(monitor);
 }
 
 TEMPLATE_TEST_CASE_SIG(

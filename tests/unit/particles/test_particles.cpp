@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 
+#include "reference/core/parallel.hpp"
 #include "reference/fluid/viscosity_field.hpp"
 #include "reference/grid/stress_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -1000,6 +1001,101 @@ TEST_CASE("density projection: identical with 1, 2, 3 and 5 threads", "[unit]") 
   check_projection_deterministic<3>(false);
   check_projection_deterministic<2>(true);
   check_projection_deterministic<3>(true);
+}
+
+namespace {
+
+/// A ball of two liquids (x < 0.5: liquid 0), ~10 particles per cell at random positions with
+/// unequal masses: in 3D on 24^3 cells about 2e4 particles, more than kParallelMinWork, so the
+/// splats below leave their serial fall-backs.
+template <int Dim>
+Particles<Dim> two_liquid_ball(const MacGrid<Dim>& grid, int per_cell) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Particles<Dim> p;
+  const double r = 0.35;
+  const int want = static_cast<int>(per_cell * (Dim == 2 ? 3.14159 * r * r : 4.18879 * r * r * r) /
+                                    grid.cell_volume());
+  while (static_cast<int>(p.size()) < want) {
+    Vec<Dim> x;
+    for (int a = 0; a < Dim; ++a) x[a] = 0.15 + 0.7 * u(rng);
+    if ((x - Vec<Dim>::Constant(0.5)).norm() > r) continue;
+    p.x.push_back(x);
+    p.v.push_back(Vec<Dim>::Zero());
+    p.c.push_back(Mat<Dim>::Zero());
+    p.mass.push_back((0.8 + 0.4 * u(rng)) * 1000.0 * grid.cell_volume() / per_cell);
+    p.density.push_back(1000.0);
+    p.liquid.push_back(x[0] < 0.5 ? 0 : 1);
+  }
+  return p;
+}
+
+template <int Dim>
+void check_splats_deterministic_above_serial_fallback() {
+  const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 160 : 24);
+  const Particles<Dim> start = two_liquid_ball<Dim>(grid, Dim == 2 ? 4 : 10);
+  INFO("dim " << Dim << ", " << start.size() << " particles");
+  REQUIRE(static_cast<long>(start.size()) > kParallelMinWork);
+  const StressGrid<Dim> stress(grid);
+  const std::vector<double> eta = {2.0, 8.0};
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const VectorX fluid = open_fluid_faces(grid);
+  const SolidField<Dim> solid = solid_ball<Dim>(Vec<Dim>::Constant(0.88), 0.1);
+  // the team exactly t threads (the core monitor would take fewer on a busy machine, and the
+  // parallel paths would not run)
+  const bool monitor = core_monitor();
+  set_core_monitor(false);
+  const int threads = omp_get_max_threads();
+  struct Result {
+    VectorX cells, dofs, phi;
+    Particles<Dim> moved, moved_by_solid;
+  };
+  const auto run = [&](int t) {
+    omp_set_num_threads(t);
+    Result r;
+    r.cells = cell_viscosity(grid, start, eta);
+    r.dofs = stress_viscosity(stress, start, eta);
+    r.phi = liquid_phi_on_lattice(start, grid, lattice, walls<Dim>());
+    r.moved = start;
+    project_particle_density(r.moved, grid, lattice, fluid, SolidField<Dim>{}, walls<Dim>(), 1);
+    r.moved_by_solid = start;
+    project_particle_density(r.moved_by_solid, grid, lattice, fluid, solid, walls<Dim>(), 1);
+    omp_set_num_threads(threads);
+    return r;
+  };
+  const Result one = run(1);
+  // the cells' splat is the diagonal stress components' (stress_viscosity makes it once)
+  for (int k = 0; k < Dim; ++k) {
+    INFO("diagonal component " << k);
+    CHECK(differing(VectorX(one.dofs.segment(stress.offset(k), stress.num_dofs(k))), one.cells) == 0);
+  }
+  // two liquids: the field is not constant (a constant would hide a wrong order of the sums)
+  CHECK(one.cells.maxCoeff() > one.cells.minCoeff());
+  for (int t : {2, 3, 5}) {
+    INFO(t << " threads");
+    const Result other = run(t);
+    CHECK(differing(other.cells, one.cells) == 0);
+    CHECK(differing(other.dofs, one.dofs) == 0);
+    CHECK(differing(other.phi, one.phi) == 0);
+    long moved = 0, differ = 0;
+    for (std::size_t i = 0; i < start.size(); ++i) {
+      moved += one.moved.x[i] != start.x[i];
+      differ += other.moved.x[i] != one.moved.x[i];
+      differ += other.moved_by_solid.x[i] != one.moved_by_solid.x[i];
+    }
+    CHECK(moved > 0);
+    CHECK(differ == 0);
+  }
+  set_core_monitor(monitor);
+}
+
+}  // namespace
+
+TEST_CASE("viscosity, level set and density projection splats of ~2e4 particles: identical with "
+          "1, 2, 3 and 5 threads; the cells' viscosity is the diagonal stress components'",
+          "[unit]") {
+  check_splats_deterministic_above_serial_fallback<2>();
+  check_splats_deterministic_above_serial_fallback<3>();
 }
 
 TEST_CASE("density projection: the same moves after a shift across the band's tiles",
