@@ -193,8 +193,8 @@ void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& l
 /// the bound of MonolithicSystem::rhs_round_off without bodies (docs/derivations.md, "The
 /// coupling schemes of section 6", item 4; docs/preconditioners.md sections 26 and 33). A liquid
 /// in free fall (uniform u* plus gravity) has b = 0 in exact arithmetic; what remains is the
-/// last bits of u* and of the sums (measured 0.3-0.6 (2 Dim / dx) U eps on
-/// viscous-bunny-into-sphere-3d's falling steps). Passed as PcgSettings::zero_rhs: such a b
+/// last bits of u* and of the sums (measured 0.64-1.06 (2 Dim / dx) U eps on
+/// viscous-bunny-into-sphere-3d's falling steps, 2-4). Passed as PcgSettings::zero_rhs: such a b
 /// gives x = 0 after no iteration. One formula from the inputs: the same on both back ends.
 template <int Dim>
 double liquid_rhs_round_off(const MacGrid<Dim>& grid, const VectorX& fluid_face,
