@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -623,6 +624,19 @@ void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& l
 }
 
 template <int Dim>
+double liquid_rhs_round_off(const MacGrid<Dim>& grid, const VectorX& fluid_face,
+                            const VectorX& u_star, const VectorX* divergence_source) {
+  constexpr double kUlps = 16.0;
+  constexpr double kEpsilon = std::numeric_limits<double>::epsilon();  // 2^-52
+  double speed = 0.0;
+  const int n = static_cast<int>(std::min(fluid_face.size(), u_star.size()));
+  for (int f = 0; f < n; ++f) speed = std::max(speed, std::abs(fluid_face[f] * u_star[f]));
+  double source = 0.0;
+  if (divergence_source && divergence_source->size() > 0) source = divergence_source->cwiseAbs().maxCoeff();
+  return kUlps * kEpsilon * ((2.0 * Dim / grid.dx()) * speed + source);
+}
+
+template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
                                    Backend backend, const PcgSettings& settings,
                                    VectorX& u, PreconditionerKind preconditioner,
@@ -675,7 +689,9 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
                                          const VectorX&, VectorX&);                              \
   template PressureSolveResult solve_pressure<D>(const MacGrid<D>&, const PressureWeights&,      \
                                                  double, Backend, const PcgSettings&, \
-                                                 VectorX&, PreconditionerKind, const VectorX*);
+                                                 VectorX&, PreconditionerKind, const VectorX*); \
+  template double liquid_rhs_round_off<D>(const MacGrid<D>&, const VectorX&, const VectorX&,     \
+                                          const VectorX*);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

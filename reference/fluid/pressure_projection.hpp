@@ -185,4 +185,19 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
 void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& liquid_cell,
                            const VectorX* divergence_source, int offset, VectorX& b);
 
+/// The round-off level N of a liquid-only right-hand side b = B^T W_F^u u* (+ W_L^p d): the
+/// pressure rows W_L^p G^T W_F^u u* (eq. (8), solve_pressure) and the stress rows W_L^s M D
+/// W_F^u u* (eq. (8), solve_stokes), each a sum of at most about 2 x 2 Dim terms of size at most
+/// (2 Dim / dx) U with U = max_f |W_F^u_f u*_f|, so
+///     N = 16 eps ((2 Dim / dx) U + max |d|)     (d: the target divergence, 1/s; nullptr: none),
+/// the bound of MonolithicSystem::rhs_round_off without bodies (docs/derivations.md, "The
+/// coupling schemes of section 6", item 4; docs/preconditioners.md sections 26 and 33). A liquid
+/// in free fall (uniform u* plus gravity) has b = 0 in exact arithmetic; what remains is the
+/// last bits of u* and of the sums (measured 0.64-1.06 (2 Dim / dx) U eps on
+/// viscous-bunny-into-sphere-3d's falling steps, 2-4). Passed as PcgSettings::zero_rhs: such a b
+/// gives x = 0 after no iteration. One formula from the inputs: the same on both back ends.
+template <int Dim>
+double liquid_rhs_round_off(const MacGrid<Dim>& grid, const VectorX& fluid_face,
+                            const VectorX& u_star, const VectorX* divergence_source);
+
 }  // namespace monolith

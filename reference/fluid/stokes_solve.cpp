@@ -4,6 +4,7 @@
 /// paper's SSOR or the block multigrid preconditioner (stokes_preconditioner.hpp) and an optional
 /// initial guess (warm start).
 
+#include <algorithm>
 #include <memory>
 #include <optional>
 
@@ -61,8 +62,13 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   }
   add_divergence_source(dofs.pressure.cell_of_dof, w.pressure.liquid_cell,
                         options.divergence_source, dofs.num_stress(), b);
+  // a right-hand side at its own round-off (a liquid in free fall) is zero: x = 0, no
+  // iteration, no preconditioner set-up (liquid_rhs_round_off; docs/preconditioners.md section 33)
+  PcgSettings pcg = settings;
+  pcg.zero_rhs = std::max(pcg.zero_rhs, liquid_rhs_round_off(grid, w.pressure.fluid_face, u,
+                                                             options.divergence_source));
   if (options.preconditioner == PreconditionerKind::ssor || dofs.size() == 0) {
-    result.pcg = pcg_solve(*op, b, x, settings);
+    result.pcg = pcg_solve(*op, b, x, pcg);
   } else {
     // built on the first PCG iteration only: a step whose right-hand side vanishes (a liquid at
     // rest under uniform gravity) or whose warm start already converges skips the set-up
@@ -75,10 +81,10 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
                                              static_cast<const MatrixFreeStokesOperator<Dim>&>(a), floor);
       return std::make_unique<StokesPreconditioner<Dim>>(grid, a, std::move(f), mg);
     });
-    PcgSettings attempt = settings;
+    PcgSettings attempt = pcg;
     VectorX start;
     if (options.fallback_to_ssor) {
-      attempt.max_iterations = multigrid_attempt_budget(settings.max_iterations);
+      attempt.max_iterations = multigrid_attempt_budget(pcg.max_iterations);
       attempt.stagnation = attempt_stagnation_rule();
       start = x;
     }
@@ -88,7 +94,7 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
       // the start if the attempt broke down (its iterate may not be finite)
       if (result.pcg.breakdown) x = start;
       const int spent = result.pcg.iterations;
-      result.pcg = pcg_solve(*op, b, x, settings);
+      result.pcg = pcg_solve(*op, b, x, pcg);
       result.pcg.iterations += spent;
       result.fell_back = true;
     }

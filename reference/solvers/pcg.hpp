@@ -47,7 +47,7 @@ struct PcgSettings {
   StagnationRule stagnation;  ///< early exit (unconverged, `stagnated`); off by default
   /// A right-hand side with ||b||_inf at or below this is zero to working precision: x = 0,
   /// converged after no iteration (relative_residual 0), as for b = 0. For a caller that knows
-  /// the round-off level of its b (the coupled fluid solves: MonolithicSystem::rhs_round_off);
+  /// the round-off level of its b (MonolithicSystem::rhs_round_off, liquid_rhs_round_off);
   /// 0 (default): only an exact zero.
   double zero_rhs = 0.0;
 };

@@ -618,3 +618,75 @@ TEMPLATE_TEST_CASE_SIG("a divergence source in the Stokes solve: eta = 0 gives s
     CHECK(rel_diff(u_plain, u_pressure) > 1e-3);  // the source changed the velocity
   }
 }
+
+TEMPLATE_TEST_CASE_SIG("a liquid in free fall: its unified solve takes no iteration on either back end",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // docs/preconditioners.md section 33: a ball of very viscous liquid away from every wall,
+  // u* uniform up to two ulps per face (the particle transfer's round-off): b = B^T W_F^u u* is
+  // zero in exact arithmetic and its round-off differs between the back ends. The relative
+  // stopping rule solved that noise to 1e-6 of itself (8-9 block-PCG iterations and a set-up per
+  // step on viscous-bunny-into-sphere-3d while the bunny falls). At or below
+  // liquid_rhs_round_off it is zero: x = 0 without an iteration, u* kept bit for bit.
+  const int n = Dim == 2 ? 24 : 12;
+  const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), std::array<bool, Dim>{});
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  std::array<BoundaryType, 2 * Dim> boundary;
+  boundary.fill(BoundaryType::wall);
+  const VectorX solid_phi = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
+  VectorX liquid_phi(lattice.size());
+  for (int k = 0; k < lattice.size(); ++k)
+    liquid_phi[k] = (lattice.position(lattice.coord(k)) - Vec<Dim>::Constant(0.5)).norm() - 0.3;
+  const StokesWeights w = stokes_weights(grid, solid_phi, liquid_phi, boundary, 1000.0, 5000.0);
+  const double dt = 0.01;
+  // u*: (1.5, -0.7981[, 0.3]) m/s, each face moved by -2..2 ulps
+  const VectorX r = random_vector(grid.num_faces(), 11);  // in [-1, 1]
+  VectorX flight(grid.num_faces());
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    const int axis = grid.face_coord(f).first;
+    flight[f] = axis == 0 ? 1.5 : axis == 1 ? -0.7981 : 0.3;
+    const int ulps = static_cast<int>(std::floor(2.5 * r[f]));
+    for (int k = 0; k < std::abs(ulps); ++k) flight[f] = std::nextafter(flight[f], ulps > 0 ? 10.0 : -10.0);
+  }
+  const double level = liquid_rhs_round_off(grid, w.pressure.fluid_face, flight, nullptr);
+  const StressLayout<Dim> layout(StressGrid<Dim>(grid), StressForm::reduced);
+  const StokesDofs dofs = select_stokes_dofs(grid, layout, w, dt, StokesUnknowns::pressure_and_stress);
+  REQUIRE(dofs.num_stress() > 0);
+  REQUIRE(dofs.num_pressure() > 0);
+  const double be = assemble_explicit_stokes(grid, layout, w, dofs, dt, flight).b.cwiseAbs().maxCoeff();
+  const double bm = MatrixFreeStokesOperator<Dim>(grid, layout, w, dofs, dt).rhs(flight).cwiseAbs().maxCoeff();
+  std::printf("free fall %dD: ||b|| explicit %.2e, matrixfree %.2e, round-off level %.2e\n", Dim, be,
+              bm, level);
+  // the noise case: b is not exactly zero, and below the level on both back ends
+  CHECK(std::max(be, bm) > 0.0);
+  CHECK(be <= level);
+  CHECK(bm <= level);
+  PcgSettings settings;  // tolerance 1e-6, as in the scenes
+  for (const PreconditionerKind kind : {PreconditionerKind::multigrid, PreconditionerKind::ssor}) {
+    std::vector<VectorX> us;
+    for (const Backend backend : {Backend::explicit_matrices, Backend::matrix_free}) {
+      StokesSolveOptions options;
+      options.preconditioner = kind;
+      VectorX u = flight;
+      const StokesSolveResult s = solve_stokes(grid, w, dt, StokesUnknowns::pressure_and_stress,
+                                               StressForm::reduced, backend, settings, u, options);
+      INFO(enum_name(kind) << " " << enum_name(backend));
+      CHECK(s.pcg.converged);
+      CHECK(s.pcg.iterations == 0);
+      CHECK(s.pressure.cwiseAbs().maxCoeff() == 0.0);
+      CHECK(s.stress.cwiseAbs().maxCoeff() == 0.0);
+      us.push_back(u);
+    }
+    CHECK((us[0].array() == us[1].array()).all());
+  }
+  // a real right-hand side (a random u*) lies far above the level and is solved
+  const VectorX real = random_vector(grid.num_faces(), 12);
+  const double real_level = liquid_rhs_round_off(grid, w.pressure.fluid_face, real, nullptr);
+  VectorX u = real;
+  StokesSolveOptions options;
+  options.preconditioner = PreconditionerKind::multigrid;
+  const StokesSolveResult s = solve_stokes(grid, w, dt, StokesUnknowns::pressure_and_stress,
+                                           StressForm::reduced, Backend::matrix_free, settings, u, options);
+  CHECK(MatrixFreeStokesOperator<Dim>(grid, layout, w, dofs, dt).rhs(real).cwiseAbs().maxCoeff() >= 1e6 * real_level);
+  CHECK(s.pcg.converged);
+  CHECK(s.pcg.iterations > 0);
+}
