@@ -441,8 +441,20 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
           rest /= fields_[field].dims[a];
         }
         for (const Term& t : terms_[field]) {
-          const int start = row_start<Dim>(fields_[t.field], c, t.axis, t.delta, periodic_);
-          if (start >= 0) read[t.field][(start - fields_[t.field].offset) / fields_[t.field].dims[0]] = 1;
+          // the input row of the term (stencil_rows: shifted along axes 1.., wrapped on
+          // periodic axes, or outside)
+          const VecI<Dim>& dims = fields_[t.field].dims;
+          int row = 0;
+          bool inside = true;
+          for (int a = Dim - 1; a >= 1 && inside; --a) {
+            int v = c[a] + (t.axis == a ? t.delta : 0);
+            if (v < 0 || v >= dims[a]) {
+              inside = periodic_[a];
+              v = ((v % dims[a]) + dims[a]) % dims[a];
+            }
+            row = row * dims[a] + v;
+          }
+          if (inside) read[t.field][row] = 1;
         }
       }
     for (int a = 0; a < Dim; ++a)
@@ -876,13 +888,25 @@ void MatrixFreeStokesOperator<Dim>::updated_velocities_into(const VectorX& x,
   // into u's storage; then per face row the update (u* - dt force / (rho W_L^u) on the updated
   // faces, u* on the others: the expression of apply_stokes_update) or a copy of u*'s row
   if (u.size() != num_faces_) u.resize(num_faces_);
+  const PressureWeights& pw = *pressure_weights_;
+  if (stokes_operator_every_face_row()) {
+    // (the test switch: B x on every face, then the update per face)
+    face_force_into(x, u.data());
+#pragma omp parallel for schedule(static) num_threads(team_threads(num_faces_))
+    for (int f = 0; f < num_faces_; ++f) {
+      if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0))
+        u[f] = u_star[f];
+      else
+        u[f] = u_star[f] - dt * u[f] / (pw.face_density[f] * pw.liquid_face[f]);
+    }
+    return;
+  }
   double* s = stress_scratch_.data();
   double* q = cell_scratch_.data();
   double* force = u.data();
   std::array<const double*, kFields> data{};
   for (int k = 0; k < kComponents; ++k) data[Dim + k] = s;
   data[kCellField] = q;
-  const PressureWeights& pw = *pressure_weights_;
 #pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
   {
     scatter(x, s, q);
@@ -911,6 +935,11 @@ void MatrixFreeStokesOperator<Dim>::updated_velocities_into(const VectorX& x,
       }
     }
   }
+}
+
+bool& stokes_operator_every_face_row() {
+  static bool every = false;
+  return every;
 }
 
 template <int Dim>
@@ -964,14 +993,18 @@ VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
   // rows keep their zeros; issue 20)
   const double* wf = fluid_face_->data();
   const double* u = u_star.data();
+  const bool every = stokes_operator_every_face_row();
   std::array<int, Dim + 1> first_row{};
   for (int a = 0; a < Dim; ++a)
-    first_row[a + 1] = first_row[a] + static_cast<int>(read_face_rows_[a].size());
+    first_row[a + 1] =
+        first_row[a] + (every ? fields_[a].dims.prod() / std::max(fields_[a].dims[0], 1)
+                              : static_cast<int>(read_face_rows_[a].size()));
   auto face_row = [&](int m, int& begin, int& end) {
     int a = 0;
     while (m >= first_row[a + 1]) ++a;
     const int n0 = fields_[a].dims[0];
-    begin = fields_[a].offset + read_face_rows_[a][m - first_row[a]] * n0;
+    const int r = every ? m - first_row[a] : read_face_rows_[a][m - first_row[a]];
+    begin = fields_[a].offset + r * n0;
     end = begin + n0;
   };
   const int read_rows = first_row[Dim];

@@ -133,6 +133,11 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 /// vectors are sized at construction: apply and the sweeps allocate nothing, and one operator
 /// must not run two of them at once from different threads. The operator keeps a reference to
 /// the weights it is built with (W_F^u, read by rhs): they must outlive it.
+/// Test switch (issue 20): MatrixFreeStokesOperator::rhs writes W_F^u u* on every face row and
+/// updated_velocities_into computes B x on every face, as before the rows were restricted
+/// (tests/unit/fluid/test_stokes.cpp compares both bit for bit). Off by default.
+bool& stokes_operator_every_face_row();
+
 template <int Dim>
 class MatrixFreeStokesOperator : public LinearOperator {
  public:
