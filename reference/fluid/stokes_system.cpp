@@ -463,7 +463,19 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   }
   if (num_stress_ > 0) stress_scratch_.setZero(num_stress_dofs_);
   cell_scratch_.setZero(num_cells_);
-  face_scratch_.setZero(num_faces_);
+  // the face scratch: zero on the rows any pass reads or writes (the active rows: apply's
+  // faces_from_grid and the sweeps, which touch only faces with C_f != 0; the rows
+  // grid_from_faces reads: apply and rhs), never touched elsewhere (uninitialised: a fresh
+  // allocation's pages there are not even mapped; issue 20, 200 MB at Fig. 2's paper grid)
+  face_scratch_.resize(num_faces_);
+  for (int a = 0; a < Dim; ++a) {
+    const Field& f = fields_[a];
+    const int n0 = f.dims[0];
+    for (const std::vector<int>* rows : {&active_rows_[a], &read_face_rows_[a]})
+      for (int r : *rows)
+        std::fill(face_scratch_.data() + f.offset + static_cast<std::ptrdiff_t>(r) * n0,
+                  face_scratch_.data() + f.offset + static_cast<std::ptrdiff_t>(r + 1) * n0, 0.0);
+  }
 }
 
 template <int Dim>
@@ -793,9 +805,10 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
   bool zero = !force_current;
   for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
   // (only the active face rows: the sweeps read and write the force only at faces with
-  // C_f != 0, which lie in them, and the other rows of the scratch are zero at all times (made
-  // zero with it, written by no pass but rhs, which zeroes every face again): the same scratch
-  // as a fill of every face, without a pass over the grid's faces per SSOR application)
+  // C_f != 0, which lie in them; the rows grid_from_faces reads besides are zero at all times
+  // (made zero with the scratch, written by no pass but rhs, which zeroes them again), and no
+  // pass reads the others: the same values as a fill of every face, without a pass over the
+  // grid's faces per SSOR application)
   if (zero) zero_active_face_rows(force);
   const bool recompute = !zero && !force_current;
   // the whole sweep in one parallel region (one fork and join per sweep, a barrier per colour
