@@ -614,17 +614,9 @@ void MonolithicSystem<Dim>::fluid_velocities_into(const VectorX& x_fluid, Vector
   // the face force B x = G W_L^p p + D^T M W_L^s tau by the stencils, written into u's own
   // storage (no face-sized temporary), then per face the update of apply_stokes_update on faces
   // with W_F^u W_L^u > 0 (u* - dt force / (rho W_L^u), the same expression) and u* elsewhere
-  if (u.size() != grid_.num_faces()) u.resize(grid_.num_faces());
-  matrix_free_stokes_->face_force_into(x_fluid, u.data());
-  const PressureWeights& pw = w_.pressure;
-  const VectorX& u_star = u_star_;
-#pragma omp parallel for schedule(static) num_threads(team_threads(grid_.num_faces()))
-  for (int f = 0; f < grid_.num_faces(); ++f) {
-    if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0))
-      u[f] = u_star[f];
-    else
-      u[f] = u_star[f] - dt_ * u[f] / (pw.face_density[f] * pw.liquid_face[f]);
-  }
+  // (the operator was built with w_; it computes the force only on the face rows holding an
+  // updated face and copies u* elsewhere: issue 20)
+  matrix_free_stokes_->updated_velocities_into(x_fluid, u_star_, dt_, u);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -23,15 +23,18 @@ constexpr Eigen::Index kParallelMin = kParallelMinWork;
 // (W_L^u)^-1 entries are reciprocal_or_zero: 0 where W_L^u = 0 (such faces have no liquid cell
 // beside them, so the matching row of G W_L^p is zero anyway).
 
-/// Per-face coefficient dt W_F^u P^-1 (W_L^u)^-1 / dx^2 of the stencil form of A.
+/// Coefficient dt W_F^u P^-1 (W_L^u)^-1 / dx^2 of face f in the stencil form of A.
+inline double face_coefficient(const PressureWeights& w, int f, double dt, double dx) {
+  const double wf = w.fluid_face[f];
+  return wf > 0.0 && w.face_density[f] > 0.0
+             ? dt * wf * reciprocal_or_zero(w.liquid_face[f]) / (w.face_density[f] * dx * dx)
+             : 0.0;
+}
+
+/// face_coefficient of every face.
 VectorX face_coefficients(const PressureWeights& w, double dt, double dx) {
   VectorX k(w.fluid_face.size());
-  for (int f = 0; f < k.size(); ++f) {
-    const double wf = w.fluid_face[f];
-    k[f] = wf > 0.0 && w.face_density[f] > 0.0
-               ? dt * wf * reciprocal_or_zero(w.liquid_face[f]) / (w.face_density[f] * dx * dx)
-               : 0.0;
-  }
+  for (int f = 0; f < k.size(); ++f) k[f] = face_coefficient(w, f, dt, dx);
   return k;
 }
 
@@ -230,7 +233,9 @@ PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeight
     dofs.cell_of_dof.push_back(c);
   }
   // connected groups over weighted faces; a group is closed if no weighted face leaves it
-  const VectorX k = face_coefficients(w, dt, grid.dx());
+  // (the faces' coefficients computed where the search reads them, the faces of the DOFs'
+  // cells: no pass over every face of the grid, issue 20)
+  const double dx = grid.dx();
   const int n = dofs.size();
   std::vector<int> group(n, -1);
   std::vector<int> stack;
@@ -248,7 +253,7 @@ PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeight
       const int cell = dofs.cell_of_dof[i];
       const auto cf = cell_faces<Dim>(grid, cell);
       for (int j = 0; j < 2 * Dim; ++j) {
-        if (!(k[cf.face[j]] > 0.0) || cf.other[j] == cell) continue;
+        if (!(face_coefficient(w, cf.face[j], dt, dx) > 0.0) || cf.other[j] == cell) continue;
         const int other = cf.other[j] >= 0 ? dofs.dof_of_cell[cf.other[j]] : -1;
         if (other < 0) {
           closed = false;  // pressure is pinned to zero across this face (air, open boundary)

@@ -15,14 +15,18 @@ namespace monolith {
 
 namespace {
 
-/// C_f = dt W_F^u P^-1 (W_L^u)^-1 per face (0 where the face carries no fluid, liquid or density).
-VectorX stokes_face_coefficients(const PressureWeights& w, double dt) {
-  VectorX c(w.fluid_face.size());
-  for (int f = 0; f < c.size(); ++f)
-    c[f] = w.fluid_face[f] > 0.0 && w.face_density[f] > 0.0
-               ? dt * w.fluid_face[f] * reciprocal_or_zero(w.liquid_face[f]) / w.face_density[f]
-               : 0.0;
-  return c;
+/// C_f = dt W_F^u P^-1 (W_L^u)^-1 of face f (0 where the face carries no fluid, liquid or
+/// density).
+inline double stokes_face_coefficient(const PressureWeights& w, int f, double dt) {
+  return w.fluid_face[f] > 0.0 && w.face_density[f] > 0.0
+             ? dt * w.fluid_face[f] * reciprocal_or_zero(w.liquid_face[f]) / w.face_density[f]
+             : 0.0;
+}
+
+/// Whether MonolithicSystem::fluid_velocities_into updates face f (W_F^u W_L^u > 0 and a
+/// density; u* elsewhere): the same test as there.
+inline bool stokes_face_updated(const PressureWeights& w, int f) {
+  return w.fluid_face[f] * w.liquid_face[f] > 0.0 && w.face_density[f] > 0.0;
 }
 
 /// The StressGrid DOFs a layout unknown expands into, with the entries of E (+1, and -1 on the
@@ -278,8 +282,8 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       num_stress_dofs_(layout.grid().num_dofs()),
       num_cells_(grid.num_cells()),
       has_pressure_(dofs.num_pressure() > 0),
-      face_coefficient_(stokes_face_coefficients(w.pressure, dt)),
       fluid_face_(&w.pressure.fluid_face),
+      pressure_weights_(&w.pressure),
       null_space_(dofs.null_space) {
   const StressGrid<Dim>& stress = layout.grid();
   const double inv_dx = 1.0 / grid.dx();
@@ -287,6 +291,32 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   for (int a = 0; a < Dim; ++a) fields_[a] = {grid.face_offset(a), grid.face_dims(a)};
   for (int k = 0; k < kComponents; ++k) fields_[Dim + k] = {stress.offset(k), stress.dims(k)};
   fields_[kCellField] = {0, grid.cells()};
+  // C_f per face, face row by face row on several threads (each row one writer, the same value
+  // per face), with per row whether some C_f != 0 (the face rows the loops visit, below) and
+  // whether some face is updated by the velocity update (updated_rows_): one pass over the
+  // faces instead of a serial one and a second read of C (issue 20)
+  face_coefficient_.resize(num_faces_);
+  std::array<std::vector<char>, Dim> face_row_used;
+  for (int a = 0; a < Dim; ++a) {
+    const Field& f = fields_[a];
+    const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
+    face_row_used[a].assign(rows, 0);
+    std::vector<char> updated(rows, 0);
+#pragma omp parallel for schedule(static) num_threads(team_threads(f.dims.prod()))
+    for (int r = 0; r < rows; ++r) {
+      bool used = false, update = false;
+      for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0; ++e) {
+        const double c = stokes_face_coefficient(w.pressure, e, dt);
+        face_coefficient_[e] = c;
+        used = used || c != 0.0;
+        update = update || stokes_face_updated(w.pressure, e);
+      }
+      face_row_used[a][r] = used;
+      updated[r] = update;
+    }
+    for (int r = 0; r < rows; ++r)
+      if (updated[r]) updated_rows_[a].push_back(r);
+  }
   for (int j = 0; j < layout.num_components(); ++j) layout_field_.push_back(Dim + layout.component(j));
   // B^T per grid DOF: the rows of D (eq. (8)) and of G^T, +-1/dx on faces around the DOF
   for (int k = 0; k < kComponents; ++k) {
@@ -376,11 +406,9 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     const Field& f = fields_[field];
     const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
     for (int r = 0; r < rows; ++r) {
-      bool used = false;
-      for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0 && !used; ++e) {
-        if (field < Dim) {
-          used = face_coefficient_[e] != 0.0;
-        } else if (field == kCellField) {
+      bool used = field < Dim && face_row_used[field][r];
+      for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0 && !used && field >= Dim; ++e) {
+        if (field == kCellField) {
           used = unknown_of_cell_[e] >= 0;
         } else if (field - Dim == eliminated_) {
           // the eliminated DOF of a cell with a diagonal unknown
@@ -395,9 +423,59 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   }
   for (int field = 0; field < kFields; ++field)
     active_work_ += static_cast<long>(active_rows_[field].size()) * fields_[field].dims[0];
+  // the face rows grid_from_faces reads: the input rows of the stencils of the stress and cell
+  // rows it visits (stencil_rows' row arithmetic), for rhs
+  {
+    std::array<std::vector<char>, Dim> read;
+    for (int a = 0; a < Dim; ++a)
+      read[a].assign(fields_[a].dims.prod() / std::max(fields_[a].dims[0], 1), 0);
+    std::vector<int> visited(layout_field_);
+    if (eliminated_ >= 0) visited.push_back(Dim + eliminated_);
+    if (has_pressure_) visited.push_back(kCellField);
+    for (int field : visited)
+      for (int r : active_rows_[field]) {
+        VecI<Dim> c = VecI<Dim>::Zero();
+        int rest = r;
+        for (int a = 1; a < Dim; ++a) {
+          c[a] = rest % fields_[field].dims[a];
+          rest /= fields_[field].dims[a];
+        }
+        for (const Term& t : terms_[field]) {
+          // the input row of the term (stencil_rows: shifted along axes 1.., wrapped on
+          // periodic axes, or outside)
+          const VecI<Dim>& dims = fields_[t.field].dims;
+          int row = 0;
+          bool inside = true;
+          for (int a = Dim - 1; a >= 1 && inside; --a) {
+            int v = c[a] + (t.axis == a ? t.delta : 0);
+            if (v < 0 || v >= dims[a]) {
+              inside = periodic_[a];
+              v = ((v % dims[a]) + dims[a]) % dims[a];
+            }
+            row = row * dims[a] + v;
+          }
+          if (inside) read[t.field][row] = 1;
+        }
+      }
+    for (int a = 0; a < Dim; ++a)
+      for (int r = 0; r < static_cast<int>(read[a].size()); ++r)
+        if (read[a][r]) read_face_rows_[a].push_back(r);
+  }
   if (num_stress_ > 0) stress_scratch_.setZero(num_stress_dofs_);
   cell_scratch_.setZero(num_cells_);
-  face_scratch_.setZero(num_faces_);
+  // the face scratch: zero on the rows any pass reads or writes (the active rows: apply's
+  // faces_from_grid and the sweeps, which touch only faces with C_f != 0; the rows
+  // grid_from_faces reads: apply and rhs), never touched elsewhere (uninitialised: a fresh
+  // allocation's pages there are not even mapped; issue 20, 200 MB at Fig. 2's paper grid)
+  face_scratch_.resize(num_faces_);
+  for (int a = 0; a < Dim; ++a) {
+    const Field& f = fields_[a];
+    const int n0 = f.dims[0];
+    for (const std::vector<int>* rows : {&active_rows_[a], &read_face_rows_[a]})
+      for (int r : *rows)
+        std::fill(face_scratch_.data() + f.offset + static_cast<std::ptrdiff_t>(r) * n0,
+                  face_scratch_.data() + f.offset + static_cast<std::ptrdiff_t>(r + 1) * n0, 0.0);
+  }
 }
 
 template <int Dim>
@@ -727,9 +805,10 @@ void MatrixFreeStokesOperator<Dim>::sweep(bool reverse, const VectorX& rhs, Vect
   bool zero = !force_current;
   for (int i = 0; i < size_ && zero; ++i) zero = x[i] == 0.0;
   // (only the active face rows: the sweeps read and write the force only at faces with
-  // C_f != 0, which lie in them, and the other rows of the scratch are zero at all times (made
-  // zero with it, written by no pass but rhs, which zeroes every face again): the same scratch
-  // as a fill of every face, without a pass over the grid's faces per SSOR application)
+  // C_f != 0, which lie in them; the rows grid_from_faces reads besides are zero at all times
+  // (made zero with the scratch, written by no pass but rhs, which zeroes them again), and no
+  // pass reads the others: the same values as a fill of every face, without a pass over the
+  // grid's faces per SSOR application)
   if (zero) zero_active_face_rows(force);
   const bool recompute = !zero && !force_current;
   // the whole sweep in one parallel region (one fork and join per sweep, a barrier per colour
@@ -815,6 +894,68 @@ void MatrixFreeStokesOperator<Dim>::face_force_into(const VectorX& x, double* fo
 }
 
 template <int Dim>
+void MatrixFreeStokesOperator<Dim>::updated_velocities_into(const VectorX& x,
+                                                            const VectorX& u_star, double dt,
+                                                            VectorX& u) const {
+  // B x on the face rows with an updated face only (the force is read nowhere else), written
+  // into u's storage; then per face row the update (u* - dt force / (rho W_L^u) on the updated
+  // faces, u* on the others: the expression of apply_stokes_update) or a copy of u*'s row
+  if (u.size() != num_faces_) u.resize(num_faces_);
+  const PressureWeights& pw = *pressure_weights_;
+  if (stokes_operator_every_face_row()) {
+    // (the test switch: B x on every face, then the update per face)
+    face_force_into(x, u.data());
+#pragma omp parallel for schedule(static) num_threads(team_threads(num_faces_))
+    for (int f = 0; f < num_faces_; ++f) {
+      if (!(pw.fluid_face[f] * pw.liquid_face[f] > 0.0) || !(pw.face_density[f] > 0.0))
+        u[f] = u_star[f];
+      else
+        u[f] = u_star[f] - dt * u[f] / (pw.face_density[f] * pw.liquid_face[f]);
+    }
+    return;
+  }
+  double* s = stress_scratch_.data();
+  double* q = cell_scratch_.data();
+  double* force = u.data();
+  std::array<const double*, kFields> data{};
+  for (int k = 0; k < kComponents; ++k) data[Dim + k] = s;
+  data[kCellField] = q;
+#pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
+  {
+    scatter(x, s, q);
+#pragma omp barrier
+    for (int a = 0; a < Dim; ++a)
+      stencil_rows<Dim>(fields_[a], force, terms_[a], fields_, data, periodic_, nullptr,
+                        &updated_rows_[a]);
+  }
+  for (int a = 0; a < Dim; ++a) {
+    const Field& f = fields_[a];
+    const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
+    std::vector<char> updated(rows, 0);
+    for (int r : updated_rows_[a]) updated[r] = 1;
+#pragma omp parallel for schedule(static) num_threads(team_threads(f.dims.prod()))
+    for (int r = 0; r < rows; ++r) {
+      const int begin = f.offset + r * n0, end = begin + n0;
+      if (!updated[r]) {
+        std::copy(u_star.data() + begin, u_star.data() + end, u.data() + begin);
+        continue;
+      }
+      for (int e = begin; e < end; ++e) {
+        if (!(pw.fluid_face[e] * pw.liquid_face[e] > 0.0) || !(pw.face_density[e] > 0.0))
+          u[e] = u_star[e];
+        else
+          u[e] = u_star[e] - dt * u[e] / (pw.face_density[e] * pw.liquid_face[e]);
+      }
+    }
+  }
+}
+
+bool& stokes_operator_every_face_row() {
+  static bool every = false;
+  return every;
+}
+
+template <int Dim>
 std::vector<std::pair<int, double>> MatrixFreeStokesOperator<Dim>::stencil(int i) const {
   std::vector<std::pair<int, double>> column;
   column.reserve(4 * Dim);  // (one allocation: at most two fields' faces)
@@ -861,18 +1002,43 @@ VectorX MatrixFreeStokesOperator<Dim>::rhs(const VectorX& u_star) const {
   double* v = face_scratch_.data();
   double* s = stress_scratch_.data();
   double* q = cell_scratch_.data();
+  // (only the face rows grid_from_faces reads: v is read nowhere else, and the scratch's other
+  // rows keep their zeros; issue 20)
   const double* wf = fluid_face_->data();
   const double* u = u_star.data();
+  const bool every = stokes_operator_every_face_row();
+  std::array<int, Dim + 1> first_row{};
+  for (int a = 0; a < Dim; ++a)
+    first_row[a + 1] =
+        first_row[a] + (every ? fields_[a].dims.prod() / std::max(fields_[a].dims[0], 1)
+                              : static_cast<int>(read_face_rows_[a].size()));
+  auto face_row = [&](int m, int& begin, int& end) {
+    int a = 0;
+    while (m >= first_row[a + 1]) ++a;
+    const int n0 = fields_[a].dims[0];
+    const int r = every ? m - first_row[a] : read_face_rows_[a][m - first_row[a]];
+    begin = fields_[a].offset + r * n0;
+    end = begin + n0;
+  };
+  const int read_rows = first_row[Dim];
 #pragma omp parallel num_threads(process_threads()) if (active_work_ > kParallelMin)
   {
 #pragma omp for schedule(static)
-    for (int f = 0; f < num_faces_; ++f) v[f] = wf[f] * u[f];
+    for (int m = 0; m < read_rows; ++m) {
+      int begin = 0, end = 0;
+      face_row(m, begin, end);
+      for (int f = begin; f < end; ++f) v[f] = wf[f] * u[f];
+    }
     grid_from_faces(v, s, q);
 #pragma omp barrier
     gather(s, q, nullptr, b);
 #pragma omp barrier
 #pragma omp for schedule(static) nowait
-    for (int f = 0; f < num_faces_; ++f) v[f] = 0.0;
+    for (int m = 0; m < read_rows; ++m) {
+      int begin = 0, end = 0;
+      face_row(m, begin, end);
+      for (int f = begin; f < end; ++f) v[f] = 0.0;
+    }
   }
   return b;
 }

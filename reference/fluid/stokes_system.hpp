@@ -133,6 +133,11 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 /// vectors are sized at construction: apply and the sweeps allocate nothing, and one operator
 /// must not run two of them at once from different threads. The operator keeps a reference to
 /// the weights it is built with (W_F^u, read by rhs): they must outlive it.
+/// Test switch (issue 20): MatrixFreeStokesOperator::rhs writes W_F^u u* on every face row and
+/// updated_velocities_into computes B x on every face, as before the rows were restricted
+/// (tests/unit/fluid/test_stokes.cpp compares both bit for bit). Off by default.
+bool& stokes_operator_every_face_row();
+
 template <int Dim>
 class MatrixFreeStokesOperator : public LinearOperator {
  public:
@@ -164,6 +169,13 @@ class MatrixFreeStokesOperator : public LinearOperator {
   VectorX face_force(const VectorX& x) const;
   /// The same into force[0 .. num_faces) (the caller's storage; no grid-sized temporary).
   void face_force_into(const VectorX& x, double* force) const;
+  /// u = u* - dt P^-1 (W_L^u)^-1 B x on the faces with W_F^u W_L^u > 0 and a density, u*
+  /// elsewhere (MonolithicSystem::fluid_velocities_into; the weights given to the constructor):
+  /// B x is computed only on the face rows holding such a face, and the other rows are copies
+  /// of u*'s (issue 20: no stencil pass over every face). The bits of face_force_into followed
+  /// by that update on every face.
+  void updated_velocities_into(const VectorX& x, const VectorX& u_star, double dt,
+                               VectorX& u) const;
   /// Column i of B: the faces unknown i acts on and the coefficients B_fi, as (face, B_fi) pairs.
   std::vector<std::pair<int, double>> stencil(int i) const;
 
@@ -226,6 +238,12 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// unknown). The other rows of the scratch vectors stay zero, so a liquid filling a small part
   /// of the grid costs in proportion to its rows, not to the grid.
   std::array<std::vector<int>, kFields> active_rows_;
+  /// per face axis, the rows with a face the velocity update changes (W_F^u W_L^u > 0 and a
+  /// density): updated_velocities_into computes B x there only
+  std::array<std::vector<int>, Dim> updated_rows_;
+  /// per face axis, the rows grid_from_faces reads (the stencils' input rows of the stress and
+  /// cell rows it visits): rhs writes W_F^u u* there only
+  std::array<std::vector<int>, Dim> read_face_rows_;
   /// Entries the loops visit: the sum over fields of active rows times the row length (the work
   /// an apply or sweep does, for the serial threshold and the adaptive team of parallel.hpp).
   long active_work_ = 0;
@@ -241,6 +259,9 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// W_F^u of the weights given to the constructor, read by rhs (not copied: a face-sized
   /// vector, 200 MB at 256x128x256)
   const VectorX* fluid_face_ = nullptr;
+  /// the pressure weights given to the constructor (W_F^u, W_L^u, P), read by
+  /// updated_velocities_into (not copied)
+  const PressureWeights* pressure_weights_ = nullptr;
   std::vector<int> unknown_of_dof_;   ///< per StressGrid DOF: unknown or -1
   std::vector<int> unknown_of_cell_;  ///< per cell: pressure unknown or -1
   std::vector<int> location_;         ///< per unknown: StressGrid DOF or cell

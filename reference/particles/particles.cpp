@@ -365,24 +365,53 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   constexpr int kLast = Dim - 1;
   const int nf = grid.num_faces();
   const long np = static_cast<long>(particles.size());
-  // the accumulators live in the outputs (setZero keeps the storage of a same-size vector)
-  for (VectorX* v : {&u, &face_mass, &face_density}) {
-    v->resize(nf);
-    fill_in_parallel(v->data(), nf, 0.0);
-  }
   const int layers = grid.cells()[kLast];
   const bool wrap_last = grid.periodic(kLast);
   // each particle's cell layer along the last axis (clamped): its stencils reach face layers
   // layer - 1 .. layer + 1 of every component's lattice (wrapped on a periodic axis)
   std::vector<int> layer_of(np);
   std::vector<long> per_layer(layers + 1, 0);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(&& : finite) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {
     const double s = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / grid.dx();
+    finite = finite && std::isfinite(s);
     layer_of[p] = std::clamp(static_cast<int>(std::floor(s)), 0, layers - 1);
   }
   for (long p = 0; p < np; ++p) ++per_layer[layer_of[p] + 1];
   for (int c = 0; c < layers; ++c) per_layer[c + 1] += per_layer[c];
+  // The accumulators live in the outputs. Only the face layers the particles reach are zeroed
+  // before the sums (issue 20: at Fig. 2's paper grid the liquid spans a part of the box's
+  // layers): the particles' cell layers [first, last] grown by particles_to_grid_zero_margin()
+  // (1: the stencils' reach, as for the slabs below), every layer on a periodic last axis or
+  // when a position is not finite. Each component lattice's layers along the last axis are a
+  // contiguous index range [zero_begin[a], zero_end[a]); the faces outside it get their zeros
+  // after the sums (u, the mass and the density are all 0 there, as the fill and the division
+  // of a face without mass gave), so every face ends with the bits of the whole-grid fill.
+  int first_layer = layers, last_layer = -1;
+  for (int c = 0; c < layers; ++c)
+    if (per_layer[c + 1] > per_layer[c]) {
+      first_layer = std::min(first_layer, c);
+      last_layer = c;
+    }
+  std::array<int, Dim> zero_begin{}, zero_end{};
+  for (int a = 0; a < Dim; ++a) {
+    const VecI<Dim> dims = grid.face_dims(a);
+    const int per = dims.prod() / dims[kLast];  // faces per layer
+    int lo = 0, hi = dims[kLast] - 1;
+    if (!wrap_last && finite) {
+      const int margin = particles_to_grid_zero_margin();
+      lo = std::max(first_layer - margin, 0);
+      hi = std::min(last_layer + margin, dims[kLast] - 1);
+    }
+    zero_begin[a] = grid.face_offset(a) + (lo <= hi ? lo * per : 0);
+    zero_end[a] = grid.face_offset(a) + (lo <= hi ? (hi + 1) * per : 0);
+  }
+  for (VectorX* v : {&u, &face_mass, &face_density}) {
+    v->resize(nf);
+    for (int a = 0; a < Dim; ++a)
+      fill_in_parallel(v->data() + zero_begin[a], zero_end[a] - zero_begin[a], 0.0);
+  }
   const int threads = std::max(1, std::min(process_threads(), layers));
   // slab t owns the face layers [first[t], first[t + 1]); the face lattices along the last axis
   // have at most layers + 1 samples
@@ -449,18 +478,33 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
     }
   }
 
-  // velocities and densities from the sums
+  // velocities and densities from the sums (in the zeroed ranges: no face outside them has
+  // mass), zeros elsewhere
+  for (int a = 0; a < Dim; ++a) {
+    const int begin = zero_begin[a], end = zero_end[a];
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f) {
-    const double m = face_mass[f];
-    if (m > 0.0) {
-      u[f] = (0.0 + u[f]) / m;
-      face_density[f] = (0.0 + face_density[f]) / m;
-    } else {
-      u[f] = 0.0;
-      face_density[f] = 0.0;
+    for (int f = begin; f < end; ++f) {
+      const double m = face_mass[f];
+      if (m > 0.0) {
+        u[f] = (0.0 + u[f]) / m;
+        face_density[f] = (0.0 + face_density[f]) / m;
+      } else {
+        u[f] = 0.0;
+        face_density[f] = 0.0;
+      }
+    }
+    const int lattice_begin = grid.face_offset(a);
+    const int lattice_end = lattice_begin + grid.face_dims(a).prod();
+    for (VectorX* v : {&u, &face_mass, &face_density}) {
+      fill_in_parallel(v->data() + lattice_begin, begin - lattice_begin, 0.0);
+      fill_in_parallel(v->data() + end, lattice_end - end, 0.0);
     }
   }
+}
+
+int& particles_to_grid_zero_margin() {
+  static int margin = 1;
+  return margin;
 }
 
 /// The PIC sums of particles_to_grid on the listed faces only. A particle in cell c (its wrapped

@@ -56,6 +56,12 @@ template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
                        VectorX& face_mass, VectorX& face_density);
 
+/// The face layers (along the last axis) beyond the particles' cell layers that
+/// particles_to_grid zeroes before its sums: 1, the stencils' reach (a particle in cell layer c
+/// reaches face layers c - 1 .. c + 1). The faces outside get their zeros after the sums. A
+/// test hook (tests/unit/particles/test_apic.cpp sets 0 and sees stale values survive).
+int& particles_to_grid_zero_margin();
+
 /// The PIC velocity of the listed faces only: pic[i] = sum_p w_fp m_p v_p / sum_p w_fp m_p for
 /// f = faces[i] (the particles' velocities without their affine part c_p (x_f - x_p); zero where
 /// no particle reaches f). `faces` sorted ascending, no repeats. Both sums run over the particles

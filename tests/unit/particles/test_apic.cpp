@@ -531,3 +531,83 @@ TEST_CASE("transfers and advection flag the particles that read NaN faces and le
   check_unread_flags<2>();
   check_unread_flags<3>();
 }
+
+namespace {
+
+/// particles_to_grid zeroes only the face layers (along the last axis) its particles reach
+/// (issue 20) and writes zeros on the others after the sums: into outputs holding stale values
+/// it gives, bit for bit, the outputs of the whole-grid fill (the margin set beyond every
+/// layer), on 1 and 2 threads, for a cloud in a slab, clouds past the lower and upper walls
+/// (clamped layers), a non-finite position, no particles, and on the periodic grid.
+template <int Dim>
+void check_zeroed_layers(bool periodic) {
+  const MacGrid<Dim> grid = make_grid<Dim>(Dim == 2 ? 24 : 12, periodic);
+  const int nf = grid.num_faces();
+  std::vector<std::pair<double, double>> slabs = {{-0.12, 0.04}, {-0.62, -0.35}, {0.33, 0.61}};
+  int case_index = 0;
+  for (int kind = 0; kind < 5; ++kind, ++case_index) {
+    CAPTURE(periodic, kind);
+    Particles<Dim> particles = random_cloud<Dim>(kind == 4 ? 0 : (Dim == 2 ? 800 : 3000), -0.45, 0.45, 31u + kind);
+    std::mt19937 rng(9 + kind);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const auto [lo, hi] = slabs[kind < 3 ? kind : 0];
+    for (std::size_t p = 0; p < particles.size(); ++p) {
+      particles.x[p][Dim - 1] = lo + (hi - lo) * 0.5 * (u(rng) + 1.0);
+      for (int a = 0; a < Dim; ++a) particles.v[p][a] = u(rng);
+      for (int a = 0; a < Dim; ++a)
+        for (int b = 0; b < Dim; ++b) particles.c[p](a, b) = u(rng);
+      particles.density[p] = 900.0 + 100.0 * (u(rng) + 1.0);
+    }
+    if (kind == 3) particles.x[7][Dim - 1] = std::numeric_limits<double>::quiet_NaN();
+    const int saved = omp_get_max_threads();
+    const int margin = particles_to_grid_zero_margin();
+    REQUIRE(margin == 1);
+    // the whole-grid fill: every layer zeroed before the sums
+    omp_set_num_threads(1);
+    particles_to_grid_zero_margin() = 1 << 20;
+    VectorX u_ref, m_ref, d_ref;
+    particles_to_grid(particles, grid, u_ref, m_ref, d_ref);
+    particles_to_grid_zero_margin() = margin;
+    auto same = [](const VectorX& a, const VectorX& b) {
+      return a.size() == b.size() &&
+             std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())) == 0;
+    };
+    for (int threads : {1, 2}) {
+      CAPTURE(threads);
+      omp_set_num_threads(threads);
+      VectorX us = VectorX::Constant(nf, 7.0), ms = VectorX::Constant(nf, -3.0),
+              ds = VectorX::Constant(nf, std::numeric_limits<double>::quiet_NaN());
+      particles_to_grid(particles, grid, us, ms, ds);
+      CHECK(same(us, u_ref));
+      CHECK(same(ms, m_ref));
+      CHECK(same(ds, d_ref));
+    }
+    omp_set_num_threads(saved);
+    if (kind < 3) {
+      // the cloud reaches a part of the layers only
+      long with_mass = 0;
+      for (int f = 0; f < nf; ++f) with_mass += m_ref[f] > 0.0;
+      CHECK(with_mass > 0);
+      CHECK(with_mass < nf / 2);
+    }
+    if (kind == 0 && !periodic) {
+      // one layer short of the stencils' reach: the faces of the first layer below the
+      // particles lose their sums
+      particles_to_grid_zero_margin() = 0;
+      VectorX uc, mc, dc;
+      particles_to_grid(particles, grid, uc, mc, dc);
+      particles_to_grid_zero_margin() = margin;
+      CHECK(!same(mc, m_ref));
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("apic particles-to-grid zeroes the layers its particles reach: stale outputs, fresh bits",
+          "[unit]") {
+  for (bool periodic : {false, true}) {
+    check_zeroed_layers<2>(periodic);
+    check_zeroed_layers<3>(periodic);
+  }
+}
