@@ -13,6 +13,8 @@
 /// propagation E = I - Q A is self-adjoint and positive semi-definite in the A inner product, so
 /// 0 < Q <= A^-1 (docs/preconditioners.md uses this). k cycles of the stationary iteration
 /// x <- x + Q (b - A x) from zero give the operator (I - E^k) A^-1, also SPD and <= A^-1.
+/// In single precision (the constructor's `single_precision`) A_l is replaced on every smoothed
+/// level by its rounded Ã_l >= A_l ((P12)): Q stays SPD, Q <= A^-1 holds up to the rounding.
 ///
 /// Parallel and deterministic: patches of one colour share no unknown and no matrix entry couples
 /// an unknown of one to an unknown of another (checked by patches_independent), so each colour is
