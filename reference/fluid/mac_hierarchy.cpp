@@ -387,7 +387,7 @@ Multigrid face_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& face_
     faces = std::move(coarse);
     g = gc;
   }
-  return Multigrid(std::move(levels), options.smoothing, options.renumber);
+  return Multigrid(std::move(levels), options.smoothing, options.renumber, options.single_precision);
 }
 
 template <int Dim>
@@ -415,7 +415,7 @@ Multigrid cell_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& cell_
     cells = std::move(coarse);
     g = gc;
   }
-  return Multigrid(std::move(levels), options.smoothing, options.renumber);
+  return Multigrid(std::move(levels), options.smoothing, options.renumber, options.single_precision);
 }
 
 #define MONOLITH_INSTANTIATE(D)                                                                  \

@@ -38,6 +38,9 @@ struct MacMultigridOptions {
   bool fine_cell_patches = true;
   /// Multigrid's renumbering of the smoothed levels for locality (same results bit for bit).
   bool renumber = true;
+  /// Multigrid's single-precision levels (the rounded operators Ã_l >= A_l; (P12), section 31
+  /// of docs/preconditioners.md).
+  bool single_precision = false;
 };
 
 /// The coarse grid of `grid`: ceil(cells / 2) cells of twice the width, same origin and periodic

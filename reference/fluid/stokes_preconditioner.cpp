@@ -200,6 +200,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     MacMultigridOptions vmg = mg;
     vmg.transverse_linear = options.transverse_linear;
     vmg.fine_cell_patches = options.fine_cell_patches;
+    vmg.single_precision = options.single_precision_velocity;
     velocity_ = face_multigrid<Dim>(grid, f_.face, moved(v), vmg, options.element_patches ? &extra : nullptr);
     if (np_ > 0 && (options.schur_correction || options.additive_pressure)) {
       // A22 is singular for enclosed liquid: the preconditioner inverts A22 + 1e-10 diag(A22)

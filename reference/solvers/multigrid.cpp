@@ -4,6 +4,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <array>
 #include <stdexcept>
 #include <string>
@@ -131,6 +132,40 @@ SparseMatrix permuted(const SparseMatrix& m, const std::vector<int>& row_order, 
   return r;
 }
 
+/// The values of a in single precision, rounded so that the rounded matrix is at least a in the
+/// order of symmetric matrices: the off-diagonal entries rounded to nearest (errors e_ij, exact in
+/// double), every diagonal entry a_ii + (sum_j |e_ij| + sum_j |e_ji|) / 2 with a margin for the
+/// double sums, rounded up. The difference (rounded - a) then has a symmetric part that is
+/// diagonally dominant with a non-negative diagonal, hence positive semi-definite, so the rounded
+/// matrix is SPD whenever a is ((P12) in docs/derivations.md).
+std::vector<float> rounded_dominant(const SparseMatrix& a) {
+  const int n = static_cast<int>(a.rows());
+  const int* outer = a.outerIndexPtr();
+  const int* inner = a.innerIndexPtr();
+  const double* value = a.valuePtr();
+  std::vector<float> r(static_cast<std::size_t>(a.nonZeros()));
+  std::vector<double> error(static_cast<std::size_t>(n), 0.0);  // row sums + column sums of |e|
+  for (int i = 0; i < n; ++i)
+    for (int e = outer[i]; e < outer[i + 1]; ++e) {
+      const int j = inner[e];
+      if (j == i) continue;
+      r[static_cast<std::size_t>(e)] = static_cast<float>(value[e]);
+      const double err = std::abs(static_cast<double>(r[static_cast<std::size_t>(e)]) - value[e]);
+      error[static_cast<std::size_t>(i)] += err;
+      error[static_cast<std::size_t>(j)] += err;
+    }
+  for (int i = 0; i < n; ++i)
+    for (int e = outer[i]; e < outer[i + 1]; ++e) {
+      if (inner[e] != i) continue;
+      // (relative 1e-12 covers the rounding of the sums of at most millions of terms)
+      const double target = value[e] + 0.5 * error[static_cast<std::size_t>(i)] * (1.0 + 1e-12);
+      float d = static_cast<float>(target);
+      if (static_cast<double>(d) < target) d = std::nextafter(d, std::numeric_limits<float>::infinity());
+      r[static_cast<std::size_t>(e)] = d;
+    }
+  return r;
+}
+
 }  // namespace
 
 int PatchSet::add(const std::vector<int>& unknowns) {
@@ -149,8 +184,8 @@ void PatchSet::close_group(int colour) {
   colours[colour].push_back(num_groups() - 1);
 }
 
-Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool renumber_levels)
-    : levels_(std::move(levels)), smoothing_(std::max(1, smoothing)) {
+Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool renumber_levels, bool single_precision)
+    : levels_(std::move(levels)), smoothing_(std::max(1, smoothing)), single_precision_(single_precision) {
   if (levels_.empty()) throw std::invalid_argument("Multigrid: no levels");
   const int num = static_cast<int>(levels_.size());
   restriction_.resize(num);
@@ -177,41 +212,7 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool ren
     restriction_[l].makeCompressed();
     coarse_rhs_[l].setZero(nc);
     coarse_x_[l].setZero(nc);
-    // dense inverses of the patch blocks A_PP
-    const PatchSet& ps = lv.patches;
-    std::vector<int>& offset = inverse_start_[l];
-    offset.assign(ps.size() + 1, 0);
-    for (int k = 0; k < ps.size(); ++k) {
-      const int m = ps.start[k + 1] - ps.start[k];
-      offset[k + 1] = offset[k] + m * m;
-    }
-    inverse_[l].assign(offset.back(), 0.0);
-#pragma omp parallel if (ps.size() > 1024) num_threads(process_threads())
-    {
-    // the block gathered by one pass over each member's row (`slot`: member position of a column)
-    std::vector<int> slot(static_cast<std::size_t>(n), -1);
-#pragma omp for schedule(static)
-    for (int k = 0; k < ps.size(); ++k) {
-      const int* idx = ps.index.data() + ps.start[k];
-      const int m = ps.start[k + 1] - ps.start[k];
-      // (storage on the stack, at most kMaxPatchSize square: no allocation per patch)
-      using Block = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, PatchSet::kMaxPatchSize, PatchSet::kMaxPatchSize>;
-      Block block = Block::Zero(m, m);
-      for (int i = 0; i < m; ++i) slot[idx[i]] = i;
-      for (int i = 0; i < m; ++i)
-        for (SparseMatrix::InnerIterator it(lv.a, idx[i]); it; ++it)
-          if (slot[it.col()] >= 0) block(i, slot[it.col()]) = it.value();
-      for (int i = 0; i < m; ++i) slot[idx[i]] = -1;
-      Eigen::LDLT<Block> ldlt(block);
-      Block inv = ldlt.solve(Block::Identity(m, m));
-      inv = 0.5 * (inv + inv.transpose()).eval();  // exactly symmetric
-      double* out = inverse_[l].data() + offset[k];
-      for (int i = 0; i < m; ++i)
-        for (int j = 0; j < m; ++j) out[i * m + j] = inv(i, j);
-    }
-    }
-    for (double v : inverse_[l])
-      if (!std::isfinite(v)) throw std::invalid_argument("Multigrid: singular patch block");
+    if (!single_precision_) compute_patch_inverses(l);
   }
   apply_residual_.setZero(levels_[0].a.rows());
   apply_correction_.setZero(levels_[0].a.rows());
@@ -222,6 +223,59 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool ren
   coarse_->prepare_solve();
   order_.assign(levels_.size(), {});
   if (renumber_levels) renumber();
+  if (single_precision_) {
+    // the rounded operators (after the renumbering: in the stored order of the rows) and the patch
+    // inverses of the rounded blocks
+    value_f_.assign(levels_.size(), {});
+    for (int l = 0; l + 1 < num; ++l) {
+      value_f_[l] = rounded_dominant(levels_[l].a);
+      compute_patch_inverses(l);
+    }
+  }
+}
+
+void Multigrid::compute_patch_inverses(int l) {
+  // dense inverses of the patch blocks A_PP (of the rounded operator's blocks in single precision:
+  // the smoother of the operator the level sweeps and residuals use)
+  const MultigridLevel& lv = levels_[l];
+  const int n = static_cast<int>(lv.a.rows());
+  const float* rounded = single_precision_ ? value_f_[l].data() : nullptr;
+  const PatchSet& ps = lv.patches;
+  std::vector<int>& offset = inverse_start_[l];
+  offset.assign(ps.size() + 1, 0);
+  for (int k = 0; k < ps.size(); ++k) {
+    const int m = ps.start[k + 1] - ps.start[k];
+    offset[k + 1] = offset[k] + m * m;
+  }
+  inverse_[l].assign(offset.back(), 0.0);
+#pragma omp parallel if (ps.size() > 1024) num_threads(process_threads())
+  {
+  // the block gathered by one pass over each member's row (`slot`: member position of a column)
+  std::vector<int> slot(static_cast<std::size_t>(n), -1);
+#pragma omp for schedule(static)
+  for (int k = 0; k < ps.size(); ++k) {
+    const int* idx = ps.index.data() + ps.start[k];
+    const int m = ps.start[k + 1] - ps.start[k];
+    // (storage on the stack, at most kMaxPatchSize square: no allocation per patch)
+    using Block = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, PatchSet::kMaxPatchSize, PatchSet::kMaxPatchSize>;
+    Block block = Block::Zero(m, m);
+    for (int i = 0; i < m; ++i) slot[idx[i]] = i;
+    for (int i = 0; i < m; ++i)
+      for (int e = lv.a.outerIndexPtr()[idx[i]]; e < lv.a.outerIndexPtr()[idx[i] + 1]; ++e) {
+        const int col = lv.a.innerIndexPtr()[e];
+        if (slot[col] >= 0) block(i, slot[col]) = rounded ? static_cast<double>(rounded[e]) : lv.a.valuePtr()[e];
+      }
+    for (int i = 0; i < m; ++i) slot[idx[i]] = -1;
+    Eigen::LDLT<Block> ldlt(block);
+    Block inv = ldlt.solve(Block::Identity(m, m));
+    inv = 0.5 * (inv + inv.transpose()).eval();  // exactly symmetric
+    double* out = inverse_[l].data() + offset[k];
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j < m; ++j) out[i * m + j] = inv(i, j);
+  }
+  }
+  for (double v : inverse_[l])
+    if (!std::isfinite(v)) throw std::invalid_argument("Multigrid: singular patch block");
 }
 
 void Multigrid::renumber() {
@@ -258,15 +312,24 @@ void Multigrid::renumber() {
   }
 }
 
-SparseMatrix Multigrid::finest_operator() const {
-  if (order_.empty() || order_[0].empty()) return levels_[0].a;
+SparseMatrix Multigrid::smoothed_operator(int l) const {
+  SparseMatrix a = levels_[l].a;
+  if (!value_f_.empty() && !value_f_[l].empty())
+    for (Eigen::Index e = 0; e < a.nonZeros(); ++e) a.valuePtr()[e] = static_cast<double>(value_f_[l][e]);
+  return a;
+}
+
+SparseMatrix Multigrid::finest_operator(bool smoothed) const {
+  const bool rounded = smoothed && !value_f_.empty() && !value_f_[0].empty();
+  if (order_.empty() || order_[0].empty()) return rounded ? smoothed_operator(0) : levels_[0].a;
   // back to the caller's numbering, columns sorted (a matrix like the one given)
   const SparseMatrix& a = levels_[0].a;
   std::vector<Triplet> t;
   t.reserve(a.nonZeros());
   for (int i = 0; i < a.outerSize(); ++i)
-    for (SparseMatrix::InnerIterator it(a, i); it; ++it)
-      t.emplace_back(order_[0][i], order_[0][it.col()], it.value());
+    for (int e = a.outerIndexPtr()[i]; e < a.outerIndexPtr()[i + 1]; ++e)
+      t.emplace_back(order_[0][i], order_[0][a.innerIndexPtr()[e]],
+                     rounded ? static_cast<double>(value_f_[0][e]) : a.valuePtr()[e]);
   SparseMatrix r(a.rows(), a.cols());
   r.setFromTriplets(t.begin(), t.end());
   r.makeCompressed();
@@ -274,11 +337,16 @@ SparseMatrix Multigrid::finest_operator() const {
 }
 
 void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const {
+  if (!value_f_.empty() && !value_f_[l].empty()) sweep_values(l, b, x, backward, value_f_[l].data());
+  else sweep_values(l, b, x, backward, levels_[l].a.valuePtr());
+}
+
+template <typename V>
+void Multigrid::sweep_values(int l, const VectorX& b, VectorX& x, bool backward, const V* value) const {
   const MultigridLevel& lv = levels_[l];
   const PatchSet& ps = lv.patches;
   const int* outer = lv.a.outerIndexPtr();
   const int* inner = lv.a.innerIndexPtr();
-  const double* value = lv.a.valuePtr();
   const double* inverse = inverse_[l].data();
   const int* offset = inverse_start_[l].data();
   double* xs = x.data();
@@ -289,7 +357,7 @@ void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const 
     // updated after d is complete, as the row-by-row loop did)
     std::array<double, PatchSet::kMaxPatchSize> r, d;
     for (int i = 0; i < m; ++i) r[i] = b[idx[i]];
-    row_sums<true>(outer, inner, value, xs, idx, m, r.data());
+    row_sums<true, V>(outer, inner, value, xs, idx, m, r.data());
     patch_correction(inverse + offset[k], r.data(), m, d.data());
     for (int i = 0; i < m; ++i) xs[idx[i]] += d[i];
   };
@@ -310,6 +378,18 @@ void Multigrid::sweep(int l, const VectorX& b, VectorX& x, bool backward) const 
   }
 }
 
+void Multigrid::level_residual(int l, const VectorX& b, const VectorX& x, VectorX& r) const {
+  const SparseMatrix& a = levels_[l].a;
+  if (value_f_.empty() || value_f_[l].empty()) {
+    residual(a, b, x, r);
+    return;
+  }
+  const int n = static_cast<int>(a.rows());
+  r.resize(n);
+  csr_row_sums<true, float>(a.outerIndexPtr(), a.innerIndexPtr(), value_f_[l].data(), 0, n, b.data(), x.data(), r.data(),
+                            n > kParallelRows);
+}
+
 void Multigrid::cycle(int l, const VectorX& b, VectorX& x) const {
   const int num = static_cast<int>(levels_.size());
   if (l + 1 == num) {
@@ -319,7 +399,7 @@ void Multigrid::cycle(int l, const VectorX& b, VectorX& x) const {
   const MultigridLevel& lv = levels_[l];
   x.setZero(lv.a.rows());
   for (int s = 0; s < smoothing_; ++s) sweep(l, b, x, false);
-  residual(lv.a, b, x, residual_[l]);
+  level_residual(l, b, x, residual_[l]);
   product(restriction_[l], residual_[l], coarse_rhs_[l]);
   cycle(l + 1, coarse_rhs_[l], coarse_x_[l]);
   product(lv.prolongation, coarse_x_[l], work_[l]);
@@ -349,7 +429,7 @@ void Multigrid::apply_internal(const VectorX& b, VectorX& x, int cycles) const {
   VectorX& r = apply_residual_;
   VectorX& d = apply_correction_;
   for (int c = 1; c < cycles; ++c) {
-    residual(levels_[0].a, b, x, r);
+    level_residual(0, b, x, r);
     cycle(0, r, d);
     x += d;
   }
@@ -371,6 +451,7 @@ std::size_t Multigrid::memory_bytes() const {
   }
   bytes += sizeof(double) * (apply_residual_.size() + apply_correction_.size() + apply_in_.size() + apply_out_.size());
   for (const std::vector<int>& o : order_) bytes += sizeof(int) * o.size();
+  for (const std::vector<float>& v : value_f_) bytes += sizeof(float) * v.size();
   // the coarse factor: at most the dense triangle of the coarsest level
   const std::size_t nc = levels_.empty() ? 0 : static_cast<std::size_t>(levels_.back().a.rows());
   bytes += sizeof(double) * std::min(nc * nc / 2, static_cast<std::size_t>(levels_.back().a.nonZeros()) * 8);

@@ -13,6 +13,8 @@
 /// propagation E = I - Q A is self-adjoint and positive semi-definite in the A inner product, so
 /// 0 < Q <= A^-1 (docs/preconditioners.md uses this). k cycles of the stationary iteration
 /// x <- x + Q (b - A x) from zero give the operator (I - E^k) A^-1, also SPD and <= A^-1.
+/// In single precision (the constructor's `single_precision`) A_l is replaced on every smoothed
+/// level by its rounded Ã_l >= A_l ((P12)): Q stays SPD, Q <= A^-1 holds up to the rounding.
 ///
 /// Parallel and deterministic: patches of one colour share no unknown and no matrix entry couples
 /// an unknown of one to an unknown of another (checked by patches_independent), so each colour is
@@ -71,7 +73,18 @@ class Multigrid {
   /// on inconsistent sizes, a patch larger than kMaxPatchSize, or a singular patch block.
   /// `renumber` false keeps the caller's numbering on every level (the same results bit for bit,
   /// only slower on large levels; for the test that checks exactly that).
-  Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool renumber = true);
+  ///
+  /// `single_precision`: every smoothed level sweeps and forms residuals with its operator's
+  /// values stored in single precision (rounded so that the rounded operator Ã_l >= A_l: SPD,
+  /// (P12) of docs/derivations.md) and patch inverses of Ã_l's blocks; the transfers, the
+  /// vectors and the coarsest factor stay in double. Q is then the V-cycle of the operators Ã_l:
+  /// still symmetric positive definite (the file comment's argument with Ã_l in place of A_l), a
+  /// different preconditioner by round-off (docs/preconditioners.md section 31).
+  Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool renumber = true, bool single_precision = false);
+  bool single_precision() const { return single_precision_; }
+  /// The operator level l's sweeps and residuals use, in its internal numbering: level(l).a, or
+  /// in single precision its rounded values Ã_l as doubles (for tests and reports).
+  SparseMatrix smoothed_operator(int l) const;
 
   int size() const { return levels_.empty() ? 0 : static_cast<int>(levels_[0].a.rows()); }
   int num_levels() const { return static_cast<int>(levels_.size()); }
@@ -83,8 +96,9 @@ class Multigrid {
   /// The numbering of level l: internal unknown i is the caller's unknown order(l)[i] (empty on
   /// the coarsest level: unchanged).
   const std::vector<int>& order(int l) const { return order_[l]; }
-  /// The finest operator in the caller's numbering (a copy; for tests and reports).
-  SparseMatrix finest_operator() const;
+  /// The finest operator in the caller's numbering (a copy; for tests and reports); `smoothed`:
+  /// the one the finest level's sweeps and residuals use (rounded in single precision).
+  SparseMatrix finest_operator(bool smoothed = false) const;
   int smoothing() const { return smoothing_; }
 
   /// x = Q_k b: `cycles` V-cycles of the stationary iteration from x = 0 (cycles >= 1), b and x
@@ -105,6 +119,12 @@ class Multigrid {
 
  private:
   void renumber();
+  void compute_patch_inverses(int level);
+  template <typename V>
+  void sweep_values(int level, const VectorX& b, VectorX& x, bool backward, const V* value) const;
+  /// r = b - A_l x with the operator the level's sweeps use (rounded in single precision)
+  void level_residual(int level, const VectorX& b, const VectorX& x, VectorX& r) const;
+
   void apply_internal(const VectorX& b, VectorX& x, int cycles) const;
 
   std::vector<MultigridLevel> levels_;
@@ -114,6 +134,10 @@ class Multigrid {
   std::vector<std::vector<double>> inverse_;     ///< per level: dense patch inverses, row-major
   std::unique_ptr<SparseLdlt> coarse_;  ///< movable
   int smoothing_ = 1;
+  bool single_precision_ = false;
+  /// per smoothed level in single precision: the rounded operator's values (rounded_dominant in
+  /// multigrid.cpp), in the stored order of levels_[l].a; empty otherwise
+  std::vector<std::vector<float>> value_f_;
   // scratch per level
   mutable std::vector<VectorX> residual_, coarse_rhs_, coarse_x_, work_;
   mutable VectorX apply_residual_, apply_correction_;  ///< cycles >= 2 of apply (finest size)

@@ -17,9 +17,9 @@
 namespace monolith {
 
 /// One term of a row sum: s - a x (a residual's) or s + a x (a product's).
-template <bool Subtract>
-inline double row_sum_term(double s, double a, double x) {
-  return Subtract ? s - a * x : s + a * x;
+template <bool Subtract, typename V>
+inline double row_sum_term(double s, V a, double x) {
+  return Subtract ? s - static_cast<double>(a) * x : s + static_cast<double>(a) * x;
 }
 
 /// The sums of `count` rows of a CSR matrix: out[t] = out[t] -/+ sum_q a_{row_t q} x_q over
@@ -29,8 +29,8 @@ inline double row_sum_term(double s, double a, double x) {
 /// on the finest velocity level, the next row's chain started only after the previous row's
 /// loop exit); four rows advanced together over their common length give the processor four
 /// independent chains and one loop instead of four, then pairs, then single rows.
-template <bool Subtract>
-inline void row_sums(const int* outer, const int* inner, const double* value, const double* x,
+template <bool Subtract, typename V = double>
+inline void row_sums(const int* outer, const int* inner, const V* value, const double* x,
                      const int* rows, int count, double* out) {
   int t = 0;
   for (; t + 4 <= count; t += 4) {
@@ -78,8 +78,8 @@ inline void row_sums(const int* outer, const int* inner, const double* value, co
 /// y[i - begin] = b_i - (A x)_i (Subtract, b given) or (A x)_i (b null, not Subtract) for the
 /// rows begin..end-1 of a CSR matrix, in blocks of eight consecutive rows handed to row_sums
 /// (row-parallel when `parallel`: one writer per entry, so any thread count gives the same bits).
-template <bool Subtract>
-inline void csr_row_sums(const int* outer, const int* inner, const double* value, int begin, int end,
+template <bool Subtract, typename V = double>
+inline void csr_row_sums(const int* outer, const int* inner, const V* value, int begin, int end,
                          const double* b, const double* x, double* y, bool parallel) {
   constexpr int kBlock = 8;
   const int blocks = (end - begin + kBlock - 1) / kBlock;
@@ -93,7 +93,7 @@ inline void csr_row_sums(const int* outer, const int* inner, const double* value
       rows[t] = first + t;
       out[t] = b ? b[first + t] : 0.0;
     }
-    row_sums<Subtract>(outer, inner, value, x, rows.data(), count, out.data());
+    row_sums<Subtract, V>(outer, inner, value, x, rows.data(), count, out.data());
     for (int t = 0; t < count; ++t) y[first + t - begin] = out[t];
   }
 }

@@ -10,6 +10,8 @@
 //       [--clamp T] [--repeats R] [--cut-threshold T (0: no cut block)] [--cut-layers L]
 //       [--cut-layer-limit N (layers after the first only while the block has at most N unknowns; 0: none)]
 //       [--no-renumber (Multigrid keeps the caller's numbering: same results, for timing)]
+//       [--double-velocity | --single-velocity (the velocity hierarchy's smoothed levels in
+//        double, or in single precision as by default: docs/preconditioners.md section 31)]
 //       [--two-term | --additive] [--schur cc|mobility|scaled (Sigma^-1 of the two-term form)]
 //       [--cycle-ratio R (0: --cycles always)]
 //       [--lean-share S (3D: one V-cycle fewer below this free-surface share; 0: off)]
@@ -338,6 +340,8 @@ int main(int argc, char** argv) {
     else if (a == "--cut-layers") cfg.options.cut_layers = std::atoi(next());
     else if (a == "--cut-layer-limit") cfg.options.cut_layer_limit = std::atoi(next());
     else if (a == "--no-renumber") cfg.options.renumber = false;
+    else if (a == "--double-velocity") cfg.options.single_precision_velocity = false;
+    else if (a == "--single-velocity") cfg.options.single_precision_velocity = true;
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;
