@@ -154,6 +154,10 @@ struct CoupledSchemeOptions {
   /// multigrid: the Woodbury correction of the bodies' low-rank term
   /// (CoupledPreconditionerOptions::body_correction).
   bool body_correction = true;
+  /// The rounds of Algorithm 2 within a step keep the block preconditioner of the previous round
+  /// for the next one (the same bodies and weights, another viscosity; (P12) of
+  /// coupled_preconditioner.hpp, docs/preconditioners.md section 32). false: each round builds its own.
+  bool keep_round_preconditioner = true;
 };
 
 /// One step's pressure / viscosity / contact solves under `scheme` (section 6), every
