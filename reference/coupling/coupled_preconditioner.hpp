@@ -230,7 +230,9 @@ class LazyCoupledFacePreconditioner : public FacePreconditioner {
 /// u*, weights) and differ in the viscosity only, so P built for eta^k, an SPD operator, serves
 /// the system of eta^(k+1) as its preconditioner (a stale one: the iterations may grow; the set-up,
 /// half or more of a block solve at 24^3, is saved). Holds the system P was built on (P reads it
-/// at every application). docs/preconditioners.md section 32.
+/// at every application). Used with CoupledSchemeOptions::keep_round_preconditioner, off by
+/// default (the stale P cost more iterations than it saved on shear-thinning's third frame).
+/// docs/preconditioners.md section 32.
 template <int Dim>
 struct KeptCoupledPreconditioner {
   std::shared_ptr<const MonolithicSystem<Dim>> system;  ///< the system the preconditioners were built on
