@@ -356,6 +356,30 @@ void LazyCoupledFacePreconditioner<Dim>::apply_in_face(const VectorX& g,
   z = z_.cwiseQuotient(*scale_);
 }
 
+template <int Dim>
+bool KeptCoupledPreconditioner<Dim>::fits(const MonolithicSystem<Dim>& s) const {
+  if (!system) return false;
+  const MonolithicSystem<Dim>& k = *system;
+  return k.num_stress() == s.num_stress() && k.num_pressure() == s.num_pressure() &&
+         k.num_contacts() == s.num_contacts() && k.num_body_dofs() == s.num_body_dofs() &&
+         k.dofs().unknown_of_dof == s.dofs().unknown_of_dof &&
+         k.dofs().pressure.cell_of_dof == s.dofs().pressure.cell_of_dof;
+}
+
+template <int Dim>
+void KeptCoupledPreconditioner<Dim>::keep(const MonolithicSystem<Dim>& s,
+                                          std::shared_ptr<CoupledPreconditioner<Dim>> fluid,
+                                          std::shared_ptr<CoupledPreconditioner<Dim>> contacts) {
+  if (!candidate || candidate.get() != &s) return;  // an owner unknown: nothing kept
+  if (system != candidate) {
+    fluid_body.reset();
+    mlcp.reset();
+    system = candidate;
+  }
+  if (fluid) fluid_body = std::move(fluid);
+  if (contacts) mlcp = std::move(contacts);
+}
+
 ScaledPreconditioner::ScaledPreconditioner(const Preconditioner& inner, const VectorX& scale)
     : inner_(inner), scale_(scale) {
   if (scale.size() != inner.size())
@@ -374,5 +398,7 @@ template class CoupledPreconditioner<2>;
 template class CoupledPreconditioner<3>;
 template class LazyCoupledFacePreconditioner<2>;
 template class LazyCoupledFacePreconditioner<3>;
+template struct KeptCoupledPreconditioner<2>;
+template struct KeptCoupledPreconditioner<3>;
 
 }  // namespace monolith

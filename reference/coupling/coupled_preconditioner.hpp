@@ -53,6 +53,8 @@
 /// correction is left out by default, Q = P (CoupledPreconditionerOptions::contact_free_correction;
 /// docs/preconditioners.md section 30).
 ///
+/// (P14): P's cut block without the layers of neighbours (coupled_fluid_options; section 32).
+///
 /// SPD whenever P is; apply allocates nothing and is deterministic for any thread count (P's
 /// applications are, the body correction runs over rows in fixed order).
 
@@ -71,6 +73,18 @@
 
 namespace monolith {
 
+/// The fluid part's options on the coupled systems: StokesPreconditionerOptions with a cut block
+/// of the cut unknowns and their pressures only (cut_layers 0, (P14)). The two layers of
+/// neighbours were chosen on a liquid-only scene (the bunny on the curved container wall,
+/// section 12); on the coupled 3D scenes they cost set-up and application time and saved no
+/// iteration on any built-in scene, and on hollow-spheres-viscous-3d they took 23-37 MPRGP
+/// iterations per system where the bare block takes 4-5 (docs/preconditioners.md section 32).
+inline StokesPreconditionerOptions coupled_fluid_options() {
+  StokesPreconditionerOptions o;
+  o.cut_layers = 0;
+  return o;
+}
+
 struct CoupledPreconditionerOptions {
   /// The Woodbury correction of the body term B_f^T W B_f (false: Q = P, the body term is left to
   /// the Krylov method).
@@ -86,8 +100,8 @@ struct CoupledPreconditionerOptions {
   /// Above this many body DOFs the correction is skipped (its set-up costs one application of P
   /// per body DOF).
   int max_body_dofs = 96;
-  /// The fluid part's preconditioner.
-  StokesPreconditionerOptions fluid;
+  /// The fluid part's preconditioner (coupled_fluid_options: no layers around the cut block).
+  StokesPreconditionerOptions fluid = coupled_fluid_options();
   /// apply_in_face eliminates the contact rows exactly (the Schur complement S_c of the file
   /// comment) when there are at most this many contacts and S_c is available (the Woodbury term
   /// on, or no body touching the liquid); otherwise, and with 0, the Jacobi rows.
@@ -196,7 +210,7 @@ class CoupledPreconditioner : public Preconditioner, public FacePreconditioner {
 template <int Dim>
 class LazyCoupledFacePreconditioner : public FacePreconditioner {
  public:
-  using Factory = std::function<std::unique_ptr<CoupledPreconditioner<Dim>>()>;
+  using Factory = std::function<std::shared_ptr<CoupledPreconditioner<Dim>>()>;
   /// scale: S (nullptr: none).
   LazyCoupledFacePreconditioner(int n, Factory make, const VectorX* scale)
       : n_(n), make_(std::move(make)), scale_(scale) {}
@@ -207,8 +221,46 @@ class LazyCoupledFacePreconditioner : public FacePreconditioner {
   int n_;
   Factory make_;
   const VectorX* scale_;
-  mutable std::unique_ptr<CoupledPreconditioner<Dim>> built_;
+  mutable std::shared_ptr<CoupledPreconditioner<Dim>> built_;
   mutable VectorX g_, z_;
+};
+
+/// (P13) The block preconditioners of one round of Algorithm 2 (section 5), kept for the next
+/// round of the same step: the rounds build their systems from the same state (the same bodies,
+/// u*, weights) and differ in the viscosity only, so P built for eta^k, an SPD operator, serves
+/// the system of eta^(k+1) as its preconditioner (a stale one: the iterations may grow; the set-up,
+/// half or more of a block solve at 24^3, is saved). Holds the system P was built on (P reads it
+/// at every application). Used with CoupledSchemeOptions::keep_round_preconditioner, off by
+/// default (the stale P cost more iterations than it saved on shear-thinning's third frame).
+/// docs/preconditioners.md section 32.
+template <int Dim>
+struct KeptCoupledPreconditioner {
+  std::shared_ptr<const MonolithicSystem<Dim>> system;  ///< the system the preconditioners were built on
+  std::shared_ptr<CoupledPreconditioner<Dim>> fluid_body;  ///< PCG on A_ff (with_contacts false)
+  std::shared_ptr<CoupledPreconditioner<Dim>> mlcp;        ///< MPRGP on (26) (with_contacts true)
+  /// The owner of the system being solved, set by the caller before the solve: kept with a
+  /// preconditioner built on it.
+  std::shared_ptr<const MonolithicSystem<Dim>> candidate;
+  /// Whether the kept preconditioners may serve `s`: built on a system with the same unknowns
+  /// (stress DOFs, pressure cells, contacts, body DOFs; the caller promises the same bodies and
+  /// weights up to the viscosity).
+  bool fits(const MonolithicSystem<Dim>& s) const;
+  /// Stores a preconditioner built on `s` (the candidate's system), dropping one of another system.
+  void keep(const MonolithicSystem<Dim>& s, std::shared_ptr<CoupledPreconditioner<Dim>> fluid,
+            std::shared_ptr<CoupledPreconditioner<Dim>> contacts);
+};
+
+/// A shared preconditioner seen as one of its own (the fluid-body PCG's LazyPreconditioner owns
+/// what its factory returns).
+class SharedPreconditioner : public Preconditioner {
+ public:
+  explicit SharedPreconditioner(std::shared_ptr<const Preconditioner> inner) : inner_(std::move(inner)) {}
+  int size() const override { return inner_->size(); }
+  void apply(const VectorX& r, VectorX& z) const override { inner_->apply(r, z); }
+  std::string name() const override { return inner_->name(); }
+
+ private:
+  std::shared_ptr<const Preconditioner> inner_;
 };
 
 /// A preconditioner of the Jacobi-scaled operator S A S (JacobiScaledOperator) from one of A:

@@ -68,12 +68,17 @@ PreconditionerKind coupled_preconditioner_kind(const MonolithicSystem<Dim>& s,
 /// application (a zero right-hand side skips the set-up).
 template <int Dim>
 std::unique_ptr<LazyPreconditioner> fluid_body_preconditioner(const MonolithicSystem<Dim>& s,
-                                                              bool body_correction) {
+                                                              bool body_correction,
+                                                              KeptCoupledPreconditioner<Dim>* kept = nullptr) {
   return std::make_unique<LazyPreconditioner>(
-      s.num_fluid(), "coupled-block", [&s, body_correction]() -> std::unique_ptr<Preconditioner> {
+      s.num_fluid(), "coupled-block", [&s, body_correction, kept]() -> std::unique_ptr<Preconditioner> {
+        // (P13) the previous round's P where it fits (coupled_preconditioner.hpp)
+        if (kept && kept->fluid_body && kept->fits(s)) return std::make_unique<SharedPreconditioner>(kept->fluid_body);
         CoupledPreconditionerOptions o;
         o.body_correction = body_correction;
-        return std::make_unique<CoupledPreconditioner<Dim>>(s, false, VectorX(), o);
+        auto built = std::make_shared<CoupledPreconditioner<Dim>>(s, false, VectorX(), o);
+        if (kept) kept->keep(s, built, nullptr);
+        return std::make_unique<SharedPreconditioner>(std::move(built));
       });
 }
 
@@ -187,13 +192,14 @@ template <int Dim>
 Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& settings,
                        CoupledSolveResult& r, long& iterations,
                        PreconditionerKind kind = PreconditionerKind::ssor,
-                       bool body_correction = true, bool fallback = false) {
+                       bool body_correction = true, bool fallback = false,
+                       KeptCoupledPreconditioner<Dim>* kept = nullptr) {
   Unknowns x = zero_unknowns(s);
   const bool multigrid = kind == PreconditionerKind::multigrid;
   if (s.num_contacts() == 0) {
     const FluidBodyOperator<Dim> op(s);
     const std::unique_ptr<LazyPreconditioner> m =
-        multigrid ? fluid_body_preconditioner(s, body_correction) : nullptr;
+        multigrid ? fluid_body_preconditioner(s, body_correction, kept) : nullptr;
     iterations += m && fallback ? fluid_solve_with_fallback(s, op, settings, x, r, *m)
                                 : fluid_solve(s, op, settings, x, r, m.get());
     r.staggered_iterations += 1;
@@ -214,7 +220,7 @@ Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& 
     StaggeredSettings attempt = settings;
     attempt.mprgp.max_iterations = multigrid_attempt_budget(settings.mprgp.max_iterations);
     attempt.mprgp.stagnation = attempt_stagnation_rule();
-    u = solve_pvc_unified(s, attempt, options);
+    u = solve_pvc_unified(s, attempt, options, kept);
     if (!u.converged || u.breakdown) {
       ++r.fallbacks;
       iterations += u.mprgp_iterations;
@@ -223,7 +229,7 @@ Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& 
       u = solve_pvc_unified(s, settings, options);
     }
   } else {
-    u = solve_pvc_unified(s, settings, options);
+    u = solve_pvc_unified(s, settings, options, kept);
   }
   if (u.breakdown) throw SimulationError("unified solve: MPRGP broke down: " + u.message);
   r.converged = r.converged && u.converged;
@@ -475,7 +481,8 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
   // builds eq. (24) from `from` and runs the scheme's solve (unified: the MLCP; otherwise the
   // partitioned solves), booking iterations and time as coupled or VC-coupled
   auto solve = [&](const State& from, std::shared_ptr<const StokesWeights> w, StressForm form,
-                   StokesUnknowns unknowns, bool unified, bool viscosity_stage) {
+                   StokesUnknowns unknowns, bool unified, bool viscosity_stage,
+                   KeptCoupledPreconditioner<Dim>* kept = nullptr) {
     State out;
     const std::vector<RigidBody<Dim>> bodies =
         from.v.size() ? with_velocities(in.bodies, from.system->contacts().body_dof, from.v)
@@ -498,9 +505,11 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
       // "auto" falls back to SSOR where the block preconditioner does not converge
       const bool fallback = kind == PreconditionerKind::multigrid &&
                             options.preconditioner == PreconditionerChoice::automatic;
+      if (kept) kept->candidate = out.system;
       out.x = unified_solve(sys, settings, r,
                             viscosity_stage ? r.viscosity_coupled_iterations : r.coupled_iterations,
-                            kind, options.body_correction, fallback);
+                            kind, options.body_correction, fallback, kept);
+      if (kept) kept->candidate.reset();
       const double seconds = t0.seconds();
       r.coupled_seconds += seconds;
       if (viscosity_stage) r.viscosity_coupled_seconds += seconds;
@@ -524,6 +533,20 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
       sys.stress_full_into(out.x.x_fluid, out.stress);
     return out;
   };
+  // (P13) the block preconditioners of the previous round of Algorithm 2 (same state, same
+  // stage; another viscosity), for the next round's system (coupled_preconditioner.hpp)
+  KeptCoupledPreconditioner<Dim> kept;
+  const State* kept_from = nullptr;
+  bool kept_stage = false;
+  auto kept_for = [&](const State& from, const VectorX* eta, bool viscosity_stage) -> KeptCoupledPreconditioner<Dim>* {
+    if (!eta || !options.keep_round_preconditioner) return nullptr;
+    if (kept_from != &from || kept_stage != viscosity_stage) {
+      kept = KeptCoupledPreconditioner<Dim>();
+      kept_from = &from;
+      kept_stage = viscosity_stage;
+    }
+    return &kept;
+  };
   const bool pc_vc_pc = scheme == CouplingScheme::pc_vc_pc_unified;
   // P.. C schemes, and the P solves of PC-VC-PC-unified (as PC-unified)
   auto pressure = [&](const State& from, SolveStage stage) {
@@ -543,19 +566,23 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
   auto unified = [&](const State& from, const VectorX* eta) {
     const auto w = with_viscosity(eta);
     State out = solve(from, w, StressForm::reduced, StokesUnknowns::pressure_and_stress,
-                      scheme == CouplingScheme::pvc_unified, false);
+                      scheme == CouplingScheme::pvc_unified, false, kept_for(from, eta, false));
     count_dofs(*out.system, r);
     return out;
   };
   // the VC-unified solve of PC-VC-PC: stress only (p fixed at 0), the full form
   auto viscous = [&](const State& from, const VectorX* eta) {
     const auto w = with_viscosity(eta);
-    State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true);
+    State out = solve(from, w, StressForm::full, StokesUnknowns::stress_only, true, true,
+                      kept_for(from, eta, true));
     r.stress_dofs = out.system->num_stress();
     return out;
   };
   ViscosityRounds viscosity;
   viscosity.rounds = std::max(1, settings.max_iterations);
+  // (P13) a round with the previous round's viscosity, bit for bit, builds the same system from
+  // the same state and solves it from the same start: the same result, not solved again
+  viscosity.skip_repeated = true;
   if (options.initial_viscosity && options.update_viscosity) {
     viscosity.initial = options.initial_viscosity;
     viscosity.update = options.update_viscosity;

@@ -154,6 +154,12 @@ struct CoupledSchemeOptions {
   /// multigrid: the Woodbury correction of the bodies' low-rank term
   /// (CoupledPreconditionerOptions::body_correction).
   bool body_correction = true;
+  /// The rounds of Algorithm 2 within a step keep the block preconditioner of the previous round
+  /// for the next one (the same bodies and weights, another viscosity; (P13) of
+  /// coupled_preconditioner.hpp, docs/preconditioners.md section 32). Off by default: it saved
+  /// 10-17 % of two frames of shear-thinning and Bingham bunnies, but the stale P took 149
+  /// instead of 30 iterations in shear-thinning-3d's frame 3 (121 instead of 41 in 2D).
+  bool keep_round_preconditioner = false;
 };
 
 /// One step's pressure / viscosity / contact solves under `scheme` (section 6), every

@@ -900,7 +900,8 @@ void JacobiScaledOperator::backward_sweep(const VectorX& rhs, VectorX& x, double
 template <int Dim>
 PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
                                    const StaggeredSettings& settings,
-                                   const PvcUnifiedOptions& options) {
+                                   const PvcUnifiedOptions& options,
+                                   KeptCoupledPreconditioner<Dim>* kept) {
   const double inf = std::numeric_limits<double>::infinity();
   const int nf = system.num_fluid(), nc = system.num_contacts(), nz = system.num_friction();
   const double gamma = settings.diagonal_boost;
@@ -927,11 +928,14 @@ PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
     const int max_exact_contacts = options.exact_contacts ? CoupledPreconditionerOptions().max_exact_contacts : 0;
     block = std::make_unique<LazyCoupledFacePreconditioner<Dim>>(
         nf + nc,
-        [&system, contact_diagonal, body_correction, max_exact_contacts]() {
+        [&system, contact_diagonal, body_correction, max_exact_contacts, kept]() {
+          if (kept && kept->mlcp && kept->fits(system)) return kept->mlcp;
           CoupledPreconditionerOptions o;
           o.body_correction = body_correction;
           o.max_exact_contacts = max_exact_contacts;
-          return std::make_unique<CoupledPreconditioner<Dim>>(system, true, contact_diagonal, o);
+          auto built = std::make_shared<CoupledPreconditioner<Dim>>(system, true, contact_diagonal, o);
+          if (kept) kept->keep(system, nullptr, built);
+          return built;
         },
         options.jacobi_scaling ? &scaled.scale() : nullptr);
     mlcp_settings.face_preconditioner = block.get();
@@ -996,8 +1000,8 @@ template class FluidBodyOperator<3>;
 template SparseMatrixOperator friction_operator<2>(const MonolithicSystem<2>&, double);
 template SparseMatrixOperator friction_operator<3>(const MonolithicSystem<3>&, double);
 template PvcUnifiedResult solve_pvc_unified<2>(const MonolithicSystem<2>&, const StaggeredSettings&,
-                                               const PvcUnifiedOptions&);
+                                               const PvcUnifiedOptions&, KeptCoupledPreconditioner<2>*);
 template PvcUnifiedResult solve_pvc_unified<3>(const MonolithicSystem<3>&, const StaggeredSettings&,
-                                               const PvcUnifiedOptions&);
+                                               const PvcUnifiedOptions&, KeptCoupledPreconditioner<3>*);
 
 }  // namespace monolith

@@ -470,8 +470,15 @@ struct PvcUnifiedResult {
 /// lambda changes by <= settings.tolerance (relative, inf-norm); always ends on (26).
 /// settings.diagonal_boost is gamma on the contact rows (section 4.4.5).
 template <int Dim>
+struct KeptCoupledPreconditioner;
+
+/// kept (nullptr: none): with the block preconditioner, the MLCP's CoupledPreconditioner is taken
+/// from it when it fits the system and stored into it when built here (the rounds of Algorithm 2
+/// within a step, (P13) of coupled_preconditioner.hpp).
+template <int Dim>
 PvcUnifiedResult solve_pvc_unified(const MonolithicSystem<Dim>& system,
                                    const StaggeredSettings& settings,
-                                   const PvcUnifiedOptions& options = {});
+                                   const PvcUnifiedOptions& options = {},
+                                   KeptCoupledPreconditioner<Dim>* kept = nullptr);
 
 }  // namespace monolith

@@ -9,6 +9,7 @@
 /// dispatcher takes the stages as callables.
 
 #include <algorithm>
+#include <cstring>
 #include <functional>
 
 #include "reference/core/common.hpp"
@@ -58,6 +59,13 @@ struct ViscosityRounds {
   std::function<VectorX(const VectorX& u_start)> initial;
   std::function<VectorX(const VectorX& stress, const VectorX& viscosity)> update;
   int rounds = 1;
+  /// (P13) A round whose viscosity has the previous round's bits is not solved again: it would
+  /// build the same system from the same state, and a solve that is deterministic and starts
+  /// from that state alone (not from the previous round's result) returns the same result. Such
+  /// are a herschel-bulkley liquid with n = 1 and tau0 = 0 (eta does not depend on the rate) and
+  /// a round that met the fixed point exactly. The update still runs after it (its residual is
+  /// recorded as before). solve_coupled_step sets it (docs/preconditioners.md section 32).
+  bool skip_repeated = false;
   bool non_newtonian() const { return initial && update; }
 };
 
@@ -67,10 +75,15 @@ template <class State, class Solve>
 State viscous_rounds(const ViscosityRounds& viscosity, const State& from, Solve solve) {
   if (!viscosity.non_newtonian()) return solve(from, static_cast<const VectorX*>(nullptr));
   VectorX eta = viscosity.initial(from.u);
+  VectorX solved;  // (skip_repeated) the viscosity of the last solve
   State out;
   for (int k = 0; k < std::max(1, viscosity.rounds); ++k) {
-    out = solve(from, &eta);
-    eta = viscosity.update(out.stress, eta);
+    const bool repeated = k > 0 && viscosity.skip_repeated && solved.size() == eta.size() &&
+                          std::memcmp(solved.data(), eta.data(), sizeof(double) * static_cast<std::size_t>(eta.size())) == 0;
+    if (!repeated) out = solve(from, &eta);
+    VectorX next = viscosity.update(out.stress, eta);
+    if (viscosity.skip_repeated) solved.swap(eta);
+    eta.swap(next);
   }
   return out;
 }

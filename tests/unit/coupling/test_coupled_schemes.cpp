@@ -3,8 +3,10 @@
 // at solver level (P-C loses volume, C-P penetrates), reductions without bodies and the
 // neutrally buoyant body.
 #include <catch2/catch.hpp>
+#include <omp.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <optional>
 #include <stdexcept>
@@ -524,4 +526,83 @@ TEST_CASE("solve_coupled_step into a kept result: the same bits as the returning
           "[unit]") {
   SECTION("2D") { check_result_in_place<2>(16); }
   SECTION("3D") { check_result_in_place<3>(8); }
+}
+
+namespace {
+
+/// Algorithm 2's rounds on the tank (mu = 0: one MLCP solve per round; `contacts` false: PCG on
+/// A_ff), eta^1 = 20 Pa s everywhere and eta^(k+1) = factor eta^k, under the block preconditioner.
+template <int Dim>
+CoupledSolveResult viscosity_rounds(const CoupledStepInput<Dim>& in, int rounds, double factor,
+                                    bool keep, int* updates = nullptr) {
+  CoupledSchemeOptions o;
+  o.preconditioner = PreconditionerChoice::multigrid;
+  o.liquid_density = kRho;
+  o.keep_round_preconditioner = keep;
+  const VectorX eta = VectorX::Constant(in.weights.viscosity.size(), 20.0);
+  o.initial_viscosity = [eta](const VectorX&) { return eta; };
+  o.update_viscosity = [factor, updates](const VectorX&, const VectorX& used) {
+    if (updates) ++*updates;
+    return VectorX(factor * used);
+  };
+  return solve_coupled_step<Dim>(in, CouplingScheme::pvc_unified, Backend::matrix_free,
+                                 settings_for(1e-10, rounds), o);
+}
+
+template <int Dim>
+void check_viscosity_rounds(int n) {
+  for (bool contacts : {true, false}) {
+    INFO((contacts ? "MLCP (26)" : "PCG on A_ff"));
+    CoupledStepInput<Dim> in = tank_scene<Dim>(n, 1.0, 0.0);
+    if (!contacts) in.contacts.clear();
+    // (P13) a round with the previous round's viscosity: that round's result without a solve,
+    // bit for bit, and only that round's iterations (a second solve of the same system would
+    // double them); the update still runs after it
+    int updates = 0;
+    const CoupledSolveResult one = viscosity_rounds<Dim>(in, 1, 1.0, true);
+    const CoupledSolveResult two = viscosity_rounds<Dim>(in, 2, 1.0, true, &updates);
+    REQUIRE(one.converged);
+    REQUIRE(two.converged);
+    REQUIRE(one.coupled_iterations > 0);
+    CHECK(updates == 2);
+    CHECK(testing::differing(two.u, one.u) == 0);
+    CHECK(testing::differing(two.pressure, one.pressure) == 0);
+    CHECK(testing::differing(two.stress, one.stress) == 0);
+    CHECK(testing::differing(two.body_velocity, one.body_velocity) == 0);
+    CHECK(testing::differing(two.lambda, one.lambda) == 0);
+    CHECK(two.coupled_iterations == one.coupled_iterations);
+    CHECK(two.multigrid_systems == 1);
+    // (P13) a changed viscosity: round 2 with round 1's block preconditioner (a stale one: other
+    // iterates than its own, the same solution to the tolerance), 1 and 2 threads bitwise
+    const CoupledSolveResult kept = viscosity_rounds<Dim>(in, 2, 1.5, true);
+    const CoupledSolveResult own = viscosity_rounds<Dim>(in, 2, 1.5, false);
+    REQUIRE(kept.converged);
+    REQUIRE(own.converged);
+    CHECK(kept.multigrid_systems == 2);
+    CHECK(kept.fallbacks == 0);
+    CHECK((kept.coupled_iterations != own.coupled_iterations || testing::differing(kept.u, own.u) > 0));
+    CHECK(relative_difference(kept.u, own.u) < 1e-6);
+    CHECK(relative_difference(kept.stress, own.stress) < 1e-6);
+    CHECK(relative_difference(kept.body_velocity, own.body_velocity) < 1e-6);
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(2);
+    const CoupledSolveResult kept2 = viscosity_rounds<Dim>(in, 2, 1.5, true);
+    omp_set_num_threads(threads);
+    CHECK(testing::differing(kept2.u, kept.u) == 0);
+    CHECK(testing::differing(kept2.stress, kept.stress) == 0);
+    CHECK(kept2.coupled_iterations == kept.coupled_iterations);
+    std::printf("viscosity rounds %dD n=%d %s: one round %ld iterations, two equal rounds %ld; "
+                "eta x 1.5: kept P %ld, own P %ld\n", Dim, n, contacts ? "MLCP" : "A_ff",
+                one.coupled_iterations, two.coupled_iterations, kept.coupled_iterations,
+                own.coupled_iterations);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Algorithm 2's rounds: a round with the previous round's viscosity is that round's result "
+          "without a solve; a changed viscosity keeps the previous round's block preconditioner (P13)",
+          "[unit]") {
+  SECTION("2D") { check_viscosity_rounds<2>(16); }
+  SECTION("3D") { check_viscosity_rounds<3>(8); }
 }
