@@ -43,6 +43,19 @@ namespace monolith {
 
 namespace {
 
+/// A particle left flagged in `unread` after the guarded reads (only when the unreached faces are
+/// poisoned, StageSwitches::poison_unreached_faces): the extrapolation did not reach a face it
+/// read. Stops the step with the particle, the time and the read (`where`) named.
+void throw_if_unread(const std::vector<char>& unread, double time, int next_frame,
+                     const char* where) {
+  const auto left = std::find(unread.begin(), unread.end(), 1);
+  if (left == unread.end()) return;
+  std::ostringstream msg;
+  msg << "t = " << time << " s (frame " << next_frame << "): particle " << (left - unread.begin())
+      << " read a face the extrapolation did not reach" << where;
+  throw SimulationError(msg.str());
+}
+
 template <int Dim>
 Vec<Dim> to_vec(const std::vector<double>& v, const Vec<Dim>& fallback) {
   if (static_cast<int>(v.size()) != Dim) return fallback;
@@ -1287,15 +1300,7 @@ void Simulation<Dim>::advect(double dt) {
       if (keep) drift_reached_[f] = !unreached;
       if (unreached) u_[f] = reached_u_[f];
     }
-    // left flagged only when poisoned (StageSwitches::poison_unreached_faces): a read of a face
-    // the extrapolation did not reach
-    const auto left = std::find(unread_.begin(), unread_.end(), 1);
-    if (left != unread_.end()) {
-      std::ostringstream msg;
-      msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): particle "
-          << (left - unread_.begin()) << " read a face the extrapolation did not reach";
-      throw SimulationError(msg.str());
-    }
+    throw_if_unread(unread_, time_, frame_ + 1, "");
     // the guard's copies are dead until the next step's extrapolation writes them again (u_ has
     // no NaN left, so face_kinetic_energy does not read reached_u_): their memory goes back to
     // the heap, where the next step's solids' weights take it (the union's lattice-sized level
@@ -1387,14 +1392,7 @@ void Simulation<Dim>::first_half_drift(double dt) {
     unread_.clear();
     advect_particles(particles_, grid_, u_, h, solids_, boundary_);
   }
-  // left flagged only when poisoned (StageSwitches::poison_unreached_faces)
-  const auto left = std::find(unread_.begin(), unread_.end(), 1);
-  if (left != unread_.end()) {
-    std::ostringstream msg;
-    msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): particle "
-        << (left - unread_.begin()) << " read a face the extrapolation did not reach (first half drift)";
-    throw SimulationError(msg.str());
-  }
+  throw_if_unread(unread_, time_, frame_ + 1, " (first half drift)");
   drop_drift_guard();
   reached_u_ = VectorX();  // (advect's copy, kept for the drift, dead until the next step's)
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
