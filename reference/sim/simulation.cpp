@@ -664,7 +664,8 @@ void Simulation<Dim>::step(double dt) {
   move_bodies(dt);                    // (13)
   advect(dt);                         // (14)
   correct_volume(dt);                 // (15)
-  check_finite("advection");
+  // (the pressure and the stress are written by the solve only: checked after it)
+  check_finite("advection", false);
 }
 
 template <int Dim>
@@ -2351,11 +2352,11 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
 }
 
 template <int Dim>
-void Simulation<Dim>::check_finite(const char* after) const {
+void Simulation<Dim>::check_finite(const char* after, bool solve_outputs) const {
   std::string what;
   if (!all_finite(u_)) what = "non-finite grid velocity";
-  if (!all_finite(pressure_)) what = "non-finite pressure";
-  if (!all_finite(stress_)) what = "non-finite viscous stress";
+  if (solve_outputs && !all_finite(pressure_)) what = "non-finite pressure";
+  if (solve_outputs && !all_finite(stress_)) what = "non-finite viscous stress";
   if (what.empty()) {
     // the first particle that is not finite (the smallest index: the same for any split)
     const long np = static_cast<long>(particles_.size());

@@ -442,8 +442,10 @@ class Simulation : public AnySimulation {
   /// from these fields (load_state recomputes the weights). A new evolving member goes here.
   template <class Archive>
   void state_fields(Archive& a);
-  /// Throws SimulationError if the state holds a non-finite value.
-  void check_finite(const char* after) const;
+  /// Throws SimulationError if the state holds a non-finite value. Without `solve_outputs` the
+  /// pressure and the stress are not read (a check after the stages that follow the solve, which
+  /// do not write them: the solve's check covered them).
+  void check_finite(const char* after, bool solve_outputs = true) const;
   /// Fills the frame statistics that describe the state (volume, particles, energy, probes).
   void fill_state_stats(FrameStats& s) const;
   /// Lines 7-11 of Algorithm 1 for the liquid beside static solids: the solves of
