@@ -1,6 +1,7 @@
 // Tests of the unified system (24), the MLCP operator (26) and the PVC-unified solve
 // (reference/coupling/monolithic_system.hpp), 2D and 3D on small grids.
 #include <catch2/catch.hpp>
+#include <omp.h>
 
 #include <cmath>
 #include <cstring>
@@ -14,6 +15,7 @@
 #include "reference/coupling/coupled_schemes.hpp"
 #include "reference/coupling/coupling.hpp"
 #include "reference/coupling/monolithic_system.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/oracle/cholmod_solver.hpp"
@@ -670,4 +672,34 @@ TEST_CASE("inviscid weights without stress vectors give the system of zero stres
   SECTION("2D explicit") { check_inviscid_weights_without_stress_vectors<2>(16, Backend::explicit_matrices); }
   SECTION("3D matrixfree") { check_inviscid_weights_without_stress_vectors<3>(8, Backend::matrix_free); }
   SECTION("3D explicit") { check_inviscid_weights_without_stress_vectors<3>(8, Backend::explicit_matrices); }
+}
+
+TEST_CASE("the round-off bound's max over every face: 1 and 2 threads give the same bits, a "
+          "large term in the last faces reaches it",
+          "[unit]") {
+  // 2 * 96 * 97 faces: above kParallelMinWork, so the max is split over the threads
+  Scene<2> s = two_group_scene<2>(96);
+  REQUIRE(s.u_star.size() > kParallelMinWork);
+  // a large u* on the last face with W_F^u > 0 (in the second thread's share of the faces)
+  int last = -1;
+  for (int f = static_cast<int>(s.u_star.size()) - 1; f >= 0 && last < 0; --f)
+    if (s.w.pressure.fluid_face[f] > 0.0) last = f;
+  REQUIRE(last > s.u_star.size() / 2);
+  VectorX big = s.u_star;
+  big[last] = 1e6;
+  const int threads = omp_get_max_threads();
+  double bound[2][2];
+  for (int t = 0; t < 2; ++t) {
+    omp_set_num_threads(t + 1);
+    for (int b = 0; b < 2; ++b) {
+      const MonolithicSystem<2> sys(s.grid, StressForm::reduced, s.w, s.dt, b ? big : s.u_star,
+                                    s.bodies, s.solids, s.contacts, Backend::matrix_free);
+      bound[t][b] = sys.rhs_round_off();
+    }
+  }
+  omp_set_num_threads(threads);
+  for (int b = 0; b < 2; ++b)
+    CHECK(std::memcmp(&bound[0][b], &bound[1][b], sizeof(double)) == 0);
+  CHECK(bound[0][0] > 0.0);
+  CHECK(bound[1][1] > 1e3 * bound[1][0]);
 }
