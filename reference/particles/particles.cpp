@@ -3,7 +3,6 @@
 
 #include <omp.h>
 
-#include <Eigen/IterativeLinearSolvers>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -1548,7 +1547,8 @@ double level_set_volume_mismatch(const MacGrid<Dim>& grid, const std::vector<int
 /// thread with Eigen's own dot products of the whole vectors: the bits of Eigen's solver for any
 /// team. (Eigen's own threads split only the product, a parallel region per iteration with the
 /// vector operations serial between them: on two threads that cost more than it saved,
-/// threads14.) Returns the solution; `iterations` as ConjugateGradient::iterations().
+/// threads14.) Team size measured per call (AdaptiveTeam), one thread below kParallelMinWork
+/// non-zeros. Returns the solution; `iterations` as ConjugateGradient::iterations().
 VectorX diagonal_cg(const SparseMatrix& A, const VectorX& rhs, double tolerance,
                     long max_iterations, long& iterations) {
   const long n = A.rows();
@@ -1578,7 +1578,11 @@ VectorX diagonal_cg(const SparseMatrix& A, const VectorX& rhs, double tolerance,
   double alpha = 0.0, beta = 0.0;
   bool converged = false;
   long done_iterations = 0;
-#pragma omp parallel num_threads(team_threads(static_cast<long>(A.nonZeros())))
+  // the team measured per call (AdaptiveTeam, as pcg_solve's vector kernels): on a core that
+  // another process takes, the ~5 barriers per iteration wait for it, and one thread wins
+  static AdaptiveTeam site;
+  TeamScope team(site, static_cast<long>(A.nonZeros()));
+#pragma omp parallel num_threads(team.threads()) if (team.parallel())
   {
     long i = 0;  // (every thread counts the same iterations)
     while (i < max_iterations) {
@@ -1690,8 +1694,20 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   std::vector<int> slab_first(slabs + 1, 0);
   slab_first[slabs] = layers;
   if (slabs > 1) {
+    // (counted per thread and the counts added: integer sums, any split)
     std::vector<long> histogram(layers + 1, 0);
-    for (long p = 0; p < np; ++p) ++histogram[particle_cell[p][kLast] + 1];
+    {
+      const int team = team_threads(np);
+      std::vector<std::vector<long>> counts(team, std::vector<long>(layers + 1, 0));
+#pragma omp parallel num_threads(team)
+      {
+        std::vector<long>& count = counts[omp_get_thread_num()];
+#pragma omp for schedule(static)
+        for (long p = 0; p < np; ++p) ++count[particle_cell[p][kLast] + 1];
+      }
+      for (const auto& count : counts)
+        for (int l = 0; l <= layers; ++l) histogram[l] += count[l];
+    }
     for (int l = 0; l < layers; ++l) histogram[l + 1] += histogram[l];
     int l = 0;
     for (int k = 1; k < slabs; ++k) {
@@ -1988,8 +2004,35 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
   // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell
   // if that is an unknown, else its plus cell.
+  // (zeroed only in the face layers of the last axis that are read or written: the particles'
+  // stencils read the samples within one layer of their cells (clamped stencils too), the rows
+  // write the faces of their cells, layer ci or ci + 1. So the layers from one below the lowest
+  // particle or unknown cell to one above the highest; every layer on a periodic last axis or
+  // when a position is not finite. The other faces are neither read nor written: the whole-grid
+  // fill was most of this pass, 800k faces on a 64^3 grid for a liquid in a few layers)
   VectorX move(nf);
-  fill_in_parallel(move.data(), nf, 0.0);
+  {
+    int lo_layer = grid.cells()[kLast], hi_layer = -1;
+    bool finite = true;
+#pragma omp parallel for schedule(static) reduction(min : lo_layer) reduction(max : hi_layer) \
+    reduction(&& : finite) num_threads(team_threads(np))
+    for (long p = 0; p < np; ++p) {
+      finite = finite && particles.x[p].allFinite();
+      lo_layer = std::min(lo_layer, particle_cell[p][kLast]);
+      hi_layer = std::max(hi_layer, particle_cell[p][kLast]);
+    }
+    // (cells is sorted and the last axis varies slowest: its ends hold the unknowns' extremes)
+    lo_layer = std::min(lo_layer, grid.cell_coord(cells.front())[kLast]);
+    hi_layer = std::max(hi_layer, grid.cell_coord(cells.back())[kLast]);
+    const bool all = grid.periodic(kLast) || !finite;
+    for (int a = 0; a < Dim; ++a) {
+      const VecI<Dim> dims = grid.face_dims(a);
+      const long per = dims.prod() / dims[kLast];  // faces per layer
+      const int lo = all ? 0 : std::max(lo_layer - 1, 0);
+      const int hi = all ? dims[kLast] - 1 : std::min(hi_layer + 1, dims[kLast] - 1);
+      fill_in_parallel(move.data() + grid.face_offset(a) + lo * per, (hi - lo + 1) * per, 0.0);
+    }
+  }
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int r = 0; r < n; ++r) {
     const VecI<Dim> ci = grid.cell_coord(cells[r]);
