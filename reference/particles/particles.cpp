@@ -3,6 +3,7 @@
 
 #include <omp.h>
 
+#include <Eigen/IterativeLinearSolvers>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -1538,91 +1539,6 @@ double level_set_volume_mismatch(const MacGrid<Dim>& grid, const std::vector<int
 /// splats volume and the level set has no liquid, so rho~ = T = 0 there and no cell is an
 /// unknown; the values in the band, the rows (in cell order) and the moves are those of a pass
 /// over the whole grid, bit for bit.
-/// The density projection's solve: Eigen 3.4's ConjugateGradient<SparseMatrix, Lower | Upper,
-/// DiagonalPreconditioner<double>> from a zero guess (internal::conjugate_gradient), step for
-/// step, with its matrix product and its vector updates on several threads in one parallel
-/// region. Each row's product is summed by one thread as Eigen sums it (0 + the row's
-/// value * p in the row's order), each vector entry is updated by one thread with Eigen's
-/// expression, and the three reductions per iteration (p . A p, |r|^2, r . z) are taken by one
-/// thread with Eigen's own dot products of the whole vectors: the bits of Eigen's solver for any
-/// team. (Eigen's own threads split only the product, a parallel region per iteration with the
-/// vector operations serial between them: on two threads that cost more than it saved,
-/// threads14.) Team size measured per call (AdaptiveTeam), one thread below kParallelMinWork
-/// non-zeros. Returns the solution; `iterations` as ConjugateGradient::iterations().
-VectorX diagonal_cg(const SparseMatrix& A, const VectorX& rhs, double tolerance,
-                    long max_iterations, long& iterations) {
-  const long n = A.rows();
-  VectorX x = VectorX::Zero(n);
-  iterations = 0;
-  // (the residual of the zero guess, rhs - A 0, is rhs: A 0 sums to +0 in every row)
-  VectorX residual = rhs;
-  const double rhs_norm2 = rhs.squaredNorm();
-  if (rhs_norm2 == 0) return x;
-  const double threshold =
-      std::max(tolerance * tolerance * rhs_norm2, std::numeric_limits<double>::min());
-  double residual_norm2 = residual.squaredNorm();
-  if (residual_norm2 < threshold) return x;
-  const int* outer = A.outerIndexPtr();
-  const int* column = A.innerIndexPtr();
-  const double* value = A.valuePtr();
-  // the Jacobi preconditioner: 1 / the diagonal entry (1 where it is missing or zero)
-  VectorX inverse_diagonal(n);
-  for (long r = 0; r < n; ++r) {
-    int k = outer[r];
-    while (k < outer[r + 1] && column[k] != r) ++k;
-    inverse_diagonal[r] = k < outer[r + 1] && value[k] != 0.0 ? 1.0 / value[k] : 1.0;
-  }
-  VectorX p = (inverse_diagonal.array() * residual.array()).matrix();
-  VectorX z(n), tmp(n);
-  double abs_new = residual.dot(p);
-  double alpha = 0.0, beta = 0.0;
-  bool converged = false;
-  long done_iterations = 0;
-  // the team measured per call (AdaptiveTeam, as pcg_solve's vector kernels): on a core that
-  // another process takes, the ~5 barriers per iteration wait for it, and one thread wins
-  static AdaptiveTeam site;
-  TeamScope team(site, static_cast<long>(A.nonZeros()));
-#pragma omp parallel num_threads(team.threads()) if (team.parallel())
-  {
-    long i = 0;  // (every thread counts the same iterations)
-    while (i < max_iterations) {
-#pragma omp for schedule(static)
-      for (long r = 0; r < n; ++r) {
-        double sum = 0.0;
-        for (int k = outer[r]; k < outer[r + 1]; ++k) sum += value[k] * p[column[k]];
-        tmp[r] = 0.0;
-        tmp[r] += 1.0 * sum;
-      }
-#pragma omp single
-      alpha = abs_new / p.dot(tmp);
-#pragma omp for schedule(static)
-      for (long r = 0; r < n; ++r) {
-        x[r] += alpha * p[r];
-        residual[r] -= alpha * tmp[r];
-        z[r] = inverse_diagonal[r] * residual[r];  // (read only if the loop goes on)
-      }
-#pragma omp single
-      {
-        residual_norm2 = residual.squaredNorm();
-        converged = residual_norm2 < threshold;
-        if (!converged) {
-          const double abs_old = abs_new;
-          abs_new = residual.dot(z);
-          beta = abs_new / abs_old;
-        }
-      }
-      if (converged) break;
-#pragma omp for schedule(static)
-      for (long r = 0; r < n; ++r) p[r] = z[r] + beta * p[r];
-      ++i;
-    }
-#pragma omp master
-    done_iterations = i;
-  }
-  iterations = done_iterations;
-  return x;
-}
-
 template <int Dim>
 DensityProjectionStats project_density_once(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                             const SampleLattice<Dim>& lattice,
@@ -1995,11 +1911,27 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
                 nonzero + row_start[r]);
     }
   }
-  // (Eigen's diagonally preconditioned CG, its products and updates on several threads: the
-  // 64^3 viscous bunny's projection has 8k rows, 54k non-zeros, ~45 iterations)
-  long cg_iterations = 0;
-  const VectorX psi = diagonal_cg(A, rhs, kProjectionTolerance, 4L * n + 100, cg_iterations);  // dx^2
-  stats.iterations = static_cast<int>(cg_iterations);
+  Eigen::ConjugateGradient<SparseMatrix, Eigen::Lower | Eigen::Upper,
+                           Eigen::DiagonalPreconditioner<double>>
+      cg;
+  cg.setTolerance(kProjectionTolerance);
+  cg.setMaxIterations(4 * n + 100);
+  cg.compute(A);
+  // On one thread: Eigen would split each product of the CG (a row-major view above 20000
+  // non-zeros) over the process team, a parallel region per iteration around a few tens of
+  // microseconds of work (the 64^3 viscous bunny: 8k rows, 54k non-zeros, ~45 iterations), and
+  // the vector operations between them are serial anyway; the regions cost more than they saved
+  // on two threads (the CG's CPU time rose from 2.6 to 14 ms per frame, measured at load 8;
+  // docs/benchmarks.md, threads14). Each row's product is
+  // summed by one thread either way: the same bits.
+  // (threads15 ran the whole CG in one parallel region, Eigen's steps and bits with five
+  // barriers per iteration: at load 7-8 its two threads took 16 ms each per frame against
+  // 2.7 ms on one, for at most ~1 ms to gain on an idle machine; docs/benchmarks.md, threads15)
+  const int eigen_threads = Eigen::nbThreads();
+  Eigen::setNbThreads(1);
+  const VectorX psi = cg.solve(rhs);  // in units of dx^2
+  Eigen::setNbThreads(eigen_threads);
+  stats.iterations = static_cast<int>(cg.iterations());
 
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
   // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell
