@@ -358,6 +358,10 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
 /// order and writes only its own faces. Every face therefore sums its contributions in particle
 /// order, as the serial loop does: the same bits for any thread count, and no per-thread copies
 /// of the grid.
+/// The block of faces of particles_to_grid's zero and division passes (one parallel region
+/// each, static blocks: a few blocks per thread on a 64^3 grid's 800k faces)
+constexpr long kFaceBlock = 1L << 14;
+
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
                        VectorX& face_mass, VectorX& face_density) {
@@ -369,16 +373,28 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   const bool wrap_last = grid.periodic(kLast);
   // each particle's cell layer along the last axis (clamped): its stencils reach face layers
   // layer - 1 .. layer + 1 of every component's lattice (wrapped on a periodic axis)
+  // (counted per thread in the same loop and the counts added: integer sums, any split)
   std::vector<int> layer_of(np);
   std::vector<long> per_layer(layers + 1, 0);
   bool finite = true;
-#pragma omp parallel for schedule(static) reduction(&& : finite) num_threads(process_threads())
-  for (long p = 0; p < np; ++p) {
-    const double s = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / grid.dx();
-    finite = finite && std::isfinite(s);
-    layer_of[p] = std::clamp(static_cast<int>(std::floor(s)), 0, layers - 1);
+  {
+    const int team = team_threads(np);
+    std::vector<std::vector<long>> counts(team, std::vector<long>(layers + 1, 0));
+#pragma omp parallel num_threads(team) reduction(&& : finite)
+    {
+      std::vector<long>& count = counts[omp_get_thread_num()];
+#pragma omp for schedule(static)
+      for (long p = 0; p < np; ++p) {
+        const double s =
+            (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / grid.dx();
+        finite = finite && std::isfinite(s);
+        layer_of[p] = std::clamp(static_cast<int>(std::floor(s)), 0, layers - 1);
+        ++count[layer_of[p] + 1];
+      }
+    }
+    for (const auto& count : counts)
+      for (int c = 0; c <= layers; ++c) per_layer[c] += count[c];
   }
-  for (long p = 0; p < np; ++p) ++per_layer[layer_of[p] + 1];
   for (int c = 0; c < layers; ++c) per_layer[c + 1] += per_layer[c];
   // The accumulators live in the outputs. Only the face layers the particles reach are zeroed
   // before the sums (issue 20: at Fig. 2's paper grid the liquid spans a part of the box's
@@ -407,10 +423,30 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
     zero_begin[a] = grid.face_offset(a) + (lo <= hi ? lo * per : 0);
     zero_end[a] = grid.face_offset(a) + (lo <= hi ? (hi + 1) * per : 0);
   }
-  for (VectorX* v : {&u, &face_mass, &face_density}) {
-    v->resize(nf);
-    for (int a = 0; a < Dim; ++a)
-      fill_in_parallel(v->data() + zero_begin[a], zero_end[a] - zero_begin[a], 0.0);
+  // (the ranges of all components zeroed in one parallel region: fixed blocks of the ranges
+  // laid end to end; a region per range and vector cost more than the zeros on two threads)
+  for (VectorX* v : {&u, &face_mass, &face_density}) v->resize(nf);
+  long zero_total = 0;
+  for (int a = 0; a < Dim; ++a) zero_total += zero_end[a] - zero_begin[a];
+  {
+    const long blocks = (zero_total + kFaceBlock - 1) / kFaceBlock;
+#pragma omp parallel for schedule(static) num_threads(team_threads(zero_total))
+    for (long b = 0; b < blocks; ++b) {
+      // block b covers [b, b + 1) kFaceBlock of the ranges laid end to end
+      long skip = b * kFaceBlock, left = std::min(kFaceBlock, zero_total - skip);
+      for (int a = 0; a < Dim && left > 0; ++a) {
+        const long length = zero_end[a] - zero_begin[a];
+        if (skip >= length) {
+          skip -= length;
+          continue;
+        }
+        const long begin = zero_begin[a] + skip, count = std::min(left, length - skip);
+        for (VectorX* v : {&u, &face_mass, &face_density})
+          std::fill(v->data() + begin, v->data() + begin + count, 0.0);
+        left -= count;
+        skip = 0;
+      }
+    }
   }
   const int threads = std::max(1, std::min(process_threads(), layers));
   // slab t owns the face layers [first[t], first[t + 1]); the face lattices along the last axis
@@ -479,25 +515,41 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   }
 
   // velocities and densities from the sums (in the zeroed ranges: no face outside them has
-  // mass), zeros elsewhere
-  for (int a = 0; a < Dim; ++a) {
-    const int begin = zero_begin[a], end = zero_end[a];
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (int f = begin; f < end; ++f) {
-      const double m = face_mass[f];
-      if (m > 0.0) {
-        u[f] = (0.0 + u[f]) / m;
-        face_density[f] = (0.0 + face_density[f]) / m;
-      } else {
-        u[f] = 0.0;
-        face_density[f] = 0.0;
+  // mass), zeros elsewhere. One parallel region over all faces in fixed blocks (the ranges are
+  // ascending and disjoint, each within its component's lattice): a block divides where it
+  // overlaps a range and writes zeros to all three vectors between them; every face gets what
+  // the division or the fill of its own component gave, whatever the split
+  {
+    const long blocks = (nf + kFaceBlock - 1) / kFaceBlock;
+    const auto divide = [&](long begin, long end) {
+      for (long f = begin; f < end; ++f) {
+        const double m = face_mass[f];
+        if (m > 0.0) {
+          u[f] = (0.0 + u[f]) / m;
+          face_density[f] = (0.0 + face_density[f]) / m;
+        } else {
+          u[f] = 0.0;
+          face_density[f] = 0.0;
+        }
       }
-    }
-    const int lattice_begin = grid.face_offset(a);
-    const int lattice_end = lattice_begin + grid.face_dims(a).prod();
-    for (VectorX* v : {&u, &face_mass, &face_density}) {
-      fill_in_parallel(v->data() + lattice_begin, begin - lattice_begin, 0.0);
-      fill_in_parallel(v->data() + end, lattice_end - end, 0.0);
+    };
+    const auto zeros = [&](long begin, long end) {
+      if (begin >= end) return;
+      for (VectorX* v : {&u, &face_mass, &face_density})
+        std::fill(v->data() + begin, v->data() + end, 0.0);
+    };
+#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
+    for (long b = 0; b < blocks; ++b) {
+      const long b0 = b * kFaceBlock, b1 = std::min<long>(nf, b0 + kFaceBlock);
+      long cursor = b0;
+      for (int a = 0; a < Dim; ++a) {
+        const long r0 = std::max<long>(b0, zero_begin[a]), r1 = std::min<long>(b1, zero_end[a]);
+        if (r0 >= r1) continue;
+        zeros(cursor, r0);
+        divide(r0, r1);
+        cursor = r1;
+      }
+      zeros(cursor, b1);
     }
   }
 }
@@ -1558,8 +1610,20 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   std::vector<int> slab_first(slabs + 1, 0);
   slab_first[slabs] = layers;
   if (slabs > 1) {
+    // (counted per thread and the counts added: integer sums, any split)
     std::vector<long> histogram(layers + 1, 0);
-    for (long p = 0; p < np; ++p) ++histogram[particle_cell[p][kLast] + 1];
+    {
+      const int team = team_threads(np);
+      std::vector<std::vector<long>> counts(team, std::vector<long>(layers + 1, 0));
+#pragma omp parallel num_threads(team)
+      {
+        std::vector<long>& count = counts[omp_get_thread_num()];
+#pragma omp for schedule(static)
+        for (long p = 0; p < np; ++p) ++count[particle_cell[p][kLast] + 1];
+      }
+      for (const auto& count : counts)
+        for (int l = 0; l <= layers; ++l) histogram[l] += count[l];
+    }
     for (int l = 0; l < layers; ++l) histogram[l + 1] += histogram[l];
     int l = 0;
     for (int k = 1; k < slabs; ++k) {
@@ -1742,14 +1806,44 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   stats.volume_mismatch = mismatch;
   stats.deficit_share = deficit_share;
 
-  // with q = -psi dx^2: (-L dx^2) psi = e (rows in cell order), and the move is grad q
-  std::vector<Triplet> triplets;
-  triplets.reserve(static_cast<std::size_t>(n) * (2 * Dim + 1));
+  // with q = -psi dx^2: (-L dx^2) psi = e (rows in cell order), and the move is grad q.
+  // The rows are made on several threads, each row by one: its entries (at most 2 Dim + 1) in
+  // the order of the loops below, sorted by column with the entries of one column summed in
+  // that order (a column twice only across a periodic axis of two cells), which is what
+  // setFromTriplets made of the same entries, bit for bit; then laid out row after row
+  constexpr int kRowEntries = 2 * Dim + 1;
+  std::vector<int> entry_column(static_cast<std::size_t>(n) * kRowEntries);
+  std::vector<double> entry_value(entry_column.size());
+  std::vector<int> row_entries(n);
+  // (the surface band's deficits listed by to_solve: flagged per row, e before the share)
+  const bool listing = surface_deficits == SurfaceDeficits::to_solve;
+  std::vector<unsigned char> listed_deficit(listing ? n : 0, 0);
+  std::vector<double> deficit_before_share(listing ? n : 0, 0.0);
   VectorX rhs(n);
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(n) * kRowEntries))
   for (int r = 0; r < n; ++r) {
     const int c = cells[r];
     const VecI<Dim> ci = grid.cell_coord(c);
     const double* v = values.find(ci);
+    int* column = entry_column.data() + static_cast<std::size_t>(r) * kRowEntries;
+    double* value = entry_value.data() + static_cast<std::size_t>(r) * kRowEntries;
+    int count = 0;
+    const auto add = [&](int col, double val) {
+      // insertion by column: a column already listed sums (in the order of the loops)
+      int k = 0;
+      while (k < count && column[k] < col) ++k;
+      if (k < count && column[k] == col) {
+        value[k] += val;
+        return;
+      }
+      for (int m = count; m > k; --m) {
+        column[m] = column[m - 1];
+        value[m] = value[m - 1];
+      }
+      column[k] = col;
+      value[k] = val;
+      ++count;
+    };
     double diag = 0.0;
     for (int a = 0; a < Dim; ++a)
       for (int s = 0; s < 2; ++s) {
@@ -1765,10 +1859,11 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
         cj[a] += s == 0 ? -1 : 1;
         const int j = grid.cell_index_or_outside(cj);
         const int rj = j >= 0 ? row_of(cj) : -1;
-        if (rj >= 0 && j != c) triplets.emplace_back(r, rj, -wf);
+        if (rj >= 0 && j != c) add(rj, -wf);
       }
     // a tiny shift keeps fully enclosed liquid (no air neighbour) non-singular
-    triplets.emplace_back(r, r, diag * (1.0 + 1e-6) + 1e-12);
+    add(r, diag * (1.0 + 1e-6) + 1e-12);
+    row_entries[r] = count;
     // On the air side of the surface (T_c < 1/2) a deficit (e < 0) is not corrected: there T
     // measures where the reconstructed surface lies, and the surface follows the particles, so
     // moving particles cannot remove it. Chasing it pulls particles into every bump of the level
@@ -1785,14 +1880,37 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide)
       e = std::max(e, 0.0);
     else if (v[kTarget] < kProjectionFullCell && e < 0.0) {
-      if (surface_deficits == SurfaceDeficits::to_solve) stats.surface_deficits.emplace_back(c, e);
+      if (surface_deficits == SurfaceDeficits::to_solve) {
+        listed_deficit[r] = 1;
+        deficit_before_share[r] = e;
+      }
       e *= deficit_share;
     }
     rhs[r] = e;
-    stats.error_before += std::abs(e) * cell_volume;
+  }
+  // the sums and the list in row order, as the serial loop made them
+  for (int r = 0; r < n; ++r) {
+    if (!listed_deficit.empty() && listed_deficit[r])
+      stats.surface_deficits.emplace_back(cells[r], deficit_before_share[r]);
+    stats.error_before += std::abs(rhs[r]) * cell_volume;
   }
   SparseMatrix A(n, n);
-  A.setFromTriplets(triplets.begin(), triplets.end());
+  {
+    std::vector<int> row_start(static_cast<std::size_t>(n) + 1, 0);
+    for (int r = 0; r < n; ++r) row_start[r + 1] = row_start[r] + row_entries[r];
+    A.resizeNonZeros(row_start[n]);
+    std::copy(row_start.begin(), row_start.end(), A.outerIndexPtr());
+    int* inner = A.innerIndexPtr();
+    double* nonzero = A.valuePtr();
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(row_start[n])))
+    for (int r = 0; r < n; ++r) {
+      const std::size_t from = static_cast<std::size_t>(r) * kRowEntries;
+      std::copy(entry_column.begin() + from, entry_column.begin() + from + row_entries[r],
+                inner + row_start[r]);
+      std::copy(entry_value.begin() + from, entry_value.begin() + from + row_entries[r],
+                nonzero + row_start[r]);
+    }
+  }
   Eigen::ConjugateGradient<SparseMatrix, Eigen::Lower | Eigen::Upper,
                            Eigen::DiagonalPreconditioner<double>>
       cg;
@@ -1806,6 +1924,9 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // on two threads (the CG's CPU time rose from 2.6 to 14 ms per frame, measured at load 8;
   // docs/benchmarks.md, threads14). Each row's product is
   // summed by one thread either way: the same bits.
+  // (threads15 ran the whole CG in one parallel region, Eigen's steps and bits with five
+  // barriers per iteration: at load 7-8 its two threads took 16 ms each per frame against
+  // 2.7 ms on one, for at most ~1 ms to gain on an idle machine; docs/benchmarks.md, threads15)
   const int eigen_threads = Eigen::nbThreads();
   Eigen::setNbThreads(1);
   const VectorX psi = cg.solve(rhs);  // in units of dx^2
@@ -1815,8 +1936,35 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
   // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell
   // if that is an unknown, else its plus cell.
+  // (zeroed only in the face layers of the last axis that are read or written: the particles'
+  // stencils read the samples within one layer of their cells (clamped stencils too), the rows
+  // write the faces of their cells, layer ci or ci + 1. So the layers from one below the lowest
+  // particle or unknown cell to one above the highest; every layer on a periodic last axis or
+  // when a position is not finite. The other faces are neither read nor written: the whole-grid
+  // fill was most of this pass, 800k faces on a 64^3 grid for a liquid in a few layers)
   VectorX move(nf);
-  fill_in_parallel(move.data(), nf, 0.0);
+  {
+    int lo_layer = grid.cells()[kLast], hi_layer = -1;
+    bool finite = true;
+#pragma omp parallel for schedule(static) reduction(min : lo_layer) reduction(max : hi_layer) \
+    reduction(&& : finite) num_threads(team_threads(np))
+    for (long p = 0; p < np; ++p) {
+      finite = finite && particles.x[p].allFinite();
+      lo_layer = std::min(lo_layer, particle_cell[p][kLast]);
+      hi_layer = std::max(hi_layer, particle_cell[p][kLast]);
+    }
+    // (cells is sorted and the last axis varies slowest: its ends hold the unknowns' extremes)
+    lo_layer = std::min(lo_layer, grid.cell_coord(cells.front())[kLast]);
+    hi_layer = std::max(hi_layer, grid.cell_coord(cells.back())[kLast]);
+    const bool all = grid.periodic(kLast) || !finite;
+    for (int a = 0; a < Dim; ++a) {
+      const VecI<Dim> dims = grid.face_dims(a);
+      const long per = dims.prod() / dims[kLast];  // faces per layer
+      const int lo = all ? 0 : std::max(lo_layer - 1, 0);
+      const int hi = all ? dims[kLast] - 1 : std::min(hi_layer + 1, dims[kLast] - 1);
+      fill_in_parallel(move.data() + grid.face_offset(a) + lo * per, (hi - lo + 1) * per, 0.0);
+    }
+  }
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int r = 0; r < n; ++r) {
     const VecI<Dim> ci = grid.cell_coord(cells[r]);

@@ -1049,6 +1049,7 @@ void check_splats_deterministic_above_serial_fallback() {
   struct Result {
     VectorX cells, dofs, phi;
     Particles<Dim> moved, moved_by_solid;
+    long cells_projected = 0;
   };
   const auto run = [&](int t) {
     omp_set_num_threads(t);
@@ -1057,13 +1058,18 @@ void check_splats_deterministic_above_serial_fallback() {
     r.dofs = stress_viscosity(stress, start, eta);
     r.phi = liquid_phi_on_lattice(start, grid, lattice, walls<Dim>());
     r.moved = start;
-    project_particle_density(r.moved, grid, lattice, fluid, SolidField<Dim>{}, walls<Dim>(), 1);
+    r.cells_projected =
+        project_particle_density(r.moved, grid, lattice, fluid, SolidField<Dim>{}, walls<Dim>(), 1)
+            .cells;
     r.moved_by_solid = start;
     project_particle_density(r.moved_by_solid, grid, lattice, fluid, solid, walls<Dim>(), 1);
     omp_set_num_threads(threads);
     return r;
   };
   const Result one = run(1);
+  // the projection's row assembly leaves its serial fall-back too (its team is sized by the
+  // rows' 2 Dim + 1 entry slots: 10308 rows in 2D, 4118 in 3D)
+  CHECK(one.cells_projected * (2 * Dim + 1) > kParallelMinWork);
   // the cells' splat is the diagonal stress components' (stress_viscosity makes it once)
   for (int k = 0; k < Dim; ++k) {
     INFO("diagonal component " << k);
