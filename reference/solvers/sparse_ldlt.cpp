@@ -6,6 +6,70 @@
 
 namespace monolith {
 
+namespace {
+
+/// The lower part of the update product of the supernodal factor: u(r, i) = sum_{c < w} t(r, c)
+/// l(i, c) for i < k and i <= r < m (t column-major m x w, l(i, c) = l[c * l_stride + i], u
+/// column-major m x k; entries above the diagonal of u are not needed and not all formed). Each
+/// entry is the sum over c in increasing order from zero, one product added at a time (no fused
+/// multiply-add): the bits of the coefficient-based product (`lazyProduct`) this replaces, whose
+/// packets sum the same way. Tiles of 2 packets of rows by 4 columns keep eight independent sums
+/// in registers (the lazy product kept one, a chain of dependent additions), and the tiles above
+/// the diagonal are skipped.
+void lower_update(const double* t, int m, const double* l, int l_stride, int k, int w, double* u) {
+  using Packet = Eigen::internal::packet_traits<double>::type;
+  constexpr int P = Eigen::internal::packet_traits<double>::size;
+  using Eigen::internal::padd;
+  using Eigen::internal::pmul;
+  using Eigen::internal::pset1;
+  using Eigen::internal::ploadu;
+  using Eigen::internal::pstoreu;
+  for (int i0 = 0; i0 < k; i0 += 4) {
+    const int nc = std::min(4, k - i0);
+    int r = i0;
+    if (nc == 4)
+      for (; r + 2 * P <= m; r += 2 * P) {
+        Packet s00 = pset1<Packet>(0.0), s01 = s00, s02 = s00, s03 = s00;
+        Packet s10 = s00, s11 = s00, s12 = s00, s13 = s00;
+        const double* tc = t + r;
+        const double* lc = l + i0;
+        for (int c = 0; c < w; ++c, tc += m, lc += l_stride) {
+          const Packet t0 = ploadu<Packet>(tc), t1 = ploadu<Packet>(tc + P);
+          const Packet b0 = pset1<Packet>(lc[0]), b1 = pset1<Packet>(lc[1]);
+          const Packet b2 = pset1<Packet>(lc[2]), b3 = pset1<Packet>(lc[3]);
+          s00 = padd(s00, pmul(t0, b0));
+          s10 = padd(s10, pmul(t1, b0));
+          s01 = padd(s01, pmul(t0, b1));
+          s11 = padd(s11, pmul(t1, b1));
+          s02 = padd(s02, pmul(t0, b2));
+          s12 = padd(s12, pmul(t1, b2));
+          s03 = padd(s03, pmul(t0, b3));
+          s13 = padd(s13, pmul(t1, b3));
+        }
+        double* u0 = u + static_cast<Eigen::Index>(i0) * m + r;
+        pstoreu(u0, s00);
+        pstoreu(u0 + P, s10);
+        pstoreu(u0 + m, s01);
+        pstoreu(u0 + m + P, s11);
+        pstoreu(u0 + 2 * m, s02);
+        pstoreu(u0 + 2 * m + P, s12);
+        pstoreu(u0 + 3 * m, s03);
+        pstoreu(u0 + 3 * m + P, s13);
+      }
+    // the rows left over (and the last columns when k is not a multiple of 4): entry by entry
+    for (; r < m; ++r)
+      for (int q = 0; q < nc && i0 + q <= r; ++q) {
+        double s = 0.0;
+        const double* tc = t + r;
+        const double* lc = l + i0 + q;
+        for (int c = 0; c < w; ++c, tc += m, lc += l_stride) s += *tc * *lc;
+        u[static_cast<Eigen::Index>(i0 + q) * m + r] = s;
+      }
+  }
+}
+
+}  // namespace
+
 void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
   eigen_assert(m_analysisIsOk && "SparseLdlt::factorize_supernodal: analyzePattern first");
   using Index = Eigen::Index;
@@ -89,12 +153,11 @@ void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
       Eigen::Map<Eigen::MatrixXd> t(scaled.data(), m, wd);
       for (int c = 0; c < wd; ++c)
         for (int r = 0; r < m; ++r) t(r, c) = ld[static_cast<Index>(c) * nrd + p + r] * m_diag[fd + c];
-      Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> lrows(ld + p, k, wd, Eigen::OuterStride<>(nrd));
-      Eigen::Map<Eigen::MatrixXd> u(update.data(), m, k);
-      // coefficient-based (lazyProduct): each entry's sum over the d's columns in order, on the
-      // calling thread; Eigen's blocked GEMM would split its depth by the thread count (bits that
-      // depend on it) and may start threads of its own
-      u.noalias() = t.lazyProduct(lrows.transpose());
+      // u = t L_d[rows p..q-1]^T, its lower part: each entry's sum over the d's columns in order,
+      // on the calling thread (lower_update); Eigen's blocked GEMM would split its depth by the
+      // thread count (bits that depend on it) and may start threads of its own
+      lower_update(scaled.data(), m, ld + p, nrd, k, wd, update.data());
+      Eigen::Map<const Eigen::MatrixXd> u(update.data(), m, k);
       for (int c = 0; c < k; ++c) {
         double* col = x + static_cast<Index>(rows_of(d, p + c) - f) * nr;
         for (int r = c; r < m; ++r) col[pos[rows_of(d, p + r)]] -= u(r, c);
