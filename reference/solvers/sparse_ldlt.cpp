@@ -68,6 +68,110 @@ void lower_update(const double* t, int m, const double* l, int l_stride, int k, 
   }
 }
 
+/// The LDL^T of a dense panel (column-major, nr rows, w <= nr columns, the first w rows its
+/// diagonal block): on return column c holds L's rows below the diagonal, diag[c] D's entry; false
+/// on a zero pivot. Every entry (r, c2) receives the terms U(r, c) (U(c2, c) / D_c) of the columns
+/// c < c2 in increasing order, each subtracted as it comes (U the unscaled columns, L = U / D_c by
+/// multiplication with 1 / D_c), exactly as the right-looking loop does column by column: the
+/// same bits. Wide panels are done by blocks of four columns: the terms of the columns left of a
+/// block are subtracted tile by tile (two packets of rows by four columns, eight independent
+/// chains held in registers; the right-looking loop streams the whole trailing panel through
+/// memory once per column), then the block's own columns right-looking; the scaling by 1 / D_c
+/// waits to the end (the unscaled columns are read by every later block). `factor`: scratch of
+/// 4 w doubles.
+bool panel_ldlt(double* x, int nr, int w, double* diag, double* factor) {
+  using Index = Eigen::Index;
+  using Packet = Eigen::internal::packet_traits<double>::type;
+  constexpr int P = Eigen::internal::packet_traits<double>::size;
+  using Eigen::internal::pmul;
+  using Eigen::internal::psub;
+  using Eigen::internal::pset1;
+  using Eigen::internal::ploadu;
+  using Eigen::internal::pstoreu;
+  if (w < 8) {
+    for (int c = 0; c < w; ++c) {
+      double* xc = x + static_cast<Index>(c) * nr;
+      const double dc = xc[c];
+      diag[c] = dc;
+      if (dc == 0.0) return false;
+      for (int c2 = c + 1; c2 < w; ++c2) {
+        const double t = xc[c2];  // L(c2, c) D_c
+        double* x2 = x + static_cast<Index>(c2) * nr;
+        for (int r = c2; r < nr; ++r) x2[r] -= xc[r] * (t / dc);
+      }
+      const double inv = 1.0 / dc;
+      for (int r = c + 1; r < nr; ++r) xc[r] *= inv;
+    }
+    return true;
+  }
+  for (int j0 = 0; j0 < w; j0 += 4) {
+    const int nc = std::min(4, w - j0);
+    // the columns c < j0: factor[4 c + q] = U(j0 + q, c) / D_c, then each entry of the block
+    // minus its terms over c in order
+    for (int c = 0; c < j0; ++c)
+      for (int q = 0; q < nc; ++q) factor[4 * c + q] = x[static_cast<Index>(c) * nr + j0 + q] / diag[c];
+    if (j0 > 0) {
+      int r = j0;
+      if (nc == 4)
+        for (; r + 2 * P <= nr; r += 2 * P) {
+          double* y = x + static_cast<Index>(j0) * nr + r;
+          Packet s00 = ploadu<Packet>(y), s10 = ploadu<Packet>(y + P);
+          Packet s01 = ploadu<Packet>(y + nr), s11 = ploadu<Packet>(y + nr + P);
+          Packet s02 = ploadu<Packet>(y + 2 * nr), s12 = ploadu<Packet>(y + 2 * nr + P);
+          Packet s03 = ploadu<Packet>(y + 3 * nr), s13 = ploadu<Packet>(y + 3 * nr + P);
+          const double* uc = x + r;
+          for (int c = 0; c < j0; ++c, uc += nr) {
+            const Packet u0 = ploadu<Packet>(uc), u1 = ploadu<Packet>(uc + P);
+            const double* fc = factor + 4 * c;
+            const Packet f0 = pset1<Packet>(fc[0]), f1 = pset1<Packet>(fc[1]);
+            const Packet f2 = pset1<Packet>(fc[2]), f3 = pset1<Packet>(fc[3]);
+            s00 = psub(s00, pmul(u0, f0));
+            s10 = psub(s10, pmul(u1, f0));
+            s01 = psub(s01, pmul(u0, f1));
+            s11 = psub(s11, pmul(u1, f1));
+            s02 = psub(s02, pmul(u0, f2));
+            s12 = psub(s12, pmul(u1, f2));
+            s03 = psub(s03, pmul(u0, f3));
+            s13 = psub(s13, pmul(u1, f3));
+          }
+          // (rows above a column's diagonal are formed too: never read)
+          pstoreu(y, s00);
+          pstoreu(y + P, s10);
+          pstoreu(y + nr, s01);
+          pstoreu(y + nr + P, s11);
+          pstoreu(y + 2 * nr, s02);
+          pstoreu(y + 2 * nr + P, s12);
+          pstoreu(y + 3 * nr, s03);
+          pstoreu(y + 3 * nr + P, s13);
+        }
+      for (; r < nr; ++r)
+        for (int q = 0; q < nc && j0 + q <= r; ++q) {
+          double v = x[static_cast<Index>(j0 + q) * nr + r];
+          for (int c = 0; c < j0; ++c) v -= x[static_cast<Index>(c) * nr + r] * factor[4 * c + q];
+          x[static_cast<Index>(j0 + q) * nr + r] = v;
+        }
+    }
+    // the block's own columns, right-looking (unscaled)
+    for (int c = j0; c < j0 + nc; ++c) {
+      double* xc = x + static_cast<Index>(c) * nr;
+      const double dc = xc[c];
+      diag[c] = dc;
+      if (dc == 0.0) return false;
+      for (int c2 = c + 1; c2 < j0 + nc; ++c2) {
+        const double t = xc[c2];
+        double* x2 = x + static_cast<Index>(c2) * nr;
+        for (int r = c2; r < nr; ++r) x2[r] -= xc[r] * (t / dc);
+      }
+    }
+  }
+  for (int c = 0; c < w; ++c) {
+    double* xc = x + static_cast<Index>(c) * nr;
+    const double inv = 1.0 / diag[c];
+    for (int r = c + 1; r < nr; ++r) xc[r] *= inv;
+  }
+  return true;
+}
+
 }  // namespace
 
 void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
@@ -127,6 +231,7 @@ void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
   std::vector<std::vector<int>> pending(ns);  // supernodes whose next update goes to s
   std::vector<double> scaled(max_rows * max_width), update(max_rows * max_rows);
   std::vector<int> row_index(max_rows);
+  std::vector<double> factor(max_width * 4);
   bool ok = true;
   for (int s = 0; s < ns && ok; ++s) {
     const int f = first[s], w = first[s + 1] - f, nr = 1 + m_nonZerosPerCol[f];
@@ -166,23 +271,8 @@ void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
       if (q < nrd) pending[super_of[rows_of(d, q)]].push_back(d);
     }
     std::vector<int>().swap(pending[s]);
-    // the panel's own LDL^T (columns left to right, right-looking within the panel)
-    for (int c = 0; c < w; ++c) {
-      double* xc = x + static_cast<Index>(c) * nr;
-      const double dc = xc[c];
-      m_diag[f + c] = dc;
-      if (dc == 0.0) {
-        ok = false;
-        break;
-      }
-      for (int c2 = c + 1; c2 < w; ++c2) {
-        const double t = xc[c2];  // L(c2, c) D_c
-        double* x2 = x + static_cast<Index>(c2) * nr;
-        for (int r = c2; r < nr; ++r) x2[r] -= xc[r] * (t / dc);
-      }
-      const double inv = 1.0 / dc;
-      for (int r = c + 1; r < nr; ++r) xc[r] *= inv;
-    }
+    // the panel's own LDL^T (panel_ldlt)
+    ok = panel_ldlt(x, nr, w, m_diag.data() + f, factor.data());
     for (int r = 0; r < nr; ++r) pos[row_index[r]] = -1;
     next[s] = w;
     if (nr > w) pending[super_of[rows_of(s, w)]].push_back(s);
