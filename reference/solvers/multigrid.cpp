@@ -465,7 +465,7 @@ double Multigrid::operator_complexity() const {
   return total / static_cast<double>(levels_[0].a.nonZeros());
 }
 
-SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros) {
+SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros, bool sort_columns) {
   if (a.cols() != b.rows()) throw std::invalid_argument("sparse_row_product: sizes do not match");
   if (!a.isCompressed() || !b.isCompressed())
     throw std::invalid_argument("sparse_row_product: compressed matrices expected");
@@ -530,7 +530,7 @@ SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bo
           }
         }
       }
-      std::sort(inner + outer[i], inner + end);
+      if (sort_columns) std::sort(inner + outer[i], inner + end);
       int out = outer[i];
       for (int e = outer[i]; e < end; ++e) {
         const double v = sum[inner[e]];
@@ -577,7 +577,9 @@ SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p) {
     pc = p;
     pc.makeCompressed();
   }
-  const SparseMatrix ap = sparse_row_product(a.isCompressed() ? a : ac, p.isCompressed() ? p : pc, false);
+  // (A P's rows unsorted: P^T (A P) adds the terms of each of its entries in the order of P^T's
+  // row, one term per row of A P, whatever the order within that row, and sorts its own rows)
+  const SparseMatrix ap = sparse_row_product(a.isCompressed() ? a : ac, p.isCompressed() ? p : pc, false, false);
   return sparse_row_product(pt, ap, true);
 }
 

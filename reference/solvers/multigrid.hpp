@@ -164,7 +164,9 @@ class MultigridPreconditioner : public Preconditioner {
 /// so the result does not depend on the thread count): the same additions in the same order as
 /// Eigen's conservative sparse product, hence the same bits; with `drop_zeros` the entries that
 /// are exactly zero are left out (Eigen's prune(0, 0)), else kept as Eigen keeps them.
-SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros);
+/// `sort_columns` false leaves each row's columns in the order of their first term (the values
+/// are the same; a product only read by another product's rows, galerkin_product's A P).
+SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros, bool sort_columns = true);
 
 /// The Galerkin coarse operator P^T A P (row-major, explicit zeros dropped).
 SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p);

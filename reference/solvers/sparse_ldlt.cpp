@@ -6,6 +6,174 @@
 
 namespace monolith {
 
+namespace {
+
+/// The lower part of the update product of the supernodal factor: u(r, i) = sum_{c < w} t(r, c)
+/// l(i, c) for i < k and i <= r < m (t column-major m x w, l(i, c) = l[c * l_stride + i], u
+/// column-major m x k; entries above the diagonal of u are not needed and not all formed). Each
+/// entry is the sum over c in increasing order from zero, one product added at a time (no fused
+/// multiply-add): the bits of the coefficient-based product (`lazyProduct`) this replaces, whose
+/// packets sum the same way. Tiles of 2 packets of rows by 4 columns keep eight independent sums
+/// in registers (the lazy product kept one, a chain of dependent additions), and the tiles above
+/// the diagonal are skipped.
+void lower_update(const double* t, int m, const double* l, int l_stride, int k, int w, double* u) {
+  using Packet = Eigen::internal::packet_traits<double>::type;
+  constexpr int P = Eigen::internal::packet_traits<double>::size;
+  using Eigen::internal::padd;
+  using Eigen::internal::pmul;
+  using Eigen::internal::pset1;
+  using Eigen::internal::ploadu;
+  using Eigen::internal::pstoreu;
+  for (int i0 = 0; i0 < k; i0 += 4) {
+    const int nc = std::min(4, k - i0);
+    int r = i0;
+    if (nc == 4)
+      for (; r + 2 * P <= m; r += 2 * P) {
+        Packet s00 = pset1<Packet>(0.0), s01 = s00, s02 = s00, s03 = s00;
+        Packet s10 = s00, s11 = s00, s12 = s00, s13 = s00;
+        const double* tc = t + r;
+        const double* lc = l + i0;
+        for (int c = 0; c < w; ++c, tc += m, lc += l_stride) {
+          const Packet t0 = ploadu<Packet>(tc), t1 = ploadu<Packet>(tc + P);
+          const Packet b0 = pset1<Packet>(lc[0]), b1 = pset1<Packet>(lc[1]);
+          const Packet b2 = pset1<Packet>(lc[2]), b3 = pset1<Packet>(lc[3]);
+          s00 = padd(s00, pmul(t0, b0));
+          s10 = padd(s10, pmul(t1, b0));
+          s01 = padd(s01, pmul(t0, b1));
+          s11 = padd(s11, pmul(t1, b1));
+          s02 = padd(s02, pmul(t0, b2));
+          s12 = padd(s12, pmul(t1, b2));
+          s03 = padd(s03, pmul(t0, b3));
+          s13 = padd(s13, pmul(t1, b3));
+        }
+        double* u0 = u + static_cast<Eigen::Index>(i0) * m + r;
+        pstoreu(u0, s00);
+        pstoreu(u0 + P, s10);
+        pstoreu(u0 + m, s01);
+        pstoreu(u0 + m + P, s11);
+        pstoreu(u0 + 2 * m, s02);
+        pstoreu(u0 + 2 * m + P, s12);
+        pstoreu(u0 + 3 * m, s03);
+        pstoreu(u0 + 3 * m + P, s13);
+      }
+    // the rows left over (and the last columns when k is not a multiple of 4): entry by entry
+    for (; r < m; ++r)
+      for (int q = 0; q < nc && i0 + q <= r; ++q) {
+        double s = 0.0;
+        const double* tc = t + r;
+        const double* lc = l + i0 + q;
+        for (int c = 0; c < w; ++c, tc += m, lc += l_stride) s += *tc * *lc;
+        u[static_cast<Eigen::Index>(i0 + q) * m + r] = s;
+      }
+  }
+}
+
+/// The LDL^T of a dense panel (column-major, nr rows, w <= nr columns, the first w rows its
+/// diagonal block): on return column c holds L's rows below the diagonal, diag[c] D's entry; false
+/// on a zero pivot. Every entry (r, c2) receives the terms U(r, c) (U(c2, c) / D_c) of the columns
+/// c < c2 in increasing order, each subtracted as it comes (U the unscaled columns, L = U / D_c by
+/// multiplication with 1 / D_c), exactly as the right-looking loop does column by column: the
+/// same bits. Wide panels are done by blocks of four columns: the terms of the columns left of a
+/// block are subtracted tile by tile (two packets of rows by four columns, eight independent
+/// chains held in registers; the right-looking loop streams the whole trailing panel through
+/// memory once per column), then the block's own columns right-looking; the scaling by 1 / D_c
+/// waits to the end (the unscaled columns are read by every later block). `factor`: scratch of
+/// 4 w doubles.
+bool panel_ldlt(double* x, int nr, int w, double* diag, double* factor) {
+  using Index = Eigen::Index;
+  using Packet = Eigen::internal::packet_traits<double>::type;
+  constexpr int P = Eigen::internal::packet_traits<double>::size;
+  using Eigen::internal::pmul;
+  using Eigen::internal::psub;
+  using Eigen::internal::pset1;
+  using Eigen::internal::ploadu;
+  using Eigen::internal::pstoreu;
+  if (w < 8) {
+    for (int c = 0; c < w; ++c) {
+      double* xc = x + static_cast<Index>(c) * nr;
+      const double dc = xc[c];
+      diag[c] = dc;
+      if (dc == 0.0) return false;
+      for (int c2 = c + 1; c2 < w; ++c2) {
+        const double t = xc[c2];  // L(c2, c) D_c
+        double* x2 = x + static_cast<Index>(c2) * nr;
+        for (int r = c2; r < nr; ++r) x2[r] -= xc[r] * (t / dc);
+      }
+      const double inv = 1.0 / dc;
+      for (int r = c + 1; r < nr; ++r) xc[r] *= inv;
+    }
+    return true;
+  }
+  for (int j0 = 0; j0 < w; j0 += 4) {
+    const int nc = std::min(4, w - j0);
+    // the columns c < j0: factor[4 c + q] = U(j0 + q, c) / D_c, then each entry of the block
+    // minus its terms over c in order
+    for (int c = 0; c < j0; ++c)
+      for (int q = 0; q < nc; ++q) factor[4 * c + q] = x[static_cast<Index>(c) * nr + j0 + q] / diag[c];
+    if (j0 > 0) {
+      int r = j0;
+      if (nc == 4)
+        for (; r + 2 * P <= nr; r += 2 * P) {
+          double* y = x + static_cast<Index>(j0) * nr + r;
+          Packet s00 = ploadu<Packet>(y), s10 = ploadu<Packet>(y + P);
+          Packet s01 = ploadu<Packet>(y + nr), s11 = ploadu<Packet>(y + nr + P);
+          Packet s02 = ploadu<Packet>(y + 2 * nr), s12 = ploadu<Packet>(y + 2 * nr + P);
+          Packet s03 = ploadu<Packet>(y + 3 * nr), s13 = ploadu<Packet>(y + 3 * nr + P);
+          const double* uc = x + r;
+          for (int c = 0; c < j0; ++c, uc += nr) {
+            const Packet u0 = ploadu<Packet>(uc), u1 = ploadu<Packet>(uc + P);
+            const double* fc = factor + 4 * c;
+            const Packet f0 = pset1<Packet>(fc[0]), f1 = pset1<Packet>(fc[1]);
+            const Packet f2 = pset1<Packet>(fc[2]), f3 = pset1<Packet>(fc[3]);
+            s00 = psub(s00, pmul(u0, f0));
+            s10 = psub(s10, pmul(u1, f0));
+            s01 = psub(s01, pmul(u0, f1));
+            s11 = psub(s11, pmul(u1, f1));
+            s02 = psub(s02, pmul(u0, f2));
+            s12 = psub(s12, pmul(u1, f2));
+            s03 = psub(s03, pmul(u0, f3));
+            s13 = psub(s13, pmul(u1, f3));
+          }
+          // (rows above a column's diagonal are formed too: never read)
+          pstoreu(y, s00);
+          pstoreu(y + P, s10);
+          pstoreu(y + nr, s01);
+          pstoreu(y + nr + P, s11);
+          pstoreu(y + 2 * nr, s02);
+          pstoreu(y + 2 * nr + P, s12);
+          pstoreu(y + 3 * nr, s03);
+          pstoreu(y + 3 * nr + P, s13);
+        }
+      for (; r < nr; ++r)
+        for (int q = 0; q < nc && j0 + q <= r; ++q) {
+          double v = x[static_cast<Index>(j0 + q) * nr + r];
+          for (int c = 0; c < j0; ++c) v -= x[static_cast<Index>(c) * nr + r] * factor[4 * c + q];
+          x[static_cast<Index>(j0 + q) * nr + r] = v;
+        }
+    }
+    // the block's own columns, right-looking (unscaled)
+    for (int c = j0; c < j0 + nc; ++c) {
+      double* xc = x + static_cast<Index>(c) * nr;
+      const double dc = xc[c];
+      diag[c] = dc;
+      if (dc == 0.0) return false;
+      for (int c2 = c + 1; c2 < j0 + nc; ++c2) {
+        const double t = xc[c2];
+        double* x2 = x + static_cast<Index>(c2) * nr;
+        for (int r = c2; r < nr; ++r) x2[r] -= xc[r] * (t / dc);
+      }
+    }
+  }
+  for (int c = 0; c < w; ++c) {
+    double* xc = x + static_cast<Index>(c) * nr;
+    const double inv = 1.0 / diag[c];
+    for (int r = c + 1; r < nr; ++r) xc[r] *= inv;
+  }
+  return true;
+}
+
+}  // namespace
+
 void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
   eigen_assert(m_analysisIsOk && "SparseLdlt::factorize_supernodal: analyzePattern first");
   using Index = Eigen::Index;
@@ -63,6 +231,7 @@ void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
   std::vector<std::vector<int>> pending(ns);  // supernodes whose next update goes to s
   std::vector<double> scaled(max_rows * max_width), update(max_rows * max_rows);
   std::vector<int> row_index(max_rows);
+  std::vector<double> factor(max_width * 4);
   bool ok = true;
   for (int s = 0; s < ns && ok; ++s) {
     const int f = first[s], w = first[s + 1] - f, nr = 1 + m_nonZerosPerCol[f];
@@ -89,12 +258,11 @@ void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
       Eigen::Map<Eigen::MatrixXd> t(scaled.data(), m, wd);
       for (int c = 0; c < wd; ++c)
         for (int r = 0; r < m; ++r) t(r, c) = ld[static_cast<Index>(c) * nrd + p + r] * m_diag[fd + c];
-      Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> lrows(ld + p, k, wd, Eigen::OuterStride<>(nrd));
-      Eigen::Map<Eigen::MatrixXd> u(update.data(), m, k);
-      // coefficient-based (lazyProduct): each entry's sum over the d's columns in order, on the
-      // calling thread; Eigen's blocked GEMM would split its depth by the thread count (bits that
-      // depend on it) and may start threads of its own
-      u.noalias() = t.lazyProduct(lrows.transpose());
+      // u = t L_d[rows p..q-1]^T, its lower part: each entry's sum over the d's columns in order,
+      // on the calling thread (lower_update); Eigen's blocked GEMM would split its depth by the
+      // thread count (bits that depend on it) and may start threads of its own
+      lower_update(scaled.data(), m, ld + p, nrd, k, wd, update.data());
+      Eigen::Map<const Eigen::MatrixXd> u(update.data(), m, k);
       for (int c = 0; c < k; ++c) {
         double* col = x + static_cast<Index>(rows_of(d, p + c) - f) * nr;
         for (int r = c; r < m; ++r) col[pos[rows_of(d, p + r)]] -= u(r, c);
@@ -103,23 +271,8 @@ void SparseLdlt::factorize_supernodal(const Eigen::SparseMatrix<double>& a) {
       if (q < nrd) pending[super_of[rows_of(d, q)]].push_back(d);
     }
     std::vector<int>().swap(pending[s]);
-    // the panel's own LDL^T (columns left to right, right-looking within the panel)
-    for (int c = 0; c < w; ++c) {
-      double* xc = x + static_cast<Index>(c) * nr;
-      const double dc = xc[c];
-      m_diag[f + c] = dc;
-      if (dc == 0.0) {
-        ok = false;
-        break;
-      }
-      for (int c2 = c + 1; c2 < w; ++c2) {
-        const double t = xc[c2];  // L(c2, c) D_c
-        double* x2 = x + static_cast<Index>(c2) * nr;
-        for (int r = c2; r < nr; ++r) x2[r] -= xc[r] * (t / dc);
-      }
-      const double inv = 1.0 / dc;
-      for (int r = c + 1; r < nr; ++r) xc[r] *= inv;
-    }
+    // the panel's own LDL^T (panel_ldlt)
+    ok = panel_ldlt(x, nr, w, m_diag.data() + f, factor.data());
     for (int r = 0; r < nr; ++r) pos[row_index[r]] = -1;
     next[s] = w;
     if (nr > w) pending[super_of[rows_of(s, w)]].push_back(s);

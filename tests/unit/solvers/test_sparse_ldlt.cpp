@@ -137,3 +137,42 @@ TEST_CASE("SparseLdlt::factorize_supernodal: the simplicial factor to round-off,
   f.factorize_supernodal(singular);
   CHECK(f.info() == Eigen::NumericalIssue);
 }
+
+TEST_CASE("factorize_supernodal on a dense matrix: the right-looking LDL^T bit for bit (one panel, blocks of four columns)", "[unit]") {
+  // A dense pattern is one supernode, so the factor is panel_ldlt's blocked LDL^T; its entries must
+  // be those of the plain right-looking loop (every entry's terms in the same order), bit for bit.
+  for (int n : {7, 8, 13, 42}) {
+    Eigen::MatrixXd m = Eigen::MatrixXd::Zero(n, n);
+    const VectorX v = random_vector(n * n, 11 + n);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j <= i; ++j) m(i, j) = m(j, i) = v[i * n + j] / 3.0;
+    for (int i = 0; i < n; ++i) m(i, i) = n + 1.0 + std::abs(v[i]);
+    const Eigen::SparseMatrix<double> a = m.sparseView();
+    SparseLdlt f;
+    f.analyzePattern(a);
+    f.factorize_supernodal(a);
+    REQUIRE(f.info() == Eigen::Success);
+    // the reference: C = P A P^T, right-looking column by column, L = U (1 / D)
+    Eigen::MatrixXd c = f.permutationP() * m * f.permutationP().transpose();
+    Eigen::VectorXd d(n);
+    for (int k = 0; k < n; ++k) {
+      const double dk = c(k, k);
+      d[k] = dk;
+      for (int k2 = k + 1; k2 < n; ++k2) {
+        const double t = c(k2, k);
+        for (int r = k2; r < n; ++r) c(r, k2) -= c(r, k) * (t / dk);
+      }
+      const double inv = 1.0 / dk;
+      for (int r = k + 1; r < n; ++r) c(r, k) *= inv;
+    }
+    const Eigen::SparseMatrix<double>& l = f.matrixL().nestedExpression();
+    REQUIRE(l.nonZeros() == static_cast<Eigen::Index>(n) * (n - 1) / 2);
+    int differ = 0;
+    for (int k = 0; k < n; ++k)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(l, k); it; ++it)
+        if (it.value() != c(it.row(), k)) ++differ;
+    CHECK(differ == 0);
+    const VectorX dt = f.vectorD();
+    CHECK((dt - d).cwiseAbs().maxCoeff() == 0.0);
+  }
+}
