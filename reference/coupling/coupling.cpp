@@ -732,8 +732,13 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
 
   // overlap rule: scale every contribution by 1/sum where the sum exceeds 1 (the sum in the
   // order static, body 0, body 1, ..., formed per face instead of as a face-sized vector); then
-  // W_S^u as the sum of its parts (in the same order), capped at 1, and W_F^u = 1 - W_S^u. One
-  // pass over the faces; the wall faces are set below.
+  // W_S^u as the sum of its parts (in the same order), capped at 1, and W_F^u = 1 - W_S^u. A face
+  // whose parts were scaled is solid: W_S^u = 1 and W_F^u = 0 exactly. (The scaled parts add up
+  // to 1 only to round-off: 1 - 1.1e-16 left W_F^u = 1.1e-16 on faces two touching bodies
+  // cover, so a cell inside the overlap with liquid extended into it became a pressure DOF
+  // coupled to nothing but the two bodies, whose push apart its pressure and their contact's
+  // lambda then shared without bound: boat-on-waves-2d's coupled solve stalled there,
+  // docs/particles.md, "energy15".) One pass over the faces; the wall faces are set below.
   if (!parts)
     w.solid_face = VectorX();
   else if (w.solid_face.size() != nf)
@@ -754,7 +759,7 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
     }
     double solid = static_part;
     for (const VectorX& body : w.body_face) solid += body[f];
-    solid = std::min(solid, 1.0);
+    solid = sum > 1.0 ? 1.0 : std::min(solid, 1.0);
     if (parts) {
       w.static_face[f] = static_part;
       w.solid_face[f] = solid;
