@@ -192,6 +192,49 @@ TEST_CASE("solid weights: per-body fractions, overlap clamp, walls", "[unit][cou
   CHECK(dv == Approx(2 * M_PI * 0.2 * 0.1 * grid.dx()).epsilon(0.05));
 }
 
+/// Two bodies that overlap: on a face whose single-body fractions add up to more than 1 the
+/// overlap rule scales them to a sum of 1, and the face is solid exactly (W_S^u = 1, W_F^u = 0).
+/// The scaled parts added up (1 / s + a / s with a = 0.3, say) give 1 - 1.1e-16 on some faces:
+/// W_F^u = 1.1e-16 made a cell inside the overlap a pressure DOF held by the two bodies only
+/// (boat-on-waves-2d's coupled solve stalled on it; docs/particles.md, "energy15"). Every other
+/// face keeps 1 - (sum of the parts).
+template <int Dim>
+void check_overlap_faces_solid() {
+  const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 32 : 16);
+  const auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+  Vec<Dim> c0 = Vec<Dim>::Constant(0.45), c1 = Vec<Dim>::Constant(0.47);
+  c0[0] = 0.4;
+  c1[0] = 0.58;
+  const std::vector<CouplingBody<Dim>> bodies = {make_body<Dim>(0, c0, 0.2, true),
+                                                 make_body<Dim>(2, c1, 0.17, true)};
+  const SolidWeights<Dim> w = solid_weights<Dim>(grid, bodies, {}, boundary, 0.0);
+  const SolidWeights<Dim> w0 = solid_weights<Dim>(grid, {bodies[0]}, {}, boundary, 0.0);
+  const SolidWeights<Dim> w1 = solid_weights<Dim>(grid, {bodies[1]}, {}, boundary, 0.0);
+  int scaled = 0, round_off = 0;
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    const auto [axis, coord] = grid.face_coord(f);
+    if (grid.is_boundary_face(axis, coord)) continue;
+    const double a0 = w0.body_face[0][f], a1 = w1.body_face[0][f], sum = 0.0 + a0 + a1;
+    if (sum > 1.0) {
+      ++scaled;
+      // the parts as the rule scales them, added in its order (static part first)
+      const double scale = 1.0 / sum;
+      if (0.0 * scale + a0 * scale + a1 * scale < 1.0) ++round_off;
+      CHECK(w.fluid_face[f] == 0.0);
+      CHECK(w.solid_face[f] == 1.0);
+    } else {
+      CHECK(w.fluid_face[f] == 1.0 - std::min(sum, 1.0));
+    }
+  }
+  CHECK(scaled > 0);
+  CHECK(round_off > 0);  // faces where the scaled parts add up to less than 1 (the case fixed)
+}
+
+TEST_CASE("solid weights: a face the overlap rule scaled is solid exactly", "[unit][coupling]") {
+  check_overlap_faces_solid<2>();
+  check_overlap_faces_solid<3>();
+}
+
 TEST_CASE("J_p = -Q W_S^u G and J_s = -Q W_S^u D^T M (2D)", "[unit][dense-reference][coupling]") {
   check_dense_reference<2>(14);
 }
