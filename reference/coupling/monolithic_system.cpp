@@ -142,9 +142,7 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   const VectorX v_one = group_velocities(bodies, BodyGroup::one_way);
   // rhs_round_off(): the bound (2 Dim / dx) U on the terms of b1, b2 (header)
   {
-    double speed = 0.0;
-    const VectorX& wf = w.pressure.fluid_face;
-    for (int f = 0; f < u_star.size(); ++f) speed = std::max(speed, std::abs(wf[f] * u_star[f]));
+    double speed = weighted_face_speed(w.pressure.fluid_face, u_star);
     for (const VectorX* v : {&contacts.v_star, &v_one})
       for (int k = 0; k < v->size(); ++k)
         if (k % kBodyDofs<Dim> < Dim) speed = std::max(speed, std::abs((*v)[k]));

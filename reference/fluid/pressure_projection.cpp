@@ -631,14 +631,11 @@ void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& l
 template <int Dim>
 double liquid_rhs_round_off(const MacGrid<Dim>& grid, const VectorX& fluid_face,
                             const VectorX& u_star, const VectorX* divergence_source) {
-  constexpr double kUlps = 16.0;
   constexpr double kEpsilon = std::numeric_limits<double>::epsilon();  // 2^-52
-  double speed = 0.0;
-  const int n = static_cast<int>(std::min(fluid_face.size(), u_star.size()));
-  for (int f = 0; f < n; ++f) speed = std::max(speed, std::abs(fluid_face[f] * u_star[f]));
+  const double speed = weighted_face_speed(fluid_face, u_star);
   double source = 0.0;
   if (divergence_source && divergence_source->size() > 0) source = divergence_source->cwiseAbs().maxCoeff();
-  return kUlps * kEpsilon * ((2.0 * Dim / grid.dx()) * speed + source);
+  return kRhsRoundOffUlps * kEpsilon * ((2.0 * Dim / grid.dx()) * speed + source);
 }
 
 template <int Dim>

@@ -11,7 +11,9 @@
 /// over p. The pressure DOFs are the cells with W_L^p > 0 that touch at least one face with
 /// W_F^u > 0; every other cell has p = 0. A is restricted to those DOFs (rows and columns).
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <string>
 #include <vector>
@@ -184,6 +186,18 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
 /// null or empty d.
 void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& liquid_cell,
                            const VectorX* divergence_source, int offset, VectorX& b);
+
+/// Multiples of eps in the round-off level N of a right-hand side (liquid_rhs_round_off below and
+/// MonolithicSystem::rhs_round_off: one rule for the liquid-only and the coupled systems).
+inline constexpr double kRhsRoundOffUlps = 16.0;
+
+/// U = max_f |W_F^u_f u*_f| over the faces: the largest face velocity term of N (below).
+inline double weighted_face_speed(const VectorX& fluid_face, const VectorX& u_star) {
+  double speed = 0.0;
+  const Eigen::Index n = std::min(fluid_face.size(), u_star.size());
+  for (Eigen::Index f = 0; f < n; ++f) speed = std::max(speed, std::abs(fluid_face[f] * u_star[f]));
+  return speed;
+}
 
 /// The round-off level N of a liquid-only right-hand side b = B^T W_F^u u* (+ W_L^p d): the
 /// pressure rows W_L^p G^T W_F^u u* (eq. (8), solve_pressure) and the stress rows W_L^s M D
