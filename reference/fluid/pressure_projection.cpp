@@ -648,9 +648,13 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
   const PressureDofs dofs = select_pressure_dofs(grid, w, dt);
   result.dofs = dofs.size();
   VectorX p = VectorX::Zero(dofs.size());
+  // a right-hand side at its own round-off (a liquid in free fall) is zero: p = 0, no iteration,
+  // no preconditioner set-up (liquid_rhs_round_off; docs/preconditioners.md section 35, (P16))
+  PcgSettings pcg = settings;
+  pcg.zero_rhs = std::max(pcg.zero_rhs, liquid_rhs_round_off(grid, w.fluid_face, u, divergence_source));
   // lines 8-10: assemble (or set up the stencil) and solve
   if (preconditioner == PreconditionerKind::multigrid && dofs.size() > 0) {
-    result.pcg = mgpcg_pressure(grid, w, dofs, dt, backend, settings, u, p, divergence_source);
+    result.pcg = mgpcg_pressure(grid, w, dofs, dt, backend, pcg, u, p, divergence_source);
   } else {
     switch (backend) {
       case Backend::explicit_matrices: {
@@ -658,21 +662,23 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
         const SparseMatrixOperator op(sys.A, dofs.null_space);
         VectorX b = sys.b;
         add_divergence_source(dofs.cell_of_dof, w.liquid_cell, divergence_source, 0, b);
-        result.pcg = pcg_solve(op, b, p, settings);
+        result.pcg = pcg_solve(op, b, p, pcg);
         break;
       }
       case Backend::matrix_free: {
         const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
         VectorX b = op.rhs(u);
         add_divergence_source(dofs.cell_of_dof, w.liquid_cell, divergence_source, 0, b);
-        result.pcg = pcg_solve(op, b, p, settings);
+        result.pcg = pcg_solve(op, b, p, pcg);
         break;
       }
     }
   }
   // line 11: velocity update
+  // (none for p = +0: it would subtract +0 from every face, leaving u bit for bit; a
+  // right-hand side at its round-off, docs/preconditioners.md section 35)
   result.pressure = scatter_pressure(dofs, p, grid.num_cells());
-  apply_pressure_update(grid, w, dt, result.pressure, u);
+  if (!all_positive_zero(p)) apply_pressure_update(grid, w, dt, result.pressure, u);
   return result;
 }
 

@@ -187,6 +187,17 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
 void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& liquid_cell,
                            const VectorX* divergence_source, int offset, VectorX& b);
 
+/// Every entry of x is +0 (the x = 0 of a right-hand side at its round-off, PcgSettings::zero_rhs).
+/// The velocity updates (apply_pressure_update, apply_stokes_update) of such an x add +0 force to
+/// every face and subtract dt (+0) / (rho W_L^u) = +0 from u, which leaves every u_f bit for bit
+/// (also -0 and non-finite values): the solves skip them then (docs/preconditioners.md section 35).
+/// A -0 entry does not count: -0 - (-0) is +0, so its update could flip the sign of a zero u_f.
+inline bool all_positive_zero(const VectorX& x) {
+  for (Eigen::Index i = 0; i < x.size(); ++i)
+    if (x[i] != 0.0 || std::signbit(x[i])) return false;
+  return true;
+}
+
 /// Multiples of eps in the round-off level N of a right-hand side (liquid_rhs_round_off below and
 /// MonolithicSystem::rhs_round_off: one rule for the liquid-only and the coupled systems).
 inline constexpr double kRhsRoundOffUlps = 16.0;
