@@ -142,14 +142,7 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   const VectorX v_one = group_velocities(bodies, BodyGroup::one_way);
   // rhs_round_off(): the bound (2 Dim / dx) U on the terms of b1, b2 (header)
   {
-    // (a maximum over every face on several threads: std::max passes over a NaN term in any
-    // order and every term is >= +0, so any split gives the serial loop's bits; issue 20: a
-    // serial read of two face-sized vectors, 2.3 % of Fig. 2's samples at the paper's grid)
-    double speed = 0.0;
-    const VectorX& wf = w.pressure.fluid_face;
-    const long nf = static_cast<long>(u_star.size());
-#pragma omp parallel for schedule(static) reduction(max : speed) num_threads(team_threads(nf))
-    for (long f = 0; f < nf; ++f) speed = std::max(speed, std::abs(wf[f] * u_star[f]));
+    double speed = weighted_face_speed(w.pressure.fluid_face, u_star);
     for (const VectorX* v : {&contacts.v_star, &v_one})
       for (int k = 0; k < v->size(); ++k)
         if (k % kBodyDofs<Dim> < Dim) speed = std::max(speed, std::abs((*v)[k]));

@@ -280,8 +280,7 @@ class MonolithicSystem {
   std::vector<RigidColumn> rigid_columns_;  ///< matrixfree, by unknown then row
   SparseMatrix j_lambda_t_, j_z_t_;
   VectorX b1_, b2_;
-  /// rhs_round_off(): multiples of eps of the bound on (b1, b2)'s terms, and the bound itself.
-  static constexpr double kRhsRoundOffUlps = 16.0;
+  /// rhs_round_off(): eps (times kRhsRoundOffUlps of pressure_projection.hpp) and the bound itself.
   static constexpr double kEpsilon = std::numeric_limits<double>::epsilon();  // 2^-52
   double rhs_round_off_ = 0.0;
 };

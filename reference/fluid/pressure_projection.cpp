@@ -631,14 +631,11 @@ void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& l
 template <int Dim>
 double liquid_rhs_round_off(const MacGrid<Dim>& grid, const VectorX& fluid_face,
                             const VectorX& u_star, const VectorX* divergence_source) {
-  constexpr double kUlps = 16.0;
   constexpr double kEpsilon = std::numeric_limits<double>::epsilon();  // 2^-52
-  double speed = 0.0;
-  const int n = static_cast<int>(std::min(fluid_face.size(), u_star.size()));
-  for (int f = 0; f < n; ++f) speed = std::max(speed, std::abs(fluid_face[f] * u_star[f]));
+  const double speed = weighted_face_speed(fluid_face, u_star);
   double source = 0.0;
   if (divergence_source && divergence_source->size() > 0) source = divergence_source->cwiseAbs().maxCoeff();
-  return kUlps * kEpsilon * ((2.0 * Dim / grid.dx()) * speed + source);
+  return kRhsRoundOffUlps * kEpsilon * ((2.0 * Dim / grid.dx()) * speed + source);
 }
 
 template <int Dim>
@@ -651,9 +648,13 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
   const PressureDofs dofs = select_pressure_dofs(grid, w, dt);
   result.dofs = dofs.size();
   VectorX p = VectorX::Zero(dofs.size());
+  // a right-hand side at its own round-off (a liquid in free fall) is zero: p = 0, no iteration,
+  // no preconditioner set-up (liquid_rhs_round_off; docs/preconditioners.md section 35, (P16))
+  PcgSettings pcg = settings;
+  pcg.zero_rhs = std::max(pcg.zero_rhs, liquid_rhs_round_off(grid, w.fluid_face, u, divergence_source));
   // lines 8-10: assemble (or set up the stencil) and solve
   if (preconditioner == PreconditionerKind::multigrid && dofs.size() > 0) {
-    result.pcg = mgpcg_pressure(grid, w, dofs, dt, backend, settings, u, p, divergence_source);
+    result.pcg = mgpcg_pressure(grid, w, dofs, dt, backend, pcg, u, p, divergence_source);
   } else {
     switch (backend) {
       case Backend::explicit_matrices: {
@@ -661,21 +662,23 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
         const SparseMatrixOperator op(sys.A, dofs.null_space);
         VectorX b = sys.b;
         add_divergence_source(dofs.cell_of_dof, w.liquid_cell, divergence_source, 0, b);
-        result.pcg = pcg_solve(op, b, p, settings);
+        result.pcg = pcg_solve(op, b, p, pcg);
         break;
       }
       case Backend::matrix_free: {
         const MatrixFreePressureOperator<Dim> op(grid, w, dofs, dt);
         VectorX b = op.rhs(u);
         add_divergence_source(dofs.cell_of_dof, w.liquid_cell, divergence_source, 0, b);
-        result.pcg = pcg_solve(op, b, p, settings);
+        result.pcg = pcg_solve(op, b, p, pcg);
         break;
       }
     }
   }
   // line 11: velocity update
+  // (none for p = +0: it would subtract +0 from every face, leaving u bit for bit; a
+  // right-hand side at its round-off, docs/preconditioners.md section 35)
   result.pressure = scatter_pressure(dofs, p, grid.num_cells());
-  apply_pressure_update(grid, w, dt, result.pressure, u);
+  if (!all_positive_zero(p)) apply_pressure_update(grid, w, dt, result.pressure, u);
   return result;
 }
 

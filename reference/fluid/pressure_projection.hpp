@@ -11,12 +11,15 @@
 /// over p. The pressure DOFs are the cells with W_L^p > 0 that touch at least one face with
 /// W_F^u > 0; every other cell has p = 0. A is restricted to those DOFs (rows and columns).
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <string>
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/solvers/backend.hpp"
 #include "reference/solvers/linear_operator.hpp"
@@ -184,6 +187,33 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
 /// null or empty d.
 void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& liquid_cell,
                            const VectorX* divergence_source, int offset, VectorX& b);
+
+/// Every entry of x is +0 (the x = 0 of a right-hand side at its round-off, PcgSettings::zero_rhs).
+/// The velocity updates (apply_pressure_update, apply_stokes_update) of such an x add +0 force to
+/// every face and subtract dt (+0) / (rho W_L^u) = +0 from u, which leaves every u_f bit for bit
+/// (also -0 and non-finite values): the solves skip them then (docs/preconditioners.md section 35).
+/// A -0 entry does not count: -0 - (-0) is +0, so its update could flip the sign of a zero u_f.
+inline bool all_positive_zero(const VectorX& x) {
+  for (Eigen::Index i = 0; i < x.size(); ++i)
+    if (x[i] != 0.0 || std::signbit(x[i])) return false;
+  return true;
+}
+
+/// Multiples of eps in the round-off level N of a right-hand side (liquid_rhs_round_off below and
+/// MonolithicSystem::rhs_round_off: one rule for the liquid-only and the coupled systems).
+inline constexpr double kRhsRoundOffUlps = 16.0;
+
+/// U = max_f |W_F^u_f u*_f| over the faces: the largest face velocity term of N (below). A
+/// maximum over every face on several threads: std::max passes over a NaN term in any order and
+/// every term is >= +0, so any split gives the serial loop's bits (issue 20: a serial read of two
+/// face-sized vectors was 2.3 % of Fig. 2's samples at the paper's grid).
+inline double weighted_face_speed(const VectorX& fluid_face, const VectorX& u_star) {
+  double speed = 0.0;
+  const long n = static_cast<long>(std::min(fluid_face.size(), u_star.size()));
+#pragma omp parallel for schedule(static) reduction(max : speed) num_threads(team_threads(n))
+  for (long f = 0; f < n; ++f) speed = std::max(speed, std::abs(fluid_face[f] * u_star[f]));
+  return speed;
+}
 
 /// The round-off level N of a liquid-only right-hand side b = B^T W_F^u u* (+ W_L^p d): the
 /// pressure rows W_L^p G^T W_F^u u* (eq. (8), solve_pressure) and the stress rows W_L^s M D

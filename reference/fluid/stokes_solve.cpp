@@ -99,7 +99,14 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
       result.fell_back = true;
     }
   }
-  // line 11: velocity update
+  // line 11: velocity update (none for x = +0: it would subtract +0 from every face, leaving u
+  // bit for bit; a right-hand side at its round-off, docs/preconditioners.md section 35)
+  // (x = +0 scatters to +0 fields: StressLayout::expand's -= of +0 leaves +0)
+  if (all_positive_zero(x)) {
+    result.stress = VectorX::Zero(layout.grid().num_dofs());
+    result.pressure = VectorX::Zero(grid.num_cells());
+    return result;
+  }
   result.stress = scatter_stress(layout, dofs, x);
   result.pressure = scatter_stokes_pressure(dofs, x, grid.num_cells());
   apply_stokes_update(grid, layout, w, dt, result.pressure, result.stress, u);

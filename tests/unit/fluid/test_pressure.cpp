@@ -436,3 +436,94 @@ TEMPLATE_TEST_CASE_SIG("a divergence source: the new velocity's weighted diverge
       CHECK((u_none - u_empty).cwiseAbs().maxCoeff() == 0.0);
     }
 }
+
+TEMPLATE_TEST_CASE_SIG("a liquid in free fall: its pressure solve takes no iteration on either back end",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // docs/preconditioners.md section 35, (P16): a ball of liquid away from every wall, u* uniform
+  // up to two ulps per face (the particle transfer's round-off). b = W_L^p G^T W_F^u u* is zero
+  // in exact arithmetic; the relative stopping rule solved its round-off to 1e-6 of itself. At or
+  // below liquid_rhs_round_off it is zero: p = 0 without an iteration, u* kept bit for bit.
+  const int n = Dim == 2 ? 24 : 12;
+  const MacGrid<Dim> grid(Vec<Dim>::Zero(), 1.0 / n, VecI<Dim>::Constant(n), std::array<bool, Dim>{});
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  std::array<BoundaryType, 2 * Dim> boundary;
+  boundary.fill(BoundaryType::wall);
+  const VectorX solid_phi = solid_phi_on_lattice<Dim>(grid, lattice, {}, 0.0);
+  auto weights = [&](auto&& phi) {
+    VectorX liquid_phi(lattice.size());
+    for (int k = 0; k < lattice.size(); ++k) liquid_phi[k] = phi(lattice.position(lattice.coord(k)));
+    PressureWeights w;
+    w.fluid_face = fluid_face_weights(grid, lattice, solid_phi, boundary);
+    w.liquid_cell = liquid_cell_weights(grid, lattice, liquid_phi);
+    w.liquid_face = liquid_face_weights(grid, lattice, liquid_phi, w.liquid_cell);
+    VectorX rho = VectorX::Zero(grid.num_faces());
+    for (int f = 0; f < grid.num_faces(); ++f)
+      if (w.liquid_face[f] > 0.05) rho[f] = 1000.0;
+    w.face_density = density_diagonal(grid, rho, 1000.0);
+    return w;
+  };
+  const PressureWeights ball =
+      weights([](const Vec<Dim>& x) { return (x - Vec<Dim>::Constant(0.5)).norm() - 0.3; });
+  const double dt = 0.01;
+  // u*: (1.5, -0.7981[, 0.3]) m/s, each face moved by -2..2 ulps
+  const VectorX r = random_vector(grid.num_faces(), 11);  // in [-1, 1]
+  VectorX flight(grid.num_faces());
+  for (int f = 0; f < grid.num_faces(); ++f) {
+    const int axis = grid.face_coord(f).first;
+    flight[f] = axis == 0 ? 1.5 : axis == 1 ? -0.7981 : 0.3;
+    const int ulps = static_cast<int>(std::floor(2.5 * r[f]));
+    for (int k = 0; k < std::abs(ulps); ++k) flight[f] = std::nextafter(flight[f], ulps > 0 ? 10.0 : -10.0);
+  }
+  const double level = liquid_rhs_round_off(grid, ball.fluid_face, flight, nullptr);
+  const PressureDofs dofs = select_pressure_dofs(grid, ball, dt);
+  REQUIRE(dofs.size() > 0);
+  const ExplicitPressureSystem sys = assemble_explicit_pressure(grid, ball, dofs, dt, flight);
+  const MatrixFreePressureOperator<Dim> mf(grid, ball, dofs, dt);
+  const double be = sys.b.cwiseAbs().maxCoeff();
+  const double bm = mf.rhs(flight).cwiseAbs().maxCoeff();
+  std::printf("pressure free fall %dD: ||b|| explicit %.2e, matrixfree %.2e, round-off level %.2e\n",
+              Dim, be, bm, level);
+  // the noise case: b is not exactly zero, and below the level on both back ends
+  CHECK(std::max(be, bm) > 0.0);
+  CHECK(be <= level);
+  CHECK(bm <= level);
+  // without the rule the relative test solves that noise (what the rule removes)
+  {
+    VectorX p;
+    CHECK(pcg_solve(SparseMatrixOperator(sys.A, dofs.null_space), sys.b, p, PcgSettings{}).iterations > 0);
+  }
+  const PcgSettings settings{};  // tolerance 1e-6, as in the scenes
+  for (const PreconditionerKind kind : {PreconditionerKind::ssor, PreconditionerKind::multigrid})
+    for (const Backend backend : {Backend::explicit_matrices, Backend::matrix_free}) {
+      INFO(enum_name(kind) << " " << enum_name(backend));
+      VectorX u = flight;
+      const PressureSolveResult s = solve_pressure(grid, ball, dt, backend, settings, u, kind);
+      CHECK(s.pcg.converged);
+      CHECK(s.pcg.iterations == 0);
+      CHECK(s.pressure.cwiseAbs().maxCoeff() == 0.0);
+      CHECK((u.array() == flight.array()).all());
+    }
+  // real right-hand sides lie far above the level and are solved as before (the same bits as
+  // PCG without the rule): a random u* on the ball, and a liquid at rest in a tank under gravity
+  // (u* = g dt on every face: the walls hold it, so b is the hydrostatic load, not round-off)
+  const PressureWeights tank = weights([](const Vec<Dim>& x) { return x[1] - 0.55; });
+  VectorX still = VectorX::Zero(grid.num_faces());
+  for (int f = 0; f < grid.num_faces(); ++f)
+    if (grid.face_coord(f).first == 1) still[f] = -9.81 * dt;
+  const std::pair<const PressureWeights*, VectorX> reals[] = {{&ball, random_vector(grid.num_faces(), 12)},
+                                                              {&tank, still}};
+  for (const auto& [w, u_star] : reals) {
+    const PressureDofs d = select_pressure_dofs(grid, *w, dt);
+    const MatrixFreePressureOperator<Dim> op(grid, *w, d, dt);
+    const VectorX b = op.rhs(u_star);
+    CHECK(b.cwiseAbs().maxCoeff() >= 1e6 * liquid_rhs_round_off(grid, w->fluid_face, u_star, nullptr));
+    VectorX u = u_star;
+    const PressureSolveResult s = solve_pressure(grid, *w, dt, Backend::matrix_free, settings, u);
+    VectorX p_plain;
+    const PcgResult plain = pcg_solve(op, b, p_plain, settings);
+    CHECK(s.pcg.converged);
+    CHECK(s.pcg.iterations > 0);
+    CHECK(s.pcg.iterations == plain.iterations);
+    CHECK((s.pressure.array() == scatter_pressure(d, p_plain, grid.num_cells()).array()).all());
+  }
+}
