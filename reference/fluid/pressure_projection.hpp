@@ -174,6 +174,11 @@ struct PressureSolveResult {
 /// is d on the pressure DOFs: b_k += W_L^p d on each DOF's cell (add_divergence_source). Not a
 /// paper equation: a project item (docs/derivations.md, "volume feedback"), the volume correction
 /// of docs/particles.md "Volume correction through the solve".
+///
+/// A right-hand side at or below its round-off level (liquid_rhs_round_off, (P16): a liquid in
+/// free fall) is zero: p = 0 with no iteration and no preconditioner set-up, and u* is kept bit
+/// for bit (all_positive_zero); above the level the relative rule decides as before
+/// (docs/preconditioners.md section 35).
 template <int Dim>
 PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
                                    Backend backend, const PcgSettings& settings,

@@ -4,6 +4,8 @@
 /// code under test plus these exact, independent definitions.
 
 #include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <string>
@@ -132,6 +134,20 @@ inline VectorX random_vector(int n, unsigned seed) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   VectorX v(n);
   for (int i = 0; i < n; ++i) v[i] = u(rng);
+  return v;
+}
+
+/// uniform_face_velocity with every face moved by -2..2 ulps (floor(2.5 r), r of random_vector
+/// with `seed`): u* as a particle transfer leaves a uniform motion, b = 0 in exact arithmetic and
+/// round-off in floating point (the round-off rules of docs/preconditioners.md sections 26, 33, 35).
+template <int Dim>
+VectorX uniform_face_velocity_with_ulps(const MacGrid<Dim>& grid, const Vec<Dim>& u, unsigned seed) {
+  VectorX v = uniform_face_velocity(grid, u);
+  const VectorX r = random_vector(grid.num_faces(), seed);  // in [-1, 1]
+  for (Eigen::Index f = 0; f < v.size(); ++f) {
+    const int ulps = static_cast<int>(std::floor(2.5 * r[f]));
+    for (int k = 0; k < std::abs(ulps); ++k) v[f] = std::nextafter(v[f], ulps > 0 ? 10.0 : -10.0);
+  }
   return v;
 }
 

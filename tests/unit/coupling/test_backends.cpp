@@ -734,14 +734,7 @@ CoupledStepInput<2> flight_scene(int n, bool rigid, unsigned seed) {
       half_lattice(in.grid), [](const Vec<2>& x) { return (x - Vec<2>(0.5, 0.45)).norm() - 0.25; });
   in.weights = coupled_stokes_weights<2>(in.grid, in.solids, phi, kRho, 10.0);
   if (rigid) {
-    in.u_star = testing::uniform_face_velocity<2>(in.grid, common);
-    const VectorX r = testing::random_vector(in.grid.num_faces(), seed);
-    for (int f = 0; f < in.u_star.size(); ++f) {
-      // -2 .. 2 ulps
-      const int ulps = static_cast<int>(std::floor(2.5 * r[f]));
-      for (int k = 0; k < std::abs(ulps); ++k)
-        in.u_star[f] = std::nextafter(in.u_star[f], ulps > 0 ? 10.0 : -10.0);
-    }
+    in.u_star = testing::uniform_face_velocity_with_ulps<2>(in.grid, common, seed);
   } else {
     in.u_star = 0.3 * testing::random_vector(in.grid.num_faces(), seed + 1);
   }

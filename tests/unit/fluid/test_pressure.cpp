@@ -466,14 +466,8 @@ TEMPLATE_TEST_CASE_SIG("a liquid in free fall: its pressure solve takes no itera
       weights([](const Vec<Dim>& x) { return (x - Vec<Dim>::Constant(0.5)).norm() - 0.3; });
   const double dt = 0.01;
   // u*: (1.5, -0.7981[, 0.3]) m/s, each face moved by -2..2 ulps
-  const VectorX r = random_vector(grid.num_faces(), 11);  // in [-1, 1]
-  VectorX flight(grid.num_faces());
-  for (int f = 0; f < grid.num_faces(); ++f) {
-    const int axis = grid.face_coord(f).first;
-    flight[f] = axis == 0 ? 1.5 : axis == 1 ? -0.7981 : 0.3;
-    const int ulps = static_cast<int>(std::floor(2.5 * r[f]));
-    for (int k = 0; k < std::abs(ulps); ++k) flight[f] = std::nextafter(flight[f], ulps > 0 ? 10.0 : -10.0);
-  }
+  const Vec<Dim> common = Vec<3>(1.5, -0.7981, 0.3).head<Dim>();
+  const VectorX flight = uniform_face_velocity_with_ulps<Dim>(grid, common, 11);
   const double level = liquid_rhs_round_off(grid, ball.fluid_face, flight, nullptr);
   const PressureDofs dofs = select_pressure_dofs(grid, ball, dt);
   REQUIRE(dofs.size() > 0);
