@@ -7,9 +7,13 @@
 // from its first frame, so compare the regains, not single frames.
 //
 //   bench_energy_regain SCENE [--frames N] [--from F] [--only NAME[,NAME...]] [--affine]
-//                       [--set KEY=VALUE]...
+//                       [--near] [--columns] [--set KEY=VALUE]...
 //
-// --affine adds a line per frame on the particles' APIC matrices c (print_affine).
+// --affine adds a line per frame on the particles' APIC matrices c (print_affine). --near adds
+// one on where the liquid beside the moving bodies is carried (print_near: the liquid's mean
+// vertical velocity, the bodies' heights and vertical velocities, and the particles' mean face
+// v_y by side of and distance to the nearest body, split by the class of face it is read from);
+// --columns (2D) also the top of every grid column and the profiles of four columns.
 // --frames defaults to three times the scene's length (the slow test's run); frames before --from
 // are run but not printed; "volume" is the liquid volume's drift from frame 0. Each variant ends with a summary line: the largest regain, its frame,
 // the bound there, and the ledger summed over the run. A measurement program: it asserts nothing.
@@ -129,11 +133,151 @@ void print_affine(const AnySimulation& any, int frame) {
   std::printf("\n");
 }
 
+
+/// Where the liquid beside the moving bodies is carried (--near; axis 1 is vertical): the
+/// particles outside the bodies by the side of the nearest body (top: its outward normal n_y >
+/// 1/2, bottom: n_y < -1/2, side) and distance to it (0-0.5, 0.5-1, 1-1.5, 1.5-3, 3-6, > 6 dx),
+/// with their mass-weighted mean vertical velocity read
+/// from the frame's last face velocities, split by the class of the faces it is read from
+/// (interpolation is linear in u): faces the solids cover (W_F^u = 0, the bodies' velocities),
+/// faces with fluid and no liquid weight (W_F^u > 0, W_L^u = 0), partly solid faces with liquid
+/// (0 < W_F^u < 1) and open faces with liquid (W_F^u = 1).
+template <int Dim>
+void print_near(const AnySimulation& any, int frame, bool columns) {
+  const auto* sim = dynamic_cast<const Simulation<Dim>*>(&any);
+  if (!sim) return;
+  const auto& p = sim->particles();
+  const auto& grid = sim->grid();
+  const double dx = grid.dx();
+  std::vector<ShapePtr<Dim>> bodies;
+  if (const auto* world = sim->rigid_world())
+    for (const auto& b : world->bodies())
+      if (b.moves()) bodies.push_back(b.posed_shape());
+  if (bodies.empty()) return;
+  const VectorX& u = sim->velocity();
+  const PressureWeights& w = sim->weights();
+  std::array<VectorX, 4> part;
+  for (auto& v : part) v = VectorX::Zero(u.size());
+  for (int f = 0; f < u.size(); ++f) {
+    const double wf = w.fluid_face[f];
+    const int k = wf == 0.0 ? 0 : w.liquid_face[f] == 0.0 ? 1 : wf < 1.0 ? 2 : 3;
+    part[k][f] = u[f];
+  }
+  double mass[3][6] = {}, vy[3][6][4] = {};
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    double d = 1e300;
+    int nearest = -1;
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+      const double db = bodies[b]->distance(p.x[i]);
+      if (db < d) {
+        d = db;
+        nearest = static_cast<int>(b);
+      }
+    }
+    if (nearest < 0 || !(d >= 0.0)) continue;
+    Vec<Dim> n = bodies[nearest]->gradient(p.x[i]);
+    if (n.norm() > 0.0) n /= n.norm();
+    const int side = n[1] > 0.5 ? 0 : n[1] < -0.5 ? 1 : 2;
+    const int bin = d < 0.5 * dx   ? 0
+                    : d < dx       ? 1
+                    : d < 1.5 * dx ? 2
+                    : d < 3 * dx   ? 3
+                    : d < 6 * dx   ? 4
+                                   : 5;
+    mass[side][bin] += p.mass[i];
+    for (int k = 0; k < 4; ++k)
+      vy[side][bin][k] += p.mass[i] * grid.interpolate_velocity(part[k], p.x[i])[1];
+  }
+  // the whole liquid: mass-weighted mean of the particles' v_y and of the face velocity read
+  double all_mass = 0.0, all_v = 0.0, all_u = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    all_mass += p.mass[i];
+    all_v += p.mass[i] * p.v[i][1];
+    all_u += p.mass[i] * grid.interpolate_velocity(u, p.x[i])[1];
+  }
+  if (columns && Dim == 2) {
+    // per grid column c: the highest particle's height (in dx), the mean face v_y of the
+    // particles within 2 dx of it (mm/s) and that point's distance to the nearest moving body
+    // (in dx), printed as c:height:v_y:distance
+    const int nx = grid.cells()[0];
+    std::vector<double> top(nx, -1e300), m(nx, 0.0), mu(nx, 0.0);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      const int c = std::clamp(static_cast<int>((p.x[i][0] - grid.origin()[0]) / dx), 0, nx - 1);
+      top[c] = std::max(top[c], p.x[i][1]);
+    }
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      const int c = std::clamp(static_cast<int>((p.x[i][0] - grid.origin()[0]) / dx), 0, nx - 1);
+      if (p.x[i][1] > top[c] - 2.0 * dx) {
+        m[c] += p.mass[i];
+        mu[c] += p.mass[i] * grid.interpolate_velocity(u, p.x[i])[1];
+      }
+    }
+    std::printf("columns frame %d:", frame);
+    for (int c = 0; c < nx; ++c) {
+      Vec<Dim> at = Vec<Dim>::Zero();
+      at[0] = grid.origin()[0] + (c + 0.5) * dx;
+      at[1] = top[c];
+      double d = 1e300;
+      for (const auto& b : bodies) d = std::min(d, b->distance(at));
+      std::printf(" %d:%.1f:%+.1f:%.1f", c, top[c] / dx, m[c] > 0 ? 1e3 * mu[c] / m[c] : 0.0, d / dx);
+    }
+    std::printf("\n");
+    // profiles of four columns, per cell from the cell of the column's highest particle down
+    // 14 cells: [row, particles, W_L^p, the cell centre's distance to the nearest body (dx), the
+    // mean face v_y of its particles (mm/s)]
+    for (int c : {nx / 4, 2 * nx / 5, 3 * nx / 5, 24 * nx / 25}) {
+      std::printf("profile column %d:", c);
+      const int first = top[c] > -1e300
+                            ? std::min(grid.cells()[1] - 1,
+                                       static_cast<int>((top[c] - grid.origin()[1]) / dx))
+                            : -1;
+      for (int j = first; j >= 0 && j > first - 14; --j) {
+        VecI<Dim> ci = VecI<Dim>::Zero();
+        ci[0] = c;
+        ci[1] = j;
+        const int cell = grid.cell_index(ci);
+        double mm = 0.0, uu = 0.0;
+        long count = 0;
+        for (std::size_t i = 0; i < p.size(); ++i) {
+          if (grid.cell_containing(p.x[i]) != ci) continue;
+          mm += p.mass[i];
+          uu += p.mass[i] * grid.interpolate_velocity(u, p.x[i])[1];
+          ++count;
+        }
+        Vec<Dim> at = grid.cell_center(ci);
+        double d = 1e300;
+        for (const auto& b : bodies) d = std::min(d, b->distance(at));
+        std::printf(" [j%d n%ld WL%.2f d%.1f u%+.0f]", j, count, w.liquid_cell[cell], d / dx,
+                    mm > 0 ? 1e3 * uu / mm : 0.0);
+      }
+      std::printf("\n");
+    }
+  }
+  static const char* sides[3] = {"top", "bottom", "side"};
+  std::printf("near frame %5d liquid %.2f kg mean v_y %+.3f mm/s (particles), %+.3f mm/s (faces)",
+              frame, all_mass, 1e3 * all_v / all_mass, 1e3 * all_u / all_mass);
+  std::printf(" | bodies y (m), v_y (mm/s):");
+  for (const auto& b : sim->rigid_world()->bodies())
+    if (b.moves()) std::printf(" %.4f %+.2f", b.position[1], 1e3 * b.velocity[1]);
+  std::printf(" | mean v_y (mm/s) = solid + unwet + partial + open:");
+  static const char* bins[6] = {"0-0.5", "0.5-1", "1-1.5", "1.5-3", "3-6", ">6"};
+  for (int s = 0; s < 3; ++s)
+    for (int b = 0; b < 6; ++b) {
+      const double m = mass[s][b] > 0.0 ? mass[s][b] : 1.0;
+      double total = 0.0;
+      for (int k = 0; k < 4; ++k) total += vy[s][b][k];
+      std::printf(" | %s %s dx %.3f kg: %+.2f = %+.2f %+.2f %+.2f %+.2f (momentum %+.4f)", sides[s],
+                  bins[b], mass[s][b], 1e3 * total / m, 1e3 * vy[s][b][0] / m,
+                  1e3 * vy[s][b][1] / m, 1e3 * vy[s][b][2] / m, 1e3 * vy[s][b][3] / m, total);
+    }
+  std::printf("\n");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int frames = 0, from = 1;
-  bool affine = false;
+  bool affine = false, near = false, columns = false;
   std::string name;
   std::vector<std::string> only, overrides{"render.enabled=false"};
   bench::BenchArgs args(argc, argv);
@@ -147,13 +291,17 @@ int main(int argc, char** argv) {
       for (const std::string& item : args.list()) only.push_back(item);
     } else if (a == "--affine") {
       affine = true;
+    } else if (a == "--near") {
+      near = true;
+    } else if (a == "--columns") {
+      near = columns = true;
     } else if (a == "--set") {
       overrides.push_back(args.value());
     } else if (!a.empty() && a[0] != '-' && name.empty()) {
       name = a;
     } else {
       std::cerr << "usage: bench_energy_regain SCENE [--frames N] [--from F] [--only NAME,...] "
-                   "[--affine] [--set KEY=VALUE]...\n";
+                   "[--affine] [--near] [--columns] [--set KEY=VALUE]...\n";
       return 2;
     }
   }
@@ -207,6 +355,10 @@ int main(int argc, char** argv) {
         if (affine && f >= from) {
           if (scene.dim == 2) print_affine<2>(*sim, f);
           else print_affine<3>(*sim, f);
+        }
+        if (near && f >= from) {
+          if (scene.dim == 2) print_near<2>(*sim, f, columns);
+          else print_near<3>(*sim, f, columns);
         }
         std::fflush(stdout);
       }
