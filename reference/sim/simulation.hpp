@@ -122,6 +122,11 @@ struct StageSwitches {
   /// velocity closes them and its energy shows in the solve's column of the ledger. A measurement
   /// switch (docs/particles.md, "Volume correction through the solve"); 0: listed, not used.
   double volume_source_gain = 1.0;
+  /// (docs/derivations.md, departures item 15) A liquid that touches nothing (more than a cell from every face of the domain and every
+  /// solid's bounds: a drop in flight) keeps its centre of mass through line 15's moves
+  /// (correct_volume; docs/particles.md "A drop in flight: line 15 may not carry it"). false:
+  /// the moves may carry it (the behaviour before; a comparison switch).
+  bool line15_keeps_free_centre = true;
   /// Measure the energy change of every stage (energy_ledger()): several extra sweeps over the
   /// faces and particles per step, so off unless a diagnosis asks for it.
   bool energy_ledger = false;
