@@ -380,7 +380,7 @@ Multigrid face_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& face_
     std::vector<int> coarse = active_prolongation(
         faces, [&](int f, const auto& add) { face_weights<Dim>(g, gc, f, add, options.transverse_linear); },
         lv.prolongation);
-    SparseMatrix ac = galerkin_product(lv.a, lv.prolongation);
+    SparseMatrix ac = galerkin_product(lv.a, lv.prolongation, &lv.restriction);
     stabilise_coarse(ac);
     levels.emplace_back();
     levels.back().a.swap(ac);
@@ -408,7 +408,7 @@ Multigrid cell_multigrid(const MacGrid<Dim>& grid, const std::vector<int>& cell_
     const MacGrid<Dim> gc = coarsen_grid(g);
     std::vector<int> coarse = active_prolongation(
         cells, [&](int i, const auto& add) { cell_weights<Dim>(g, gc, i, add); }, lv.prolongation);
-    SparseMatrix ac = galerkin_product(lv.a, lv.prolongation);
+    SparseMatrix ac = galerkin_product(lv.a, lv.prolongation, &lv.restriction);
     stabilise_coarse(ac);
     levels.emplace_back();
     levels.back().a.swap(ac);

@@ -46,6 +46,54 @@ StokesFactors& moved(StokesFactors& f) {
   return f;
 }
 
+/// B_p^T diag(w) with B_p^T row-major (compressed): each entry times its face's weight, the bits
+/// of Eigen's product with sparse_diagonal(w) (one term per entry).
+SparseMatrix weighted_rows(const SparseMatrix& bpt, const VectorX& w) {
+  SparseMatrix s = bpt;
+  s.makeCompressed();
+  const int* inner = s.innerIndexPtr();
+  double* value = s.valuePtr();
+  for (Eigen::Index e = 0; e < s.nonZeros(); ++e) value[e] = value[e] * w[inner[e]];
+  return s;
+}
+
+/// B_p^T diag(w) B_p: the bits of Eigen's SparseMatrix(bpt * sparse_diagonal(w)) * bp
+/// (sparse_row_product performs the additions of Eigen's conservative product in its order,
+/// test_galerkin_product), without Eigen's sorting transposes.
+SparseMatrix weighted_product(const SparseMatrix& bpt, const VectorX& w, const SparseMatrix& bp) {
+  return sparse_row_product(weighted_rows(bpt, w), bp, false);
+}
+
+/// The diagonal of weighted_product(bpt, w, bp) alone, the same bits: entry k sums the terms of
+/// row k of B_p^T diag(w) that reach column k of B_p, in the order of the row, the first term
+/// assigned and the others added (as the product does; no entry: 0).
+VectorX weighted_product_diagonal(const SparseMatrix& bpt, const VectorX& w, const SparseMatrix& bp) {
+  const SparseMatrix s = weighted_rows(bpt, w);
+  const int n = static_cast<int>(s.rows());
+  VectorX d = VectorX::Zero(n);
+  const int* outer = s.outerIndexPtr();
+  const int* inner = s.innerIndexPtr();
+  const double* value = s.valuePtr();
+  const int* b_outer = bp.outerIndexPtr();
+  const int* b_inner = bp.innerIndexPtr();
+  const double* b_value = bp.valuePtr();
+  for (int k = 0; k < n; ++k) {
+    bool first = true;
+    double sum = 0.0;
+    for (int e = outer[k]; e < outer[k + 1]; ++e) {
+      const int f = inner[e];
+      for (int q = b_outer[f]; q < b_outer[f + 1]; ++q)
+        if (b_inner[q] == k) {
+          const double term = value[e] * b_value[q];
+          sum = first ? term : sum + term;
+          first = false;
+        }
+    }
+    d[k] = sum;
+  }
+  return d;
+}
+
 }  // namespace
 
 template <int Dim>
@@ -74,15 +122,24 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   mg.smoothing = options.smoothing;
   mg.max_coarse = options.max_coarse;
   mg.renumber = options.renumber;
-  // A22 = B_p^T C B_p, the pressure Poisson block
-  SparseMatrix a22;
-  if (np_ > 0) {
-    const SparseMatrix bp = f_.b.rightCols(np_);
-    const SparseMatrix bpt = f_.b_transpose.bottomRows(np_);
-    a22 = SparseMatrix(bpt * sparse_diagonal(f_.c)) * bp;
-    a22.makeCompressed();
-  }
+  // A22 = B_p^T C B_p, the pressure Poisson block; with the scaled commutator in the pressure
+  // hierarchy's place only its diagonal is read (Pi, the near-empty cells)
   pressure_only_ = ns_ == 0;
+  const bool scaled_commutator = np_ > 0 && options.schur_correction && !options.additive_pressure &&
+                                 options.schur == SchurApproximation::commutator_scaled;
+  SparseMatrix a22, bp, bpt;
+  VectorX a22_diagonal;
+  if (np_ > 0) {
+    bp = f_.b.rightCols(np_);
+    bpt = f_.b_transpose.bottomRows(np_);
+    if (pressure_only_ || !scaled_commutator) {
+      SparseMatrix product = weighted_product(bpt, f_.c, bp);
+      a22.swap(product);
+      a22_diagonal = a22.diagonal();
+    } else {
+      a22_diagonal = weighted_product_diagonal(bpt, f_.c, bp);
+    }
+  }
   if (pressure_only_) {
     if (np_ > 0) pressure_ = cell_multigrid<Dim>(grid, f_.pressure_cell, moved(a22), mg);
   } else {
@@ -95,14 +152,13 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     schur_diagonal_.resize(np_);
     for (int k = 0; k < np_; ++k) {
       const double visc = f_.pressure_viscosity[k] / f_.pressure_liquid[k];
-      const double inv = options.penalty_factor * (visc + 1.0 / a22.coeff(k, k));
+      const double inv = options.penalty_factor * (visc + 1.0 / a22_diagonal[k]);
       penalty_[k] = 1.0 / inv;
       schur_diagonal_[k] = inv + options.schur_viscous_factor * visc;
     }
     // the near-empty cells: out of (P2) and S (Pi^-1 = 0), Jacobi instead
     penalty_divisor_ = penalty_;
     penalty_used_ = penalty_;
-    VectorX a22_diagonal = a22.diagonal();
     if (np_ > 0 && options.empty_cell_ratio > 0.0) {
       const double bound = options.empty_cell_ratio *
                            lower_median(std::vector<double>(a22_diagonal.data(), a22_diagonal.data() + np_));
@@ -170,8 +226,8 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
     commutator_ = np_ > 0 && options.schur_correction && !options.additive_pressure &&
                   options.schur != SchurApproximation::cahouet_chabard;
     if (commutator_) {
-      bp_ = f_.b.rightCols(np_);
-      bpt_ = f_.b_transpose.bottomRows(np_);
+      bp_.swap(bp);  // (B_p and B_p^T as formed above)
+      bpt_.swap(bpt);
       if (!empty_.empty()) {
         // B_p without the near-empty cells' columns (their rows of B_p^T)
         VectorX keep = VectorX::Ones(np_);
@@ -193,22 +249,23 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       lt_.setZero(ns_);
       lu_.setZero(n_);
     }
-    // V = C^-1 + B D^-1 B^T with D^-1 = 0 on the near-empty cells (1 / inf)
-    SparseMatrix v = velocity_operator(f_, penalty_divisor_);
     ExtraPatches<Dim> extra;
     if (options.element_patches) extra = stress_element_patches<Dim>(f_);
     MacMultigridOptions vmg = mg;
     vmg.transverse_linear = options.transverse_linear;
     vmg.fine_cell_patches = options.fine_cell_patches;
     vmg.single_precision = options.single_precision_velocity;
+    // V = C^-1 + B D^-1 B^T with D^-1 = 0 on the near-empty cells (1 / inf)
+    // (K^-1 as formed above)
+    SparseMatrix v = velocity_operator(f_, penalty_divisor_, &kinv_);
     velocity_ = face_multigrid<Dim>(grid, f_.face, moved(v), vmg, options.element_patches ? &extra : nullptr);
     if (np_ > 0 && (options.schur_correction || options.additive_pressure)) {
       // A22 is singular for enclosed liquid: the preconditioner inverts A22 + 1e-10 diag(A22)
       // (the scaled commutator's L = B_p^T W B_p in its place; with W = C it is A22)
       SparseMatrix shifted;
       if (commutator_ && options.schur == SchurApproximation::commutator_scaled) {
-        shifted = SparseMatrix(bpt_ * sparse_diagonal(commutator_weight_)) * bp_;
-        shifted.makeCompressed();
+        SparseMatrix product = weighted_product(bpt_, commutator_weight_, bp_);
+        shifted.swap(product);  // (Eigen 3.4's SparseMatrix has no move assignment)
       } else {
         shifted.swap(a22);  // (a22 is not used after this)
       }

@@ -4,6 +4,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
+#include <memory>
 #include <stdexcept>
 
 namespace monolith {
@@ -85,29 +86,54 @@ void finish_b(std::vector<Triplet>& columns, int n, StokesFactors& f) {
 }
 
 
-/// m = the row-major matrix whose row r holds rows[r]'s (column, value) pairs, each row's
-/// columns distinct and sorted (what setFromTriplets would build, written straight into the
-/// compressed storage without a triplet list or a transposed copy); rows' storage is released
-/// as it is copied. Rows are copied in parallel, each by one thread.
-void assign_sorted_rows(std::vector<std::vector<std::pair<int, double>>>& rows, int cols,
-                        SparseMatrix& m) {
-  const int n = static_cast<int>(rows.size());
+/// m (n x cols, row-major) from its rows: `make_row()` is called once per thread and returns a
+/// function row(r, list) that fills `list` (cleared by the caller) with output row r's (column,
+/// value) pairs, columns distinct and in the order they are to be stored. Each thread assembles its block of consecutive rows into one
+/// buffer of its own, then copies it into the compressed storage at its offset: no list per row
+/// (a separate allocation for each of up to millions of rows, most of them fresh pages). Every
+/// row is formed by one thread: any thread count gives the same bits.
+template <class MakeRow>
+void assemble_rows(int n, int cols, SparseMatrix& m, const MakeRow& make_row) {
+  std::vector<int> outer(static_cast<std::size_t>(n) + 1, 0);
   m.resize(n, cols);
-  int* outer = m.outerIndexPtr();
-  outer[0] = 0;
-  for (int r = 0; r < n; ++r) outer[r + 1] = outer[r] + static_cast<int>(rows[r].size());
-  m.resizeNonZeros(outer[n]);
-  int* inner = m.innerIndexPtr();
-  double* value = m.valuePtr();
-#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int r = 0; r < n; ++r) {
-    int pos = outer[r];
-    for (const auto& [g, x] : rows[r]) {
-      inner[pos] = g;
-      value[pos++] = x;
+  m.resizeNonZeros(0);
+#pragma omp parallel if (n > kParallelRows) num_threads(process_threads())
+  {
+    auto row = make_row();
+    std::vector<std::pair<int, double>> list;
+    list.reserve(64);
+    std::vector<int> inner;
+    std::vector<double> value;
+    int first = -1;
+#pragma omp for schedule(static)
+    for (int r = 0; r < n; ++r) {
+      if (first < 0) {
+        first = r;
+        // (a guess of the block's entries; the vectors grow past it if needed)
+        const std::size_t guess = static_cast<std::size_t>(n) * 12 / static_cast<std::size_t>(omp_get_num_threads()) + 16;
+        inner.reserve(guess);
+        value.reserve(guess);
+      }
+      list.clear();
+      row(r, list);
+      for (const auto& [g, x] : list) {
+        inner.push_back(g);
+        value.push_back(x);
+      }
+      outer[static_cast<std::size_t>(r) + 1] = static_cast<int>(list.size());
     }
-    std::vector<std::pair<int, double>>().swap(rows[r]);
+#pragma omp single
+    {
+      for (int r = 0; r < n; ++r) outer[static_cast<std::size_t>(r) + 1] += outer[r];
+      m.resizeNonZeros(outer[n]);
+    }
+    // (the single's barrier: offsets and storage ready)
+    if (first >= 0) {
+      std::copy(inner.begin(), inner.end(), m.innerIndexPtr() + outer[first]);
+      std::copy(value.begin(), value.end(), m.valuePtr() + outer[first]);
+    }
   }
+  std::copy(outer.begin(), outer.end(), m.outerIndexPtr());
 }
 
 }  // namespace
@@ -202,26 +228,24 @@ StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& 
   for (std::size_t q = 0; q < f.face.size(); ++q) f.c[q] = c_all[f.face[q]];
   // the columns of B from the operator's stencils, per unknown (parallel, merged in order)
   const int n = f.size();
-  std::vector<std::vector<std::pair<int, double>>> columns(n);
-#pragma omp parallel for schedule(static) if (n > kParallelRows) num_threads(process_threads())
-  for (int i = 0; i < n; ++i) {
-    // row i of B^T: the active faces, sorted, a repeated face summed in the stencil's order (the
-    // matrix setFromTriplets built from these entries, without the triplet list)
-    std::vector<std::pair<int, double>>& row = columns[i];
-    row = op.stencil(i);
-    std::size_t kept = 0;
-    for (const auto& [face, coef] : row)
-      if (active_of_face[face] >= 0 && coef != 0.0) row[kept++] = {active_of_face[face], coef};
-    row.resize(kept);
-    std::stable_sort(row.begin(), row.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
-    std::size_t out = 0;
-    for (std::size_t q = 0; q < row.size(); ++q) {
-      if (out > 0 && row[out - 1].first == row[q].first) row[out - 1].second += row[q].second;
-      else row[out++] = row[q];
-    }
-    row.resize(out);
-  }
-  assign_sorted_rows(columns, static_cast<int>(f.face.size()), f.b_transpose);
+  assemble_rows(n, static_cast<int>(f.face.size()), f.b_transpose, [&]() {
+    return [&](int i, std::vector<std::pair<int, double>>& row) {
+      // row i of B^T: the active faces, sorted, a repeated face summed in the stencil's order (the
+      // matrix setFromTriplets built from these entries, without the triplet list)
+      row = op.stencil(i);
+      std::size_t kept = 0;
+      for (const auto& [face, coef] : row)
+        if (active_of_face[face] >= 0 && coef != 0.0) row[kept++] = {active_of_face[face], coef};
+      row.resize(kept);
+      std::stable_sort(row.begin(), row.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+      std::size_t out = 0;
+      for (std::size_t q = 0; q < row.size(); ++q) {
+        if (out > 0 && row[out - 1].first == row[q].first) row[out - 1].second += row[q].second;
+        else row[out++] = row[q];
+      }
+      row.resize(out);
+    };
+  });
   f.b = f.b_transpose.transpose();
   f.b.makeCompressed();
   return f;
@@ -256,12 +280,14 @@ SparseMatrix block_diagonal_inverse(const SparseMatrix& k) {
   return r;
 }
 
-SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
+SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty, const SparseMatrix* kinv_given) {
   const int nf = static_cast<int>(f.face.size());
   const int ns = f.num_stress;
   if (penalty.size() != f.num_pressure)
     throw std::invalid_argument("velocity_operator: one penalty per pressure unknown expected");
-  const SparseMatrix kinv = block_diagonal_inverse(f.compliance);
+  SparseMatrix kinv_own;
+  if (!kinv_given) kinv_own = block_diagonal_inverse(f.compliance);
+  const SparseMatrix& kinv = kinv_given ? *kinv_given : kinv_own;
   // D^-1 per unknown as (column, value) lists: K^-1 blocks, then 1/penalty
   auto dinv_row = [&](int i, const auto& visit) {
     if (i < ns) {
@@ -270,51 +296,42 @@ SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty) {
       visit(i, 1.0 / penalty[i - ns]);
     }
   };
-  // rows in parallel into per-row lists, then CSR
-  std::vector<std::vector<std::pair<int, double>>> rows(nf);
   const int* b_outer = f.b.outerIndexPtr();
   const int* b_inner = f.b.innerIndexPtr();
   const double* b_value = f.b.valuePtr();
   const int* t_outer = f.b_transpose.outerIndexPtr();
   const int* t_inner = f.b_transpose.innerIndexPtr();
   const double* t_value = f.b_transpose.valuePtr();
-#pragma omp parallel if (nf > kParallelRows) num_threads(process_threads())
-  {
-  // slot[g]: the position of column g in the current row (-1: none yet), the linear search's
-  // answer in one load; contributions are summed in the same order
-  std::vector<int> slot(static_cast<std::size_t>(nf), -1);
-#pragma omp for schedule(static)
-  for (int r = 0; r < nf; ++r) {
-    std::vector<std::pair<int, double>>& row = rows[r];
-    row.clear();
-    row.reserve(32);
-    row.emplace_back(r, 1.0 / f.c[r]);
-    slot[r] = 0;
-    for (int q = b_outer[r]; q < b_outer[r + 1]; ++q) {
-      const int i = b_inner[q];
-      const double bri = b_value[q];
-      dinv_row(i, [&](int j, double dij) {
-        const double s = bri * dij;
-        for (int p = t_outer[j]; p < t_outer[j + 1]; ++p) {
-          const int g = t_inner[p];
-          const double v = s * t_value[p];
-          if (slot[g] < 0) {
-            slot[g] = static_cast<int>(row.size());
-            row.emplace_back(g, v);
-          } else {
-            row[slot[g]].second += v;
-          }
-        }
-      });
-    }
-    for (const auto& e : row) slot[e.first] = -1;
-    std::sort(row.begin(), row.end());
-  }
-  }
-  // the rows straight into compressed storage (each row's columns are distinct and sorted: the
-  // matrix setFromTriplets would build, without its triplet list and transposed copy)
   SparseMatrix v;
-  assign_sorted_rows(rows, nf, v);
+  assemble_rows(nf, nf, v, [&]() {
+    // slot[g]: the position of column g in the current row (-1: none yet), the linear search's
+    // answer in one load; contributions are summed in the same order (one array per thread)
+    auto slot = std::make_shared<std::vector<int>>(static_cast<std::size_t>(nf), -1);
+    return [&, slot](int r, std::vector<std::pair<int, double>>& row) {
+      int* sl = slot->data();
+      row.emplace_back(r, 1.0 / f.c[r]);
+      sl[r] = 0;
+      for (int q = b_outer[r]; q < b_outer[r + 1]; ++q) {
+        const int i = b_inner[q];
+        const double bri = b_value[q];
+        dinv_row(i, [&](int j, double dij) {
+          const double s = bri * dij;
+          for (int p = t_outer[j]; p < t_outer[j + 1]; ++p) {
+            const int g = t_inner[p];
+            const double x = s * t_value[p];
+            if (sl[g] < 0) {
+              sl[g] = static_cast<int>(row.size());
+              row.emplace_back(g, x);
+            } else {
+              row[sl[g]].second += x;
+            }
+          }
+        });
+      }
+      for (const auto& e : row) sl[e.first] = -1;
+      std::sort(row.begin(), row.end());
+    };
+  });
   return v;
 }
 

@@ -90,7 +90,9 @@ StokesFactors stokes_factors(const MacGrid<Dim>& grid, const StressLayout<Dim>& 
 /// V = C^-1 + B D^-1 B^T over the faces of `f`, D = blkdiag(K, diag(penalty)) (penalty = the
 /// diagonal Pi added to the pressure block, one positive entry per pressure unknown), assembled
 /// row by row (each row by one thread, in a fixed order: deterministic). SPD.
-SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty);
+/// `kinv`: K^-1 as block_diagonal_inverse(f.compliance) gives it, when the caller has it already
+/// (null: computed here).
+SparseMatrix velocity_operator(const StokesFactors& f, const VectorX& penalty, const SparseMatrix* kinv = nullptr);
 
 /// The inverse of a block-diagonal SPD matrix whose blocks have at most 3 unknowns (K).
 SparseMatrix block_diagonal_inverse(const SparseMatrix& k);

@@ -208,8 +208,14 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool ren
       throw std::invalid_argument("Multigrid: prolongation of level " + std::to_string(l) +
                                   " has the wrong shape");
     lv.prolongation.makeCompressed();
-    restriction_[l] = lv.prolongation.transpose();
-    restriction_[l].makeCompressed();
+    if (lv.restriction.rows() == nc && lv.restriction.cols() == n && lv.restriction.isCompressed() &&
+        lv.restriction.nonZeros() == lv.prolongation.nonZeros()) {
+      restriction_[l].swap(lv.restriction);  // the caller's P^T (galerkin_product's): one transpose less
+    } else {
+      restriction_[l] = lv.prolongation.transpose();
+      restriction_[l].makeCompressed();
+    }
+    SparseMatrix().swap(lv.restriction);
     coarse_rhs_[l].setZero(nc);
     coarse_x_[l].setZero(nc);
     if (!single_precision_) compute_patch_inverses(l);
@@ -561,7 +567,7 @@ SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bo
   return c;
 }
 
-SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p) {
+SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p, SparseMatrix* transpose) {
   // P^T (A P), both products row by row; A P keeps its cancelled entries (as Eigen's product
   // did), P^T A P drops the exact zeros: the same matrix, bit for bit, as
   // prune(P^T * (A * P)) with Eigen's products (test_multigrid's check), at about half the cost
@@ -580,7 +586,9 @@ SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p) {
   // (A P's rows unsorted: P^T (A P) adds the terms of each of its entries in the order of P^T's
   // row, one term per row of A P, whatever the order within that row, and sorts its own rows)
   const SparseMatrix ap = sparse_row_product(a.isCompressed() ? a : ac, p.isCompressed() ? p : pc, false, false);
-  return sparse_row_product(pt, ap, true);
+  SparseMatrix c = sparse_row_product(pt, ap, true);
+  if (transpose) transpose->swap(pt);
+  return c;
 }
 
 bool patches_independent(const SparseMatrix& a, const PatchSet& patches) {

@@ -60,6 +60,9 @@ struct PatchSet {
 struct MultigridLevel {
   SparseMatrix a;             ///< the operator of this level (square, SPD)
   SparseMatrix prolongation;  ///< from the next coarser level: rows = a.rows(); empty on the coarsest
+  /// optional: prolongation's transpose as Eigen forms it (galerkin_product hands out the one it
+  /// formed), taken by Multigrid instead of forming it again; empty: formed there
+  SparseMatrix restriction;
   PatchSet patches;           ///< the smoother's patches (ignored on the coarsest level)
 };
 
@@ -168,8 +171,9 @@ class MultigridPreconditioner : public Preconditioner {
 /// are the same; a product only read by another product's rows, galerkin_product's A P).
 SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros, bool sort_columns = true);
 
-/// The Galerkin coarse operator P^T A P (row-major, explicit zeros dropped).
-SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p);
+/// The Galerkin coarse operator P^T A P (row-major, explicit zeros dropped). `transpose` (optional)
+/// receives the P^T it formed (compressed, row-major; MultigridLevel::restriction).
+SparseMatrix galerkin_product(const SparseMatrix& a, const SparseMatrix& p, SparseMatrix* transpose = nullptr);
 
 /// True when no two groups of one colour share an unknown or are coupled by an entry of `a`
 /// (so relaxing a colour in parallel gives the serial result) and every group is in exactly one

@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <omp.h>
 
 #include "reference/oracle/cholmod_solver.hpp"
@@ -911,4 +912,93 @@ TEMPLATE_TEST_CASE_SIG("the cut block keeps the preconditioner symmetric positiv
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(scaled, Eigen::EigenvaluesOnly);
     CHECK(es.eigenvalues().minCoeff() > 0.0);
   }
+}
+
+TEST_CASE("the set-up's assembly: B^T, V and A22's diagonal the bits of the plain assembly, on 1 and 2 threads",
+          "[unit]") {
+  // stokes_factors and velocity_operator assemble through one buffer per thread
+  // (velocity_operator.cpp, assemble_rows), the block preconditioner forms only A22's diagonal
+  // under the scaled commutator (docs/preconditioners.md section 36): B^T equals the matrix built
+  // from the stencils by setFromTriplets, V does not depend on the thread count or on K^-1 being
+  // passed in and equals C^-1 + B D^-1 B^T to round-off, and Pi is the one of Eigen's A22, bit for bit
+  constexpr int Dim = 3;
+  CaseOptions o;
+  o.n = 14;  // more than 4096 faces and rows: the parallel paths
+  o.eta = 1000.0;
+  const auto sc = make_case<Dim>(o);
+  const auto s = make_system(sc);
+  auto same_bits = [](const SparseMatrix& a, const SparseMatrix& b) {
+    if (a.rows() != b.rows() || a.cols() != b.cols() || a.nonZeros() != b.nonZeros()) return false;
+    for (int i = 0; i <= a.rows(); ++i)
+      if (a.outerIndexPtr()[i] != b.outerIndexPtr()[i]) return false;
+    for (int e = 0; e < a.nonZeros(); ++e)
+      if (a.innerIndexPtr()[e] != b.innerIndexPtr()[e] ||
+          std::memcmp(a.valuePtr() + e, b.valuePtr() + e, sizeof(double)) != 0)
+        return false;
+    return true;
+  };
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const StokesFactors f1 = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf, 0.01);
+  omp_set_num_threads(2);
+  const StokesFactors f2 = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf, 0.01);
+  omp_set_num_threads(threads);
+  REQUIRE(f1.face.size() > 4096);
+  REQUIRE(f1.size() > 4096);
+  CHECK(same_bits(f1.b_transpose, f2.b_transpose));
+  CHECK(same_bits(f1.b, f2.b));
+  // B^T from the stencils by triplets (repeated faces summed in the stencil's order)
+  std::vector<int> active(sc.grid.num_faces(), -1);
+  for (std::size_t q = 0; q < f1.face.size(); ++q) active[f1.face[q]] = static_cast<int>(q);
+  std::vector<Triplet> t;
+  for (int i = 0; i < f1.size(); ++i)
+    for (const auto& [face, coef] : s.mf->stencil(i))
+      if (active[face] >= 0 && coef != 0.0) t.emplace_back(i, active[face], coef);
+  SparseMatrix bt(f1.size(), static_cast<int>(f1.face.size()));
+  bt.setFromTriplets(t.begin(), t.end());
+  bt.makeCompressed();
+  CHECK(same_bits(f1.b_transpose, bt));
+  // V on 1 and 2 threads, with and without K^-1 given, against Eigen's products
+  const VectorX penalty = VectorX::LinSpaced(f1.num_pressure, 1e-4, 1e-2);
+  const SparseMatrix kinv = block_diagonal_inverse(f1.compliance);
+  omp_set_num_threads(1);
+  const SparseMatrix v1 = velocity_operator(f1, penalty);
+  omp_set_num_threads(2);
+  const SparseMatrix v2 = velocity_operator(f1, penalty);
+  const SparseMatrix v3 = velocity_operator(f1, penalty, &kinv);
+  omp_set_num_threads(threads);
+  CHECK(same_bits(v1, v2));
+  CHECK(same_bits(v1, v3));
+  VectorX dinv_p = penalty.cwiseInverse();
+  SparseMatrix dinv(f1.size(), f1.size());
+  {
+    std::vector<Triplet> d;
+    for (int i = 0; i < kinv.outerSize(); ++i)
+      for (SparseMatrix::InnerIterator it(kinv, i); it; ++it) d.emplace_back(i, static_cast<int>(it.col()), it.value());
+    for (int k = 0; k < f1.num_pressure; ++k) d.emplace_back(f1.num_stress + k, f1.num_stress + k, dinv_p[k]);
+    dinv.setFromTriplets(d.begin(), d.end());
+  }
+  const SparseMatrix v_ref =
+      SparseMatrix(sparse_diagonal(f1.c.cwiseInverse())) + SparseMatrix(SparseMatrix(f1.b * dinv) * f1.b_transpose);
+  const SparseMatrix diff = v1 - v_ref;
+  double scale = 0.0, worst = 0.0;
+  for (int e = 0; e < v_ref.nonZeros(); ++e) scale = std::max(scale, std::abs(v_ref.valuePtr()[e]));
+  for (int e = 0; e < diff.nonZeros(); ++e) worst = std::max(worst, std::abs(diff.valuePtr()[e]));
+  CHECK(scale > 0.0);
+  CHECK(worst <= 1e-12 * scale);
+  // Pi from A22's diagonal alone (the default scaled commutator) and from Eigen's A22
+  StokesPreconditionerOptions po = small_options();
+  REQUIRE(po.schur == SchurApproximation::commutator_scaled);
+  StokesFactors f = f1;
+  const SparseMatrix a22 = SparseMatrix(SparseMatrix(f.b_transpose.bottomRows(f.num_pressure) * sparse_diagonal(f.c)) *
+                                        f.b.rightCols(f.num_pressure));
+  const StokesPreconditioner<Dim> m(sc.grid, *s.mf, std::move(f), po);
+  REQUIRE(m.penalty().size() == f1.num_pressure);
+  int checked = 0;
+  for (int k = 0; k < f1.num_pressure; ++k) {
+    const double visc = f1.pressure_viscosity[k] / f1.pressure_liquid[k];
+    const double expected = 1.0 / (po.penalty_factor * (visc + 1.0 / a22.coeff(k, k)));
+    if (std::memcmp(&expected, &m.penalty()[k], sizeof(double)) == 0) ++checked;
+  }
+  CHECK(checked == f1.num_pressure);
 }
