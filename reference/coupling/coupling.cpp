@@ -601,7 +601,12 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   // call and of this one, each once: scratch.face_mark)
   std::vector<int>& touched = scratch.touched;
   touched.clear();
-  if (incremental && scratch.face_mark.size() != static_cast<std::size_t>(nf))
+  // (made at the first call that may keep its outputs, not at the first incremental one: the
+  // simulation's first call is its set-up, so this face-sized buffer, kept across steps, is
+  // placed among the set-up's blocks, not in the hole that the first step's release of a
+  // lattice-sized vector leaves in the heap, where it kept the next lattice-sized vector from
+  // reusing that hole: 541 MB more peak at the paper's 256x128x256 grid, docs/benchmarks.md)
+  if (in_parts && !parts && scratch.face_mark.size() != static_cast<std::size_t>(nf))
     scratch.face_mark.assign(nf, 0);
   const auto touch = [&](int f) {
     if (scratch.face_mark[f]) return;

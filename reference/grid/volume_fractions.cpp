@@ -597,6 +597,32 @@ VectorX fluid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& l
   return w;
 }
 
+template <int Dim>
+VectorX fluid_face_weights_without_solids(const MacGrid<Dim>& grid,
+                                          const std::array<BoundaryType, 2 * Dim>& boundary) {
+  VectorX w = VectorX::Ones(grid.num_faces());
+  // the wall faces: the two boundary planes of each axis's own faces (none on periodic axes)
+  for (int axis = 0; axis < Dim; ++axis) {
+    if (grid.periodic(axis)) continue;
+    const VecI<Dim> dims = grid.face_dims(axis);
+    for (int side = 0; side < 2; ++side) {
+      if (boundary[2 * axis + side] != BoundaryType::wall) continue;
+      // the faces with coord[axis] fixed: every combination of the other axes' coordinates
+      VecI<Dim> lo = VecI<Dim>::Zero(), hi = dims - VecI<Dim>::Ones();
+      lo[axis] = hi[axis] = side == 0 ? 0 : dims[axis] - 1;
+      VecI<Dim> c = lo;
+      while (true) {
+        w[grid.face_index(axis, c)] = 0.0;
+        int a = 0;
+        while (a < Dim && c[a] == hi[a]) c[a] = lo[a], ++a;
+        if (a == Dim) break;
+        ++c[a];
+      }
+    }
+  }
+  return w;
+}
+
 VectorX solid_face_weights(const VectorX& fluid_face_weights) {
   return VectorX::Ones(fluid_face_weights.size()) - fluid_face_weights;
 }
@@ -740,6 +766,8 @@ void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& l
                                               const VectorX&);                                    \
   template VectorX fluid_face_weights<D>(const MacGrid<D>&, const SampleLattice<D>&,              \
                                          const VectorX&, const std::array<BoundaryType, 2 * D>&); \
+  template VectorX fluid_face_weights_without_solids<D>(const MacGrid<D>&,                        \
+                                                        const std::array<BoundaryType, 2 * D>&);  \
   template VectorX liquid_cell_weights<D>(const MacGrid<D>&, const SampleLattice<D>&,             \
                                           const VectorX&);                                        \
   template VectorX liquid_face_weights<D>(const MacGrid<D>&, const SampleLattice<D>&,             \

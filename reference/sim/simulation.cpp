@@ -256,12 +256,35 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
   solids_ = make_solid_field<Dim>(solid_shapes_, grid_.dx());
   solid_field_shapes_ = solid_shapes_;
   for (const auto& sh : solid_shapes_) solid_field_boxes_.push_back(sh->bounds());
-  // W_F^u from the solid level set shrunk by zeta (section 4.4.6)
-  solid_phi_ =
-      solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
-  std::tie(solid_lo_, solid_hi_) = negative_point_box(lattice_, solid_phi_);
-  find_faces_in_solids();
-  weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
+  // viscosity: which solves the scheme runs (the stress DOFs with W_F^s below)
+  liquid_eta_ = liquid_viscosities(scene.liquids);
+  non_newtonian_ = has_non_newtonian(scene.liquids);
+  const bool viscous = non_newtonian_ || std::any_of(liquid_eta_.begin(), liquid_eta_.end(),
+                                                     [](double eta) { return eta > 0.0; });
+  if (non_newtonian_)
+    for (const auto& l : scene.liquids)
+      mixture_.models.push_back(HerschelBulkley::from_spec(l.viscosity));
+  sequence_ = solve_sequence(scene.solver.scheme, viscous);
+  // W_F^u from the solid level set shrunk by zeta (section 4.4.6). Without a static solid that
+  // level set is +infinity everywhere (no fraction anywhere), and unless W_F^s is made from it
+  // below it is not made: W_F^u is 1 but on the walls (fluid_face_weights_without_solids, the
+  // same bits), and no point or face is in a solid. Its 541 MB at the paper's 256x128x256 grid
+  // were the set-up's first block: released in step 1 (it was lent to the liquid level set),
+  // they left a hole at the bottom of the heap that the steps' kept buffers split, so the next
+  // liquid level set went above every other block (a peak one lattice-sized vector higher)
+  if (!solid_shapes_.empty() || sequence_ != SolveSequence::pressure) {
+    solid_phi_ =
+        solid_phi_on_lattice(grid_, lattice_, solid_shapes_, scene.solver.shrink * grid_.dx());
+    std::tie(solid_lo_, solid_hi_) = negative_point_box(lattice_, solid_phi_);
+    find_faces_in_solids();
+    weights_.fluid_face = fluid_face_weights(grid_, lattice_, solid_phi_, boundary_);
+  } else {
+    // (the box negative_point_box finds in a level set without a negative point)
+    solid_lo_ = lattice_.dims;
+    solid_hi_ = -VecI<Dim>::Ones();
+    find_faces_in_solids();
+    weights_.fluid_face = fluid_face_weights_without_solids(grid_, boundary_);
+  }
   // moving bodies: the rigid world; next to a liquid they enter the weights of every step
   // (W_F^u, W_F^s from their pose) and the particles never start inside them
   for (const auto& b : scene.bodies)
@@ -271,15 +294,6 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
     }
   coupled_ = rigid_ && !scene.liquids.empty();
 
-  // viscosity: which solves the scheme runs, and the stress DOFs with W_F^s (static solids)
-  liquid_eta_ = liquid_viscosities(scene.liquids);
-  non_newtonian_ = has_non_newtonian(scene.liquids);
-  const bool viscous = non_newtonian_ || std::any_of(liquid_eta_.begin(), liquid_eta_.end(),
-                                                     [](double eta) { return eta > 0.0; });
-  if (non_newtonian_)
-    for (const auto& l : scene.liquids)
-      mixture_.models.push_back(HerschelBulkley::from_spec(l.viscosity));
-  sequence_ = solve_sequence(scene.solver.scheme, viscous);
   stress_grid_ = StressGrid<Dim>(grid_);
   if (non_newtonian_ && sequence_ != SolveSequence::pressure)
     deformation_rate_ = std::make_shared<const SparseMatrix>(deformation_rate_matrix(stress_grid_));
@@ -310,6 +324,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
                                  boundary_, kSeedProjectionIterations,
                                  switches_.density_projection_surface_deficits)
             .surface_deficits;
+  reserve_step_buffers();
   frame_zero();
   if (scene.particles.settle_steps > 0 && !particles_.x.empty()) {
     settle(scene.particles.settle_steps);
@@ -317,6 +332,34 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
     frame_zero();
   }
   stats_.timing[FramePhase::total] = setup_watch.seconds();
+}
+
+template <int Dim>
+void Simulation<Dim>::reserve_step_buffers() {
+  // Heap placement (issue 20, branch paper16). The lattice-sized liquid level set is released
+  // before every solve (release_liquid_phi) so that the solve's grid-sized vectors reuse its
+  // memory, and made again by the next step's weights. That sharing holds only while no kept
+  // buffer is placed in the released block: made first in step 1 (a face-sized flag array, the
+  // faces in the solids' frames) or after the level set in frame_zero (W_L^p, W_L^u, eta per
+  // cell, the pressure), such buffers split it or lay above it, the next level set no longer
+  // fit and went above every other block: a peak one lattice-sized vector higher (541 MB,
+  // 135k first-touch page faults at the paper's 256x128x256 grid). Sized here, before
+  // frame_zero, the kept buffers lie below the level set's block, which is the heap's last one
+  // and goes back to its top when released. A reserve or resize does not touch the pages, and
+  // every buffer below is overwritten before it is read: the results do not change.
+  const auto faces = static_cast<std::size_t>(grid_.num_faces());
+  if (switches_.air_velocity || switches_.extrapolate_after_solve) face_flags_.reserve(faces);
+  // the faces in the solids with their frame (constrain_velocity_in_solids): twice the
+  // set-up's count, room for the bodies to move into more faces before a reallocation
+  if (guards_reads()) solid_frame_.reserve(2 * solid_faces_.size());
+  // W_L^p and W_L^u (their first fill zeroes them whole: no valid WrittenBox yet) and the
+  // pressure (frame_zero zeroes it)
+  if (weights_.liquid_cell.size() == 0) weights_.liquid_cell.resize(grid_.num_cells());
+  if (weights_.liquid_face.size() == 0) weights_.liquid_face.resize(grid_.num_faces());
+  if (pressure_.size() == 0) pressure_.resize(grid_.num_cells());
+  // eta per cell likewise (a non-Newtonian liquid's is made before the first solve when its
+  // size is not the grid's: left to update_liquid_weights)
+  if (!non_newtonian_ && cell_eta_.size() == 0) cell_eta_.resize(grid_.num_cells());
 }
 
 template <int Dim>

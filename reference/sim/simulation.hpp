@@ -325,6 +325,8 @@ class Simulation : public AnySimulation {
   /// Whether the faces the extrapolation did not reach are marked (NaN) while the particles read
   /// the velocity (extend_to_every_read or poison_unreached_faces).
   bool guards_reads() const;
+  /// the capacity of the buffers every step keeps, given at the set-up (heap placement)
+  void reserve_step_buffers();
   /// The faces the extrapolation after the solve left unreached get the values of one twice as
   /// deep (from the solve's velocity, reached_u_), then the walls' and solids' velocities; faces
   /// already reached keep their values bit for bit. Returns false once the extrapolation reaches

@@ -136,6 +136,42 @@ TEMPLATE_TEST_CASE_SIG("lattice-aligned box: exact fractions, full and empty cel
   }
 }
 
+TEMPLATE_TEST_CASE_SIG("weights: W_F^u without solids from the walls alone, the same bits as "
+                       "from a level set of no solid",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // every wall/open combination of the first two axes' sides, with x periodic or not, on a
+  // grid that is not a cube (the boundary planes of each axis differ in size)
+  for (const bool periodic : {false, true}) {
+    VecI<Dim> cells = VecI<Dim>::Constant(5);
+    cells[0] = 7;
+    if (Dim == 3) cells[Dim - 1] = 4;
+    std::array<bool, Dim> periodic_axes{};
+    periodic_axes[0] = periodic;
+    const MacGrid<Dim> grid(Vec<Dim>::Zero(), 0.1, cells, periodic_axes);
+    const auto lattice = half_lattice(grid);
+    const VectorX no_solid = solid_phi_on_lattice(grid, lattice, {}, 0.01 * grid.dx());
+    for (int mask = 0; mask < 16; ++mask) {
+      auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+      for (int side = 0; side < 4; ++side)
+        if (mask & (1 << side)) boundary[side] = BoundaryType::open;
+      if (periodic) boundary[0] = boundary[1] = BoundaryType::periodic;
+      const VectorX expected = fluid_face_weights(grid, lattice, no_solid, boundary);
+      const VectorX w = fluid_face_weights_without_solids(grid, boundary);
+      REQUIRE(w.size() == expected.size());
+      int walls = 0;
+      for (int f = 0; f < grid.num_faces(); ++f) {
+        REQUIRE(std::signbit(w[f]) == std::signbit(expected[f]));
+        REQUIRE(w[f] == expected[f]);
+        walls += w[f] == 0.0;
+      }
+      // (the comparison means something: faces are walls exactly when some side is a wall)
+      const bool any_wall = std::find(boundary.begin(), boundary.end(), BoundaryType::wall) !=
+                            boundary.end();
+      CHECK((walls > 0) == any_wall);
+    }
+  }
+}
+
 TEMPLATE_TEST_CASE_SIG("weights: solid shrinkage, walls, open and periodic boundaries, clamp",
                        "[unit]", ((int Dim), Dim), 2, 3) {
   const int n = 6;
