@@ -1037,58 +1037,75 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<int> bucket(np), order(np);
   std::vector<Vec<Dim>> xw(np), xs(np);
   double max_support = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
-  for (long p = 0; p < np; ++p) {
-    support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
-    max_support = std::max(max_support, support[p]);
-    xw[p] = grid.wrap_position(particles.x[p]);
-    bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
-    order[p] = static_cast<int>(p);
-  }
-
   // spatial hash by occupied cells only (no table the size of the grid): the particles sorted by
   // cell (a stable radix sort, so in particle order within a cell), each occupied cell a run of
   // slots, the wrapped positions stored in slot order for locality; runs found through tiles of
-  // 8^Dim cells made only where particles are
+  // 8^Dim cells made only where particles are.
+  // Each pass of the sort on several threads: fixed blocks of slots count their digits, every
+  // block's share of a digit starts after the earlier digits and the earlier blocks' share of
+  // it, and each block scatters its slots in order (a stable sort, whose result is unique: the
+  // same order for any team). The supports, the sort and the runs' starts share one parallel
+  // region (they were seven regions, each a fork-join around a fraction of a millisecond)
+  constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
+  int bits = 0;
+  while ((1L << bits) < nc) ++bits;
+  const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
+  std::vector<int> sorted(np);
+  std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
+  const auto block_begin = [&](int b) { return np * b / blocks; };
+  const int sort_team = process_threads();
+  // run k's first slot: listed per thread over static (contiguous, ascending) blocks of slots
+  // and joined in thread order, the list of the serial loop
+  std::vector<std::vector<int>> run_part(sort_team);
+#pragma omp parallel reduction(max : max_support) num_threads(sort_team)
   {
-    // each pass on several threads: fixed blocks of slots count their digits, every block's
-    // share of a digit starts after the earlier digits and the earlier blocks' share of it, and
-    // each block scatters its slots in order (a stable sort, whose result is unique: the same
-    // order for any team)
-    constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
-    int bits = 0;
-    while ((1L << bits) < nc) ++bits;
-    const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
-    std::vector<int> sorted(np);
-    std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
-    const auto block_begin = [&](int b) { return np * b / blocks; };
+#pragma omp for schedule(static)
+    for (long p = 0; p < np; ++p) {
+      support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
+      max_support = std::max(max_support, support[p]);
+      xw[p] = grid.wrap_position(particles.x[p]);
+      bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
+      order[p] = static_cast<int>(p);
+    }
     for (int shift = 0; shift < bits; shift += kDigitBits) {
       const auto digit = [&](long s) { return (bucket[order[s]] >> shift) & (kDigits - 1); };
-#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+#pragma omp for schedule(static, 1)
       for (int b = 0; b < blocks; ++b) {
         std::fill(count[b].begin(), count[b].end(), 0L);
         for (long s = block_begin(b); s < block_begin(b + 1); ++s) ++count[b][digit(s)];
       }
-      long start = 0;
-      for (int d = 0; d < kDigits; ++d)
-        for (int b = 0; b < blocks; ++b) {
-          const long c = count[b][d];
-          count[b][d] = start;
-          start += c;
-        }
-#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+#pragma omp single
+      {
+        long start = 0;
+        for (int d = 0; d < kDigits; ++d)
+          for (int b = 0; b < blocks; ++b) {
+            const long c = count[b][d];
+            count[b][d] = start;
+            start += c;
+          }
+      }
+#pragma omp for schedule(static, 1)
       for (int b = 0; b < blocks; ++b)
         for (long s = block_begin(b); s < block_begin(b + 1); ++s)
           sorted[count[b][digit(s)]++] = order[s];
+#pragma omp single
       order.swap(sorted);
     }
+    std::vector<int>& part = run_part[omp_get_thread_num()];
+#pragma omp for schedule(static) nowait
+    for (long s = 0; s < np; ++s) {
+      xs[s] = xw[order[s]];
+      if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) part.push_back(static_cast<int>(s));
+    }
   }
-#pragma omp parallel for schedule(static) num_threads(team_threads(np))
-  for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
   // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1]) (gathered in order)
-  std::vector<int> run_start = gather_in_order<int>(static_cast<int>(np), [&](int s, std::vector<int>& out) {
-    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) out.push_back(s);
-  });
+  std::vector<int> run_start;
+  {
+    std::size_t total = 0;
+    for (const auto& part : run_part) total += part.size();
+    run_start.reserve(total + 1);
+    for (const auto& part : run_part) run_start.insert(run_start.end(), part.begin(), part.end());
+  }
   std::vector<int> run_cell(run_start.size());
   for (std::size_t k = 0; k < run_start.size(); ++k) run_cell[k] = bucket[order[run_start[k]]];
   run_start.push_back(static_cast<int>(np));
@@ -1560,17 +1577,27 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // only at lattice points within the support R of a particle (2 R with solids: a particle's
   // image across a solid reaches points inside it), and T_c reads the lattice points of
   // [c - 1/2, c + 3/2] dx per axis, so T_c > 0 needs a particle with |c - c_p| < 3/2 + R / dx
+  // (in one pass with the particles' cells (wrapped, clamped) and the range of their layers of
+  // the last axis, which the move below zeroes: the particles do not move before it; min, max
+  // and logical and give the same result for any split)
+  constexpr int kLast = Dim - 1;
   double max_support = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
-  for (long p = 0; p < np; ++p)
+  std::vector<VecI<Dim>> particle_cell(np);
+  int lo_layer = grid.cells()[kLast], hi_layer = -1;
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(max : max_support) \
+    reduction(min : lo_layer) reduction(max : hi_layer) reduction(&& : finite) \
+    num_threads(process_threads())
+  for (long p = 0; p < np; ++p) {
     max_support = std::max(max_support, kSurfaceSupport * particle_spacing(particles, p, dx));
+    const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
+    particle_cell[p] = c;
+    finite = finite && particles.x[p].allFinite();
+    lo_layer = std::min(lo_layer, c[kLast]);
+    hi_layer = std::max(hi_layer, c[kLast]);
+  }
   const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
   const int ring = std::max(2, static_cast<int>(std::floor(1.5 + reach / dx + 1e-6)));
-  // the particles' cells (wrapped, clamped), each once
-  std::vector<VecI<Dim>> particle_cell(np);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (long p = 0; p < np; ++p)
-    particle_cell[p] = grid.cell_containing(grid.wrap_position(particles.x[p]));
   // the tiles under the ring around every particle's cell, flagged on several threads (a particle
   // in the cell of the one before it flags nothing new) and made in parallel: the same tiles for
   // any team; `rho` has the same tiles (the same lattice and tile size)
@@ -1589,8 +1616,10 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       values.mark_box(lo, hi, band_flags);
     });
   }
-  values.make_tiles(band_flags, process_threads());
-  rho.make_tiles(band_flags, process_threads());
+  // (the tiles' memory claimed here, filled with the background in the region of the layer
+  // histogram below)
+  const std::vector<double*> fresh_values = values.claim_tiles(band_flags);
+  const std::vector<double*> fresh_rho = rho.claim_tiles(band_flags);
   std::vector<int> band;  // the made tiles of `values` (and of `rho`)
   for (int t = 0; t < values.num_tile_slots(); ++t)
     if (values.has_tile(t)) band.push_back(t);
@@ -1604,26 +1633,33 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // threads, and as before)
   // The slabs' bounds cut the particles' layers into equal counts (equal widths left one thread
   // most of a blob's particles; any bounds give the same bits).
-  constexpr int kLast = Dim - 1;
   const int layers = grid.cells()[kLast];
   const int slabs = std::max(1, std::min(process_threads(), layers));
   std::vector<int> slab_first(slabs + 1, 0);
   slab_first[slabs] = layers;
-  if (slabs > 1) {
-    // (counted per thread and the counts added: integer sums, any split)
-    std::vector<long> histogram(layers + 1, 0);
-    {
-      const int team = team_threads(np);
-      std::vector<std::vector<long>> counts(team, std::vector<long>(layers + 1, 0));
+  // (counted per thread and the counts added: integer sums, any split; in one parallel region
+  // with the filling of the band's new tiles)
+  const int team = team_threads(np);
+  std::vector<std::vector<long>> counts(slabs > 1 ? team : 0, std::vector<long>(layers + 1, 0));
+  {
+    const int nv = static_cast<int>(fresh_values.size()), nr = static_cast<int>(fresh_rho.size());
 #pragma omp parallel num_threads(team)
-      {
+    {
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < nv; ++i) values.fill_tile(fresh_values[i]);
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < nr; ++i) rho.fill_tile(fresh_rho[i]);
+      if (slabs > 1) {
         std::vector<long>& count = counts[omp_get_thread_num()];
-#pragma omp for schedule(static)
+#pragma omp for schedule(static) nowait
         for (long p = 0; p < np; ++p) ++count[particle_cell[p][kLast] + 1];
       }
-      for (const auto& count : counts)
-        for (int l = 0; l <= layers; ++l) histogram[l] += count[l];
     }
+  }
+  if (slabs > 1) {
+    std::vector<long> histogram(layers + 1, 0);
+    for (const auto& count : counts)
+      for (int l = 0; l <= layers; ++l) histogram[l] += count[l];
     for (int l = 0; l < layers; ++l) histogram[l + 1] += histogram[l];
     int l = 0;
     for (int k = 1; k < slabs; ++k) {
@@ -1944,47 +1980,57 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // fill was most of this pass, 800k faces on a 64^3 grid for a liquid in a few layers)
   VectorX move(nf);
   {
-    int lo_layer = grid.cells()[kLast], hi_layer = -1;
-    bool finite = true;
-#pragma omp parallel for schedule(static) reduction(min : lo_layer) reduction(max : hi_layer) \
-    reduction(&& : finite) num_threads(team_threads(np))
-    for (long p = 0; p < np; ++p) {
-      finite = finite && particles.x[p].allFinite();
-      lo_layer = std::min(lo_layer, particle_cell[p][kLast]);
-      hi_layer = std::max(hi_layer, particle_cell[p][kLast]);
-    }
     // (cells is sorted and the last axis varies slowest: its ends hold the unknowns' extremes)
     lo_layer = std::min(lo_layer, grid.cell_coord(cells.front())[kLast]);
     hi_layer = std::max(hi_layer, grid.cell_coord(cells.back())[kLast]);
     const bool all = grid.periodic(kLast) || !finite;
+    // the zeroed layers of every axis, then (after a barrier) the rows' faces: one parallel
+    // region (the zeros in fixed blocks of kParallelMinWork faces)
+    std::array<long, Dim> zero_first, zero_count;
+    long zero_total = 0;
     for (int a = 0; a < Dim; ++a) {
       const VecI<Dim> dims = grid.face_dims(a);
       const long per = dims.prod() / dims[kLast];  // faces per layer
       const int lo = all ? 0 : std::max(lo_layer - 1, 0);
       const int hi = all ? dims[kLast] - 1 : std::min(hi_layer + 1, dims[kLast] - 1);
-      fill_in_parallel(move.data() + grid.face_offset(a) + lo * per, (hi - lo + 1) * per, 0.0);
+      zero_first[a] = grid.face_offset(a) + lo * per;
+      zero_count[a] = std::max(0L, (hi - lo + 1) * per);
+      zero_total += zero_count[a];
     }
-  }
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int r = 0; r < n; ++r) {
-    const VecI<Dim> ci = grid.cell_coord(cells[r]);
-    for (int a = 0; a < Dim; ++a) {
-      VecI<Dim> lower = ci, upper = ci;
-      lower[a] -= 1;
-      upper[a] += 1;
-      const int r_minus = row_of(lower);
-      const int r_plus = row_of(upper);
-      // the face on the minus side (unless the minus cell writes it) and on the plus side
-      for (int s = 0; s < 2; ++s) {
-        if (s == 0 && r_minus >= 0) continue;
-        VecI<Dim> fc = ci;
-        fc[a] += s;
-        if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
-        const int f = grid.face_index(a, fc);
-        if (!(fluid_face[f] > 0.0)) continue;
-        const double pm = s == 0 ? 0.0 : psi[r];
-        const double pp = s == 0 ? psi[r] : (r_plus >= 0 ? psi[r_plus] : 0.0);
-        move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+#pragma omp parallel num_threads(team_threads(std::max<long>(zero_total, n)))
+    {
+      for (int a = 0; a < Dim; ++a) {
+        const long blocks = (zero_count[a] + kParallelMinWork - 1) / kParallelMinWork;
+#pragma omp for schedule(static) nowait
+        for (long b = 0; b < blocks; ++b) {
+          const long from = zero_first[a] + b * kParallelMinWork;
+          const long to = zero_first[a] + std::min(zero_count[a], (b + 1) * kParallelMinWork);
+          std::fill(move.data() + from, move.data() + to, 0.0);
+        }
+      }
+#pragma omp barrier
+#pragma omp for schedule(static)
+      for (int r = 0; r < n; ++r) {
+        const VecI<Dim> ci = grid.cell_coord(cells[r]);
+        for (int a = 0; a < Dim; ++a) {
+          VecI<Dim> lower = ci, upper = ci;
+          lower[a] -= 1;
+          upper[a] += 1;
+          const int r_minus = row_of(lower);
+          const int r_plus = row_of(upper);
+          // the face on the minus side (unless the minus cell writes it) and on the plus side
+          for (int s = 0; s < 2; ++s) {
+            if (s == 0 && r_minus >= 0) continue;
+            VecI<Dim> fc = ci;
+            fc[a] += s;
+            if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
+            const int f = grid.face_index(a, fc);
+            if (!(fluid_face[f] > 0.0)) continue;
+            const double pm = s == 0 ? 0.0 : psi[r];
+            const double pp = s == 0 ? psi[r] : (r_plus >= 0 ? psi[r_plus] : 0.0);
+            move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+          }
+        }
       }
     }
   }
