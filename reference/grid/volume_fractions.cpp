@@ -226,30 +226,37 @@ void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
   }
   signs.row_start.assign(rows + 1, 0);
   const int nx = hi[0] - lo[0] + 1;
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int q = 0; q < rows; ++q) {
-    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
-    const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
-    int count = 0;
-    for (int x = 0; x < nx; ++x) count += cls[x] == Signs::kMixed;
-    signs.row_start[q + 1] = count;
-  }
-  for (int q = 0; q < rows; ++q) signs.row_start[q + 1] += signs.row_start[q];
-  signs.mixed_x.resize(signs.row_start[rows]);
-  signs.mixed_fraction.resize(signs.row_start[rows]);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int q = 0; q < rows; ++q) {
-    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
-    const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
-    const int point = c.dot(pstride);
-    int slot = signs.row_start[q];
-    for (int x = 0; x < nx; ++x) {
-      if (cls[x] != Signs::kMixed) continue;
-      std::array<double, kCorners> corners;
-      for (int k = 0; k < kCorners; ++k) corners[k] = phi[point + x + corner_offset[k]];
-      signs.mixed_x[slot] = lo[0] + x;
-      signs.mixed_fraction[slot] = lattice_cell_negative_fraction<Dim>(corners);
-      ++slot;
+  // (the counts, their running sums (one thread) and the fractions in one parallel region)
+#pragma omp parallel num_threads(process_threads())
+  {
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+      const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
+      int count = 0;
+      for (int x = 0; x < nx; ++x) count += cls[x] == Signs::kMixed;
+      signs.row_start[q + 1] = count;
+    }
+#pragma omp single
+    {
+      for (int q = 0; q < rows; ++q) signs.row_start[q + 1] += signs.row_start[q];
+      signs.mixed_x.resize(signs.row_start[rows]);
+      signs.mixed_fraction.resize(signs.row_start[rows]);
+    }
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+      const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
+      const int point = c.dot(pstride);
+      int slot = signs.row_start[q];
+      for (int x = 0; x < nx; ++x) {
+        if (cls[x] != Signs::kMixed) continue;
+        std::array<double, kCorners> corners;
+        for (int k = 0; k < kCorners; ++k) corners[k] = phi[point + x + corner_offset[k]];
+        signs.mixed_x[slot] = lo[0] + x;
+        signs.mixed_fraction[slot] = lattice_cell_negative_fraction<Dim>(corners);
+        ++slot;
+      }
     }
   }
 }
@@ -423,47 +430,48 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
                                        double* out, WrittenBox<Dim>* written) {
   using Signs = LatticeSigns<Dim>;
   constexpr int kCorners = 1 << Dim;
-  if (written && written->valid_for(out, dims.prod())) {
+  // the zeros (what the last call wrote, or every entry) and the fractions in one parallel
+  // region, a barrier between (they were two regions per call, ~20 calls per frame)
+  VecI<Dim> zlo = VecI<Dim>::Zero(), zhi = -VecI<Dim>::Ones(), rows_box = VecI<Dim>::Ones();
+  int zero_rows = 0, zero_nx = 0;
+  long zero_blocks = 0;  // of kParallelMinWork entries, when every entry is zeroed
+  const long total = dims.prod();
+  if (written && written->valid_for(out, total)) {
     // zero only what the last call wrote (the rest is 0 already)
-    VecI<Dim> zlo = written->lo.cwiseMax(VecI<Dim>::Zero());
-    VecI<Dim> zhi = written->hi.cwiseMin(dims - VecI<Dim>::Ones());
+    zlo = written->lo.cwiseMax(VecI<Dim>::Zero());
+    zhi = written->hi.cwiseMin(dims - VecI<Dim>::Ones());
     if ((zlo.array() <= zhi.array()).all()) {
-      const int nx = zhi[0] - zlo[0] + 1;
-      VecI<Dim> rows_box = zhi - zlo + VecI<Dim>::Ones();
+      zero_nx = zhi[0] - zlo[0] + 1;
+      rows_box = zhi - zlo + VecI<Dim>::Ones();
       rows_box[0] = 1;
-      const int rows = rows_box.prod();
-#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(rows) * nx))
-      for (int r = 0; r < rows; ++r) {
-        const VecI<Dim> c = zlo + lattice_coord<Dim>(r, rows_box);
-        std::fill_n(out + lattice_index<Dim>(c, dims), nx, 0.0);
-      }
+      zero_rows = rows_box.prod();
     }
   } else {
-    fill_in_parallel(out, dims.prod(), 0.0);
+    zero_blocks = (total + kParallelMinWork - 1) / kParallelMinWork;
   }
   if (written) {
     // nothing visited unless set below
     written->lo = VecI<Dim>::Zero();
     written->hi = -VecI<Dim>::Ones();
     written->data = out;
-    written->size = dims.prod();
+    written->size = total;
     written->valid = true;
   }
-  if (!signs.any_negative()) return;
   // the mixed lattice cells' fractions made with the classes (when made from this level set)
   const bool memo = signs.phi_data == phi.data() && signs.phi_size == static_cast<long>(phi.size());
   // control volumes c whose lattice cells 2 c + off + {0, 1} (mirrored at walls: at most one
   // lattice cell inwards) can reach the box [lo, hi]; every c on a periodic axis
-  VecI<Dim> from, to;
-  for (int a = 0; a < Dim; ++a) {
+  VecI<Dim> from = VecI<Dim>::Zero(), to = -VecI<Dim>::Ones();
+  bool fractions = signs.any_negative();
+  for (int a = 0; a < Dim && fractions; ++a) {
     from[a] = 0;
     to[a] = dims[a] - 1;
     if (grid.periodic(a)) continue;
     from[a] = std::max(from[a], floor_half(signs.lo[a] - lower_offset[a] - 1));
     to[a] = std::min(to[a], floor_half(signs.hi[a] - lower_offset[a] + 1));
-    if (from[a] > to[a]) return;
+    if (from[a] > to[a]) fractions = false;
   }
-  if (written) {
+  if (fractions && written) {
     written->lo = from;
     written->hi = to;
   }
@@ -476,63 +484,77 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
   // the classes of the written box (kPositive outside it)
   const VecI<Dim> cstride = signs.box_strides(), wlo = signs.written_lo,
                   wext = signs.written_hi - signs.written_lo;
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int t = from[Dim - 1]; t <= to[Dim - 1]; ++t) {
-    VecI<Dim> start = from;
-    start[Dim - 1] = t;
-    for_slab<Dim>(start, from, to, [&](const VecI<Dim>& c) {
-      // the mapped lattice cells of the cube along every axis (wrapped or mirrored)
-      std::array<std::array<int, 2>, Dim> l;
-      for (int a = 0; a < Dim; ++a)
-        for (int s = 0; s < 2; ++s)
-          l[a][s] = map_lattice_cell(2 * c[a] + lower_offset[a] + s, signs.cells[a],
-                                     grid.periodic(a));
-      std::array<std::uint8_t, kCorners> sub_class;
-      int negative = 0, positive = 0;
-      for (int sub = 0; sub < kCorners; ++sub) {
-        int index = 0;
-        bool inside = true;
-        for (int a = 0; a < Dim; ++a) {
-          const int offset = l[a][(sub >> a) & 1] - wlo[a];
-          inside = inside && offset >= 0 && offset <= wext[a];
-          index += offset * cstride[a];
-        }
-        const std::uint8_t cl = inside ? signs.cls[index] : Signs::kPositive;
-        sub_class[sub] = cl;
-        negative += cl == Signs::kNegative;
-        positive += cl == Signs::kPositive;
-      }
-      if (positive == kCorners) return;
-      double& w = out[c.dot(ostride)];
-      if (negative == kCorners) {
-        w = 1.0;
-        return;
-      }
-      // as lattice_cube_negative_fraction: the sub-cubes' fractions in order, over 2^Dim
-      double sum = 0.0;
-      for (int sub = 0; sub < kCorners; ++sub) {
-        const std::uint8_t cl = sub_class[sub];
-        if (cl == Signs::kPositive) {
-          sum += 0.0;
-        } else if (cl == Signs::kNegative) {
-          sum += 1.0;
-        } else if (memo) {
-          VecI<Dim> cell;
-          for (int a = 0; a < Dim; ++a) cell[a] = l[a][(sub >> a) & 1];
-          sum += signs.mixed_fraction_of(cell);
-        } else {
-          std::array<double, kCorners> corners;
-          for (int k = 0; k < kCorners; ++k) {
-            int index = 0;
-            for (int a = 0; a < Dim; ++a)
-              index += (l[a][(sub >> a) & 1] + ((k >> a) & 1)) * pstride[a];
-            corners[k] = phi[index];
+  const long zero_work = zero_blocks > 0 ? total : static_cast<long>(zero_rows) * zero_nx;
+  if (!fractions && zero_work == 0) return;
+  const int first_slab = fractions ? from[Dim - 1] : 0, last_slab = fractions ? to[Dim - 1] : -1;
+#pragma omp parallel num_threads(fractions ? process_threads() : team_threads(zero_work))
+  {
+#pragma omp for schedule(static) nowait
+    for (int r = 0; r < zero_rows; ++r) {
+      const VecI<Dim> c = zlo + lattice_coord<Dim>(r, rows_box);
+      std::fill_n(out + lattice_index<Dim>(c, dims), zero_nx, 0.0);
+    }
+#pragma omp for schedule(static)
+    for (long b = 0; b < zero_blocks; ++b)
+      std::fill(out + b * kParallelMinWork, out + std::min(total, (b + 1) * kParallelMinWork), 0.0);
+#pragma omp for schedule(static)
+    for (int t = first_slab; t <= last_slab; ++t) {
+      VecI<Dim> start = from;
+      start[Dim - 1] = t;
+      for_slab<Dim>(start, from, to, [&](const VecI<Dim>& c) {
+        // the mapped lattice cells of the cube along every axis (wrapped or mirrored)
+        std::array<std::array<int, 2>, Dim> l;
+        for (int a = 0; a < Dim; ++a)
+          for (int s = 0; s < 2; ++s)
+            l[a][s] = map_lattice_cell(2 * c[a] + lower_offset[a] + s, signs.cells[a],
+                                       grid.periodic(a));
+        std::array<std::uint8_t, kCorners> sub_class;
+        int negative = 0, positive = 0;
+        for (int sub = 0; sub < kCorners; ++sub) {
+          int index = 0;
+          bool inside = true;
+          for (int a = 0; a < Dim; ++a) {
+            const int offset = l[a][(sub >> a) & 1] - wlo[a];
+            inside = inside && offset >= 0 && offset <= wext[a];
+            index += offset * cstride[a];
           }
-          sum += lattice_cell_negative_fraction<Dim>(corners);
+          const std::uint8_t cl = inside ? signs.cls[index] : Signs::kPositive;
+          sub_class[sub] = cl;
+          negative += cl == Signs::kNegative;
+          positive += cl == Signs::kPositive;
         }
-      }
-      w = sum / kCorners;
-    });
+        if (positive == kCorners) return;
+        double& w = out[c.dot(ostride)];
+        if (negative == kCorners) {
+          w = 1.0;
+          return;
+        }
+        // as lattice_cube_negative_fraction: the sub-cubes' fractions in order, over 2^Dim
+        double sum = 0.0;
+        for (int sub = 0; sub < kCorners; ++sub) {
+          const std::uint8_t cl = sub_class[sub];
+          if (cl == Signs::kPositive) {
+            sum += 0.0;
+          } else if (cl == Signs::kNegative) {
+            sum += 1.0;
+          } else if (memo) {
+            VecI<Dim> cell;
+            for (int a = 0; a < Dim; ++a) cell[a] = l[a][(sub >> a) & 1];
+            sum += signs.mixed_fraction_of(cell);
+          } else {
+            std::array<double, kCorners> corners;
+            for (int k = 0; k < kCorners; ++k) {
+              int index = 0;
+              for (int a = 0; a < Dim; ++a)
+                index += (l[a][(sub >> a) & 1] + ((k >> a) & 1)) * pstride[a];
+              corners[k] = phi[index];
+            }
+            sum += lattice_cell_negative_fraction<Dim>(corners);
+          }
+        }
+        w = sum / kCorners;
+      });
+    }
   }
 }
 
