@@ -2155,34 +2155,39 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   std::vector<std::vector<long>> index_count(parts > 1 ? blocks : 0,
                                              std::vector<long>(lattice.dims[0], 0));
   const auto block_begin = [&](int b) { return np * b / blocks; };
-#pragma omp parallel for schedule(static, 1) num_threads(blocks)
-  for (int b = 0; b < blocks; ++b)
-    for (long p = block_begin(b); p < block_begin(b + 1); ++p) {
-      const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
-      const int k = static_cast<int>(std::floor(s / width));
-      slab_of[p] = std::clamp(k, 0, slabs - 1);
-      ++slab_count[b][slab_of[p]];
-      if (parts > 1) {
-        const double s0 = (particles.x[p][0] - lattice.origin[0]) / h;
-        ++index_count[b][std::clamp(static_cast<int>(std::floor(s0)), 0, lattice.dims[0] - 1)];
+  // (the sort's two passes share one parallel region with the solid images and the flagging of
+  // the tiles below; they were four regions)
+  const auto count_blocks = [&] {
+#pragma omp for schedule(static, 1)
+    for (int b = 0; b < blocks; ++b)
+      for (long p = block_begin(b); p < block_begin(b + 1); ++p) {
+        const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
+        const int k = static_cast<int>(std::floor(s / width));
+        slab_of[p] = std::clamp(k, 0, slabs - 1);
+        ++slab_count[b][slab_of[p]];
+        if (parts > 1) {
+          const double s0 = (particles.x[p][0] - lattice.origin[0]) / h;
+          ++index_count[b][std::clamp(static_cast<int>(std::floor(s0)), 0, lattice.dims[0] - 1)];
+        }
       }
-    }
-  {
-    int start = 0;
-    for (int k = 0; k < slabs; ++k) {
-      slab_start[k] = start;
-      for (int b = 0; b < blocks; ++b) {
-        const int c = slab_count[b][k];
-        slab_count[b][k] = start;
-        start += c;
+#pragma omp single
+    {
+      int start = 0;
+      for (int k = 0; k < slabs; ++k) {
+        slab_start[k] = start;
+        for (int b = 0; b < blocks; ++b) {
+          const int c = slab_count[b][k];
+          slab_count[b][k] = start;
+          start += c;
+        }
       }
+      slab_start[slabs] = start;
     }
-    slab_start[slabs] = start;
-  }
-#pragma omp parallel for schedule(static, 1) num_threads(blocks)
-  for (int b = 0; b < blocks; ++b)
-    for (long p = block_begin(b); p < block_begin(b + 1); ++p)
-      order[slab_count[b][slab_of[p]]++] = static_cast<int>(p);
+#pragma omp for schedule(static, 1) nowait
+    for (int b = 0; b < blocks; ++b)
+      for (long p = block_begin(b); p < block_begin(b + 1); ++p)
+        order[slab_count[b][slab_of[p]]++] = static_cast<int>(p);
+  };
 
   // periodic images: shift by +-L on periodic axes; mirror images across wall faces
   std::array<double, Dim> period{};
@@ -2374,22 +2379,28 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // each particle's image across the nearest solid surface within its support (independent per
   // particle, in parallel), then the tiles under every box a particle or an image reaches,
   // flagged in parallel and made before the splat
-  if (!solids.empty()) {
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (long p = 0; p < np; ++p) {
-      const Vec<Dim> xp = particles.x[p];
-      const double d = solids.distance(xp);
-      if (!(d > 0.0) || d >= support[p]) continue;
-      const Vec<Dim> n = solids.gradient(xp);
-      const double len = n.norm();
-      if (!(len > 0.0)) continue;
-      solid_image[p] = xp - (2.0 * d / len) * n;
+  // (in the region of the sort above; the images are complete before any splat reads them)
+#pragma omp parallel num_threads(process_threads())
+  {
+    count_blocks();
+    if (!solids.empty()) {
+#pragma omp for schedule(static)
+      for (long p = 0; p < np; ++p) {
+        const Vec<Dim> xp = particles.x[p];
+        const double d = solids.distance(xp);
+        if (!(d > 0.0) || d >= support[p]) continue;
+        const Vec<Dim> n = solids.gradient(xp);
+        const double len = n.norm();
+        if (!(len > 0.0)) continue;
+        solid_image[p] = xp - (2.0 * d / len) * n;
+      }
     }
+#pragma omp for schedule(static)
+    for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true, all_lo, all_hi);
   }
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true, all_lo, all_hi);
-  acc.make_tiles(acc_flags, process_threads());
-  solid_distance.make_tiles(solid_flags, process_threads());
+  // (the tiles' memory claimed here, filled in the splat's region below before its phases)
+  const std::vector<double*> fresh_acc = acc.claim_tiles(acc_flags);
+  const std::vector<double*> fresh_distance = solid_distance.claim_tiles(solid_flags);
 
   // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
   const bool wrap_last = grid.periodic(kLast);
@@ -2422,20 +2433,32 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
       part_lo[k] = part_hi[k - 1] + 1;
     }
   }
-  for (int phase = 0; phase < 3; ++phase) {
-    const std::vector<int>& list = phase_slabs[phase];
-    const int count = static_cast<int>(list.size());
-    if (phase == 2) {
-      for (int s = 0; s < count; ++s)
-        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
-          splat(order[q], false, all_lo, all_hi);
-    } else {
-#pragma omp parallel for schedule(static, 1) num_threads(parts)
-      for (int part = 0; part < parts; ++part)
-        for (int s = 0; s < count; ++s)
-          for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
-            splat(order[q], false, part_lo[part], part_hi[part]);
+  // (the new tiles' filling and phases 0 and 1 in one parallel region, a barrier after each;
+  // phase 2 after it on one thread)
+  {
+    const int na = static_cast<int>(fresh_acc.size()), nd = static_cast<int>(fresh_distance.size());
+#pragma omp parallel num_threads(std::max(parts, team_threads(static_cast<long>(na + nd) * TiledLattice<Dim, double>::kTilePoints)))
+    {
+#pragma omp for schedule(static) nowait
+      for (int t = 0; t < na; ++t) acc.fill_tile(fresh_acc[t]);
+#pragma omp for schedule(static)
+      for (int t = 0; t < nd; ++t) solid_distance.fill_tile(fresh_distance[t]);
+      for (int phase = 0; phase < 2; ++phase) {
+        const std::vector<int>& list = phase_slabs[phase];
+        const int count = static_cast<int>(list.size());
+#pragma omp for schedule(static, 1)
+        for (int part = 0; part < parts; ++part)
+          for (int s = 0; s < count; ++s)
+            for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
+              splat(order[q], false, part_lo[part], part_hi[part]);
+      }
     }
+  }
+  {
+    const std::vector<int>& list = phase_slabs[2];
+    for (int s = 0; s < static_cast<int>(list.size()); ++s)
+      for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
+        splat(order[q], false, all_lo, all_hi);
   }
 
   return max_support;
