@@ -737,32 +737,51 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
   // filled; the order of the list changes no value (every average of a layer reads the validity
   // at the layer's start, and each candidate is written once).
   constexpr char kFresh = 2;
+  // the candidates that source f lists, appended to out
+  const auto list_candidates = [&](int f, auto&& is_source, std::vector<int>& out) {
+    std::array<int, 2 * Dim> nb, nb_of_g;
+    neighbours(f, nb);
+    for (int k = 0; k < 2 * Dim; ++k) {
+      const int g = nb[k];
+      if (g < 0 || valid[g]) continue;
+      bool first_mention = true;
+      for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
+      if (!first_mention) continue;
+      neighbours(g, nb_of_g);
+      int first_source = -1;
+      for (int l = 0; l < 2 * Dim && first_source < 0; ++l)
+        if (nb_of_g[l] >= 0 && is_source(nb_of_g[l])) first_source = nb_of_g[l];
+      if (first_source == f) out.push_back(g);
+    }
+  };
   const auto gather_candidates = [&](int count, auto&& source_face, auto&& is_source) {
     return gather_in_order<int>(count, [&](int i, std::vector<int>& out) {
       const int f = source_face(i);
-      if (f < 0) return;
-      std::array<int, 2 * Dim> nb, nb_of_g;
-      neighbours(f, nb);
-      for (int k = 0; k < 2 * Dim; ++k) {
-        const int g = nb[k];
-        if (g < 0 || valid[g]) continue;
-        bool first_mention = true;
-        for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
-        if (!first_mention) continue;
-        neighbours(g, nb_of_g);
-        int first_source = -1;
-        for (int l = 0; l < 2 * Dim && first_source < 0; ++l)
-          if (nb_of_g[l] >= 0 && is_source(nb_of_g[l])) first_source = nb_of_g[l];
-        if (first_source == f) out.push_back(g);
-      }
+      if (f >= 0) list_candidates(f, is_source, out);
     });
   };
-  // the first layer's: beside any valid face (the given flags made 0 / 1 first)
-#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
-  for (int f = 0; f < nf; ++f)
-    if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
-  std::vector<int> candidates = gather_candidates(
-      nf, [&](int f) { return valid[f] ? f : -1; }, [&](int g) { return valid[g] != 0; });
+  // the first layer's: beside any valid face (the given flags made 0 / 1 first, then, after a
+  // barrier, the candidates listed per thread over static (contiguous, ascending) blocks of
+  // faces and joined in thread order: gather_candidates' list, in one parallel region)
+  std::vector<int> candidates;
+  {
+    const int team = team_threads(nf);
+    std::vector<std::vector<int>> part(team);
+#pragma omp parallel num_threads(team)
+    {
+#pragma omp for schedule(static)
+      for (int f = 0; f < nf; ++f)
+        if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
+      std::vector<int>& out = part[omp_get_thread_num()];
+#pragma omp for schedule(static) nowait
+      for (int f = 0; f < nf; ++f)
+        if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, out);
+    }
+    std::size_t total = 0;
+    for (const auto& list : part) total += list.size();
+    candidates.reserve(total);
+    for (const auto& list : part) candidates.insert(candidates.end(), list.begin(), list.end());
+  }
   std::vector<double> value;
   std::vector<char> filled;
   std::vector<int> fresh;
