@@ -630,6 +630,19 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
 }
 
 template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const std::vector<VecI<Dim>>& dims,
+                                       const std::vector<VecI<Dim>>& lower_offsets,
+                                       const std::vector<double*>& out) {
+  std::vector<ControlVolumePass<Dim>> passes;
+  for (std::size_t k = 0; k < dims.size(); ++k)
+    passes.push_back(plan_control_volume<Dim>(grid, lattice, phi, signs, dims[k], lower_offsets[k],
+                                              out[k], nullptr));
+  run_control_volume_passes(passes.data(), static_cast<int>(passes.size()));
+}
+
+template <int Dim>
 void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                              const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
                              WrittenBox<Dim>* written) {
@@ -864,6 +877,9 @@ void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& l
                                                      const VectorX&, const LatticeSigns<D>&,      \
                                                      const VecI<D>&, const VecI<D>&, double*,     \
                                                      WrittenBox<D>*);                             \
+  template void control_volume_negative_fractions<D>(                                            \
+      const MacGrid<D>&, const SampleLattice<D>&, const VectorX&, const LatticeSigns<D>&,           \
+      const std::vector<VecI<D>>&, const std::vector<VecI<D>>&, const std::vector<double*>&);      \
   template void cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
                                            const VectorX&, const LatticeSigns<D>&, VectorX&,      \
                                            WrittenBox<D>*);                                       \
