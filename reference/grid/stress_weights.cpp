@@ -19,14 +19,18 @@ void stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattic
                                const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out) {
   if (out.size() != stress.num_dofs()) out.resize(stress.num_dofs());
   // component k's control volumes start at lattice point 2 c + 2 shift(k) - 1: offset -1 on its
-  // node-aligned axes, 0 on the cell-centred ones
+  // node-aligned axes, 0 on the cell-centred ones (every component in one parallel region)
+  std::vector<VecI<Dim>> dims, offsets;
+  std::vector<double*> outs;
   for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
     const Vec<Dim> shift = StressGrid<Dim>::shift(k);
     VecI<Dim> offset;
     for (int a = 0; a < Dim; ++a) offset[a] = static_cast<int>(2.0 * shift[a]) - 1;
-    control_volume_negative_fractions<Dim>(stress.grid(), lattice, phi, signs, stress.dims(k),
-                                           offset, out.data() + stress.offset(k));
+    dims.push_back(stress.dims(k));
+    offsets.push_back(offset);
+    outs.push_back(out.data() + stress.offset(k));
   }
+  control_volume_negative_fractions<Dim>(stress.grid(), lattice, phi, signs, dims, offsets, outs);
 }
 
 template <int Dim>

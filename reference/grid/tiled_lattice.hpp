@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <vector>
 
@@ -25,29 +26,80 @@
 
 namespace monolith {
 
+/// A process-wide store of released tile memory, one per element type and tile length (`Values`
+/// elements per tile): blocks handed back by TiledLattice::reset and ~TiledLattice, taken by the
+/// next tiles made. Holds at most kPoolBytes (blocks beyond it are freed). Thread-safe.
+template <class T, std::size_t Values>
+class TilePool {
+ public:
+  static constexpr std::size_t kPoolBytes = std::size_t(32) << 20;
+  static constexpr std::size_t kMaxBlocks = std::max<std::size_t>(1, kPoolBytes / (Values * sizeof(T)));
+
+  static TilePool& instance() {
+    static TilePool pool;
+    return pool;
+  }
+  /// Up to `count` blocks (their contents undefined), fewer when the pool holds fewer.
+  void take(std::size_t count, std::vector<std::unique_ptr<T[]>>& out) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    while (count-- > 0 && !blocks_.empty()) {
+      out.push_back(std::move(blocks_.back()));
+      blocks_.pop_back();
+    }
+  }
+  /// Hands back the non-null blocks of `tiles` (each left null); those over the limit are freed.
+  void give(std::vector<std::unique_ptr<T[]>>& tiles) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto& t : tiles)
+      if (t) {
+        if (blocks_.size() < kMaxBlocks) blocks_.push_back(std::move(t));
+        t.reset();
+      }
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<T[]>> blocks_;
+};
+
 template <int Dim, class T, int Stride = 1>
 class TiledLattice {
  public:
   static constexpr int kTile = 8;  ///< points per tile along each axis
   static constexpr int kTilePoints = Dim == 2 ? kTile * kTile : kTile * kTile * kTile;
+  using Pool = TilePool<T, static_cast<std::size_t>(kTilePoints) * Stride>;
 
   TiledLattice() = default;
   TiledLattice(const VecI<Dim>& dims, T background) { reset(dims, background); }
+  ~TiledLattice() { Pool::instance().give(tiles_); }
+  TiledLattice(TiledLattice&&) = default;
+  TiledLattice& operator=(TiledLattice&& other) {
+    if (this != &other) {
+      Pool::instance().give(tiles_);
+      dims_ = other.dims_;
+      tile_dims_ = other.tile_dims_;
+      background_ = other.background_;
+      tiles_ = std::move(other.tiles_);
+      num_tiles_ = other.num_tiles_;
+      other.tiles_.clear();
+      other.num_tiles_ = 0;
+    }
+    return *this;
+  }
 
   /// Empties the lattice: dims points per axis, every value `background`, no tile. The tile
-  /// table (one pointer per tile) is kept when the dims do not change; the tiles' memory is
-  /// released.
+  /// table (one pointer per tile) is kept when the dims do not change; the tiles' memory goes
+  /// to the pool.
   void reset(const VecI<Dim>& dims, T background) {
     if ((dims.array() < 1).any())
       throw std::invalid_argument("TiledLattice: every axis needs at least one point");
     background_ = background;
+    Pool::instance().give(tiles_);
     if (dims != dims_ || tiles_.empty()) {
       dims_ = dims;
       for (int a = 0; a < Dim; ++a) tile_dims_[a] = (dims[a] + kTile - 1) / kTile;
       tiles_.clear();
       tiles_.resize(static_cast<std::size_t>(tile_dims_.prod()));
-    } else {
-      for (auto& t : tiles_) t.reset();
     }
     num_tiles_ = 0;
   }
@@ -82,18 +134,38 @@ class TiledLattice {
     });
   }
   void make_tiles(const std::vector<unsigned char>& flags, int threads) {
+    std::vector<T*> fresh = claim_tiles(flags);
+    const int count = static_cast<int>(fresh.size());
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (int i = 0; i < count; ++i) fill_tile(fresh[i]);
+  }
+  /// make_tiles in two halves, for filling the tiles of several lattices in one parallel region:
+  /// claim_tiles gives every flagged tile not yet made its memory (serial; from the pool first)
+  /// and returns them, their values not yet set; fill_tile sets one to the background (distinct
+  /// tiles on several threads at once). Every returned tile must be filled before it is read.
+  std::vector<T*> claim_tiles(const std::vector<unsigned char>& flags) {
     const int slots = num_tile_slots();
-    int made = 0;
-#pragma omp parallel for schedule(static) reduction(+ : made) num_threads(threads)
+    std::size_t wanted = 0;
+    for (int tile = 0; tile < slots; ++tile) wanted += flags[tile] && !tiles_[tile];
+    std::vector<std::unique_ptr<T[]>> blocks;
+    blocks.reserve(wanted);
+    Pool::instance().take(wanted, blocks);
+    std::vector<T*> fresh;
+    fresh.reserve(wanted);
+    std::size_t next = 0;
     for (int tile = 0; tile < slots; ++tile) {
       if (!flags[tile] || tiles_[tile]) continue;
-      std::unique_ptr<T[]>& data = tiles_[tile];
-      data.reset(new T[static_cast<std::size_t>(kTilePoints) * Stride]);
-      std::fill(data.get(), data.get() + static_cast<std::size_t>(kTilePoints) * Stride,
-                background_);
-      ++made;
+      if (next < blocks.size())
+        tiles_[tile] = std::move(blocks[next++]);
+      else
+        tiles_[tile].reset(new T[static_cast<std::size_t>(kTilePoints) * Stride]);
+      fresh.push_back(tiles_[tile].get());
     }
-    num_tiles_ += made;
+    num_tiles_ += static_cast<int>(fresh.size());
+    return fresh;
+  }
+  void fill_tile(T* data) const {
+    std::fill(data, data + static_cast<std::size_t>(kTilePoints) * Stride, background_);
   }
 
   /// The Stride values of point c, making its tile if needed. Serial (it may make a tile).
@@ -200,9 +272,13 @@ class TiledLattice {
   T* make_tile(int tile) {
     std::unique_ptr<T[]>& data = tiles_[tile];
     if (!data) {
-      data.reset(new T[static_cast<std::size_t>(kTilePoints) * Stride]);
-      std::fill(data.get(), data.get() + static_cast<std::size_t>(kTilePoints) * Stride,
-                background_);
+      std::vector<std::unique_ptr<T[]>> block;
+      Pool::instance().take(1, block);
+      if (block.empty())
+        data.reset(new T[static_cast<std::size_t>(kTilePoints) * Stride]);
+      else
+        data = std::move(block.front());
+      fill_tile(data.get());
       ++num_tiles_;
     }
     return data.get();

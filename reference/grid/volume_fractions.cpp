@@ -226,30 +226,37 @@ void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
   }
   signs.row_start.assign(rows + 1, 0);
   const int nx = hi[0] - lo[0] + 1;
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int q = 0; q < rows; ++q) {
-    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
-    const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
-    int count = 0;
-    for (int x = 0; x < nx; ++x) count += cls[x] == Signs::kMixed;
-    signs.row_start[q + 1] = count;
-  }
-  for (int q = 0; q < rows; ++q) signs.row_start[q + 1] += signs.row_start[q];
-  signs.mixed_x.resize(signs.row_start[rows]);
-  signs.mixed_fraction.resize(signs.row_start[rows]);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int q = 0; q < rows; ++q) {
-    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
-    const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
-    const int point = c.dot(pstride);
-    int slot = signs.row_start[q];
-    for (int x = 0; x < nx; ++x) {
-      if (cls[x] != Signs::kMixed) continue;
-      std::array<double, kCorners> corners;
-      for (int k = 0; k < kCorners; ++k) corners[k] = phi[point + x + corner_offset[k]];
-      signs.mixed_x[slot] = lo[0] + x;
-      signs.mixed_fraction[slot] = lattice_cell_negative_fraction<Dim>(corners);
-      ++slot;
+  // (the counts, their running sums (one thread) and the fractions in one parallel region)
+#pragma omp parallel num_threads(process_threads())
+  {
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+      const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
+      int count = 0;
+      for (int x = 0; x < nx; ++x) count += cls[x] == Signs::kMixed;
+      signs.row_start[q + 1] = count;
+    }
+#pragma omp single
+    {
+      for (int q = 0; q < rows; ++q) signs.row_start[q + 1] += signs.row_start[q];
+      signs.mixed_x.resize(signs.row_start[rows]);
+      signs.mixed_fraction.resize(signs.row_start[rows]);
+    }
+#pragma omp for schedule(static)
+    for (int q = 0; q < rows; ++q) {
+      const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+      const std::uint8_t* cls = signs.cls.data() + (c - wlo).dot(cstride);
+      const int point = c.dot(pstride);
+      int slot = signs.row_start[q];
+      for (int x = 0; x < nx; ++x) {
+        if (cls[x] != Signs::kMixed) continue;
+        std::array<double, kCorners> corners;
+        for (int k = 0; k < kCorners; ++k) corners[k] = phi[point + x + corner_offset[k]];
+        signs.mixed_x[slot] = lo[0] + x;
+        signs.mixed_fraction[slot] = lattice_cell_negative_fraction<Dim>(corners);
+        ++slot;
+      }
     }
   }
 }
@@ -416,124 +423,223 @@ void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice
   mixed_cell_fractions(lattice, phi, signs);
 }
 
+namespace {
+
+/// One call of control_volume_negative_fractions, planned (serially: what to zero, which control
+/// volumes to visit, the written box updated) and then run by the threads of an enclosing
+/// parallel region: zero() and then, after a barrier, fill() (each an `omp for nowait`, each
+/// entry written by one thread). Several planned calls over distinct outputs (the Dim face
+/// lattices) share one region.
 template <int Dim>
-void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
-                                       const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
-                                       double* out, WrittenBox<Dim>* written) {
+struct ControlVolumePass {
   using Signs = LatticeSigns<Dim>;
-  constexpr int kCorners = 1 << Dim;
-  if (written && written->valid_for(out, dims.prod())) {
+  static constexpr int kCorners = 1 << Dim;
+  const MacGrid<Dim>* grid_ = nullptr;
+  const VectorX* phi_ = nullptr;
+  const Signs* signs_ = nullptr;
+  VecI<Dim> dims, lower_offset;
+  double* out = nullptr;
+  long total = 0;
+  // zeros: rows of [zlo, zhi] (what the last call wrote), or every entry in blocks
+  VecI<Dim> zlo = VecI<Dim>::Zero(), rows_box = VecI<Dim>::Ones();
+  int zero_rows = 0, zero_nx = 0;
+  long zero_blocks = 0;  // of kParallelMinWork entries, when every entry is zeroed
+  // fractions: the control volumes [from, to], when any
+  bool fractions = false, memo = false;
+  VecI<Dim> from = VecI<Dim>::Zero(), to = -VecI<Dim>::Ones();
+  VecI<Dim> pstride, ostride, cstride, wlo, wext;
+
+  long zero_work() const { return zero_blocks > 0 ? total : static_cast<long>(zero_rows) * zero_nx; }
+
+  void zero() const {
+#pragma omp for schedule(static) nowait
+    for (int r = 0; r < zero_rows; ++r) {
+      const VecI<Dim> c = zlo + lattice_coord<Dim>(r, rows_box);
+      std::fill_n(out + lattice_index<Dim>(c, dims), zero_nx, 0.0);
+    }
+#pragma omp for schedule(static) nowait
+    for (long b = 0; b < zero_blocks; ++b)
+      std::fill(out + b * kParallelMinWork, out + std::min(total, (b + 1) * kParallelMinWork), 0.0);
+  }
+
+  void fill() const {
+    const int first_slab = fractions ? from[Dim - 1] : 0, last_slab = fractions ? to[Dim - 1] : -1;
+    const MacGrid<Dim>& grid = *grid_;
+    const VectorX& phi = *phi_;
+    const Signs& signs = *signs_;
+#pragma omp for schedule(static) nowait
+    for (int t = first_slab; t <= last_slab; ++t) {
+      VecI<Dim> start = from;
+      start[Dim - 1] = t;
+      for_slab<Dim>(start, from, to, [&](const VecI<Dim>& c) {
+        // the mapped lattice cells of the cube along every axis (wrapped or mirrored)
+        std::array<std::array<int, 2>, Dim> l;
+        for (int a = 0; a < Dim; ++a)
+          for (int s = 0; s < 2; ++s)
+            l[a][s] = map_lattice_cell(2 * c[a] + lower_offset[a] + s, signs.cells[a],
+                                       grid.periodic(a));
+        std::array<std::uint8_t, kCorners> sub_class;
+        int negative = 0, positive = 0;
+        for (int sub = 0; sub < kCorners; ++sub) {
+          int index = 0;
+          bool inside = true;
+          for (int a = 0; a < Dim; ++a) {
+            const int offset = l[a][(sub >> a) & 1] - wlo[a];
+            inside = inside && offset >= 0 && offset <= wext[a];
+            index += offset * cstride[a];
+          }
+          const std::uint8_t cl = inside ? signs.cls[index] : Signs::kPositive;
+          sub_class[sub] = cl;
+          negative += cl == Signs::kNegative;
+          positive += cl == Signs::kPositive;
+        }
+        if (positive == kCorners) return;
+        double& w = out[c.dot(ostride)];
+        if (negative == kCorners) {
+          w = 1.0;
+          return;
+        }
+        // as lattice_cube_negative_fraction: the sub-cubes' fractions in order, over 2^Dim
+        double sum = 0.0;
+        for (int sub = 0; sub < kCorners; ++sub) {
+          const std::uint8_t cl = sub_class[sub];
+          if (cl == Signs::kPositive) {
+            sum += 0.0;
+          } else if (cl == Signs::kNegative) {
+            sum += 1.0;
+          } else if (memo) {
+            VecI<Dim> cell;
+            for (int a = 0; a < Dim; ++a) cell[a] = l[a][(sub >> a) & 1];
+            sum += signs.mixed_fraction_of(cell);
+          } else {
+            std::array<double, kCorners> corners;
+            for (int k = 0; k < kCorners; ++k) {
+              int index = 0;
+              for (int a = 0; a < Dim; ++a)
+                index += (l[a][(sub >> a) & 1] + ((k >> a) & 1)) * pstride[a];
+              corners[k] = phi[index];
+            }
+            sum += lattice_cell_negative_fraction<Dim>(corners);
+          }
+        }
+        w = sum / kCorners;
+      });
+    }
+  }
+};
+
+template <int Dim>
+ControlVolumePass<Dim> plan_control_volume(const MacGrid<Dim>& grid,
+                                           const SampleLattice<Dim>& lattice, const VectorX& phi,
+                                           const LatticeSigns<Dim>& signs, const VecI<Dim>& dims,
+                                           const VecI<Dim>& lower_offset, double* out,
+                                           WrittenBox<Dim>* written) {
+  ControlVolumePass<Dim> pass;
+  pass.grid_ = &grid;
+  pass.phi_ = &phi;
+  pass.signs_ = &signs;
+  pass.dims = dims;
+  pass.lower_offset = lower_offset;
+  pass.out = out;
+  pass.total = dims.prod();
+  if (written && written->valid_for(out, pass.total)) {
     // zero only what the last call wrote (the rest is 0 already)
-    VecI<Dim> zlo = written->lo.cwiseMax(VecI<Dim>::Zero());
-    VecI<Dim> zhi = written->hi.cwiseMin(dims - VecI<Dim>::Ones());
-    if ((zlo.array() <= zhi.array()).all()) {
-      const int nx = zhi[0] - zlo[0] + 1;
-      VecI<Dim> rows_box = zhi - zlo + VecI<Dim>::Ones();
-      rows_box[0] = 1;
-      const int rows = rows_box.prod();
-#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(rows) * nx))
-      for (int r = 0; r < rows; ++r) {
-        const VecI<Dim> c = zlo + lattice_coord<Dim>(r, rows_box);
-        std::fill_n(out + lattice_index<Dim>(c, dims), nx, 0.0);
-      }
+    pass.zlo = written->lo.cwiseMax(VecI<Dim>::Zero());
+    const VecI<Dim> zhi = written->hi.cwiseMin(dims - VecI<Dim>::Ones());
+    if ((pass.zlo.array() <= zhi.array()).all()) {
+      pass.zero_nx = zhi[0] - pass.zlo[0] + 1;
+      pass.rows_box = zhi - pass.zlo + VecI<Dim>::Ones();
+      pass.rows_box[0] = 1;
+      pass.zero_rows = pass.rows_box.prod();
     }
   } else {
-    fill_in_parallel(out, dims.prod(), 0.0);
+    pass.zero_blocks = (pass.total + kParallelMinWork - 1) / kParallelMinWork;
   }
   if (written) {
     // nothing visited unless set below
     written->lo = VecI<Dim>::Zero();
     written->hi = -VecI<Dim>::Ones();
     written->data = out;
-    written->size = dims.prod();
+    written->size = pass.total;
     written->valid = true;
   }
-  if (!signs.any_negative()) return;
   // the mixed lattice cells' fractions made with the classes (when made from this level set)
-  const bool memo = signs.phi_data == phi.data() && signs.phi_size == static_cast<long>(phi.size());
+  pass.memo = signs.phi_data == phi.data() && signs.phi_size == static_cast<long>(phi.size());
   // control volumes c whose lattice cells 2 c + off + {0, 1} (mirrored at walls: at most one
   // lattice cell inwards) can reach the box [lo, hi]; every c on a periodic axis
-  VecI<Dim> from, to;
-  for (int a = 0; a < Dim; ++a) {
-    from[a] = 0;
-    to[a] = dims[a] - 1;
+  pass.fractions = signs.any_negative();
+  for (int a = 0; a < Dim && pass.fractions; ++a) {
+    pass.from[a] = 0;
+    pass.to[a] = dims[a] - 1;
     if (grid.periodic(a)) continue;
-    from[a] = std::max(from[a], floor_half(signs.lo[a] - lower_offset[a] - 1));
-    to[a] = std::min(to[a], floor_half(signs.hi[a] - lower_offset[a] + 1));
-    if (from[a] > to[a]) return;
+    pass.from[a] = std::max(pass.from[a], floor_half(signs.lo[a] - lower_offset[a] - 1));
+    pass.to[a] = std::min(pass.to[a], floor_half(signs.hi[a] - lower_offset[a] + 1));
+    if (pass.from[a] > pass.to[a]) pass.fractions = false;
   }
-  if (written) {
-    written->lo = from;
-    written->hi = to;
+  if (!pass.fractions) {
+    pass.from = VecI<Dim>::Zero();
+    pass.to = -VecI<Dim>::Ones();
   }
-  VecI<Dim> pstride, ostride;
-  pstride[0] = ostride[0] = 1;
+  if (pass.fractions && written) {
+    written->lo = pass.from;
+    written->hi = pass.to;
+  }
+  pass.pstride[0] = pass.ostride[0] = 1;
   for (int a = 1; a < Dim; ++a) {
-    pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
-    ostride[a] = ostride[a - 1] * dims[a - 1];
+    pass.pstride[a] = pass.pstride[a - 1] * lattice.dims[a - 1];
+    pass.ostride[a] = pass.ostride[a - 1] * dims[a - 1];
   }
   // the classes of the written box (kPositive outside it)
-  const VecI<Dim> cstride = signs.box_strides(), wlo = signs.written_lo,
-                  wext = signs.written_hi - signs.written_lo;
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int t = from[Dim - 1]; t <= to[Dim - 1]; ++t) {
-    VecI<Dim> start = from;
-    start[Dim - 1] = t;
-    for_slab<Dim>(start, from, to, [&](const VecI<Dim>& c) {
-      // the mapped lattice cells of the cube along every axis (wrapped or mirrored)
-      std::array<std::array<int, 2>, Dim> l;
-      for (int a = 0; a < Dim; ++a)
-        for (int s = 0; s < 2; ++s)
-          l[a][s] = map_lattice_cell(2 * c[a] + lower_offset[a] + s, signs.cells[a],
-                                     grid.periodic(a));
-      std::array<std::uint8_t, kCorners> sub_class;
-      int negative = 0, positive = 0;
-      for (int sub = 0; sub < kCorners; ++sub) {
-        int index = 0;
-        bool inside = true;
-        for (int a = 0; a < Dim; ++a) {
-          const int offset = l[a][(sub >> a) & 1] - wlo[a];
-          inside = inside && offset >= 0 && offset <= wext[a];
-          index += offset * cstride[a];
-        }
-        const std::uint8_t cl = inside ? signs.cls[index] : Signs::kPositive;
-        sub_class[sub] = cl;
-        negative += cl == Signs::kNegative;
-        positive += cl == Signs::kPositive;
-      }
-      if (positive == kCorners) return;
-      double& w = out[c.dot(ostride)];
-      if (negative == kCorners) {
-        w = 1.0;
-        return;
-      }
-      // as lattice_cube_negative_fraction: the sub-cubes' fractions in order, over 2^Dim
-      double sum = 0.0;
-      for (int sub = 0; sub < kCorners; ++sub) {
-        const std::uint8_t cl = sub_class[sub];
-        if (cl == Signs::kPositive) {
-          sum += 0.0;
-        } else if (cl == Signs::kNegative) {
-          sum += 1.0;
-        } else if (memo) {
-          VecI<Dim> cell;
-          for (int a = 0; a < Dim; ++a) cell[a] = l[a][(sub >> a) & 1];
-          sum += signs.mixed_fraction_of(cell);
-        } else {
-          std::array<double, kCorners> corners;
-          for (int k = 0; k < kCorners; ++k) {
-            int index = 0;
-            for (int a = 0; a < Dim; ++a)
-              index += (l[a][(sub >> a) & 1] + ((k >> a) & 1)) * pstride[a];
-            corners[k] = phi[index];
-          }
-          sum += lattice_cell_negative_fraction<Dim>(corners);
-        }
-      }
-      w = sum / kCorners;
-    });
+  pass.cstride = signs.box_strides();
+  pass.wlo = signs.written_lo;
+  pass.wext = signs.written_hi - signs.written_lo;
+  return pass;
+}
+
+/// The planned passes in one parallel region: every pass's zeros, a barrier, every pass's
+/// fractions (the passes' outputs are disjoint).
+template <int Dim>
+void run_control_volume_passes(const ControlVolumePass<Dim>* passes, int count) {
+  bool any_fractions = false;
+  long zero_work = 0;
+  for (int k = 0; k < count; ++k) {
+    any_fractions = any_fractions || passes[k].fractions;
+    zero_work += passes[k].zero_work();
   }
+  if (!any_fractions && zero_work == 0) return;
+#pragma omp parallel num_threads(any_fractions ? process_threads() : team_threads(zero_work))
+  {
+    for (int k = 0; k < count; ++k) passes[k].zero();
+#pragma omp barrier
+    for (int k = 0; k < count; ++k) passes[k].fill();
+  }
+}
+
+}  // namespace
+
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
+                                       double* out, WrittenBox<Dim>* written) {
+  // the zeros (what the last call wrote, or every entry) and the fractions in one parallel
+  // region, a barrier between (they were two regions per call, ~20 calls per frame)
+  const ControlVolumePass<Dim> pass =
+      plan_control_volume(grid, lattice, phi, signs, dims, lower_offset, out, written);
+  run_control_volume_passes(&pass, 1);
+}
+
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const std::vector<VecI<Dim>>& dims,
+                                       const std::vector<VecI<Dim>>& lower_offsets,
+                                       const std::vector<double*>& out) {
+  std::vector<ControlVolumePass<Dim>> passes;
+  for (std::size_t k = 0; k < dims.size(); ++k)
+    passes.push_back(plan_control_volume<Dim>(grid, lattice, phi, signs, dims[k], lower_offsets[k],
+                                              out[k], nullptr));
+  run_control_volume_passes(passes.data(), static_cast<int>(passes.size()));
 }
 
 template <int Dim>
@@ -552,13 +658,16 @@ void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
                              std::array<WrittenBox<Dim>, Dim>* written) {
   if (out.size() != grid.num_faces()) out.resize(grid.num_faces());
   // the face control volume starts half a cell before the face along its normal
+  // (the Dim face lattices' passes in one parallel region)
+  std::array<ControlVolumePass<Dim>, Dim> passes;
   for (int axis = 0; axis < Dim; ++axis) {
     VecI<Dim> offset = VecI<Dim>::Zero();
     offset[axis] = -1;
-    control_volume_negative_fractions<Dim>(grid, lattice, phi, signs, grid.face_dims(axis), offset,
-                                           out.data() + grid.face_offset(axis),
-                                           written ? &(*written)[axis] : nullptr);
+    passes[axis] = plan_control_volume<Dim>(grid, lattice, phi, signs, grid.face_dims(axis), offset,
+                                            out.data() + grid.face_offset(axis),
+                                            written ? &(*written)[axis] : nullptr);
   }
+  run_control_volume_passes(passes.data(), Dim);
 }
 
 template <int Dim>
@@ -796,6 +905,9 @@ void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& l
                                                      const VectorX&, const LatticeSigns<D>&,      \
                                                      const VecI<D>&, const VecI<D>&, double*,     \
                                                      WrittenBox<D>*);                             \
+  template void control_volume_negative_fractions<D>(                                            \
+      const MacGrid<D>&, const SampleLattice<D>&, const VectorX&, const LatticeSigns<D>&,           \
+      const std::vector<VecI<D>>&, const std::vector<VecI<D>>&, const std::vector<double*>&);      \
   template void cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
                                            const VectorX&, const LatticeSigns<D>&, VectorX&,      \
                                            WrittenBox<D>*);                                       \

@@ -206,6 +206,16 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
                                        const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
                                        double* out, WrittenBox<Dim>* written = nullptr);
 
+/// control_volume_negative_fractions of several control-volume lattices of one level set
+/// (lattice k: dims[k], lower_offsets[k], out[k], outputs disjoint, no written boxes), in one
+/// parallel region instead of one per lattice: the same values.
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const std::vector<VecI<Dim>>& dims,
+                                       const std::vector<VecI<Dim>>& lower_offsets,
+                                       const std::vector<double*>& out);
+
 /// Signed distance to the union of the solids, shifted inward by the shrinkage zeta of section
 /// 4.4.6: returns min_k d_k(x) + shrink_in_metres at every lattice point (positive outside the
 /// solids; +infinity everywhere when there is no solid).

@@ -737,32 +737,51 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
   // filled; the order of the list changes no value (every average of a layer reads the validity
   // at the layer's start, and each candidate is written once).
   constexpr char kFresh = 2;
+  // the candidates that source f lists, appended to out
+  const auto list_candidates = [&](int f, auto&& is_source, std::vector<int>& out) {
+    std::array<int, 2 * Dim> nb, nb_of_g;
+    neighbours(f, nb);
+    for (int k = 0; k < 2 * Dim; ++k) {
+      const int g = nb[k];
+      if (g < 0 || valid[g]) continue;
+      bool first_mention = true;
+      for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
+      if (!first_mention) continue;
+      neighbours(g, nb_of_g);
+      int first_source = -1;
+      for (int l = 0; l < 2 * Dim && first_source < 0; ++l)
+        if (nb_of_g[l] >= 0 && is_source(nb_of_g[l])) first_source = nb_of_g[l];
+      if (first_source == f) out.push_back(g);
+    }
+  };
   const auto gather_candidates = [&](int count, auto&& source_face, auto&& is_source) {
     return gather_in_order<int>(count, [&](int i, std::vector<int>& out) {
       const int f = source_face(i);
-      if (f < 0) return;
-      std::array<int, 2 * Dim> nb, nb_of_g;
-      neighbours(f, nb);
-      for (int k = 0; k < 2 * Dim; ++k) {
-        const int g = nb[k];
-        if (g < 0 || valid[g]) continue;
-        bool first_mention = true;
-        for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
-        if (!first_mention) continue;
-        neighbours(g, nb_of_g);
-        int first_source = -1;
-        for (int l = 0; l < 2 * Dim && first_source < 0; ++l)
-          if (nb_of_g[l] >= 0 && is_source(nb_of_g[l])) first_source = nb_of_g[l];
-        if (first_source == f) out.push_back(g);
-      }
+      if (f >= 0) list_candidates(f, is_source, out);
     });
   };
-  // the first layer's: beside any valid face (the given flags made 0 / 1 first)
-#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
-  for (int f = 0; f < nf; ++f)
-    if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
-  std::vector<int> candidates = gather_candidates(
-      nf, [&](int f) { return valid[f] ? f : -1; }, [&](int g) { return valid[g] != 0; });
+  // the first layer's: beside any valid face (the given flags made 0 / 1 first, then, after a
+  // barrier, the candidates listed per thread over static (contiguous, ascending) blocks of
+  // faces and joined in thread order: gather_candidates' list, in one parallel region)
+  std::vector<int> candidates;
+  {
+    const int team = team_threads(nf);
+    std::vector<std::vector<int>> part(team);
+#pragma omp parallel num_threads(team)
+    {
+#pragma omp for schedule(static)
+      for (int f = 0; f < nf; ++f)
+        if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
+      std::vector<int>& out = part[omp_get_thread_num()];
+#pragma omp for schedule(static) nowait
+      for (int f = 0; f < nf; ++f)
+        if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, out);
+    }
+    std::size_t total = 0;
+    for (const auto& list : part) total += list.size();
+    candidates.reserve(total);
+    for (const auto& list : part) candidates.insert(candidates.end(), list.begin(), list.end());
+  }
   std::vector<double> value;
   std::vector<char> filled;
   std::vector<int> fresh;
@@ -1037,58 +1056,75 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<int> bucket(np), order(np);
   std::vector<Vec<Dim>> xw(np), xs(np);
   double max_support = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
-  for (long p = 0; p < np; ++p) {
-    support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
-    max_support = std::max(max_support, support[p]);
-    xw[p] = grid.wrap_position(particles.x[p]);
-    bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
-    order[p] = static_cast<int>(p);
-  }
-
   // spatial hash by occupied cells only (no table the size of the grid): the particles sorted by
   // cell (a stable radix sort, so in particle order within a cell), each occupied cell a run of
   // slots, the wrapped positions stored in slot order for locality; runs found through tiles of
-  // 8^Dim cells made only where particles are
+  // 8^Dim cells made only where particles are.
+  // Each pass of the sort on several threads: fixed blocks of slots count their digits, every
+  // block's share of a digit starts after the earlier digits and the earlier blocks' share of
+  // it, and each block scatters its slots in order (a stable sort, whose result is unique: the
+  // same order for any team). The supports, the sort and the runs' starts share one parallel
+  // region (they were seven regions, each a fork-join around a fraction of a millisecond)
+  constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
+  int bits = 0;
+  while ((1L << bits) < nc) ++bits;
+  const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
+  std::vector<int> sorted(np);
+  std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
+  const auto block_begin = [&](int b) { return np * b / blocks; };
+  const int sort_team = process_threads();
+  // run k's first slot: listed per thread over static (contiguous, ascending) blocks of slots
+  // and joined in thread order, the list of the serial loop
+  std::vector<std::vector<int>> run_part(sort_team);
+#pragma omp parallel reduction(max : max_support) num_threads(sort_team)
   {
-    // each pass on several threads: fixed blocks of slots count their digits, every block's
-    // share of a digit starts after the earlier digits and the earlier blocks' share of it, and
-    // each block scatters its slots in order (a stable sort, whose result is unique: the same
-    // order for any team)
-    constexpr int kDigitBits = 11, kDigits = 1 << kDigitBits;
-    int bits = 0;
-    while ((1L << bits) < nc) ++bits;
-    const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
-    std::vector<int> sorted(np);
-    std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
-    const auto block_begin = [&](int b) { return np * b / blocks; };
+#pragma omp for schedule(static)
+    for (long p = 0; p < np; ++p) {
+      support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
+      max_support = std::max(max_support, support[p]);
+      xw[p] = grid.wrap_position(particles.x[p]);
+      bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
+      order[p] = static_cast<int>(p);
+    }
     for (int shift = 0; shift < bits; shift += kDigitBits) {
       const auto digit = [&](long s) { return (bucket[order[s]] >> shift) & (kDigits - 1); };
-#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+#pragma omp for schedule(static, 1)
       for (int b = 0; b < blocks; ++b) {
         std::fill(count[b].begin(), count[b].end(), 0L);
         for (long s = block_begin(b); s < block_begin(b + 1); ++s) ++count[b][digit(s)];
       }
-      long start = 0;
-      for (int d = 0; d < kDigits; ++d)
-        for (int b = 0; b < blocks; ++b) {
-          const long c = count[b][d];
-          count[b][d] = start;
-          start += c;
-        }
-#pragma omp parallel for schedule(static, 1) num_threads(std::min(blocks, process_threads()))
+#pragma omp single
+      {
+        long start = 0;
+        for (int d = 0; d < kDigits; ++d)
+          for (int b = 0; b < blocks; ++b) {
+            const long c = count[b][d];
+            count[b][d] = start;
+            start += c;
+          }
+      }
+#pragma omp for schedule(static, 1)
       for (int b = 0; b < blocks; ++b)
         for (long s = block_begin(b); s < block_begin(b + 1); ++s)
           sorted[count[b][digit(s)]++] = order[s];
+#pragma omp single
       order.swap(sorted);
     }
+    std::vector<int>& part = run_part[omp_get_thread_num()];
+#pragma omp for schedule(static) nowait
+    for (long s = 0; s < np; ++s) {
+      xs[s] = xw[order[s]];
+      if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) part.push_back(static_cast<int>(s));
+    }
   }
-#pragma omp parallel for schedule(static) num_threads(team_threads(np))
-  for (long s = 0; s < np; ++s) xs[s] = xw[order[s]];
   // runs: occupied cell k holds the slots [run_start[k], run_start[k + 1]) (gathered in order)
-  std::vector<int> run_start = gather_in_order<int>(static_cast<int>(np), [&](int s, std::vector<int>& out) {
-    if (s == 0 || bucket[order[s]] != bucket[order[s - 1]]) out.push_back(s);
-  });
+  std::vector<int> run_start;
+  {
+    std::size_t total = 0;
+    for (const auto& part : run_part) total += part.size();
+    run_start.reserve(total + 1);
+    for (const auto& part : run_part) run_start.insert(run_start.end(), part.begin(), part.end());
+  }
   std::vector<int> run_cell(run_start.size());
   for (std::size_t k = 0; k < run_start.size(); ++k) run_cell[k] = bucket[order[run_start[k]]];
   run_start.push_back(static_cast<int>(np));
@@ -1560,17 +1596,27 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // only at lattice points within the support R of a particle (2 R with solids: a particle's
   // image across a solid reaches points inside it), and T_c reads the lattice points of
   // [c - 1/2, c + 3/2] dx per axis, so T_c > 0 needs a particle with |c - c_p| < 3/2 + R / dx
+  // (in one pass with the particles' cells (wrapped, clamped) and the range of their layers of
+  // the last axis, which the move below zeroes: the particles do not move before it; min, max
+  // and logical and give the same result for any split)
+  constexpr int kLast = Dim - 1;
   double max_support = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
-  for (long p = 0; p < np; ++p)
+  std::vector<VecI<Dim>> particle_cell(np);
+  int lo_layer = grid.cells()[kLast], hi_layer = -1;
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(max : max_support) \
+    reduction(min : lo_layer) reduction(max : hi_layer) reduction(&& : finite) \
+    num_threads(process_threads())
+  for (long p = 0; p < np; ++p) {
     max_support = std::max(max_support, kSurfaceSupport * particle_spacing(particles, p, dx));
+    const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
+    particle_cell[p] = c;
+    finite = finite && particles.x[p].allFinite();
+    lo_layer = std::min(lo_layer, c[kLast]);
+    hi_layer = std::max(hi_layer, c[kLast]);
+  }
   const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
   const int ring = std::max(2, static_cast<int>(std::floor(1.5 + reach / dx + 1e-6)));
-  // the particles' cells (wrapped, clamped), each once
-  std::vector<VecI<Dim>> particle_cell(np);
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (long p = 0; p < np; ++p)
-    particle_cell[p] = grid.cell_containing(grid.wrap_position(particles.x[p]));
   // the tiles under the ring around every particle's cell, flagged on several threads (a particle
   // in the cell of the one before it flags nothing new) and made in parallel: the same tiles for
   // any team; `rho` has the same tiles (the same lattice and tile size)
@@ -1589,8 +1635,10 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       values.mark_box(lo, hi, band_flags);
     });
   }
-  values.make_tiles(band_flags, process_threads());
-  rho.make_tiles(band_flags, process_threads());
+  // (the tiles' memory claimed here, filled with the background in the region of the layer
+  // histogram below)
+  const std::vector<double*> fresh_values = values.claim_tiles(band_flags);
+  const std::vector<double*> fresh_rho = rho.claim_tiles(band_flags);
   std::vector<int> band;  // the made tiles of `values` (and of `rho`)
   for (int t = 0; t < values.num_tile_slots(); ++t)
     if (values.has_tile(t)) band.push_back(t);
@@ -1604,26 +1652,33 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // threads, and as before)
   // The slabs' bounds cut the particles' layers into equal counts (equal widths left one thread
   // most of a blob's particles; any bounds give the same bits).
-  constexpr int kLast = Dim - 1;
   const int layers = grid.cells()[kLast];
   const int slabs = std::max(1, std::min(process_threads(), layers));
   std::vector<int> slab_first(slabs + 1, 0);
   slab_first[slabs] = layers;
-  if (slabs > 1) {
-    // (counted per thread and the counts added: integer sums, any split)
-    std::vector<long> histogram(layers + 1, 0);
-    {
-      const int team = team_threads(np);
-      std::vector<std::vector<long>> counts(team, std::vector<long>(layers + 1, 0));
+  // (counted per thread and the counts added: integer sums, any split; in one parallel region
+  // with the filling of the band's new tiles)
+  const int team = team_threads(np);
+  std::vector<std::vector<long>> counts(slabs > 1 ? team : 0, std::vector<long>(layers + 1, 0));
+  {
+    const int nv = static_cast<int>(fresh_values.size()), nr = static_cast<int>(fresh_rho.size());
 #pragma omp parallel num_threads(team)
-      {
+    {
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < nv; ++i) values.fill_tile(fresh_values[i]);
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < nr; ++i) rho.fill_tile(fresh_rho[i]);
+      if (slabs > 1) {
         std::vector<long>& count = counts[omp_get_thread_num()];
-#pragma omp for schedule(static)
+#pragma omp for schedule(static) nowait
         for (long p = 0; p < np; ++p) ++count[particle_cell[p][kLast] + 1];
       }
-      for (const auto& count : counts)
-        for (int l = 0; l <= layers; ++l) histogram[l] += count[l];
     }
+  }
+  if (slabs > 1) {
+    std::vector<long> histogram(layers + 1, 0);
+    for (const auto& count : counts)
+      for (int l = 0; l <= layers; ++l) histogram[l] += count[l];
     for (int l = 0; l < layers; ++l) histogram[l + 1] += histogram[l];
     int l = 0;
     for (int k = 1; k < slabs; ++k) {
@@ -1944,47 +1999,57 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // fill was most of this pass, 800k faces on a 64^3 grid for a liquid in a few layers)
   VectorX move(nf);
   {
-    int lo_layer = grid.cells()[kLast], hi_layer = -1;
-    bool finite = true;
-#pragma omp parallel for schedule(static) reduction(min : lo_layer) reduction(max : hi_layer) \
-    reduction(&& : finite) num_threads(team_threads(np))
-    for (long p = 0; p < np; ++p) {
-      finite = finite && particles.x[p].allFinite();
-      lo_layer = std::min(lo_layer, particle_cell[p][kLast]);
-      hi_layer = std::max(hi_layer, particle_cell[p][kLast]);
-    }
     // (cells is sorted and the last axis varies slowest: its ends hold the unknowns' extremes)
     lo_layer = std::min(lo_layer, grid.cell_coord(cells.front())[kLast]);
     hi_layer = std::max(hi_layer, grid.cell_coord(cells.back())[kLast]);
     const bool all = grid.periodic(kLast) || !finite;
+    // the zeroed layers of every axis, then (after a barrier) the rows' faces: one parallel
+    // region (the zeros in fixed blocks of kParallelMinWork faces)
+    std::array<long, Dim> zero_first, zero_count;
+    long zero_total = 0;
     for (int a = 0; a < Dim; ++a) {
       const VecI<Dim> dims = grid.face_dims(a);
       const long per = dims.prod() / dims[kLast];  // faces per layer
       const int lo = all ? 0 : std::max(lo_layer - 1, 0);
       const int hi = all ? dims[kLast] - 1 : std::min(hi_layer + 1, dims[kLast] - 1);
-      fill_in_parallel(move.data() + grid.face_offset(a) + lo * per, (hi - lo + 1) * per, 0.0);
+      zero_first[a] = grid.face_offset(a) + lo * per;
+      zero_count[a] = std::max(0L, (hi - lo + 1) * per);
+      zero_total += zero_count[a];
     }
-  }
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int r = 0; r < n; ++r) {
-    const VecI<Dim> ci = grid.cell_coord(cells[r]);
-    for (int a = 0; a < Dim; ++a) {
-      VecI<Dim> lower = ci, upper = ci;
-      lower[a] -= 1;
-      upper[a] += 1;
-      const int r_minus = row_of(lower);
-      const int r_plus = row_of(upper);
-      // the face on the minus side (unless the minus cell writes it) and on the plus side
-      for (int s = 0; s < 2; ++s) {
-        if (s == 0 && r_minus >= 0) continue;
-        VecI<Dim> fc = ci;
-        fc[a] += s;
-        if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
-        const int f = grid.face_index(a, fc);
-        if (!(fluid_face[f] > 0.0)) continue;
-        const double pm = s == 0 ? 0.0 : psi[r];
-        const double pp = s == 0 ? psi[r] : (r_plus >= 0 ? psi[r_plus] : 0.0);
-        move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+#pragma omp parallel num_threads(team_threads(std::max<long>(zero_total, n)))
+    {
+      for (int a = 0; a < Dim; ++a) {
+        const long blocks = (zero_count[a] + kParallelMinWork - 1) / kParallelMinWork;
+#pragma omp for schedule(static) nowait
+        for (long b = 0; b < blocks; ++b) {
+          const long from = zero_first[a] + b * kParallelMinWork;
+          const long to = zero_first[a] + std::min(zero_count[a], (b + 1) * kParallelMinWork);
+          std::fill(move.data() + from, move.data() + to, 0.0);
+        }
+      }
+#pragma omp barrier
+#pragma omp for schedule(static)
+      for (int r = 0; r < n; ++r) {
+        const VecI<Dim> ci = grid.cell_coord(cells[r]);
+        for (int a = 0; a < Dim; ++a) {
+          VecI<Dim> lower = ci, upper = ci;
+          lower[a] -= 1;
+          upper[a] += 1;
+          const int r_minus = row_of(lower);
+          const int r_plus = row_of(upper);
+          // the face on the minus side (unless the minus cell writes it) and on the plus side
+          for (int s = 0; s < 2; ++s) {
+            if (s == 0 && r_minus >= 0) continue;
+            VecI<Dim> fc = ci;
+            fc[a] += s;
+            if (grid.periodic(a) && fc[a] == grid.cells()[a]) fc[a] = 0;  // the stored seam face
+            const int f = grid.face_index(a, fc);
+            if (!(fluid_face[f] > 0.0)) continue;
+            const double pm = s == 0 ? 0.0 : psi[r];
+            const double pp = s == 0 ? psi[r] : (r_plus >= 0 ? psi[r_plus] : 0.0);
+            move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+          }
+        }
       }
     }
   }
@@ -2109,34 +2174,39 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   std::vector<std::vector<long>> index_count(parts > 1 ? blocks : 0,
                                              std::vector<long>(lattice.dims[0], 0));
   const auto block_begin = [&](int b) { return np * b / blocks; };
-#pragma omp parallel for schedule(static, 1) num_threads(blocks)
-  for (int b = 0; b < blocks; ++b)
-    for (long p = block_begin(b); p < block_begin(b + 1); ++p) {
-      const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
-      const int k = static_cast<int>(std::floor(s / width));
-      slab_of[p] = std::clamp(k, 0, slabs - 1);
-      ++slab_count[b][slab_of[p]];
-      if (parts > 1) {
-        const double s0 = (particles.x[p][0] - lattice.origin[0]) / h;
-        ++index_count[b][std::clamp(static_cast<int>(std::floor(s0)), 0, lattice.dims[0] - 1)];
+  // (the sort's two passes share one parallel region with the solid images and the flagging of
+  // the tiles below; they were four regions)
+  const auto count_blocks = [&] {
+#pragma omp for schedule(static, 1)
+    for (int b = 0; b < blocks; ++b)
+      for (long p = block_begin(b); p < block_begin(b + 1); ++p) {
+        const double s = (particles.x[p][kLast] - lattice.origin[kLast]) / h;
+        const int k = static_cast<int>(std::floor(s / width));
+        slab_of[p] = std::clamp(k, 0, slabs - 1);
+        ++slab_count[b][slab_of[p]];
+        if (parts > 1) {
+          const double s0 = (particles.x[p][0] - lattice.origin[0]) / h;
+          ++index_count[b][std::clamp(static_cast<int>(std::floor(s0)), 0, lattice.dims[0] - 1)];
+        }
       }
-    }
-  {
-    int start = 0;
-    for (int k = 0; k < slabs; ++k) {
-      slab_start[k] = start;
-      for (int b = 0; b < blocks; ++b) {
-        const int c = slab_count[b][k];
-        slab_count[b][k] = start;
-        start += c;
+#pragma omp single
+    {
+      int start = 0;
+      for (int k = 0; k < slabs; ++k) {
+        slab_start[k] = start;
+        for (int b = 0; b < blocks; ++b) {
+          const int c = slab_count[b][k];
+          slab_count[b][k] = start;
+          start += c;
+        }
       }
+      slab_start[slabs] = start;
     }
-    slab_start[slabs] = start;
-  }
-#pragma omp parallel for schedule(static, 1) num_threads(blocks)
-  for (int b = 0; b < blocks; ++b)
-    for (long p = block_begin(b); p < block_begin(b + 1); ++p)
-      order[slab_count[b][slab_of[p]]++] = static_cast<int>(p);
+#pragma omp for schedule(static, 1) nowait
+    for (int b = 0; b < blocks; ++b)
+      for (long p = block_begin(b); p < block_begin(b + 1); ++p)
+        order[slab_count[b][slab_of[p]]++] = static_cast<int>(p);
+  };
 
   // periodic images: shift by +-L on periodic axes; mirror images across wall faces
   std::array<double, Dim> period{};
@@ -2328,22 +2398,28 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // each particle's image across the nearest solid surface within its support (independent per
   // particle, in parallel), then the tiles under every box a particle or an image reaches,
   // flagged in parallel and made before the splat
-  if (!solids.empty()) {
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (long p = 0; p < np; ++p) {
-      const Vec<Dim> xp = particles.x[p];
-      const double d = solids.distance(xp);
-      if (!(d > 0.0) || d >= support[p]) continue;
-      const Vec<Dim> n = solids.gradient(xp);
-      const double len = n.norm();
-      if (!(len > 0.0)) continue;
-      solid_image[p] = xp - (2.0 * d / len) * n;
+  // (in the region of the sort above; the images are complete before any splat reads them)
+#pragma omp parallel num_threads(process_threads())
+  {
+    count_blocks();
+    if (!solids.empty()) {
+#pragma omp for schedule(static)
+      for (long p = 0; p < np; ++p) {
+        const Vec<Dim> xp = particles.x[p];
+        const double d = solids.distance(xp);
+        if (!(d > 0.0) || d >= support[p]) continue;
+        const Vec<Dim> n = solids.gradient(xp);
+        const double len = n.norm();
+        if (!(len > 0.0)) continue;
+        solid_image[p] = xp - (2.0 * d / len) * n;
+      }
     }
+#pragma omp for schedule(static)
+    for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true, all_lo, all_hi);
   }
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (long p = 0; p < np; ++p) splat(static_cast<int>(p), true, all_lo, all_hi);
-  acc.make_tiles(acc_flags, process_threads());
-  solid_distance.make_tiles(solid_flags, process_threads());
+  // (the tiles' memory claimed here, filled in the splat's region below before its phases)
+  const std::vector<double*> fresh_acc = acc.claim_tiles(acc_flags);
+  const std::vector<double*> fresh_distance = solid_distance.claim_tiles(solid_flags);
 
   // phases: even slabs, odd slabs, then (periodic last axis) the two end slabs serially
   const bool wrap_last = grid.periodic(kLast);
@@ -2376,20 +2452,32 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
       part_lo[k] = part_hi[k - 1] + 1;
     }
   }
-  for (int phase = 0; phase < 3; ++phase) {
-    const std::vector<int>& list = phase_slabs[phase];
-    const int count = static_cast<int>(list.size());
-    if (phase == 2) {
-      for (int s = 0; s < count; ++s)
-        for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
-          splat(order[q], false, all_lo, all_hi);
-    } else {
-#pragma omp parallel for schedule(static, 1) num_threads(parts)
-      for (int part = 0; part < parts; ++part)
-        for (int s = 0; s < count; ++s)
-          for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
-            splat(order[q], false, part_lo[part], part_hi[part]);
+  // (the new tiles' filling and phases 0 and 1 in one parallel region, a barrier after each;
+  // phase 2 after it on one thread)
+  {
+    const int na = static_cast<int>(fresh_acc.size()), nd = static_cast<int>(fresh_distance.size());
+#pragma omp parallel num_threads(std::max(parts, team_threads(static_cast<long>(na + nd) * TiledLattice<Dim, double>::kTilePoints)))
+    {
+#pragma omp for schedule(static) nowait
+      for (int t = 0; t < na; ++t) acc.fill_tile(fresh_acc[t]);
+#pragma omp for schedule(static)
+      for (int t = 0; t < nd; ++t) solid_distance.fill_tile(fresh_distance[t]);
+      for (int phase = 0; phase < 2; ++phase) {
+        const std::vector<int>& list = phase_slabs[phase];
+        const int count = static_cast<int>(list.size());
+#pragma omp for schedule(static, 1)
+        for (int part = 0; part < parts; ++part)
+          for (int s = 0; s < count; ++s)
+            for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
+              splat(order[q], false, part_lo[part], part_hi[part]);
+      }
     }
+  }
+  {
+    const std::vector<int>& list = phase_slabs[2];
+    for (int s = 0; s < static_cast<int>(list.size()); ++s)
+      for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
+        splat(order[q], false, all_lo, all_hi);
   }
 
   return max_support;

@@ -69,16 +69,6 @@ std::vector<double> to_std(const Vec<Dim>& x) {
   return std::vector<double>(x.data(), x.data() + Dim);
 }
 
-bool all_finite(const VectorX& v) {
-  // on several threads (a logical and: the same answer for any split)
-  const Eigen::Index n = v.size();
-  bool finite = true;
-#pragma omp parallel for schedule(static) reduction(&& : finite) num_threads(team_threads(n))
-  for (Eigen::Index i = 0; i < n; i += 4096)
-    finite = finite && v.segment(i, std::min<Eigen::Index>(4096, n - i)).allFinite();
-  return finite;
-}
-
 /// phi[k] = value(k) for every point k of the lattice box [lo, hi] (inclusive, clamped), on
 /// several threads (rows along x shared statically); every point whose bits change is listed
 /// with its old value in `undo` (one list per thread, cleared first), so that restore_points
@@ -718,23 +708,54 @@ double Simulation<Dim>::grid_and_body_kinetic_energy() const {
 
 template <int Dim>
 typename Simulation<Dim>::FaceBoxes Simulation<Dim>::particle_face_boxes() const {
-  // the particles' bounds (a minimum and maximum per axis: the same for any split)
+  // the particles' bounds (a minimum and maximum per axis: the same for any split), every axis
+  // in one pass and one parallel region (a region per axis was three fork-joins per call, each
+  // around ~0.1 ms of work; the per-thread results are combined by min and max, exact in any order)
   Vec<Dim> lo = Vec<Dim>::Constant(std::numeric_limits<double>::infinity());
   Vec<Dim> hi = -lo;
   const long np = static_cast<long>(particles_.size());
+  std::array<double, Dim> mn, mx;
   for (int a = 0; a < Dim; ++a) {
-    double mn = lo[a], mx = hi[a];
-    bool finite = true;
-#pragma omp parallel for schedule(static) reduction(min : mn) reduction(max : mx) \
-    reduction(&& : finite) num_threads(team_threads(np))
-    for (long p = 0; p < np; ++p) {
-      const double x = grid_.wrap_position(particles_.x[p])[a];
-      finite = finite && std::isfinite(x);
-      mn = std::min(mn, x);
-      mx = std::max(mx, x);
+    mn[a] = lo[a];
+    mx[a] = hi[a];
+  }
+  std::array<bool, Dim> finite;
+  finite.fill(true);
+  {
+    const int team = team_threads(np);
+    std::vector<std::array<double, 2 * Dim>> part(team);
+    std::vector<std::array<bool, Dim>> part_finite(team);
+#pragma omp parallel num_threads(team)
+    {
+      std::array<double, 2 * Dim> m;
+      std::array<bool, Dim> fin;
+      for (int a = 0; a < Dim; ++a) {
+        m[a] = mn[a];
+        m[Dim + a] = mx[a];
+        fin[a] = true;
+      }
+#pragma omp for schedule(static)
+      for (long p = 0; p < np; ++p) {
+        const Vec<Dim> x = grid_.wrap_position(particles_.x[p]);
+        for (int a = 0; a < Dim; ++a) {
+          fin[a] = fin[a] && std::isfinite(x[a]);
+          m[a] = std::min(m[a], x[a]);
+          m[Dim + a] = std::max(m[Dim + a], x[a]);
+        }
+      }
+      part[omp_get_thread_num()] = m;
+      part_finite[omp_get_thread_num()] = fin;
     }
-    lo[a] = finite ? mn : -std::numeric_limits<double>::infinity();
-    hi[a] = finite ? mx : std::numeric_limits<double>::infinity();
+    for (int t = 0; t < team; ++t)
+      for (int a = 0; a < Dim; ++a) {
+        mn[a] = std::min(mn[a], part[t][a]);
+        mx[a] = std::max(mx[a], part[t][Dim + a]);
+        finite[a] = finite[a] && part_finite[t][a];
+      }
+  }
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = finite[a] ? mn[a] : -std::numeric_limits<double>::infinity();
+    hi[a] = finite[a] ? mx[a] : std::numeric_limits<double>::infinity();
   }
   // a particle in cell c (clamped) reaches the samples c - 1 .. c + 1 of every face lattice
   // (pic_velocity_on_faces's note on axis_stencil); two more cells either side
@@ -781,11 +802,20 @@ typename Simulation<Dim>::FaceRows Simulation<Dim>::face_rows(const FaceBoxes& b
 template <int Dim>
 template <class Fn>
 void Simulation<Dim>::for_faces_in_boxes(const FaceBoxes& boxes, Fn&& fn) const {
+  // every axis's box in one parallel region (a region per axis cost three fork-joins per call),
+  // each axis's rows split statically; the axes' faces are distinct, so no barrier between them
+  std::array<FaceRows, Dim> rows_of;
+  long total = 0;
   for (int axis = 0; axis < Dim; ++axis) {
-    const FaceRows face_rows_of_box = face_rows(boxes, axis);
+    rows_of[axis] = face_rows(boxes, axis);
+    total += static_cast<long>(rows_of[axis].rows()) * rows_of[axis].nx;
+  }
+  if (total == 0) return;
+#pragma omp parallel num_threads(team_threads(total))
+  for (int axis = 0; axis < Dim; ++axis) {
+    const FaceRows& face_rows_of_box = rows_of[axis];
     const int rows = face_rows_of_box.rows(), nx = face_rows_of_box.nx;
-    if (rows == 0) continue;
-#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(rows) * nx))
+#pragma omp for schedule(static) nowait
     for (int r = 0; r < rows; ++r) {
       const int first = face_rows_of_box.first(r);
       for (int x = 0; x < nx; ++x) fn(first + x);
@@ -840,12 +870,41 @@ void Simulation<Dim>::mark_faces_with_mass() {
     // boxes are cleared and the new boxes marked (every other flag is 0 already)
     const bool kept = mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_ &&
                       mass_faces_.size() == static_cast<std::size_t>(nf);
-    if (kept)
-      for_faces_in_boxes(mass_boxes_, [&](int f) { mass_faces_[f] = 0; });
-    else
-      mass_faces_.assign(nf, 0);
-    mass_boxes_ = particle_face_boxes();
-    for_faces_in_boxes(mass_boxes_, [&](int f) { mass_faces_[f] = face_mass_[f] > 0.0; });
+    // (the new boxes first; then the old boxes cleared and the new ones marked in one parallel
+    // region, a barrier between: a face of both is cleared before it is marked)
+    const FaceBoxes boxes = particle_face_boxes();
+    if (!kept) mass_faces_.assign(nf, 0);
+    std::array<FaceRows, Dim> clear_rows, mark_rows;
+    long total = 0;
+    for (int axis = 0; axis < Dim; ++axis) {
+      if (kept) clear_rows[axis] = face_rows(mass_boxes_, axis);
+      mark_rows[axis] = face_rows(boxes, axis);
+      total += static_cast<long>(clear_rows[axis].rows()) * clear_rows[axis].nx +
+               static_cast<long>(mark_rows[axis].rows()) * mark_rows[axis].nx;
+    }
+#pragma omp parallel num_threads(team_threads(total))
+    {
+      for (int axis = 0; axis < Dim; ++axis) {
+        const FaceRows& fr = clear_rows[axis];
+        const int rows = fr.rows(), nx = fr.nx;
+#pragma omp for schedule(static) nowait
+        for (int r = 0; r < rows; ++r) {
+          const int first = fr.first(r);
+          std::fill(mass_faces_.begin() + first, mass_faces_.begin() + first + nx, 0);
+        }
+      }
+#pragma omp barrier
+      for (int axis = 0; axis < Dim; ++axis) {
+        const FaceRows& fr = mark_rows[axis];
+        const int rows = fr.rows(), nx = fr.nx;
+#pragma omp for schedule(static) nowait
+        for (int r = 0; r < rows; ++r) {
+          const int first = fr.first(r);
+          for (int x = 0; x < nx; ++x) mass_faces_[first + x] = face_mass_[first + x] > 0.0;
+        }
+      }
+    }
+    mass_boxes_ = boxes;
     mass_boxes_data_ = mass_faces_.data();
     mass_boxes_valid_ = true;
     return;
@@ -1231,6 +1290,9 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   // row by row of each axis's face lattice (x fastest), the coordinates counted along the row
   // instead of divided out of the index per face (wall_face, face_coord): the same faces written
   // with the same values
+  // (every axis in one parallel region, the rows of each split statically: the axes' faces are
+  // distinct, so no barrier between them)
+#pragma omp parallel num_threads(process_threads())
   for (int axis = 0; axis < Dim; ++axis) {
     const VecI<Dim> fdims = grid_.face_dims(axis);
     const int nx = fdims[0], rows = fdims.prod() / nx, offset = grid_.face_offset(axis);
@@ -1238,7 +1300,7 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
     const bool wall_lo = walls && boundary_[2 * axis] == BoundaryType::wall;
     const bool wall_hi = walls && boundary_[2 * axis + 1] == BoundaryType::wall;
     const int top = grid_.cells()[axis];
-#pragma omp parallel for schedule(static) num_threads(process_threads())
+#pragma omp for schedule(static) nowait
     for (int r = 0; r < rows; ++r) {
       VecI<Dim> coord = lattice_coord<Dim>(r * nx, fdims);
       const int first = offset + r * nx;
@@ -1413,10 +1475,14 @@ void Simulation<Dim>::first_half_drift(double dt) {
     VectorX kept;
     {
       ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
-      kept = u_;  // (u_ as the step left it: back in place after the drift)
+      // (u_ as the step left it, back in place after the drift: copied in the same parallel
+      // pass that marks the unreached faces)
+      kept.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-      for (int f = 0; f < nf; ++f)
+      for (int f = 0; f < nf; ++f) {
+        kept[f] = u_[f];
         if (!drift_reached_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
+      }
       unread_.clear();
       advect_particles(particles_, grid_, u_, h, solids_, boundary_, &unread_);
     }
@@ -2452,20 +2518,38 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
 
 template <int Dim>
 void Simulation<Dim>::check_finite(const char* after, bool solve_outputs) const {
-  std::string what;
-  if (!all_finite(u_)) what = "non-finite grid velocity";
-  if (solve_outputs && !all_finite(pressure_)) what = "non-finite pressure";
-  if (solve_outputs && !all_finite(stress_)) what = "non-finite viscous stress";
-  if (what.empty()) {
-    // the first particle that is not finite (the smallest index: the same for any split)
-    const long np = static_cast<long>(particles_.size());
-    long first = np;
-#pragma omp parallel for schedule(static) reduction(min : first) num_threads(team_threads(np))
+  // every check in one parallel region (a region per vector cost up to four fork-joins per
+  // call): logical ands and the smallest index of a particle that is not finite, the same
+  // answer for any split
+  const long np = static_cast<long>(particles_.size());
+  const auto blocks = [](const VectorX& v) { return (static_cast<long>(v.size()) + 4095) / 4096; };
+  const long nu = blocks(u_), npr = solve_outputs ? blocks(pressure_) : 0,
+             ns = solve_outputs ? blocks(stress_) : 0;
+  bool finite_u = true, finite_p = true, finite_s = true;
+  long first = np;
+  const auto segment_finite = [](const VectorX& v, long b) {
+    const Eigen::Index i = static_cast<Eigen::Index>(b) * 4096;
+    return v.segment(i, std::min<Eigen::Index>(4096, v.size() - i)).allFinite();
+  };
+#pragma omp parallel reduction(&& : finite_u, finite_p, finite_s) reduction(min : first) \
+    num_threads(team_threads(std::max<long>(4096 * (nu + npr + ns), np)))
+  {
+#pragma omp for schedule(static) nowait
+    for (long b = 0; b < nu; ++b) finite_u = finite_u && segment_finite(u_, b);
+#pragma omp for schedule(static) nowait
+    for (long b = 0; b < npr; ++b) finite_p = finite_p && segment_finite(pressure_, b);
+#pragma omp for schedule(static) nowait
+    for (long b = 0; b < ns; ++b) finite_s = finite_s && segment_finite(stress_, b);
+#pragma omp for schedule(static) nowait
     for (long p = 0; p < np; ++p)
       if (!particles_.x[p].allFinite() || !particles_.v[p].allFinite()) first = std::min(first, p);
-    if (first < np)
-      what = "non-finite particle position or velocity (particle " + std::to_string(first) + ")";
   }
+  std::string what;
+  if (!finite_u) what = "non-finite grid velocity";
+  if (!finite_p) what = "non-finite pressure";
+  if (!finite_s) what = "non-finite viscous stress";
+  if (what.empty() && first < np)
+    what = "non-finite particle position or velocity (particle " + std::to_string(first) + ")";
   if (what.empty()) return;
   std::ostringstream msg;
   msg << "t = " << time_ << " s (frame " << frame_ + 1 << "): " << what << " after " << after;

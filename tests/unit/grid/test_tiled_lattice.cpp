@@ -1,6 +1,7 @@
 // TiledLattice (reference/grid/tiled_lattice.hpp): values in tiles made on demand agree with a
 // dense lattice written the same way, and nothing outside the touched tiles is stored.
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <map>
 #include <random>
 
@@ -128,4 +129,38 @@ TEST_CASE("TiledLattice: tiles flagged on several threads (mark_box, make_tiles)
   // flags already made are left alone: a second make_tiles makes nothing
   flagged.make_tiles(flags, 2);
   CHECK(flagged.num_tiles() == serial.num_tiles());
+}
+
+TEST_CASE("TiledLattice: tiles made after a lattice is reset or destroyed take the released "
+          "memory and hold the new background",
+          "[unit]") {
+  const VecI<3> dims(24, 16, 16);
+  std::vector<const double*> released;
+  {
+    TiledLattice<3, double, 3> first(dims, -1.0);
+    first.touch_box(VecI<3>::Zero(), dims - VecI<3>::Ones());  // every tile
+    first.for_each_point([&](const VecI<3>&, const double* v) {
+      const_cast<double*>(v)[0] = 7.0;  // values the next lattice must not see
+    });
+    for (int t = 0; t < first.num_tile_slots(); ++t) released.push_back(first.find(first.tile_origin(t)));
+    first.reset(dims, -1.0);
+    CHECK(first.num_tiles() == 0);
+  }
+  // (the pool holds them now; another lattice's tiles, made serially and in parallel, reuse them)
+  TiledLattice<3, double, 3> serial(dims, 2.5), flagged(dims, 4.0);
+  serial.touch_box(VecI<3>::Zero(), VecI<3>(7, 7, 7));
+  std::vector<unsigned char> flags = flagged.tile_flags();
+  flagged.mark_box(VecI<3>(8, 0, 0), dims - VecI<3>::Ones(), flags);
+  flagged.make_tiles(flags, 2);
+  int reused = 0, differ = 0;
+  for (const TiledLattice<3, double, 3>* t : {&serial, &flagged})
+    for (int tile = 0; tile < t->num_tile_slots(); ++tile)
+      if (t->has_tile(tile))
+        reused += std::count(released.begin(), released.end(), t->find(t->tile_origin(tile))) > 0;
+  CHECK(reused == serial.num_tiles() + flagged.num_tiles());
+  serial.for_each_point([&](const VecI<3>&, const double* v) { differ += v[0] != 2.5 || v[2] != 2.5; });
+  flagged.for_each_point([&](const VecI<3>&, const double* v) { differ += v[0] != 4.0 || v[2] != 4.0; });
+  CHECK(differ == 0);
+  CHECK(serial.num_tiles() == 1);
+  CHECK(flagged.num_tiles() == 8);  // tiles 1..2 along x of 3 x 2 x 2
 }

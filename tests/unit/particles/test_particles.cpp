@@ -1048,8 +1048,10 @@ void check_splats_deterministic_above_serial_fallback() {
   const int threads = omp_get_max_threads();
   struct Result {
     VectorX cells, dofs, phi;
-    Particles<Dim> moved, moved_by_solid;
+    Particles<Dim> moved, moved_by_solid, corrected;
     long cells_projected = 0;
+    VectorX faces, faces_again, extrapolated;
+    std::vector<char> valid;
   };
   const auto run = [&](int t) {
     omp_set_num_threads(t);
@@ -1063,6 +1065,29 @@ void check_splats_deterministic_above_serial_fallback() {
             .cells;
     r.moved_by_solid = start;
     project_particle_density(r.moved_by_solid, grid, lattice, fluid, solid, walls<Dim>(), 1);
+    // position correction (the ball holds more than the rest density: compressed particles)
+    r.corrected = start;
+    correct_positions(r.corrected, grid, 0.01, solid, walls<Dim>());
+    // the faces' liquid fractions: all faces zeroed first, then (a second level set, the same
+    // written boxes) only what the first call wrote
+    LatticeSigns<Dim> signs;
+    classify_lattice_cells(grid, lattice, r.phi, signs);
+    std::array<WrittenBox<Dim>, Dim> written;
+    face_negative_fractions<Dim>(grid, lattice, r.phi, signs, r.faces, &written);
+    const VectorX phi_moved = liquid_phi_on_lattice(r.moved, grid, lattice, walls<Dim>());
+    LatticeSigns<Dim> signs_moved;
+    classify_lattice_cells(grid, lattice, phi_moved, signs_moved);
+    r.faces_again = r.faces;
+    face_negative_fractions<Dim>(grid, lattice, phi_moved, signs_moved, r.faces_again, &written);
+    // the velocity extrapolated from the faces inside the ball, three layers out
+    r.extrapolated = VectorX::Zero(grid.num_faces());
+    r.valid.assign(grid.num_faces(), 0);
+    for (int f = 0; f < grid.num_faces(); ++f) {
+      if (!(r.faces[f] > 0.5)) continue;
+      r.valid[f] = 1;
+      r.extrapolated[f] = std::sin(0.37 * f) + 0.1 * (f % 7);
+    }
+    extrapolate_velocity(grid, r.extrapolated, r.valid, 3);
     omp_set_num_threads(threads);
     return r;
   };
@@ -1091,13 +1116,31 @@ void check_splats_deterministic_above_serial_fallback() {
     }
     CHECK(moved > 0);
     CHECK(differ == 0);
+    long corrected = 0, corrected_differ = 0;
+    for (std::size_t i = 0; i < start.size(); ++i) {
+      corrected += one.corrected.x[i] != start.x[i];
+      corrected_differ += other.corrected.x[i] != one.corrected.x[i];
+    }
+    CHECK(corrected > 0);
+    CHECK(corrected_differ == 0);
+    CHECK(differing(other.faces, one.faces) == 0);
+    CHECK(differing(other.faces_again, one.faces_again) == 0);
+    CHECK(differing(other.extrapolated, one.extrapolated) == 0);
+    CHECK(other.valid == one.valid);
   }
+  // the passes above their serial fall-backs: the face lattices and the particles
+  CHECK(grid.num_faces() > kParallelMinWork);
+  CHECK(differing(one.faces_again, one.faces) > 0);
+  CHECK(std::count(one.valid.begin(), one.valid.end(), 1) >
+        std::count_if(one.faces.data(), one.faces.data() + one.faces.size(),
+                      [](double w) { return w > 0.5; }));
   set_core_monitor(monitor);
 }
 
 }  // namespace
 
-TEST_CASE("viscosity, level set and density projection splats of ~2e4 particles: identical with "
+TEST_CASE("viscosity, level set and density projection splats, position correction, the faces'"
+          " liquid fractions and the velocity extrapolation of ~2e4 particles: identical with "
           "1, 2, 3 and 5 threads; the cells' viscosity is the diagonal stress components'",
           "[unit]") {
   check_splats_deterministic_above_serial_fallback<2>();
