@@ -1580,11 +1580,16 @@ std::optional<Vec<Dim>> free_liquid_centre(const Particles<Dim>& particles,
     if (solids[i].isEmpty() || !reach.intersects(solids[i])) continue;
     if (i >= shapes.size() || !shapes[i]) return std::nullopt;
     const Shape<Dim>& shape = *shapes[i];
+    // (a particle outside the solid's bounds grown by the margin is farther than the margin from
+    // it: only the others need the signed distance)
+    const Box<Dim> grown(solids[i].min() - Vec<Dim>::Constant(margin),
+                         solids[i].max() + Vec<Dim>::Constant(margin));
     const long n = static_cast<long>(np);
     bool near = false;
 #pragma omp parallel for schedule(static) reduction(|| : near) num_threads(team_threads(n))
     for (long p = 0; p < n; ++p)
-      if (!near && !(shape.distance(particles.x[p]) > margin)) near = true;
+      if (!near && grown.contains(particles.x[p]) && !(shape.distance(particles.x[p]) > margin))
+        near = true;
     if (near) return std::nullopt;
   }
   return Vec<Dim>(moment / mass);
