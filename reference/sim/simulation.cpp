@@ -1550,12 +1550,15 @@ void Simulation<Dim>::resolve_drift_velocity() {
 namespace {
 
 /// The liquid's mass-weighted centre, or nothing when the liquid may touch something: a particle
-/// within `margin` of a face of the domain (any kind: a wall, an open face, a periodic seam) or
-/// the bounds of all particles within `margin` of a solid's bounds. Serial sums in particle order
-/// (the same bits for any thread count).
+/// within `margin` of a face of the domain (any kind: a wall, an open face, a periodic seam), or,
+/// for a solid whose bounds the particles' bounds grown by `margin` meet, a particle whose signed
+/// distance to that solid is at most `margin` (a liquid falling inside a container is free until
+/// it comes near the container's wall). Serial sums in particle order; the distance test is an
+/// "any" over the particles (the same answer and bits for any thread count).
 template <int Dim>
 std::optional<Vec<Dim>> free_liquid_centre(const Particles<Dim>& particles,
                                            const MacGrid<Dim>& grid,
+                                           const std::vector<ShapePtr<Dim>>& shapes,
                                            const std::vector<Box<Dim>>& solids, double margin) {
   const std::size_t np = particles.size();
   if (np == 0) return std::nullopt;
@@ -1573,8 +1576,22 @@ std::optional<Vec<Dim>> free_liquid_centre(const Particles<Dim>& particles,
     if (!(bounds.min()[a] - margin > domain.min()[a] && bounds.max()[a] + margin < domain.max()[a]))
       return std::nullopt;
   Box<Dim> reach(bounds.min() - Vec<Dim>::Constant(margin), bounds.max() + Vec<Dim>::Constant(margin));
-  for (const auto& b : solids)
-    if (!b.isEmpty() && reach.intersects(b)) return std::nullopt;
+  for (std::size_t i = 0; i < solids.size(); ++i) {
+    if (solids[i].isEmpty() || !reach.intersects(solids[i])) continue;
+    if (i >= shapes.size() || !shapes[i]) return std::nullopt;
+    const Shape<Dim>& shape = *shapes[i];
+    // (a particle outside the solid's bounds grown by the margin is farther than the margin from
+    // it: only the others need the signed distance)
+    const Box<Dim> grown(solids[i].min() - Vec<Dim>::Constant(margin),
+                         solids[i].max() + Vec<Dim>::Constant(margin));
+    const long n = static_cast<long>(np);
+    bool near = false;
+#pragma omp parallel for schedule(static) reduction(|| : near) num_threads(team_threads(n))
+    for (long p = 0; p < n; ++p)
+      if (!near && grown.contains(particles.x[p]) && !(shape.distance(particles.x[p]) > margin))
+        near = true;
+    if (near) return std::nullopt;
+  }
   return Vec<Dim>(moment / mass);
 }
 
@@ -1592,14 +1609,14 @@ void Simulation<Dim>::correct_volume(double dt) {
   std::vector<Vec<Dim>> before;
   if (local) before = particles_.x;
   // (departures item 15) a liquid that touches nothing (a drop in flight, more than a cell from every face of
-  // the domain and every solid's bounds) has no wall or body to push against: line 15's moves
+  // the domain and from every solid) has no wall or body to push against: line 15's moves
   // rearrange it and may not carry it, so its centre of mass is put back where it was after them
   // (the density projection's displacement over a falling drop is not zero-mean: it lifted the
   // 3D drops of Fig. 10 by 1e-3 dx per frame, energy no force paid for)
   const double free_margin = grid_.dx();
   const std::optional<Vec<Dim>> free_centre =
       switches_.line15_keeps_free_centre
-          ? free_liquid_centre(particles_, grid_, solid_field_boxes_, free_margin)
+          ? free_liquid_centre(particles_, grid_, solid_field_shapes_, solid_field_boxes_, free_margin)
           : std::nullopt;
   if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
   account(frame_ledger_.position_correction, [&] { return liquid_potential_energy(); });

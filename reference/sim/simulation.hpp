@@ -122,8 +122,9 @@ struct StageSwitches {
   /// velocity closes them and its energy shows in the solve's column of the ledger. A measurement
   /// switch (docs/particles.md, "Volume correction through the solve"); 0: listed, not used.
   double volume_source_gain = 1.0;
-  /// (docs/derivations.md, departures item 15) A liquid that touches nothing (more than a cell from every face of the domain and every
-  /// solid's bounds: a drop in flight) keeps its centre of mass through line 15's moves
+  /// (docs/derivations.md, departures item 15) A liquid that touches nothing (more than a cell
+  /// from every face of the domain and from every solid: a drop in flight, also inside a
+  /// container) keeps its centre of mass through line 15's moves
   /// (correct_volume; docs/particles.md "A drop in flight: line 15 may not carry it"). false:
   /// the moves may carry it (the behaviour before; a comparison switch).
   bool line15_keeps_free_centre = true;
