@@ -1549,6 +1549,19 @@ void Simulation<Dim>::resolve_drift_velocity() {
 
 namespace {
 
+/// The particles' mass-weighted centre (nothing without mass), summed serially in particle order.
+template <int Dim>
+std::optional<Vec<Dim>> mass_centre(const Particles<Dim>& particles) {
+  Vec<Dim> moment = Vec<Dim>::Zero();
+  double mass = 0.0;
+  for (std::size_t p = 0; p < particles.size(); ++p) {
+    moment += particles.mass[p] * particles.x[p];
+    mass += particles.mass[p];
+  }
+  if (!(mass > 0.0)) return std::nullopt;
+  return Vec<Dim>(moment / mass);
+}
+
 /// The liquid's mass-weighted centre, or nothing when the liquid may touch something: a particle
 /// within `margin` of a face of the domain (any kind: a wall, an open face, a periodic seam), or,
 /// for a solid whose bounds the particles' bounds grown by `margin` meet, a particle whose signed
@@ -1563,14 +1576,7 @@ std::optional<Vec<Dim>> free_liquid_centre(const Particles<Dim>& particles,
   const std::size_t np = particles.size();
   if (np == 0) return std::nullopt;
   Box<Dim> bounds;
-  Vec<Dim> moment = Vec<Dim>::Zero();
-  double mass = 0.0;
-  for (std::size_t p = 0; p < np; ++p) {
-    bounds.extend(particles.x[p]);
-    moment += particles.mass[p] * particles.x[p];
-    mass += particles.mass[p];
-  }
-  if (!(mass > 0.0)) return std::nullopt;
+  for (std::size_t p = 0; p < np; ++p) bounds.extend(particles.x[p]);
   const Box<Dim> domain = grid.domain_box();
   for (int a = 0; a < Dim; ++a)
     if (!(bounds.min()[a] - margin > domain.min()[a] && bounds.max()[a] + margin < domain.max()[a]))
@@ -1592,7 +1598,7 @@ std::optional<Vec<Dim>> free_liquid_centre(const Particles<Dim>& particles,
         near = true;
     if (near) return std::nullopt;
   }
-  return Vec<Dim>(moment / mass);
+  return mass_centre(particles);
 }
 
 }  // namespace
@@ -1626,17 +1632,12 @@ void Simulation<Dim>::correct_volume(double dt) {
                                  boundary_, 1, switches_.density_projection_surface_deficits)
             .surface_deficits;
   if (free_centre) {
-    // the centre after the moves, in the same order of sums
-    Vec<Dim> moment = Vec<Dim>::Zero();
-    double mass = 0.0;
-    for (std::size_t p = 0; p < particles_.size(); ++p) {
-      moment += particles_.mass[p] * particles_.x[p];
-      mass += particles_.mass[p];
-    }
-    const Vec<Dim> shift = *free_centre - moment / mass;
     // (the moves are a small part of a cell, far below the margin: the shifted liquid still
     // touches nothing)
-    for (auto& x : particles_.x) x += shift;
+    if (const auto after = mass_centre(particles_)) {
+      const Vec<Dim> shift = *free_centre - *after;
+      for (auto& x : particles_.x) x += shift;
+    }
   }
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
   if (pay) {
