@@ -262,6 +262,27 @@ TEST_CASE("potential energy in the frame statistics: a column of water and a dyn
   }
 }
 
+namespace {
+
+/// A ball of inviscid liquid (radius 0.15, centre height 0.65) thrown sideways and down at
+/// (0.5, -1) m/s through the air of column_scene's tank, 2 frames at 50 fps.
+nlohmann::json thrown_drop_scene(int dim, int n) {
+  nlohmann::json j = column_scene(dim, n, 0.5, "matrixfree");
+  std::vector<double> centre(dim, 0.5), velocity(dim, 0.0);
+  centre[1] = 0.65;
+  velocity[0] = 0.5;
+  velocity[1] = -1.0;
+  j["liquids"] = {{{"name", "drop"},
+                   {"shape", {{"type", "sphere"}, {"center", centre}, {"radius", 0.15}}},
+                   {"density", 1000.0},
+                   {"velocity", velocity}}};
+  j["probes"] = nlohmann::json::array();
+  j["time"] = {{"fps", 50}, {"frames", 2}, {"cfl", 3.0}, {"max_dt", 0.01}};
+  return j;
+}
+
+}  // namespace
+
 TEST_CASE("a drop thrown through the air keeps its mechanical energy: the first half drift goes "
           "through the initial velocity",
           "[validation]") {
@@ -275,17 +296,7 @@ TEST_CASE("a drop thrown through the air keeps its mechanical energy: the first 
   // surface's small pressures and line 15 on the jittered seeding).
   for (int dim : {2, 3}) {
     const int n = dim == 2 ? 32 : 16;
-    nlohmann::json j = column_scene(dim, n, 0.5, "matrixfree");
-    std::vector<double> centre(dim, 0.5), velocity(dim, 0.0);
-    centre[1] = 0.65;
-    velocity[0] = 0.5;
-    velocity[1] = -1.0;
-    j["liquids"] = {{{"name", "drop"},
-                     {"shape", {{"type", "sphere"}, {"center", centre}, {"radius", 0.15}}},
-                     {"density", 1000.0},
-                     {"velocity", velocity}}};
-    j["probes"] = nlohmann::json::array();
-    j["time"] = {{"fps", 50}, {"frames", 2}, {"cfl", 3.0}, {"max_dt", 0.01}};
+    nlohmann::json j = thrown_drop_scene(dim, n);
     auto sim = make_simulation(parse_scene(j, "drop", "."));
     const FrameStats s0 = sim->current_stats();
     const double e0 = s0.kinetic_energy_liquid + s0.potential_energy_liquid;
@@ -317,17 +328,7 @@ TEST_CASE("line 15 does not carry a liquid that touches nothing: a drop in fligh
   // bounds) did not find the drop free; the solids' distance does.
   for (int dim : {2, 3}) {
     const int n = dim == 2 ? 32 : 16;
-    nlohmann::json j = column_scene(dim, n, 0.5, "matrixfree");
-    std::vector<double> centre(dim, 0.5), velocity(dim, 0.0);
-    centre[1] = 0.65;
-    velocity[0] = 0.5;
-    velocity[1] = -1.0;
-    j["liquids"] = {{{"name", "drop"},
-                     {"shape", {{"type", "sphere"}, {"center", centre}, {"radius", 0.15}}},
-                     {"density", 1000.0},
-                     {"velocity", velocity}}};
-    j["probes"] = nlohmann::json::array();
-    j["time"] = {{"fps", 50}, {"frames", 2}, {"cfl", 3.0}, {"max_dt", 0.01}};
+    nlohmann::json j = thrown_drop_scene(dim, n);
     // and the same drop inside a closed static shell (the container of
     // viscous-bunny-into-sphere-3d), whose bounds hold the whole liquid: free all the same
     for (bool container : {false, true}) {
