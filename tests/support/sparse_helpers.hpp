@@ -2,6 +2,7 @@
 /// \file sparse_helpers.hpp
 /// Small sparse test matrices shared by tests and benchmarks.
 
+#include <cstring>
 #include <vector>
 
 #include <Eigen/SparseCore>
@@ -9,6 +10,19 @@
 #include "reference/core/common.hpp"
 
 namespace monolith::testing {
+
+/// True when a and b have the same pattern and every value the same bits (memcmp: -0 differs
+/// from +0, a NaN equals itself), for checks that a product or an assembly is bitwise another's.
+inline bool same_sparse_bits(const SparseMatrix& a, const SparseMatrix& b) {
+  if (a.rows() != b.rows() || a.cols() != b.cols() || a.nonZeros() != b.nonZeros()) return false;
+  for (int i = 0; i <= a.rows(); ++i)
+    if (a.outerIndexPtr()[i] != b.outerIndexPtr()[i]) return false;
+  for (int e = 0; e < a.nonZeros(); ++e)
+    if (a.innerIndexPtr()[e] != b.innerIndexPtr()[e] ||
+        std::memcmp(a.valuePtr() + e, b.valuePtr() + e, sizeof(double)) != 0)
+      return false;
+  return true;
+}
 
 /// The 5-point matrix on m x m nodes (node (i, j) is row i + m j): -1 between grid neighbours,
 /// diagonal 4 + extra[r] in row r (extra > 0: symmetric positive definite; a small constant

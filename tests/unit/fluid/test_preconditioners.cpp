@@ -14,6 +14,7 @@
 #include "reference/fluid/velocity_operator.hpp"
 #include "reference/solvers/pcg.hpp"
 #include "reference/fluid/stokes_system.hpp"
+#include "tests/support/sparse_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -927,16 +928,6 @@ TEST_CASE("the set-up's assembly: B^T, V and A22's diagonal the bits of the plai
   o.eta = 1000.0;
   const auto sc = make_case<Dim>(o);
   const auto s = make_system(sc);
-  auto same_bits = [](const SparseMatrix& a, const SparseMatrix& b) {
-    if (a.rows() != b.rows() || a.cols() != b.cols() || a.nonZeros() != b.nonZeros()) return false;
-    for (int i = 0; i <= a.rows(); ++i)
-      if (a.outerIndexPtr()[i] != b.outerIndexPtr()[i]) return false;
-    for (int e = 0; e < a.nonZeros(); ++e)
-      if (a.innerIndexPtr()[e] != b.innerIndexPtr()[e] ||
-          std::memcmp(a.valuePtr() + e, b.valuePtr() + e, sizeof(double)) != 0)
-        return false;
-    return true;
-  };
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);
   const StokesFactors f1 = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf, 0.01);
@@ -945,8 +936,8 @@ TEST_CASE("the set-up's assembly: B^T, V and A22's diagonal the bits of the plai
   omp_set_num_threads(threads);
   REQUIRE(f1.face.size() > 4096);
   REQUIRE(f1.size() > 4096);
-  CHECK(same_bits(f1.b_transpose, f2.b_transpose));
-  CHECK(same_bits(f1.b, f2.b));
+  CHECK(testing::same_sparse_bits(f1.b_transpose, f2.b_transpose));
+  CHECK(testing::same_sparse_bits(f1.b, f2.b));
   // B^T from the stencils by triplets (repeated faces summed in the stencil's order)
   std::vector<int> active(sc.grid.num_faces(), -1);
   for (std::size_t q = 0; q < f1.face.size(); ++q) active[f1.face[q]] = static_cast<int>(q);
@@ -957,7 +948,7 @@ TEST_CASE("the set-up's assembly: B^T, V and A22's diagonal the bits of the plai
   SparseMatrix bt(f1.size(), static_cast<int>(f1.face.size()));
   bt.setFromTriplets(t.begin(), t.end());
   bt.makeCompressed();
-  CHECK(same_bits(f1.b_transpose, bt));
+  CHECK(testing::same_sparse_bits(f1.b_transpose, bt));
   // V on 1 and 2 threads, with and without K^-1 given, against Eigen's products
   const VectorX penalty = VectorX::LinSpaced(f1.num_pressure, 1e-4, 1e-2);
   const SparseMatrix kinv = block_diagonal_inverse(f1.compliance);
@@ -967,8 +958,8 @@ TEST_CASE("the set-up's assembly: B^T, V and A22's diagonal the bits of the plai
   const SparseMatrix v2 = velocity_operator(f1, penalty);
   const SparseMatrix v3 = velocity_operator(f1, penalty, &kinv);
   omp_set_num_threads(threads);
-  CHECK(same_bits(v1, v2));
-  CHECK(same_bits(v1, v3));
+  CHECK(testing::same_sparse_bits(v1, v2));
+  CHECK(testing::same_sparse_bits(v1, v3));
   VectorX dinv_p = penalty.cwiseInverse();
   SparseMatrix dinv(f1.size(), f1.size());
   {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "reference/solvers/multigrid.hpp"
+#include "tests/support/sparse_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -36,16 +37,6 @@ SparseMatrix random_sparse(int m, int n, int per_row, unsigned seed) {
   return a;
 }
 
-bool same_bits(const SparseMatrix& a, const SparseMatrix& b) {
-  if (a.rows() != b.rows() || a.cols() != b.cols() || a.nonZeros() != b.nonZeros()) return false;
-  for (int i = 0; i <= a.rows(); ++i)
-    if (a.outerIndexPtr()[i] != b.outerIndexPtr()[i]) return false;
-  for (int e = 0; e < a.nonZeros(); ++e)
-    if (a.innerIndexPtr()[e] != b.innerIndexPtr()[e] ||
-        std::memcmp(a.valuePtr() + e, b.valuePtr() + e, sizeof(double)) != 0)
-      return false;
-  return true;
-}
 
 }  // namespace
 
@@ -70,11 +61,11 @@ TEST_CASE("sparse_row_product and galerkin_product: Eigen's products bit for bit
     for (int t = 1; t <= 2; ++t) {
       omp_set_num_threads(t);
       const SparseMatrix ap = sparse_row_product(a, p, false);
-      CHECK(same_bits(ap, ap_eigen));
+      CHECK(testing::same_sparse_bits(ap, ap_eigen));
       const SparseMatrix ap_dropped = sparse_row_product(a, p, true);
       CHECK(ap_dropped.nonZeros() < ap.nonZeros());
       CHECK((SparseMatrix(ap_dropped - ap)).norm() == 0.0);
-      CHECK(same_bits(galerkin_product(a, p), c_eigen));
+      CHECK(testing::same_sparse_bits(galerkin_product(a, p), c_eigen));
     }
     omp_set_num_threads(threads);
   }
