@@ -1175,13 +1175,16 @@ void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   // itself, so the shallower layers here change nothing) and for the faces no particle read (the
   // extrapolation did not write them: the solve's values); then the faces not reached are NaN
   // while the particles read the velocity (advect), so that a read shows in the particle's values
+  // The copy is u_'s own buffer (a swap: the same values, no pass), and u_ is written anew in
+  // one stream: the reached faces' values, NaN elsewhere (issue 20, band17: the copy read u_ and
+  // wrote both vectors, three face-sized streams per step, 202 MB each at the paper's
+  // 256x128x256 grid)
   const int nf = grid_.num_faces();
-  reached_u_.resize(nf);
+  reached_u_.swap(u_);
+  u_.resize(nf);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int f = 0; f < nf; ++f) {
-    reached_u_[f] = u_[f];
-    if (!face_flags_[f]) u_[f] = std::numeric_limits<double>::quiet_NaN();
-  }
+  for (int f = 0; f < nf; ++f) u_[f] = face_flags_[f] ? reached_u_[f] : nan;
 }
 
 template <int Dim>
@@ -1280,6 +1283,31 @@ bool Simulation<Dim>::wall_face(int f) const {
 }
 
 template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> Simulation<Dim>::solid_face_box(int axis) const {
+  // (docs/derivations.md, "Passes restricted to boxes") W_F^u = 1 - W_S^u is 0 off the walls only where the solids' fraction of the face's
+  // control volume is 1 > 0. Every such fraction is 0 unless a lattice point of that control
+  // volume has a solids' level set < 0: lattice_cube_negative_fraction (fluid_face_weights, the
+  // static solids) and solid_weights' parts per body (each body's level set >= the union's, so
+  // a negative point of a body's is one of the union's) count negative corners and return 0
+  // without one. Those points lie in [solid_lo_, solid_hi_] (the box of the solids' negative
+  // points, made with W_F^u). The control volume of face c of `axis` spans the lattice points
+  // p - 1 .. p + 1 per axis b, p = 2 c_b (+ 1 off `axis`), mirrored into the lattice at a
+  // domain side (staying within p - 1 .. p + 1) or wrapped on a periodic axis: a face whose
+  // coordinate b has 2 c_b + 2 < lo_b or 2 c_b - 2 > hi_b (one point of margin each side) reads
+  // no point of the box. Periodic axes: every coordinate (the reads wrap). lo > hi: no face.
+  const VecI<Dim> fdims = grid_.face_dims(axis);
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = fdims - VecI<Dim>::Ones();
+  if ((solid_lo_.array() > solid_hi_.array()).any()) return {lo, -VecI<Dim>::Ones()};
+  for (int b = 0; b < Dim; ++b) {
+    if (grid_.periodic(b)) continue;
+    // c >= (lo_b - 2) / 2 rounded down, c <= (hi_b + 2) / 2 rounded down (lo_b, hi_b >= 0)
+    lo[b] = std::max(0, (solid_lo_[b] - 2) / 2 - 1);
+    hi[b] = std::min(fdims[b] - 1, (solid_hi_[b] + 2) / 2);
+  }
+  return {lo, hi};
+}
+
+template <int Dim>
 void Simulation<Dim>::apply_wall_and_solid_velocities() {
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   // zero the normal velocity on walls, give fully solid faces their solid's velocity (zero for
@@ -1292,26 +1320,39 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   // with the same values
   // (every axis in one parallel region, the rows of each split statically: the axes' faces are
   // distinct, so no barrier between them)
+  // Only the faces whose W_F^u can be 0 off the walls are visited (issue 20, band17: the pass
+  // over every face was box-sized work per step): solid_face_box
+  // (StageSwitches::restricted_passes off: every face, the dense pass the tests compare with)
+  const bool restricted = switches_.restricted_passes;
+  if (!restricted || !(solid_lo_.array() > solid_hi_.array()).any()) {
 #pragma omp parallel num_threads(process_threads())
   for (int axis = 0; axis < Dim; ++axis) {
-    const VecI<Dim> fdims = grid_.face_dims(axis);
-    const int nx = fdims[0], rows = fdims.prod() / nx, offset = grid_.face_offset(axis);
+    const auto [flo, fhi] = restricted ? solid_face_box(axis)
+                                       : std::pair<VecI<Dim>, VecI<Dim>>(
+                                             VecI<Dim>::Zero(),
+                                             grid_.face_dims(axis) - VecI<Dim>::Ones());
+    const int nx = fhi[0] - flo[0] + 1;
+    VecI<Dim> row_dims = fhi - flo + VecI<Dim>::Ones();
+    row_dims[0] = 1;
+    const int rows = (flo.array() > fhi.array()).any() ? 0 : row_dims.prod();
     const bool walls = !grid_.periodic(axis);
     const bool wall_lo = walls && boundary_[2 * axis] == BoundaryType::wall;
     const bool wall_hi = walls && boundary_[2 * axis + 1] == BoundaryType::wall;
     const int top = grid_.cells()[axis];
 #pragma omp for schedule(static) nowait
     for (int r = 0; r < rows; ++r) {
-      VecI<Dim> coord = lattice_coord<Dim>(r * nx, fdims);
-      const int first = offset + r * nx;
-      for (int x = 0; x < nx; ++x) {
-        const int f = first + x;
+      VecI<Dim> coord = flo + lattice_coord<Dim>(r, row_dims);
+      const int first = grid_.face_index(axis, coord);
+      for (int i = 0; i < nx; ++i) {
+        const int f = first + i;
+        const int x = flo[0] + i;
         if (weights_.fluid_face[f] != 0.0) continue;
         coord[0] = x;
         if ((wall_lo && coord[axis] == 0) || (wall_hi && coord[axis] == top)) continue;
         u_[f] = coupled_ ? solid_velocity(grid_.face_center(axis, coord), bounds)[axis] : 0.0;
       }
     }
+  }
   }
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
@@ -1399,12 +1440,23 @@ void Simulation<Dim>::advect(double dt) {
     // (with drift_guarded, the faces reached are kept for the next step's first half drift)
     const int nf = grid_.num_faces();
     const bool keep = drift_guarded();
-    if (keep) drift_reached_.resize(nf);
+    if (keep) {
+      drift_reached_.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
-    for (int f = 0; f < nf; ++f) {
-      const bool unreached = std::isnan(u_[f]);
-      if (keep) drift_reached_[f] = !unreached;
-      if (unreached) u_[f] = reached_u_[f];
+      for (int f = 0; f < nf; ++f) {
+        const bool unreached = std::isnan(u_[f]);
+        drift_reached_[f] = !unreached;
+        if (unreached) u_[f] = reached_u_[f];
+      }
+    } else {
+      // the same values the other way round: the faces written since the guard (not NaN: the
+      // reached ones, the walls' and solids' set after it, a deeper extrapolation's) go into the
+      // copy, which becomes u_ (one face-sized read and a write per such face instead of a
+      // write of nearly every face from a second vector); the copy is released below
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+      for (int f = 0; f < nf; ++f)
+        if (!std::isnan(u_[f])) reached_u_[f] = u_[f];
+      u_.swap(reached_u_);
     }
     throw_if_unread(unread_, time_, frame_ + 1, "");
     // the guard's copies are dead until the next step's extrapolation writes them again (u_ has

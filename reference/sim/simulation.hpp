@@ -270,6 +270,10 @@ class Simulation : public AnySimulation {
   const VectorX& liquid_phi() const { return liquid_phi_; }
   /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis.
   const PressureWeights& weights() const { return weights_; }
+  /// The inclusive box of `axis`'s face coordinates outside which no face off the walls has
+  /// W_F^u = 0 (from the box of the solids' negative lattice points; lo > hi: none), the faces
+  /// apply_wall_and_solid_velocities visits (docs/derivations.md, "Passes restricted to boxes").
+  std::pair<VecI<Dim>, VecI<Dim>> solid_face_box(int axis) const;
   /// Face velocities (MacGrid face numbering).
   const VectorX& velocity() const { return u_; }
   /// Cell pressures of the last solve (Pa; zero before the first step).
