@@ -685,6 +685,12 @@ long grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
 
 // --- extrapolation -------------------------------------------------------------------------------
 
+/// extrapolate_velocity with optional boxes (both null: every face) outside which valid is 0.
+template <int Dim>
+void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
+                             int layers, const std::array<VecI<Dim>, Dim>* box_lo,
+                             const std::array<VecI<Dim>, Dim>* box_hi);
+
 /// Breadth-first extrapolation: per layer, every invalid face with valid same-axis neighbours
 /// (+-1 along each axis, wrapped on periodic axes) of the previous layer takes their average.
 /// The first layer visits the invalid neighbours of the given valid faces; a later layer can fill only faces next to those the
@@ -693,6 +699,20 @@ long grid_to_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, cons
 template <int Dim>
 void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
                           int layers) {
+  extrapolate_velocity_in<Dim>(grid, u, valid, layers, nullptr, nullptr);
+}
+
+template <int Dim>
+void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
+                          int layers, const std::array<VecI<Dim>, Dim>& box_lo,
+                          const std::array<VecI<Dim>, Dim>& box_hi) {
+  extrapolate_velocity_in<Dim>(grid, u, valid, layers, &box_lo, &box_hi);
+}
+
+template <int Dim>
+void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
+                             int layers, const std::array<VecI<Dim>, Dim>* box_lo,
+                             const std::array<VecI<Dim>, Dim>* box_hi) {
   const int nf = grid.num_faces();
   valid.resize(nf, 0);
   // the same-axis neighbours of face f (each once, in a fixed order), -1 where there is none
@@ -764,7 +784,43 @@ void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char
   // barrier, the candidates listed per thread over static (contiguous, ascending) blocks of
   // faces and joined in thread order: gather_candidates' list, in one parallel region)
   std::vector<int> candidates;
-  {
+  if (box_lo != nullptr) {
+    // (issue 20, band17) the same two passes over the boxes' faces only (every flag outside them
+    // is 0: no source there, nothing to make 0 / 1), row by row: the rows in ascending face
+    // order, split statically and joined in thread order, so the list is the one of the pass
+    // over every face (sources in ascending order, each with its candidates in its order)
+    std::vector<std::pair<int, int>> rows;  // (first face, faces in the row)
+    long work = 0;
+    for (int axis = 0; axis < Dim; ++axis) {
+      const VecI<Dim> lo = (*box_lo)[axis], hi = (*box_hi)[axis];
+      if ((lo.array() > hi.array()).any()) continue;
+      VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
+      const int nx = row_dims[0];
+      row_dims[0] = 1;
+      for (int r = 0; r < row_dims.prod(); ++r)
+        rows.push_back({grid.face_index(axis, lo + lattice_coord<Dim>(r, row_dims)), nx});
+      work += static_cast<long>(row_dims.prod()) * nx;
+    }
+    const int count = static_cast<int>(rows.size());
+    const int team = team_threads(work);
+    std::vector<std::vector<int>> part(team);
+#pragma omp parallel num_threads(team)
+    {
+#pragma omp for schedule(static)
+      for (int r = 0; r < count; ++r)
+        for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
+          if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
+      std::vector<int>& out = part[omp_get_thread_num()];
+#pragma omp for schedule(static) nowait
+      for (int r = 0; r < count; ++r)
+        for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
+          if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, out);
+    }
+    std::size_t total = 0;
+    for (const auto& list : part) total += list.size();
+    candidates.reserve(total);
+    for (const auto& list : part) candidates.insert(candidates.end(), list.begin(), list.end());
+  } else {
     const int team = team_threads(nf);
     std::vector<std::vector<int>> part(team);
 #pragma omp parallel num_threads(team)
@@ -2589,6 +2645,9 @@ double max_particle_speed(const Particles<Dim>& particles) {
   template long grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&,                \
                                   std::vector<char>*);                                             \
   template void extrapolate_velocity(const MacGrid<D>&, VectorX&, std::vector<char>&, int);        \
+  template void extrapolate_velocity<D>(const MacGrid<D>&, VectorX&, std::vector<char>&, int,      \
+                                        const std::array<VecI<D>, D>&,                             \
+                                        const std::array<VecI<D>, D>&);                            \
   template void divergence_free_air_velocity(const MacGrid<D>&, const SampleLattice<D>&,          \
                                             const VectorX&, const VectorX&,                       \
                                             const std::vector<char>&,                             \

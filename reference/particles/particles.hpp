@@ -106,6 +106,13 @@ void divergence_free_air_velocity(const MacGrid<Dim>& grid, const SampleLattice<
 template <int Dim>
 void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
                           int layers);
+/// The same, given per axis an inclusive box of face coordinates (box_lo[a] > box_hi[a] on some
+/// axis: none) outside which every valid[f] is 0: the first layer's search visits the boxes'
+/// faces instead of every face (issue 20); the same values, flags and order of work.
+template <int Dim>
+void extrapolate_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<char>& valid,
+                          int layers, const std::array<VecI<Dim>, Dim>& box_lo,
+                          const std::array<VecI<Dim>, Dim>& box_hi);
 
 /// Moves particles through the (extrapolated) grid velocity u for dt with a second-order
 /// Runge-Kutta scheme, in substeps of at most half a cell so that thin solids are not tunnelled

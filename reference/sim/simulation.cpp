@@ -1068,7 +1068,12 @@ void Simulation<Dim>::extrapolate_into_air() {
   ScopedTimer timer(stats_.timing[FramePhase::extrapolation]);
   std::vector<char>& carried = face_flags_;
   carried = mass_faces_;
-  extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
+  // (the faces with mass lie in mass_boxes_: the first layer searches those boxes, band17)
+  if (switches_.restricted_passes && mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_)
+    extrapolate_velocity<Dim>(grid_, u_, carried, kAirVelocityLayers, mass_boxes_.lo,
+                              mass_boxes_.hi);
+  else
+    extrapolate_velocity(grid_, u_, carried, kAirVelocityLayers);
 }
 
 template <int Dim>
@@ -1169,7 +1174,13 @@ void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   // come from are made again before it, at the frame's end)
   drop_drift_guard();
   if (drift_guarded()) drift_trusted_ = face_flags_;
-  extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
+  // (trusted_faces found them in trusted_boxes when it can: the first layer searches those boxes,
+  // band17; the same state, so the same boxes)
+  FaceBoxes boxes;
+  if (trusted_boxes(boxes))
+    extrapolate_velocity<Dim>(grid_, u_, face_flags_, reached_layers_, boxes.lo, boxes.hi);
+  else
+    extrapolate_velocity(grid_, u_, face_flags_, reached_layers_);
   if (!guards_reads()) return;
   // a copy for a deeper extrapolation (which reads only the trusted faces and the layers it fills
   // itself, so the shallower layers here change nothing) and for the faces no particle read (the
