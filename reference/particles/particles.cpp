@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 
@@ -1441,13 +1442,18 @@ enum ProjectionValue { kTarget = 0, kWet = 1, kRow = 2, kProjectionValues = 3 };
 /// hat integrals 1/8, 3/8, 3/8, 1/8. A half cell outside a non-periodic domain passes its weight
 /// to the adjacent inside one, as the clamped particle stencil does.
 ///
-/// Written for the cells of one tile of `values` (component `slot`), from the lattice values
-/// `corner_value(point)`: the half cells under the tile's hats (2 x 8 + 2 per axis) and their
-/// fractions, then the three (two) passes of the taps along the axes, each output the same sum
-/// in the same order as a pass over the whole grid would form it (so the same bits).
-template <int Dim, class Values, class CornerValue>
-void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int tile, int slot,
-                                  CornerValue&& corner_value) {
+/// Written for the cells of one tile of `values`, for each of `Slots` components: component
+/// slot[s] from the lattice values corner_values(point, out)'s out[s] (one call per point
+/// gives every component's value, so lookups they share are made once): the half cells under
+/// the tile's hats (2 x 8 + 2 per axis) and their fractions, then the three (two) passes of the
+/// taps along the axes, each output the same sum in the same order as a pass over the whole grid
+/// would form it (so the same bits). A component whose gathered values equal an earlier one's
+/// bit for bit takes that one's cells (the same function of the same values); one whose values
+/// are all of one sign takes 0 or 1 (below).
+template <int Dim, int Slots, class Values, class CornerValues>
+void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int tile,
+                                  const std::array<int, Slots>& slot,
+                                  CornerValues&& corner_values) {
   constexpr int kTile = Values::kTile;
   constexpr int kHalf = 2 * kTile + 2;  // half cells under the hats of one tile's cells, per axis
   constexpr int kCorners = 1 << Dim;
@@ -1473,69 +1479,101 @@ void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int 
       }
     }
   }
-  // the lattice values at the gathered points (axis 0 fastest)
+  // the lattice values at the gathered points (axis 0 fastest), per component
   int gathered = 1;
   for (int a = 0; a < Dim; ++a) gathered *= points[a];
-  std::vector<double> value(gathered);
+  std::array<std::vector<double>, Slots> value;
+  for (auto& v : value) v.resize(gathered);
   {
     std::array<int, Dim> k{};
+    std::array<double, Slots> out;
     for (int g = 0; g < gathered; ++g) {
       VecI<Dim> c;
       for (int a = 0; a < Dim; ++a) c[a] = point[a][k[a]];
-      value[g] = corner_value(c);
+      corner_values(c, out.data());
+      for (int s = 0; s < Slots; ++s) value[s][g] = out[s];
       for (int a = 0; a < Dim; ++a) {
         if (++k[a] < points[a]) break;
         k[a] = 0;
       }
     }
   }
-  // liquid fractions of the half cells (axis 0 fastest)
   int count = 1;
   for (int a = 0; a < Dim; ++a) count *= kHalf;
-  std::vector<double> cur(count), next;
-  {
-    std::array<int, Dim> l{};
-    for (int h = 0; h < count; ++h) {
-      std::array<double, kCorners> corner;
-      for (int b = 0; b < kCorners; ++b) {
-        int g = 0;
-        for (int a = Dim - 1; a >= 0; --a)
-          g = g * points[a] + (((b >> a) & 1) ? hi_point[a][l[a]] : lo_point[a][l[a]]);
-        corner[b] = value[g];
-      }
-      cur[h] = lattice_cell_negative_fraction<Dim>(corner);
-      for (int a = 0; a < Dim; ++a) {
-        if (++l[a] < kHalf) break;
-        l[a] = 0;
+  std::vector<double> cur, next;
+  for (int s = 0; s < Slots; ++s) {
+    // the same values as an earlier component (bit for bit: memcmp, so -0 and NaN patterns
+    // count as they are): its cells
+    int same = -1;
+    for (int e = 0; e < s && same < 0; ++e)
+      if (std::memcmp(value[e].data(), value[s].data(), sizeof(double) * gathered) == 0) same = e;
+    if (same >= 0) {
+      const int from = slot[same], to = slot[s];
+      values.for_each_point_in_tile(tile, [&](const VecI<Dim>&, double* v) { v[to] = v[from]; });
+      continue;
+    }
+    // values all of one sign need no half cell: every half cell's fraction is 0 (no value
+    // below 0) or 1 (every value below 0), as lattice_cell_negative_fraction returns them, and
+    // the taps (1/8, 3/8, 3/8, 1/8) sum zeros to +0 and ones to exactly 1 (every partial sum is
+    // a multiple of 1/8), so every cell of the tile takes 0 or 1, bit for bit as the passes
+    // below would give it (the band's tiles in the air or deep in the liquid)
+    {
+      int negatives = 0;
+      for (int g = 0; g < gathered; ++g) negatives += value[s][g] < 0.0;
+      if (negatives == 0 || negatives == gathered) {
+        const double uniform = negatives == 0 ? 0.0 : 1.0;
+        const int to = slot[s];
+        values.for_each_point_in_tile(tile, [&](const VecI<Dim>&, double* v) { v[to] = uniform; });
+        continue;
       }
     }
-  }
-  // per axis, the 4-tap hat integrals from half cells to cells: local cell o reads the local
-  // half cells 2 o .. 2 o + 3
-  static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
-  VecI<Dim> dims = VecI<Dim>::Constant(kHalf);
-  for (int a = 0; a < Dim; ++a) {
-    VecI<Dim> out_dims = dims;
-    out_dims[a] = kTile;
-    const int out_count = out_dims.prod();
-    next.assign(out_count, 0.0);
-    int stride = 1;
-    for (int b = 0; b < a; ++b) stride *= dims[b];
-    for (int k = 0; k < out_count; ++k) {
-      const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
-      VecI<Dim> i = o;
-      i[a] = 2 * o[a];
-      const int base = lattice_index<Dim>(i, dims);
-      double sum = 0.0;
-      for (int t = 0; t < 4; ++t) sum += kTaps[t] * cur[base + t * stride];
-      next[k] = sum;
+    // liquid fractions of the half cells (axis 0 fastest)
+    cur.resize(count);
+    {
+      std::array<int, Dim> l{};
+      for (int h = 0; h < count; ++h) {
+        std::array<double, kCorners> corner;
+        for (int b = 0; b < kCorners; ++b) {
+          int g = 0;
+          for (int a = Dim - 1; a >= 0; --a)
+            g = g * points[a] + (((b >> a) & 1) ? hi_point[a][l[a]] : lo_point[a][l[a]]);
+          corner[b] = value[s][g];
+        }
+        cur[h] = lattice_cell_negative_fraction<Dim>(corner);
+        for (int a = 0; a < Dim; ++a) {
+          if (++l[a] < kHalf) break;
+          l[a] = 0;
+        }
+      }
     }
-    cur.swap(next);
-    dims = out_dims;
+    // per axis, the 4-tap hat integrals from half cells to cells: local cell o reads the local
+    // half cells 2 o .. 2 o + 3
+    static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
+    VecI<Dim> dims = VecI<Dim>::Constant(kHalf);
+    for (int a = 0; a < Dim; ++a) {
+      VecI<Dim> out_dims = dims;
+      out_dims[a] = kTile;
+      const int out_count = out_dims.prod();
+      next.assign(out_count, 0.0);
+      int stride = 1;
+      for (int b = 0; b < a; ++b) stride *= dims[b];
+      for (int k = 0; k < out_count; ++k) {
+        const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
+        VecI<Dim> i = o;
+        i[a] = 2 * o[a];
+        const int base = lattice_index<Dim>(i, dims);
+        double sum = 0.0;
+        for (int t = 0; t < 4; ++t) sum += kTaps[t] * cur[base + t * stride];
+        next[k] = sum;
+      }
+      cur.swap(next);
+      dims = out_dims;
+    }
+    const int to = slot[s];
+    values.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, double* v) {
+      v[to] = cur[lattice_index<Dim>(VecI<Dim>(c - t0), dims)];
+    });
   }
-  values.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, double* v) {
-    v[slot] = cur[lattice_index<Dim>(VecI<Dim>(c - t0), dims)];
-  });
 }
 
 /// The share of a deficit on the liquid side of the surface band that the density projection
@@ -1768,8 +1806,9 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   if (solids.empty()) {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
     for (int b = 0; b < band_tiles; ++b)
-      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget,
-                                        [&](const VecI<Dim>& c) { return phi.value(c); });
+      hat_liquid_fractions_in_tile<Dim, 1>(
+          grid, values, band[b], {kTarget},
+          [&](const VecI<Dim>& c, double* out) { out[0] = phi.value(c); });
   } else {
     // the solid distances of the lattice points under the band's hats where the level set is
     // within 2 dx of liquid (elsewhere phi >= 2 dx stays positive), each computed once: tiles of
@@ -1805,18 +1844,18 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     for (int b = 0; b < band_tiles; ++b) {
       // the fluid's liquid max(phi, -d_S) for the target, the level set extended into the
       // solids for the air side (only near liquid and solids: elsewhere both are phi)
-      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget, [&](const VecI<Dim>& c) {
-        const double v = phi.value(c);
-        if (!(v < 2.0 * dx)) return v;
-        const double ds = *solid_distance.find(c);
-        return ds < 2.0 * dx ? std::max(v, -ds) : v;
-      });
-      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kWet, [&](const VecI<Dim>& c) {
-        const double v = phi.value(c);
-        if (!(v < 2.0 * dx)) return v;
-        const double ds = *solid_distance.find(c);
-        return ds < 2.0 * dx ? liquid_extended_into_solid(v, ds, solid_reach, dx) : v;
-      });
+      // (both from one gather: a tile away from the solids reads the same values for both and
+      // makes its fractions once)
+      hat_liquid_fractions_in_tile<Dim, 2>(
+          grid, values, band[b], {kTarget, kWet}, [&](const VecI<Dim>& c, double* out) {
+            const double v = phi.value(c);
+            out[0] = out[1] = v;
+            if (!(v < 2.0 * dx)) return;
+            const double ds = *solid_distance.find(c);
+            if (!(ds < 2.0 * dx)) return;
+            out[0] = std::max(v, -ds);
+            out[1] = liquid_extended_into_solid(v, ds, solid_reach, dx);
+          });
     }
   }
 
