@@ -1043,7 +1043,8 @@ double lattice_number_density() {
 template <int Dim>
 void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
                        const SolidField<Dim>& solids,
-                       const std::array<BoundaryType, 2 * Dim>& boundary) {
+                       const std::array<BoundaryType, 2 * Dim>& boundary,
+                       PositionCorrectionBuffers* buffers) {
   const long np = static_cast<long>(particles.size());
   if (np < 2 || !(dt > 0.0)) return;
   const double dx = grid.dx();
@@ -1188,7 +1189,11 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<double> lambda(np, 0.0);
   std::vector<char> close_pair(np, 0);
   const int team = process_threads();
-  std::vector<std::vector<int>> neighbour_slots(team);
+  // (the caller's buffers when given: cleared, their capacity kept from the last call)
+  PositionCorrectionBuffers local;
+  std::vector<std::vector<int>>& neighbour_slots = (buffers ? *buffers : local).neighbour_slots;
+  if (static_cast<int>(neighbour_slots.size()) < team) neighbour_slots.resize(team);
+  for (auto& slots : neighbour_slots) slots.clear();
   std::vector<std::array<int, 3>> neighbours_of(np);  // (buffer, first, count)
   long compressed = 0;
 #pragma omp parallel reduction(+ : compressed) num_threads(team)
@@ -2639,7 +2644,8 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                              const SolidField<D>&,                                 \
                                              const std::array<BoundaryType, 2 * D>&);              \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
-                                  const std::array<BoundaryType, 2 * D>&);                         \
+                                  const std::array<BoundaryType, 2 * D>&,                          \
+                                  PositionCorrectionBuffers*);                                     \
   template DensityProjectionStats project_particle_density(                                        \
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
       const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, SurfaceDeficits);         \
