@@ -964,8 +964,10 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
         read = false;
         break;
       }
+      // (one substep: h is dt and a is v1, so the midpoint is the one v2 was read at, the same
+      // bits, and v2 is its velocity: not interpolated again)
       const Vec<Dim> xm = x + 0.5 * h * a;
-      const Vec<Dim> b = grid.interpolate_velocity(u, xm);
+      const Vec<Dim> b = n == 1 ? v2 : grid.interpolate_velocity(u, xm);
       if (unreadable(b)) {
         read = false;
         break;
