@@ -1591,14 +1591,19 @@ void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int 
       next.assign(out_count, 0.0);
       int stride = 1;
       for (int b = 0; b < a; ++b) stride *= dims[b];
+      // (the output's coordinates o counted along, axis 0 fastest, as lattice_coord gives them)
+      VecI<Dim> o = VecI<Dim>::Zero();
       for (int k = 0; k < out_count; ++k) {
-        const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
         VecI<Dim> i = o;
         i[a] = 2 * o[a];
         const int base = lattice_index<Dim>(i, dims);
         double sum = 0.0;
         for (int t = 0; t < 4; ++t) sum += kTaps[t] * cur[base + t * stride];
         next[k] = sum;
+        for (int b = 0; b < Dim; ++b) {
+          if (++o[b] < out_dims[b]) break;
+          o[b] = 0;
+        }
       }
       cur.swap(next);
       dims = out_dims;
