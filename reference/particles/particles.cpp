@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 
@@ -125,6 +126,32 @@ double particle_spacing(const Particles<Dim>& particles, std::size_t p, double d
   if (!(rho > 0.0) || !(particles.mass[p] > 0.0)) return 0.5 * dx;
   return std::pow(particles.mass[p] / rho, 1.0 / Dim);
 }
+
+/// particle_spacing through the last particle's inputs: the power is taken again only when the
+/// mass or the density differs from the last call's (the particles of one liquid mostly share
+/// both, and equal inputs give the same bits), one per thread (pow was ~3 ms per frame of the
+/// 64^3 viscous bunny's step on one thread)
+template <int Dim>
+class SpacingOf {
+ public:
+  SpacingOf(const Particles<Dim>& particles, double dx) : particles_(particles), dx_(dx) {}
+  double operator()(std::size_t p) {
+    const double m = particles_.mass[p], rho = particles_.density[p];
+    if (!(m == mass_ && rho == density_)) {
+      mass_ = m;
+      density_ = rho;
+      spacing_ = particle_spacing(particles_, p, dx_);
+    }
+    return spacing_;
+  }
+
+ private:
+  const Particles<Dim>& particles_;
+  double dx_;
+  double mass_ = std::numeric_limits<double>::quiet_NaN();
+  double density_ = std::numeric_limits<double>::quiet_NaN();
+  double spacing_ = 0.0;
+};
 
 /// Moves a point inside a solid out along the solid's gradient to distance kSolidMargin dx.
 template <int Dim>
@@ -993,8 +1020,10 @@ long advect_particles(Particles<Dim>& particles, const MacGrid<Dim>& grid, const
         read = false;
         break;
       }
+      // (one substep: h is dt and a is v1, so the midpoint is the one v2 was read at, the same
+      // bits, and v2 is its velocity: not interpolated again)
       const Vec<Dim> xm = x + 0.5 * h * a;
-      const Vec<Dim> b = grid.interpolate_velocity(u, xm);
+      const Vec<Dim> b = n == 1 ? v2 : grid.interpolate_velocity(u, xm);
       if (unreadable(b)) {
         read = false;
         break;
@@ -1098,7 +1127,8 @@ double lattice_number_density() {
 template <int Dim>
 void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
                        const SolidField<Dim>& solids,
-                       const std::array<BoundaryType, 2 * Dim>& boundary) {
+                       const std::array<BoundaryType, 2 * Dim>& boundary,
+                       PositionCorrectionBuffers* buffers) {
   const long np = static_cast<long>(particles.size());
   if (np < 2 || !(dt > 0.0)) return;
   const double dx = grid.dx();
@@ -1134,9 +1164,10 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<std::vector<int>> run_part(sort_team);
 #pragma omp parallel reduction(max : max_support) num_threads(sort_team)
   {
+    SpacingOf<Dim> spacing_of(particles, dx);
 #pragma omp for schedule(static)
     for (long p = 0; p < np; ++p) {
-      support[p] = kCorrectionSupport * particle_spacing(particles, p, dx);
+      support[p] = kCorrectionSupport * spacing_of(p);
       max_support = std::max(max_support, support[p]);
       xw[p] = grid.wrap_position(particles.x[p]);
       bucket[p] = grid.cell_index(grid.cell_containing(xw[p]));
@@ -1243,7 +1274,11 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<double> lambda(np, 0.0);
   std::vector<char> close_pair(np, 0);
   const int team = process_threads();
-  std::vector<std::vector<int>> neighbour_slots(team);
+  // (the caller's buffers when given: cleared, their capacity kept from the last call)
+  PositionCorrectionBuffers local;
+  std::vector<std::vector<int>>& neighbour_slots = (buffers ? *buffers : local).neighbour_slots;
+  if (static_cast<int>(neighbour_slots.size()) < team) neighbour_slots.resize(team);
+  for (auto& slots : neighbour_slots) slots.clear();
   std::vector<std::array<int, 3>> neighbours_of(np);  // (buffer, first, count)
   long compressed = 0;
 #pragma omp parallel reduction(+ : compressed) num_threads(team)
@@ -1497,13 +1532,18 @@ enum ProjectionValue { kTarget = 0, kWet = 1, kRow = 2, kProjectionValues = 3 };
 /// hat integrals 1/8, 3/8, 3/8, 1/8. A half cell outside a non-periodic domain passes its weight
 /// to the adjacent inside one, as the clamped particle stencil does.
 ///
-/// Written for the cells of one tile of `values` (component `slot`), from the lattice values
-/// `corner_value(point)`: the half cells under the tile's hats (2 x 8 + 2 per axis) and their
-/// fractions, then the three (two) passes of the taps along the axes, each output the same sum
-/// in the same order as a pass over the whole grid would form it (so the same bits).
-template <int Dim, class Values, class CornerValue>
-void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int tile, int slot,
-                                  CornerValue&& corner_value) {
+/// Written for the cells of one tile of `values`, for each of `Slots` components: component
+/// slot[s] from the lattice values corner_values(point, out)'s out[s] (one call per point
+/// gives every component's value, so lookups they share are made once): the half cells under
+/// the tile's hats (2 x 8 + 2 per axis) and their fractions, then the three (two) passes of the
+/// taps along the axes, each output the same sum in the same order as a pass over the whole grid
+/// would form it (so the same bits). A component whose gathered values equal an earlier one's
+/// bit for bit takes that one's cells (the same function of the same values); one whose values
+/// are all of one sign takes 0 or 1 (below).
+template <int Dim, int Slots, class Values, class CornerValues>
+void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int tile,
+                                  const std::array<int, Slots>& slot,
+                                  CornerValues&& corner_values) {
   constexpr int kTile = Values::kTile;
   constexpr int kHalf = 2 * kTile + 2;  // half cells under the hats of one tile's cells, per axis
   constexpr int kCorners = 1 << Dim;
@@ -1529,69 +1569,106 @@ void hat_liquid_fractions_in_tile(const MacGrid<Dim>& grid, Values& values, int 
       }
     }
   }
-  // the lattice values at the gathered points (axis 0 fastest)
+  // the lattice values at the gathered points (axis 0 fastest), per component
   int gathered = 1;
   for (int a = 0; a < Dim; ++a) gathered *= points[a];
-  std::vector<double> value(gathered);
+  std::array<std::vector<double>, Slots> value;
+  for (auto& v : value) v.resize(gathered);
   {
     std::array<int, Dim> k{};
+    std::array<double, Slots> out;
     for (int g = 0; g < gathered; ++g) {
       VecI<Dim> c;
       for (int a = 0; a < Dim; ++a) c[a] = point[a][k[a]];
-      value[g] = corner_value(c);
+      corner_values(c, out.data());
+      for (int s = 0; s < Slots; ++s) value[s][g] = out[s];
       for (int a = 0; a < Dim; ++a) {
         if (++k[a] < points[a]) break;
         k[a] = 0;
       }
     }
   }
-  // liquid fractions of the half cells (axis 0 fastest)
   int count = 1;
   for (int a = 0; a < Dim; ++a) count *= kHalf;
-  std::vector<double> cur(count), next;
-  {
-    std::array<int, Dim> l{};
-    for (int h = 0; h < count; ++h) {
-      std::array<double, kCorners> corner;
-      for (int b = 0; b < kCorners; ++b) {
-        int g = 0;
-        for (int a = Dim - 1; a >= 0; --a)
-          g = g * points[a] + (((b >> a) & 1) ? hi_point[a][l[a]] : lo_point[a][l[a]]);
-        corner[b] = value[g];
-      }
-      cur[h] = lattice_cell_negative_fraction<Dim>(corner);
-      for (int a = 0; a < Dim; ++a) {
-        if (++l[a] < kHalf) break;
-        l[a] = 0;
+  std::vector<double> cur, next;
+  for (int s = 0; s < Slots; ++s) {
+    // the same values as an earlier component (bit for bit: memcmp, so -0 and NaN patterns
+    // count as they are): its cells
+    int same = -1;
+    for (int e = 0; e < s && same < 0; ++e)
+      if (std::memcmp(value[e].data(), value[s].data(), sizeof(double) * gathered) == 0) same = e;
+    if (same >= 0) {
+      const int from = slot[same], to = slot[s];
+      values.for_each_point_in_tile(tile, [&](const VecI<Dim>&, double* v) { v[to] = v[from]; });
+      continue;
+    }
+    // values all of one sign need no half cell: every half cell's fraction is 0 (no value
+    // below 0) or 1 (every value below 0), as lattice_cell_negative_fraction returns them, and
+    // the taps (1/8, 3/8, 3/8, 1/8) sum zeros to +0 and ones to exactly 1 (every partial sum is
+    // a multiple of 1/8), so every cell of the tile takes 0 or 1, bit for bit as the passes
+    // below would give it (the band's tiles in the air or deep in the liquid)
+    {
+      int negatives = 0;
+      for (int g = 0; g < gathered; ++g) negatives += value[s][g] < 0.0;
+      if (negatives == 0 || negatives == gathered) {
+        const double uniform = negatives == 0 ? 0.0 : 1.0;
+        const int to = slot[s];
+        values.for_each_point_in_tile(tile, [&](const VecI<Dim>&, double* v) { v[to] = uniform; });
+        continue;
       }
     }
-  }
-  // per axis, the 4-tap hat integrals from half cells to cells: local cell o reads the local
-  // half cells 2 o .. 2 o + 3
-  static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
-  VecI<Dim> dims = VecI<Dim>::Constant(kHalf);
-  for (int a = 0; a < Dim; ++a) {
-    VecI<Dim> out_dims = dims;
-    out_dims[a] = kTile;
-    const int out_count = out_dims.prod();
-    next.assign(out_count, 0.0);
-    int stride = 1;
-    for (int b = 0; b < a; ++b) stride *= dims[b];
-    for (int k = 0; k < out_count; ++k) {
-      const VecI<Dim> o = lattice_coord<Dim>(k, out_dims);
-      VecI<Dim> i = o;
-      i[a] = 2 * o[a];
-      const int base = lattice_index<Dim>(i, dims);
-      double sum = 0.0;
-      for (int t = 0; t < 4; ++t) sum += kTaps[t] * cur[base + t * stride];
-      next[k] = sum;
+    // liquid fractions of the half cells (axis 0 fastest)
+    cur.resize(count);
+    {
+      std::array<int, Dim> l{};
+      for (int h = 0; h < count; ++h) {
+        std::array<double, kCorners> corner;
+        for (int b = 0; b < kCorners; ++b) {
+          int g = 0;
+          for (int a = Dim - 1; a >= 0; --a)
+            g = g * points[a] + (((b >> a) & 1) ? hi_point[a][l[a]] : lo_point[a][l[a]]);
+          corner[b] = value[s][g];
+        }
+        cur[h] = lattice_cell_negative_fraction<Dim>(corner);
+        for (int a = 0; a < Dim; ++a) {
+          if (++l[a] < kHalf) break;
+          l[a] = 0;
+        }
+      }
     }
-    cur.swap(next);
-    dims = out_dims;
+    // per axis, the 4-tap hat integrals from half cells to cells: local cell o reads the local
+    // half cells 2 o .. 2 o + 3
+    static constexpr double kTaps[4] = {0.125, 0.375, 0.375, 0.125};
+    VecI<Dim> dims = VecI<Dim>::Constant(kHalf);
+    for (int a = 0; a < Dim; ++a) {
+      VecI<Dim> out_dims = dims;
+      out_dims[a] = kTile;
+      const int out_count = out_dims.prod();
+      next.assign(out_count, 0.0);
+      int stride = 1;
+      for (int b = 0; b < a; ++b) stride *= dims[b];
+      // (the output's coordinates o counted along, axis 0 fastest, as lattice_coord gives them)
+      VecI<Dim> o = VecI<Dim>::Zero();
+      for (int k = 0; k < out_count; ++k) {
+        VecI<Dim> i = o;
+        i[a] = 2 * o[a];
+        const int base = lattice_index<Dim>(i, dims);
+        double sum = 0.0;
+        for (int t = 0; t < 4; ++t) sum += kTaps[t] * cur[base + t * stride];
+        next[k] = sum;
+        for (int b = 0; b < Dim; ++b) {
+          if (++o[b] < out_dims[b]) break;
+          o[b] = 0;
+        }
+      }
+      cur.swap(next);
+      dims = out_dims;
+    }
+    const int to = slot[s];
+    values.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, double* v) {
+      v[to] = cur[lattice_index<Dim>(VecI<Dim>(c - t0), dims)];
+    });
   }
-  values.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, double* v) {
-    v[slot] = cur[lattice_index<Dim>(VecI<Dim>(c - t0), dims)];
-  });
 }
 
 /// The share of a deficit on the liquid side of the surface band that the density projection
@@ -1660,16 +1737,19 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   std::vector<VecI<Dim>> particle_cell(np);
   int lo_layer = grid.cells()[kLast], hi_layer = -1;
   bool finite = true;
-#pragma omp parallel for schedule(static) reduction(max : max_support) \
-    reduction(min : lo_layer) reduction(max : hi_layer) reduction(&& : finite) \
-    num_threads(process_threads())
-  for (long p = 0; p < np; ++p) {
-    max_support = std::max(max_support, kSurfaceSupport * particle_spacing(particles, p, dx));
-    const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
-    particle_cell[p] = c;
-    finite = finite && particles.x[p].allFinite();
-    lo_layer = std::min(lo_layer, c[kLast]);
-    hi_layer = std::max(hi_layer, c[kLast]);
+#pragma omp parallel reduction(max : max_support) reduction(min : lo_layer) \
+    reduction(max : hi_layer) reduction(&& : finite) num_threads(process_threads())
+  {
+    SpacingOf<Dim> spacing_of(particles, dx);
+#pragma omp for schedule(static)
+    for (long p = 0; p < np; ++p) {
+      max_support = std::max(max_support, kSurfaceSupport * spacing_of(p));
+      const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
+      particle_cell[p] = c;
+      finite = finite && particles.x[p].allFinite();
+      lo_layer = std::min(lo_layer, c[kLast]);
+      hi_layer = std::max(hi_layer, c[kLast]);
+    }
   }
   const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
   const int ring = std::max(2, static_cast<int>(std::floor(1.5 + reach / dx + 1e-6)));
@@ -1747,6 +1827,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   for (int slab = 0; slab < slabs; ++slab) {
     const int first = slab_first[slab];
     const int end = slab_first[slab + 1];
+    SpacingOf<Dim> spacing_of(particles, dx);
     for (long p = 0; p < np; ++p) {
       // the five layers of the last axis this particle reaches: skip it if none is in the slab
       {
@@ -1765,7 +1846,7 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       }
       const double volume =
           particles.density[p] > 0.0 ? particles.mass[p] / particles.density[p] : 0.0;
-      const double width = particle_spacing(particles, p, dx) / dx;
+      const double width = spacing_of(p) / dx;
       const Vec<Dim> xr = (grid.wrap_position(particles.x[p]) - grid.origin()) / dx;
       // per axis: five candidate cells around the particle and their weights
       std::array<std::array<int, 5>, Dim> cell;
@@ -1824,8 +1905,9 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   if (solids.empty()) {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
     for (int b = 0; b < band_tiles; ++b)
-      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget,
-                                        [&](const VecI<Dim>& c) { return phi.value(c); });
+      hat_liquid_fractions_in_tile<Dim, 1>(
+          grid, values, band[b], {kTarget},
+          [&](const VecI<Dim>& c, double* out) { out[0] = phi.value(c); });
   } else {
     // the solid distances of the lattice points under the band's hats where the level set is
     // within 2 dx of liquid (elsewhere phi >= 2 dx stays positive), each computed once: tiles of
@@ -1861,18 +1943,18 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     for (int b = 0; b < band_tiles; ++b) {
       // the fluid's liquid max(phi, -d_S) for the target, the level set extended into the
       // solids for the air side (only near liquid and solids: elsewhere both are phi)
-      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kTarget, [&](const VecI<Dim>& c) {
-        const double v = phi.value(c);
-        if (!(v < 2.0 * dx)) return v;
-        const double ds = *solid_distance.find(c);
-        return ds < 2.0 * dx ? std::max(v, -ds) : v;
-      });
-      hat_liquid_fractions_in_tile<Dim>(grid, values, band[b], kWet, [&](const VecI<Dim>& c) {
-        const double v = phi.value(c);
-        if (!(v < 2.0 * dx)) return v;
-        const double ds = *solid_distance.find(c);
-        return ds < 2.0 * dx ? liquid_extended_into_solid(v, ds, solid_reach, dx) : v;
-      });
+      // (both from one gather: a tile away from the solids reads the same values for both and
+      // makes its fractions once)
+      hat_liquid_fractions_in_tile<Dim, 2>(
+          grid, values, band[b], {kTarget, kWet}, [&](const VecI<Dim>& c, double* out) {
+            const double v = phi.value(c);
+            out[0] = out[1] = v;
+            if (!(v < 2.0 * dx)) return;
+            const double ds = *solid_distance.find(c);
+            if (!(ds < 2.0 * dx)) return;
+            out[0] = std::max(v, -ds);
+            out[1] = liquid_extended_into_solid(v, ds, solid_reach, dx);
+          });
     }
   }
 
@@ -2659,7 +2741,8 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                              const SolidField<D>&,                                 \
                                              const std::array<BoundaryType, 2 * D>&);              \
   template void correct_positions(Particles<D>&, const MacGrid<D>&, double, const SolidField<D>&,  \
-                                  const std::array<BoundaryType, 2 * D>&);                         \
+                                  const std::array<BoundaryType, 2 * D>&,                          \
+                                  PositionCorrectionBuffers*);                                     \
   template DensityProjectionStats project_particle_density(                                        \
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
       const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, SurfaceDeficits);         \

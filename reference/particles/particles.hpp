@@ -141,12 +141,22 @@ long drift_particles_own_velocity(Particles<Dim>& particles, const MacGrid<Dim>&
                                   const SolidField<Dim>& solids,
                                   const std::array<BoundaryType, 2 * Dim>& boundary);
 
+/// Buffers correct_positions keeps between calls when given them (speed only: nothing in them
+/// carries over from one call to the next): the per-thread lists of each particle's neighbours,
+/// which otherwise grow by doubling in every call (8.4 + 16.8 + 33.6 MB at Fig. 2's paper grid,
+/// copied at each doubling); kept, they stay at the largest call's size.
+struct PositionCorrectionBuffers {
+  std::vector<std::vector<int>> neighbour_slots;
+};
+
 /// Position correction that keeps particles evenly spread so the liquid volume stays steady
-/// (Algorithm 1, line 15); respects solids, walls and periodicity.
+/// (Algorithm 1, line 15); respects solids, walls and periodicity. `buffers` (optional) are
+/// reused across calls (the same result with or without them).
 template <int Dim>
 void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, double dt,
                        const SolidField<Dim>& solids,
-                       const std::array<BoundaryType, 2 * Dim>& boundary);
+                       const std::array<BoundaryType, 2 * Dim>& boundary,
+                       PositionCorrectionBuffers* buffers = nullptr);
 
 /// What project_particle_density did (for statistics and tests).
 struct DensityProjectionStats {

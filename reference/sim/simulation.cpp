@@ -1687,7 +1687,8 @@ void Simulation<Dim>::correct_volume(double dt) {
       switches_.line15_keeps_free_centre
           ? free_liquid_centre(particles_, grid_, solid_field_shapes_, solid_field_boxes_, free_margin)
           : std::nullopt;
-  if (switches_.position_correction) correct_positions(particles_, grid_, dt, solids_, boundary_);
+  if (switches_.position_correction)
+    correct_positions(particles_, grid_, dt, solids_, boundary_, &correction_buffers_);
   account(frame_ledger_.position_correction, [&] { return liquid_potential_energy(); });
   if (switches_.density_projection && switches_.density_projection_in_steps)
     volume_errors_ =

@@ -543,6 +543,8 @@ class Simulation : public AnySimulation {
   // and the faces whose centre lies in a solid (find_faces_in_solids) with their new values in
   // constrain_velocity_in_solids
   std::vector<char> face_flags_;
+  /// correct_positions' neighbour lists, kept across steps (speed only; not state)
+  PositionCorrectionBuffers correction_buffers_;
   // the guard of the particles' reads (guards_reads): the velocity after the extrapolation
   // (before the faces not reached become NaN; on those the solve's values), a deeper extrapolation's velocity and flags, the particles that read a face
   // not reached, the layers of the last extrapolation

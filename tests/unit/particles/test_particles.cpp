@@ -1048,11 +1048,13 @@ void check_splats_deterministic_above_serial_fallback() {
   const int threads = omp_get_max_threads();
   struct Result {
     VectorX cells, dofs, phi;
-    Particles<Dim> moved, moved_by_solid, corrected;
+    Particles<Dim> moved, moved_by_solid, corrected, corrected_kept;
     long cells_projected = 0;
     VectorX faces, faces_again, extrapolated;
     std::vector<char> valid;
   };
+  // correct_positions' buffers, kept from one run to the next (filled by other team sizes)
+  PositionCorrectionBuffers kept;
   const auto run = [&](int t) {
     omp_set_num_threads(t);
     Result r;
@@ -1068,6 +1070,8 @@ void check_splats_deterministic_above_serial_fallback() {
     // position correction (the ball holds more than the rest density: compressed particles)
     r.corrected = start;
     correct_positions(r.corrected, grid, 0.01, solid, walls<Dim>());
+    r.corrected_kept = start;
+    correct_positions(r.corrected_kept, grid, 0.01, solid, walls<Dim>(), &kept);
     // the faces' liquid fractions: all faces zeroed first, then (a second level set, the same
     // written boxes) only what the first call wrote
     LatticeSigns<Dim> signs;
@@ -1092,6 +1096,13 @@ void check_splats_deterministic_above_serial_fallback() {
     return r;
   };
   const Result one = run(1);
+  // the kept buffers change nothing (their first use here, and after every team size below)
+  {
+    long kept_differ = 0;
+    for (std::size_t i = 0; i < start.size(); ++i)
+      kept_differ += one.corrected_kept.x[i] != one.corrected.x[i];
+    CHECK(kept_differ == 0);
+  }
   // the projection's row assembly leaves its serial fall-back too (its team is sized by the
   // rows' 2 Dim + 1 entry slots: 10308 rows in 2D, 4118 in 3D)
   CHECK(one.cells_projected * (2 * Dim + 1) > kParallelMinWork);
@@ -1120,6 +1131,7 @@ void check_splats_deterministic_above_serial_fallback() {
     for (std::size_t i = 0; i < start.size(); ++i) {
       corrected += one.corrected.x[i] != start.x[i];
       corrected_differ += other.corrected.x[i] != one.corrected.x[i];
+      corrected_differ += other.corrected_kept.x[i] != one.corrected.x[i];
     }
     CHECK(corrected > 0);
     CHECK(corrected_differ == 0);
@@ -1141,7 +1153,8 @@ void check_splats_deterministic_above_serial_fallback() {
 
 TEST_CASE("viscosity, level set and density projection splats, position correction, the faces'"
           " liquid fractions and the velocity extrapolation of ~2e4 particles: identical with "
-          "1, 2, 3 and 5 threads; the cells' viscosity is the diagonal stress components'",
+          "1, 2, 3 and 5 threads (position correction also with buffers kept across calls); the "
+          "cells' viscosity is the diagonal stress components'",
           "[unit]") {
   check_splats_deterministic_above_serial_fallback<2>();
   check_splats_deterministic_above_serial_fallback<3>();
