@@ -264,7 +264,8 @@ std::unique_ptr<MonolithicSystem<Dim>> build_system(const CoupledStepInput<Dim>&
   const ContactSystem<Dim> contacts(bodies, in.contacts, in.contact_params);
   auto system = std::make_unique<MonolithicSystem<Dim>>(in.grid, form, std::move(w), in.dt,
                                                         std::move(u_star), bodies, in.solids,
-                                                        contacts, backend, unknowns);
+                                                        contacts, backend, unknowns,
+                                                        in.workspace);
   system->add_divergence_source(in.divergence_source);
   return system;
 }

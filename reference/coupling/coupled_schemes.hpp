@@ -65,6 +65,9 @@ struct CoupledStepInput {
   /// every system the scheme builds (MonolithicSystem::add_divergence_source): the simulation's
   /// volume correction through the solve (StageSwitches::volume_source_gain).
   const VectorX* divergence_source = nullptr;
+  /// The liquid solve's storage kept across steps and the liquid's band (stokes_workspace.hpp;
+  /// nullptr: none), given to every MonolithicSystem the scheme builds; owned by the caller.
+  StokesWorkspace* workspace = nullptr;
 };
 
 /// The weights of eq. (24) (section 3.1.2, 4.4.6) for a liquid beside bodies: W_L^p, W_L^u

@@ -86,7 +86,8 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
                                         const std::vector<RigidBody<Dim>>& bodies,
                                         const SolidWeights<Dim>& solids,
                                         const ContactSystem<Dim>& contacts,
-                                        Backend backend, StokesUnknowns unknowns)
+                                        Backend backend, StokesUnknowns unknowns,
+                                        StokesWorkspace* workspace)
     : grid_(grid), stress_(grid), layout_(stress_, form), w_owner_(std::move(weights)),
       w_(*w_owner_), dt_(dt), u_star_owner_(std::move(u_star_shared)), u_star_(*u_star_owner_),
       backend_(backend), unknowns_(unknowns),
@@ -98,7 +99,8 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   if (std::abs(contacts.alpha - alpha_) > 1e-12 * alpha_)
     throw std::invalid_argument("MonolithicSystem: ContactSystem alpha differs from 1/dx^Dim");
   // the liquid blocks: eq. (8) restricted to the active DOFs
-  dofs_ = select_stokes_dofs<Dim>(grid, layout_, w, dt, unknowns);
+  dofs_ = select_stokes_dofs<Dim>(grid, layout_, w, dt, unknowns,
+                                  workspace ? &workspace->band : nullptr);
   const int nd = contacts.num_body_dofs();
   const std::vector<CouplingBody<Dim>> view = coupling_bodies(bodies);
   // J_p's columns only at the pressure unknowns' cells and J_s only with stress unknowns: the
@@ -151,7 +153,8 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
 
   if (matrix_free_) {
     // the fluid part by stencils; b = B^T W_F^u u* by the same stencils
-    auto op = std::make_shared<MatrixFreeStokesOperator<Dim>>(grid, layout_, w, dofs_, dt);
+    auto op = std::make_shared<MatrixFreeStokesOperator<Dim>>(grid, layout_, w, dofs_, dt,
+                                                              workspace);
     const VectorX b = op->rhs(u_star);
     matrix_free_stokes_ = op;
     stokes_operator_ = op;

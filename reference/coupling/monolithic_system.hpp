@@ -78,13 +78,17 @@ class MonolithicSystem {
                    const ContactSystem<Dim>& contacts, Backend backend,
                    StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
   /// The same with u* shared too (a face-sized vector: 194 MiB at the paper's 256x128x256 grid).
-  /// A caller whose u* outlives the system may pass a non-owning pointer.
+  /// A caller whose u* outlives the system may pass a non-owning pointer. `workspace`
+  /// (stokes_workspace.hpp; nullptr: none): the matrix-free operator's storage kept across steps
+  /// and the liquid's band (the DOF selection and C_f in the band only); it must outlive the
+  /// system. The same system either way.
   MonolithicSystem(const MacGrid<Dim>& grid, StressForm form,
                    std::shared_ptr<const StokesWeights> w, double dt,
                    std::shared_ptr<const VectorX> u_star,
                    const std::vector<RigidBody<Dim>>& bodies, const SolidWeights<Dim>& solids,
                    const ContactSystem<Dim>& contacts, Backend backend,
-                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress);
+                   StokesUnknowns unknowns = StokesUnknowns::pressure_and_stress,
+                   StokesWorkspace* workspace = nullptr);
 
   /// Test switch (tests only; not thread-safe): true makes every system built afterwards search
   /// the bodies' whole boxes for J_p and J_s columns (BodyCouplingOperator without Columns)

@@ -219,18 +219,39 @@ void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fa
 }
 
 template <int Dim>
-PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeights& w, double dt) {
+PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                                  const LiquidBand* band) {
   PressureDofs dofs;
   dofs.dof_of_cell.assign(grid.num_cells(), -1);
   // active: liquid in the cell and at least one face open to fluid
-  for (int c = 0; c < grid.num_cells(); ++c) {
-    if (!(w.liquid_cell[c] > 0.0)) continue;
+  auto visit = [&](int c) {
+    if (!(w.liquid_cell[c] > 0.0)) return;
     const auto cf = cell_faces<Dim>(grid, c);
     bool open = false;
     for (int f : cf.face) open = open || w.fluid_face[f] > 0.0;
-    if (!open) continue;
+    if (!open) return;
     dofs.dof_of_cell[c] = dofs.size();
     dofs.cell_of_dof.push_back(c);
+  };
+  if (band && band->valid) {
+    // the cells of the band's box (W_L^p = 0 outside it), rows along x in increasing index
+    // order: the order of the pass over every cell (issue 20)
+    VecI<Dim> lo, hi;
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = std::max(band->cell_lo[a], 0);
+      hi[a] = std::min(band->cell_hi[a], grid.cells()[a] - 1);
+    }
+    if ((lo.array() <= hi.array()).all()) {
+      VecI<Dim> rows_box = hi - lo + VecI<Dim>::Ones();
+      rows_box[0] = 1;
+      for (int r = 0; r < rows_box.prod(); ++r) {
+        VecI<Dim> c = lo + lattice_coord<Dim>(r, rows_box);
+        const int start = grid.cell_index(c);
+        for (int k = 0; k <= hi[0] - lo[0]; ++k) visit(start + k);
+      }
+    }
+  } else {
+    for (int c = 0; c < grid.num_cells(); ++c) visit(c);
   }
   // connected groups over weighted faces; a group is closed if no weighted face leaves it
   // (the faces' coefficients computed where the search reads them, the faces of the DOFs'
@@ -689,7 +710,7 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
                                              const std::array<VecI<D>, D>&,                         \
                                              const std::array<VecI<D>, D>&);                        \
   template PressureDofs select_pressure_dofs<D>(const MacGrid<D>&, const PressureWeights&,       \
-                                                double);                                         \
+                                                double, const LiquidBand*);                      \
   template ExplicitPressureSystem assemble_explicit_pressure<D>(                                 \
       const MacGrid<D>&, const PressureWeights&, const PressureDofs&, double, const VectorX&);   \
   template class MatrixFreePressureOperator<D>;                                                  \

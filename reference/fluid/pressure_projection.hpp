@@ -20,6 +20,7 @@
 
 #include "reference/core/common.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/fluid/stokes_workspace.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/solvers/backend.hpp"
 #include "reference/solvers/linear_operator.hpp"
@@ -65,8 +66,12 @@ struct PressureDofs {
   int size() const { return static_cast<int>(cell_of_dof.size()); }
 };
 
+/// `band` (optional, stokes_workspace.hpp): the DOFs are searched among the cells of its cell box
+/// only (a DOF needs W_L^p > 0, which the band promises to be 0 outside the box), in the same
+/// increasing cell order: the same DOFs and null space.
 template <int Dim>
-PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeights& w, double dt);
+PressureDofs select_pressure_dofs(const MacGrid<Dim>& grid, const PressureWeights& w, double dt,
+                                  const LiquidBand* band = nullptr);
 
 /// Explicit back end: every matrix of eq. (8) with its paper name, A and b formed as written.
 struct ExplicitPressureSystem {

@@ -37,7 +37,8 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   StokesSolveResult result;
   const StressLayout<Dim> layout(StressGrid<Dim>(grid), form);
   // line 7: active DOFs
-  const StokesDofs dofs = select_stokes_dofs(grid, layout, w, dt, unknowns);
+  const StokesDofs dofs = select_stokes_dofs(grid, layout, w, dt, unknowns,
+                                             options.workspace ? &options.workspace->band : nullptr);
   result.stress_dofs = dofs.num_stress();
   result.pressure_dofs = dofs.num_pressure();
   const VectorX empty;
@@ -54,7 +55,8 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
       b = sys->b;
       break;
     case Backend::matrix_free: {
-      auto mf = std::make_unique<MatrixFreeStokesOperator<Dim>>(grid, layout, w, dofs, dt);
+      auto mf = std::make_unique<MatrixFreeStokesOperator<Dim>>(grid, layout, w, dofs, dt,
+                                                                options.workspace);
       b = mf->rhs(u);
       op = std::move(mf);
       break;

@@ -58,29 +58,37 @@ const VectorX& or_zeros(const VectorX& v, int n, VectorX& zeros) {
 
 template <int Dim>
 StokesDofs select_stokes_dofs(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
-                              const StokesWeights& w, double dt, StokesUnknowns unknowns) {
+                              const StokesWeights& w, double dt, StokesUnknowns unknowns,
+                              const LiquidBand* band) {
   StokesDofs dofs;
   // stress: W^s > 0 and eta > 0 on every StressGrid DOF the unknown stands for (none when the
   // weights are inviscid: eta = 0 everywhere)
-  if (!w.inviscid()) dofs.dof_of_unknown.assign(layout.num_unknowns(), -1);
-  for (int i = 0; i < layout.num_unknowns() && !w.inviscid(); ++i) {
-    std::array<int, 2> dof;
-    std::array<double, 2> sign;
-    const int count = expansion_column(layout, i, dof, sign);
-    bool active = true;
-    for (int m = 0; m < count; ++m) {
-      const int d = dof[m];
-      active = active && w.fluid_stress[d] * w.liquid_stress[d] > 0.0 && w.viscosity[d] > 0.0;
+  // (the active unknowns listed on several threads, each over a contiguous block, the lists
+  // joined in block order: the increasing list of the serial loop; then the inverse map)
+  if (!w.inviscid()) {
+    dofs.unknown_of_dof = gather_in_order<int>(layout.num_unknowns(), [&](int i, std::vector<int>& out) {
+      std::array<int, 2> dof;
+      std::array<double, 2> sign;
+      const int count = expansion_column(layout, i, dof, sign);
+      bool active = true;
+      for (int m = 0; m < count; ++m) {
+        const int d = dof[m];
+        active = active && w.fluid_stress[d] * w.liquid_stress[d] > 0.0 && w.viscosity[d] > 0.0;
+      }
+      if (active) out.push_back(i);
+    });
+    if (dofs.num_stress() > 0) {
+      dofs.dof_of_unknown.assign(layout.num_unknowns(), -1);
+      const int ns = dofs.num_stress();
+#pragma omp parallel for schedule(static) num_threads(team_threads(ns))
+      for (int k = 0; k < ns; ++k) dofs.dof_of_unknown[dofs.unknown_of_dof[k]] = k;
     }
-    if (!active) continue;
-    dofs.dof_of_unknown[i] = dofs.num_stress();
-    dofs.unknown_of_dof.push_back(i);
   }
   // without active stress DOFs the map is all -1: not kept (its readers visit stress unknowns)
   if (dofs.num_stress() == 0) std::vector<int>().swap(dofs.dof_of_unknown);
   // pressure: the DOFs of the pressure solve
   if (unknowns == StokesUnknowns::pressure_and_stress)
-    dofs.pressure = select_pressure_dofs(grid, w.pressure, dt);
+    dofs.pressure = select_pressure_dofs(grid, w.pressure, dt, band);
   // null space: an enclosed pressure group with tau = 0 (A11 is definite, so there is no other)
   for (const VectorX& n : dofs.pressure.null_space) {
     VectorX v = VectorX::Zero(dofs.size());
@@ -273,7 +281,8 @@ template <int Dim>
 MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid,
                                                         const StressLayout<Dim>& layout,
                                                         const StokesWeights& w,
-                                                        const StokesDofs& dofs, double dt)
+                                                        const StokesDofs& dofs, double dt,
+                                                        StokesWorkspace* workspace)
     : periodic_(grid.periodic()),
       eliminated_(layout.eliminated_component()),
       size_(dofs.size()),
@@ -295,15 +304,59 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   // per face), with per row whether some C_f != 0 (the face rows the loops visit, below) and
   // whether some face is updated by the velocity update (updated_rows_): one pass over the
   // faces instead of a serial one and a second read of C (issue 20)
-  face_coefficient_.resize(num_faces_);
+  //
+  // The face-, cell- and stress-sized vectors: borrowed from the workspace (zero, or -1 for the
+  // maps, except where the last operator wrote; that part reset here), else made here (issue
+  // 20, docs/preconditioners.md section 39)
+  if (workspace && workspace->keep && !workspace->lent) {
+    workspace_ = workspace;
+    workspace->lent = true;
+    ++workspace->reused;
+  } else if (workspace && workspace->keep) {
+    ++workspace->refused;
+  }
+  // With the workspace's band, C_f is computed on the face rows that cross the band's face box
+  // of their axis only: W_L^u = 0 outside it, so C_f = +0 there, the value the vector holds
+  const LiquidBand* band = workspace && workspace->band.valid ? &workspace->band : nullptr;
+  if (workspace_) {
+    // (without a band every face is written below: no entry needs a reset)
+    if (!band) workspace_->face_coefficient.dirty.clear();
+    workspace_->face_coefficient.lend(num_faces_, face_coefficient_);
+  }
+  else if (band)
+    face_coefficient_.setZero(num_faces_);
+  else
+    face_coefficient_.resize(num_faces_);
   std::array<std::vector<char>, Dim> face_row_used;
   for (int a = 0; a < Dim; ++a) {
     const Field& f = fields_[a];
     const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
     face_row_used[a].assign(rows, 0);
     std::vector<char> updated(rows, 0);
-#pragma omp parallel for schedule(static) num_threads(team_threads(f.dims.prod()))
-    for (int r = 0; r < rows; ++r) {
+    // the rows computed: all, or those of the band's box (increasing)
+    std::vector<int> band_rows;
+    if (band) {
+      VecI<Dim> lo = VecI<Dim>::Zero(), hi = VecI<Dim>::Zero();
+      bool empty = false;
+      for (int d = 1; d < Dim; ++d) {
+        lo[d] = std::max(band->face_lo[a][d], 0);
+        hi[d] = std::min(band->face_hi[a][d], f.dims[d] - 1);
+        empty = empty || lo[d] > hi[d];
+      }
+      empty = empty || band->face_lo[a][0] > band->face_hi[a][0];
+      if (!empty) {
+        const VecI<Dim> box = hi - lo + VecI<Dim>::Ones();
+        VecI<Dim> row_dims = f.dims;
+        row_dims[0] = 1;
+        band_rows.reserve(box.prod());
+        for (int j = 0; j < box.prod(); ++j)
+          band_rows.push_back(lattice_index<Dim>(lo + lattice_coord<Dim>(j, box), row_dims));
+      }
+    }
+    const int count = band ? static_cast<int>(band_rows.size()) : rows;
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(count) * n0))
+    for (int m = 0; m < count; ++m) {
+      const int r = band ? band_rows[m] : m;
       bool used = false, update = false;
       for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0; ++e) {
         const double c = stokes_face_coefficient(w.pressure, e, dt);
@@ -313,6 +366,14 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       }
       face_row_used[a][r] = used;
       updated[r] = update;
+    }
+    // the spans written, for the workspace (consecutive rows merged)
+    for (int m = 0; m < count; ++m) {
+      const long begin = f.offset + static_cast<long>(band ? band_rows[m] : m) * n0;
+      if (!coefficient_spans_.empty() && coefficient_spans_.back().second == begin)
+        coefficient_spans_.back().second = begin + n0;
+      else
+        coefficient_spans_.emplace_back(begin, begin + n0);
     }
     for (int r = 0; r < rows; ++r)
       if (updated[r]) updated_rows_[a].push_back(r);
@@ -357,11 +418,21 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   auto half_n_inv_ws = [&](int d) { return half_n_inv_ws_m(d, m_of(d)); };
   // (the StressGrid-sized maps and scratch only with stress unknowns: an inviscid operator
   // keeps none, and its weights may come without stress vectors, StokesWeights)
-  if (num_stress_ > 0) unknown_of_dof_.assign(num_stress_dofs_, -1);
-  unknown_of_cell_.assign(num_cells_, -1);
+  if (num_stress_ > 0) {
+    if (workspace_)
+      workspace_->unknown_of_dof.lend(num_stress_dofs_, unknown_of_dof_);
+    else
+      unknown_of_dof_.assign(num_stress_dofs_, -1);
+  }
+  if (workspace_)
+    workspace_->unknown_of_cell.lend(num_cells_, unknown_of_cell_);
+  else
+    unknown_of_cell_.assign(num_cells_, -1);
   location_.resize(size_);
   weight_.resize(size_);
   self_.setZero(size_);
+  // (per unknown: one writer of each entry, and of the maps' entry at its distinct DOF or cell)
+#pragma omp parallel for schedule(static) num_threads(team_threads(size_))
   for (int i = 0; i < num_stress_; ++i) {
     const int d = layout.dof_of_unknown(dofs.unknown_of_dof[i]);
     const int k = stress.coord(d).first;
@@ -373,6 +444,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     if (eliminated_ >= 0 && StressGrid<Dim>::is_diagonal(k))
       self_[i] += half_n_inv_ws(stress.offset(eliminated_) + d - stress.offset(k));
   }
+#pragma omp parallel for schedule(static) num_threads(team_threads(size_))
   for (int k = 0; k < dofs.num_pressure(); ++k) {
     const int i = num_stress_ + k, cell = dofs.pressure.cell_of_dof[k];
     unknown_of_cell_[cell] = i;
@@ -385,6 +457,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     eliminated_weight_.resize(num_cells_);
     if constexpr (Dim == 3) eliminated_coupling_.resize(num_cells_);
     const double m = StressGrid<Dim>::multiplicity(eliminated_);
+#pragma omp parallel for schedule(static) num_threads(team_threads(num_cells_))
     for (int c = 0; c < num_cells_; ++c) {
       const int d = stress.offset(eliminated_) + c;
       eliminated_weight_[c] = -m * w.liquid_stress[d];
@@ -393,33 +466,42 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   }
   // diagonal: 1/2 N^-1 W^s plus sum_f C_f B_fi^2 over the merged column of B
   diagonal_ = self_;
+#pragma omp parallel for schedule(static) num_threads(team_threads(size_))
   for (int i = 0; i < size_; ++i)
     for (const auto& [f, b] : stencil(i)) diagonal_[i] += face_coefficient_[f] * b * b;
   // an odd periodic axis couples a colour to itself: relax serially then
   for (int a = 0; a < Dim; ++a)
     if (grid.periodic(a) && grid.cells()[a] % 2 == 1 && grid.cells()[a] > 1)
       colouring_valid_ = false;
-  // the rows the loops visit: face rows with fluid, stress and cell rows with unknowns
-  for (int field = 0; field < kFields; ++field) {
-    // (stress rows only with stress unknowns)
-    if (num_stress_ == 0 && field >= Dim && field < kCellField) continue;
-    const Field& f = fields_[field];
-    const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
-    for (int r = 0; r < rows; ++r) {
-      bool used = field < Dim && face_row_used[field][r];
-      for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0 && !used && field >= Dim; ++e) {
-        if (field == kCellField) {
-          used = unknown_of_cell_[e] >= 0;
-        } else if (field - Dim == eliminated_) {
-          // the eliminated DOF of a cell with a diagonal unknown
-          for (int k = 0; k < Dim - 1; ++k)
-            used = used || unknown_of_dof_[fields_[Dim + k].offset + (e - f.offset)] >= 0;
-        } else {
-          used = unknown_of_dof_[e] >= 0;
-        }
-      }
-      if (used) active_rows_[field].push_back(r);
+  // the rows the loops visit: face rows with fluid, stress and cell rows with unknowns (the
+  // eliminated component: rows of cells with an unknown of a diagonal component 0..Dim-2), found
+  // from the unknowns' locations (a row is visited iff it holds one), in increasing order: the
+  // rows a scan of the maps over the grid finds, in time proportional to the unknowns and rows
+  for (int a = 0; a < Dim; ++a)
+    for (int r = 0; r < static_cast<int>(face_row_used[a].size()); ++r)
+      if (face_row_used[a][r]) active_rows_[a].push_back(r);
+  {
+    std::array<std::vector<char>, kFields> row_used;
+    for (int field = Dim; field < kFields; ++field) {
+      if (num_stress_ == 0 && field < kCellField) continue;
+      const Field& f = fields_[field];
+      row_used[field].assign(f.dims.prod() / std::max(f.dims[0], 1), 0);
     }
+    for (int i = 0; i < num_stress_; ++i) {
+      const int d = location_[i];
+      const int k = stress.coord(d).first;
+      const int e = d - fields_[Dim + k].offset;
+      row_used[Dim + k][e / fields_[Dim + k].dims[0]] = 1;
+      if (eliminated_ >= 0 && k < Dim - 1) {
+        const Field& el = fields_[Dim + eliminated_];
+        row_used[Dim + eliminated_][e / el.dims[0]] = 1;
+      }
+    }
+    for (int k = 0; k < dofs.num_pressure(); ++k)
+      row_used[kCellField][dofs.pressure.cell_of_dof[k] / fields_[kCellField].dims[0]] = 1;
+    for (int field = Dim; field < kFields; ++field)
+      for (int r = 0; r < static_cast<int>(row_used[field].size()); ++r)
+        if (row_used[field][r]) active_rows_[field].push_back(r);
   }
   for (int field = 0; field < kFields; ++field)
     active_work_ += static_cast<long>(active_rows_[field].size()) * fields_[field].dims[0];
@@ -461,13 +543,23 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
       for (int r = 0; r < static_cast<int>(read[a].size()); ++r)
         if (read[a][r]) read_face_rows_[a].push_back(r);
   }
-  if (num_stress_ > 0) stress_scratch_.setZero(num_stress_dofs_);
-  cell_scratch_.setZero(num_cells_);
+  if (num_stress_ > 0) {
+    if (workspace_)
+      workspace_->stress_scratch.lend(num_stress_dofs_, stress_scratch_);
+    else
+      stress_scratch_.setZero(num_stress_dofs_);
+  }
+  if (workspace_)
+    workspace_->cell_scratch.lend(num_cells_, cell_scratch_);
+  else
+    cell_scratch_.setZero(num_cells_);
   // the face scratch: zero on the rows any pass reads or writes (the active rows: apply's
   // faces_from_grid and the sweeps, which touch only faces with C_f != 0; the rows
   // grid_from_faces reads: apply and rhs), never touched elsewhere (uninitialised: a fresh
   // allocation's pages there are not even mapped; issue 20, 200 MB at Fig. 2's paper grid)
+  if (workspace_ && workspace_->face_scratch.size() == num_faces_) face_scratch_.swap(workspace_->face_scratch);
   face_scratch_.resize(num_faces_);
+  if (workspace_) workspace_->face_scratch = VectorX();
   for (int a = 0; a < Dim; ++a) {
     const Field& f = fields_[a];
     const int n0 = f.dims[0];
@@ -476,6 +568,39 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
         std::fill(face_scratch_.data() + f.offset + static_cast<std::ptrdiff_t>(r) * n0,
                   face_scratch_.data() + f.offset + static_cast<std::ptrdiff_t>(r + 1) * n0, 0.0);
   }
+}
+
+template <int Dim>
+MatrixFreeStokesOperator<Dim>::~MatrixFreeStokesOperator() {
+  if (!workspace_) return;
+  // the storage back to the workspace, with the entries this operator may have left non-zero
+  // (not -1): C_f on the spans it computed, the maps at its unknowns' DOFs and cells, the stress
+  // and cell scratch on the rows the passes write (the active rows of their fields: scatter,
+  // grid_from_faces); the face scratch as it is (the next operator zeroes the rows it uses)
+  StokesWorkspace& w = *workspace_;
+  w.face_coefficient.values.swap(face_coefficient_);
+  w.face_coefficient.dirty = std::move(coefficient_spans_);
+  auto give_rows = [&](KeptZeros& kept, VectorX& v, int first_field, int last_field) {
+    kept.values.swap(v);
+    kept.dirty.clear();
+    for (int field = first_field; field <= last_field; ++field) {
+      const Field& f = fields_[field];
+      for (int r : active_rows_[field]) {
+        const long begin = f.offset + static_cast<long>(r) * f.dims[0];
+        kept.dirty.emplace_back(begin, begin + f.dims[0]);
+      }
+    }
+  };
+  if (num_stress_ > 0) {
+    give_rows(w.stress_scratch, stress_scratch_, Dim, kCellField - 1);
+    w.unknown_of_dof.values.swap(unknown_of_dof_);
+    w.unknown_of_dof.dirty.assign(location_.begin(), location_.begin() + num_stress_);
+  }
+  give_rows(w.cell_scratch, cell_scratch_, kCellField, kCellField);
+  w.unknown_of_cell.values.swap(unknown_of_cell_);
+  w.unknown_of_cell.dirty.assign(location_.begin() + num_stress_, location_.end());
+  w.face_scratch.swap(face_scratch_);
+  w.lent = false;
 }
 
 template <int Dim>
@@ -1223,7 +1348,8 @@ std::vector<int> stokes_sweep_order(const MacGrid<Dim>& grid, const StressLayout
                                                    const std::array<BoundaryType, 2 * D>&,       \
                                                    double, double);                              \
   template StokesDofs select_stokes_dofs<D>(const MacGrid<D>&, const StressLayout<D>&,           \
-                                            const StokesWeights&, double, StokesUnknowns);       \
+                                            const StokesWeights&, double, StokesUnknowns,        \
+                                            const LiquidBand*);                                  \
   template ExplicitStokesSystem assemble_explicit_stokes<D>(const MacGrid<D>&,                   \
                                                             const StressLayout<D>&,              \
                                                             const StokesWeights&,                \

@@ -27,6 +27,7 @@
 
 #include "reference/core/common.hpp"
 #include "reference/fluid/pressure_projection.hpp"
+#include "reference/fluid/stokes_workspace.hpp"
 #include "reference/fluid/viscosity.hpp"
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
@@ -81,9 +82,12 @@ struct StokesDofs {
   int size() const { return num_stress() + num_pressure(); }
 };
 
+/// `band` (optional; stokes_workspace.hpp): the pressure DOFs are searched in its cell box only
+/// (select_pressure_dofs), with the same result when the band's promise holds.
 template <int Dim>
 StokesDofs select_stokes_dofs(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
-                              const StokesWeights& w, double dt, StokesUnknowns unknowns);
+                              const StokesWeights& w, double dt, StokesUnknowns unknowns,
+                              const LiquidBand* band = nullptr);
 
 /// Explicit back end: every matrix of eq. (8)/(24) by its paper name; unknown vector (tau, p),
 /// tau first (the order of eq. (24)). A = [A11 A12; A12^T A22] restricted to the active DOFs.
@@ -133,6 +137,12 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 /// vectors are sized at construction: apply and the sweeps allocate nothing, and one operator
 /// must not run two of them at once from different threads. The operator keeps a reference to
 /// the weights it is built with (W_F^u, read by rhs): they must outlive it.
+/// With a StokesWorkspace (stokes_workspace.hpp; issue 20, docs/preconditioners.md section 39)
+/// the operator borrows its face-, cell- and stress-sized vectors from the workspace and gives
+/// them back when destroyed (the workspace must outlive it), and with the workspace's band it
+/// computes C_f on the band's face rows only (0 elsewhere): no grid-sized allocation or fill
+/// after the first step, the same bits. The rows the loops visit come from the unknowns'
+/// locations (a row is visited iff it holds an unknown), not from a scan of the grid.
 /// Test switch (issue 20): MatrixFreeStokesOperator::rhs writes W_F^u u* on every face row and
 /// updated_velocities_into computes B x on every face, as before the rows were restricted
 /// (tests/unit/fluid/test_stokes.cpp compares both bit for bit). Off by default.
@@ -142,7 +152,12 @@ template <int Dim>
 class MatrixFreeStokesOperator : public LinearOperator {
  public:
   MatrixFreeStokesOperator(const MacGrid<Dim>& grid, const StressLayout<Dim>& layout,
-                           const StokesWeights& w, const StokesDofs& dofs, double dt);
+                           const StokesWeights& w, const StokesDofs& dofs, double dt,
+                           StokesWorkspace* workspace = nullptr);
+  /// Gives the borrowed storage back to the workspace (if any), with the entries it wrote.
+  ~MatrixFreeStokesOperator() override;
+  MatrixFreeStokesOperator(const MatrixFreeStokesOperator&) = delete;
+  MatrixFreeStokesOperator& operator=(const MatrixFreeStokesOperator&) = delete;
   int size() const override { return size_; }
   void apply(const VectorX& x, VectorX& y) const override;
   VectorX diagonal() const override { return diagonal_; }
@@ -272,6 +287,10 @@ class MatrixFreeStokesOperator : public LinearOperator {
   VectorX diagonal_;
   bool colouring_valid_ = true;
   std::vector<VectorX> null_space_;
+  /// the workspace whose storage the operator holds (nullptr: its own storage), and the spans of
+  /// face_coefficient_ it wrote (given back with it)
+  StokesWorkspace* workspace_ = nullptr;
+  std::vector<std::pair<long, long>> coefficient_spans_;
   // scratch, sized at construction
   mutable VectorX stress_scratch_, cell_scratch_, face_scratch_;
 };
@@ -338,6 +357,9 @@ struct StokesSolveOptions {
   PreconditionerKind preconditioner = PreconditionerKind::ssor;
   /// The multigrid preconditioner's parameters (nullptr: StokesPreconditionerOptions{}).
   const StokesPreconditionerOptions* multigrid = nullptr;
+  /// Storage kept across steps and the liquid's band (stokes_workspace.hpp; nullptr: the
+  /// operator's own vectors, passes over the whole grid). The same results either way.
+  StokesWorkspace* workspace = nullptr;
   /// Warm start: the initial (tau, p) read from these fields where the unknowns exist (a full
   /// StressGrid stress field, a cell pressure field; nullptr or a field of another size: zero).
   /// The solve still stops at settings.tolerance; only the starting residual changes.

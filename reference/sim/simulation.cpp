@@ -2102,8 +2102,10 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // the volume correction's divergence source (empty: none; StageSwitches::volume_source_gain)
   const VectorX source = volume_source(dt);
   in.divergence_source = source.size() > 0 ? &source : nullptr;
+  in.workspace = stokes_workspace_for(in.weights.pressure);
   solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options, r);
   in.divergence_source = nullptr;
+  in.workspace = nullptr;
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
   if (model) {
@@ -2141,6 +2143,34 @@ void Simulation<Dim>::solve_coupled(double dt) {
     note_unconverged("coupled " + enum_name(scene_.solver.scheme),
                      r.fluid_iterations + r.contact_iterations + r.coupled_iterations,
                      r.max_relative_residual);
+}
+
+template <int Dim>
+StokesWorkspace* Simulation<Dim>::stokes_workspace_for(const PressureWeights& w) {
+  stokes_workspace_.keep = switches_.kept_solve_storage;
+  if (!stokes_workspace_.keep) {
+    // (the storage a kept run left goes back to the heap)
+    const LiquidBand band = stokes_workspace_.band;
+    stokes_workspace_ = StokesWorkspace();
+    stokes_workspace_.band = band;
+    stokes_workspace_.keep = false;
+  }
+  LiquidBand& band = stokes_workspace_.band;
+  band.valid = liquid_cell_box_.valid_for(w.liquid_cell.data(), w.liquid_cell.size());
+  for (int a = 0; a < Dim; ++a)
+    band.valid = band.valid && liquid_face_boxes_[a].valid_for(w.liquid_face.data() + grid_.face_offset(a),
+                                                               grid_.face_dims(a).prod());
+  if (band.valid) {
+    for (int d = 0; d < Dim; ++d) {
+      band.cell_lo[d] = liquid_cell_box_.lo[d];
+      band.cell_hi[d] = liquid_cell_box_.hi[d];
+      for (int a = 0; a < Dim; ++a) {
+        band.face_lo[a][d] = liquid_face_boxes_[a].lo[d];
+        band.face_hi[a][d] = liquid_face_boxes_[a].hi[d];
+      }
+    }
+  }
+  return &stokes_workspace_;
 }
 
 template <int Dim>
@@ -2198,6 +2228,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     State out = from;
     StokesSolveOptions options = stokes_options(w.viscosity, dt);
     options.divergence_source = &source;
+    options.workspace = stokes_workspace_for(w.pressure);
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
                      backend, pcg_settings_, out.u, options);
@@ -2212,9 +2243,11 @@ void Simulation<Dim>::solve_liquid(double dt) {
   auto viscous = [&](const State& from, const VectorX* eta) {
     w.viscosity = eta ? *eta : stress_eta_;
     State out = from;
+    StokesSolveOptions options = stokes_options(w.viscosity, dt);
+    options.workspace = stokes_workspace_for(w.pressure);
     const StokesSolveResult solve = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
                                                  StressForm::full, backend, pcg_settings_, out.u,
-                                                 stokes_options(w.viscosity, dt));
+                                                 options);
     record_solve(solve.pcg, 0, solve.stress_dofs, "viscosity");
     if (solve.fell_back) ++stats_.solver.preconditioner_fallbacks;
     out.stress = solve.stress;

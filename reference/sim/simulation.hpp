@@ -170,6 +170,10 @@ struct StageSwitches {
   /// set's extension into the solids over the solids' box and its negative points searched over
   /// the lattice. The same results either way (tests/unit/sim/test_restricted_passes.cpp).
   bool restricted_passes = true;
+  /// A measurement switch: false makes the liquid solve's operator allocate its face-, cell- and
+  /// stress-sized vectors per step instead of keeping them in stokes_workspace_ (the band is
+  /// used either way). The same results either way (docs/preconditioners.md section 39).
+  bool kept_solve_storage = true;
 };
 
 /// Energy changes of the liquid (and the moving bodies) per stage of the step, summed over a
@@ -518,6 +522,16 @@ class Simulation : public AnySimulation {
   std::unique_ptr<RigidWorld<Dim>> rigid_;
   /// Moving bodies next to a liquid: the coupled step (update_moving_solids, solve_coupled).
   bool coupled_ = false;
+  /// The liquid solve's storage kept across steps (the matrix-free operator's face-, cell- and
+  /// stress-sized vectors) and the liquid's band of the step (stokes_workspace.hpp; issue 20,
+  /// docs/preconditioners.md section 39), given to solve_stokes and the coupled systems.
+  /// Declared before every member that could hold a system or an operator (destroyed after
+  /// them: an operator gives its storage back when destroyed).
+  StokesWorkspace stokes_workspace_;
+  /// The workspace with its band set from the boxes update_liquid_weights wrote W_L^p and W_L^u
+  /// in (liquid_cell_box_, liquid_face_boxes_), when they are valid for `w`'s vectors (else no
+  /// band: the set-up passes over the grid).
+  StokesWorkspace* stokes_workspace_for(const PressureWeights& w);
   /// The coupled step's input, kept across steps so that its grid-sized vectors are reused:
   /// its `solids` are the weights of the last update_moving_solids (whose lattice_phi has moved
   /// to solid_phi_), the rest is filled by solve_coupled.
