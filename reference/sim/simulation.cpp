@@ -1313,6 +1313,16 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
       }
     }
   }
+  // (departures item 16) a wall face beside air keeps the extrapolated velocity: no particle's
+  // stencil reached it at the transfer (mass_faces_) and the cell beside it holds no liquid
+  // (W_L^p = 0), so the solve did not see this wall; the particles that reach it in the
+  // advection are stopped by the wall clamp (settle_position). A face the extrapolation did not
+  // reach (NaN under the guard) takes the zero as before.
+  const int nf = grid_.num_faces();
+  const bool air_walls = switches_.air_walls_extrapolated &&
+                         mass_faces_.size() == static_cast<std::size_t>(nf) &&
+                         weights_.liquid_cell.size() == grid_.num_cells();
+  air_walls_.clear();
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
     for (int side = 0; side < 2; ++side) {
@@ -1322,10 +1332,20 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
       for (int j = 0; j < layer.prod(); ++j) {
         VecI<Dim> coord = lattice_coord<Dim>(j, layer);
         coord[axis] = side == 0 ? 0 : grid_.cells()[axis];
-        u_[grid_.face_index(axis, coord)] = 0.0;
+        const int f = grid_.face_index(axis, coord);
+        if (air_walls && !mass_faces_[f] && std::isfinite(u_[f])) {
+          VecI<Dim> cell = coord;
+          if (side == 1) cell[axis] -= 1;
+          if (weights_.liquid_cell[grid_.cell_index(cell)] == 0.0) {
+            air_walls_.push_back(f);
+            continue;
+          }
+        }
+        u_[f] = 0.0;
       }
     }
   }
+  std::sort(air_walls_.begin(), air_walls_.end());
   constrain_velocity_in_solids();
 }
 
@@ -1713,6 +1733,11 @@ void Simulation<Dim>::rescale_face_velocity(const Vec<Dim>& mean, double s) {
     const auto [axis, fc] = grid_.face_coord(f);
     // (the domain's walls keep their zero)
     if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
+  }
+  // the walls beside air hold air velocities (apply_wall_and_solid_velocities): scaled alike
+  for (const int f : air_walls_) {
+    const int axis = grid_.face_coord(f).first;
+    u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
   }
 }
 
