@@ -1230,9 +1230,13 @@ bool Simulation<Dim>::extend_extrapolation(bool drift) {
   // with the rest
   {
     const VectorX& given = extended_u_;
+    // (the walls beside air, departures item 16, are air faces: they keep the deeper values)
+    std::vector<double> air_wall_values(air_walls_.size());
+    for (std::size_t i = 0; i < air_walls_.size(); ++i) air_wall_values[i] = u_[air_walls_[i]];
 #pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int f = 0; f < nf; ++f)
       if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = drift ? 0.0 : given[f];
+    for (std::size_t i = 0; i < air_walls_.size(); ++i) u_[air_walls_[i]] = air_wall_values[i];
     // (the rows the step's constrain evaluated: a row it left keeps +0 in u_ and in given)
     const int count = static_cast<int>(constrained_rows_.size());
     for (int r = 0; r < count && !solids_.empty(); ++r) {
@@ -1316,8 +1320,9 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   // (departures item 16) a wall face beside air keeps the extrapolated velocity: no particle's
   // stencil reached it at the transfer (mass_faces_) and the cell beside it holds no liquid
   // (W_L^p = 0), so the solve did not see this wall; the particles that reach it in the
-  // advection are stopped by the wall clamp (settle_position). A face the extrapolation did not
-  // reach (NaN under the guard) takes the zero as before.
+  // advection are stopped by the wall clamp (settle_position). It is an air face in every other
+  // respect: one the extrapolation did not reach stays NaN under the guard, and a particle that
+  // reads it is redone after a deeper extrapolation (extend_extrapolation), as for any air face.
   const int nf = grid_.num_faces();
   const bool air_walls = switches_.air_walls_extrapolated &&
                          mass_faces_.size() == static_cast<std::size_t>(nf) &&
@@ -1333,7 +1338,7 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
         VecI<Dim> coord = lattice_coord<Dim>(j, layer);
         coord[axis] = side == 0 ? 0 : grid_.cells()[axis];
         const int f = grid_.face_index(axis, coord);
-        if (air_walls && !mass_faces_[f] && std::isfinite(u_[f])) {
+        if (air_walls && !mass_faces_[f]) {
           VecI<Dim> cell = coord;
           if (side == 1) cell[axis] -= 1;
           if (weights_.liquid_cell[grid_.cell_index(cell)] == 0.0) {

@@ -333,8 +333,9 @@ class Simulation : public AnySimulation {
   void apply_wall_and_solid_velocities();
   /// The wall faces that kept their extrapolated velocity in the step's
   /// apply_wall_and_solid_velocities (ascending): no particle mass at the step's transfer, no
-  /// liquid in the cell beside them, a finite extrapolated value. Line 15's payment scales them
-  /// with the air (rescale_face_velocity).
+  /// liquid in the cell beside them. They are air faces from then on: a deeper extrapolation
+  /// (extend_extrapolation) fills them and line 15's payment scales them with the air
+  /// (rescale_face_velocity).
   std::vector<int> air_walls_;
   /// The air cells beside the liquid made divergence-free (StageSwitches::divergence_free_air).
   void divergence_free_air();

@@ -96,7 +96,13 @@ TEST_CASE("dam break surge front follows Martin & Moyce (1952)", "[validation][d
             << "; largest pointwise relative error " << max_rel << "\n";
   CHECK(std::abs(speed_sim - speed_exp) / speed_exp < 0.10);
   CHECK(best_error < 0.10);
-  // the front never moves backwards and starts at Z = 1
+  // the front never moves backwards and starts at Z = 1; checked while it is a surge front, more
+  // than a cell from the tank's far wall (Z = 4, reached at T = 3.2, after the data): there the
+  // front is the liquid running up the wall, whose foremost particle may recoil (1.2e-7 m at
+  // frame 34 since the walls beside air stopped slowing it a cell early, departures item 16;
+  // before, the wall clamp pinned it at the wall)
   CHECK(h.Z.front() == Approx(1.0).margin(0.02));
-  for (size_t i = 1; i < h.Z.size(); ++i) CHECK(h.Z[i] >= h.Z[i - 1] - 1e-9);
+  const double wall = 4.0, cell = 4.0 / 64;
+  for (size_t i = 1; i < h.Z.size(); ++i)
+    if (h.Z[i - 1] < wall - cell) CHECK(h.Z[i] >= h.Z[i - 1] - 1e-9);
 }
