@@ -1244,9 +1244,13 @@ bool Simulation<Dim>::extend_extrapolation(bool drift) {
   // with the rest
   {
     const VectorX& given = extended_u_;
+    // (the walls beside air, departures item 16, are air faces: they keep the deeper values)
+    std::vector<double> air_wall_values(air_walls_.size());
+    for (std::size_t i = 0; i < air_walls_.size(); ++i) air_wall_values[i] = u_[air_walls_[i]];
 #pragma omp parallel for schedule(static) num_threads(process_threads())
     for (int f = 0; f < nf; ++f)
       if (weights_.fluid_face[f] == 0.0 || wall_face(f)) u_[f] = drift ? 0.0 : given[f];
+    for (std::size_t i = 0; i < air_walls_.size(); ++i) u_[air_walls_[i]] = air_wall_values[i];
     // (the rows the step's constrain evaluated: a row it left keeps +0 in u_ and in given)
     const int count = static_cast<int>(constrained_rows_.size());
     for (int r = 0; r < count && !solids_.empty(); ++r) {
@@ -1365,6 +1369,17 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
     }
   }
   }
+  // (departures item 16) a wall face beside air keeps the extrapolated velocity: no particle's
+  // stencil reached it at the transfer (mass_faces_) and the cell beside it holds no liquid
+  // (W_L^p = 0), so the solve did not see this wall; the particles that reach it in the
+  // advection are stopped by the wall clamp (settle_position). It is an air face in every other
+  // respect: one the extrapolation did not reach stays NaN under the guard, and a particle that
+  // reads it is redone after a deeper extrapolation (extend_extrapolation), as for any air face.
+  const int nf = grid_.num_faces();
+  const bool air_walls = switches_.air_walls_extrapolated &&
+                         mass_faces_.size() == static_cast<std::size_t>(nf) &&
+                         weights_.liquid_cell.size() == grid_.num_cells();
+  air_walls_.clear();
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
     for (int side = 0; side < 2; ++side) {
@@ -1374,10 +1389,20 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
       for (int j = 0; j < layer.prod(); ++j) {
         VecI<Dim> coord = lattice_coord<Dim>(j, layer);
         coord[axis] = side == 0 ? 0 : grid_.cells()[axis];
-        u_[grid_.face_index(axis, coord)] = 0.0;
+        const int f = grid_.face_index(axis, coord);
+        if (air_walls && !mass_faces_[f]) {
+          VecI<Dim> cell = coord;
+          if (side == 1) cell[axis] -= 1;
+          if (weights_.liquid_cell[grid_.cell_index(cell)] == 0.0) {
+            air_walls_.push_back(f);
+            continue;
+          }
+        }
+        u_[f] = 0.0;
       }
     }
   }
+  std::sort(air_walls_.begin(), air_walls_.end());
   constrain_velocity_in_solids();
 }
 
@@ -1777,6 +1802,11 @@ void Simulation<Dim>::rescale_face_velocity(const Vec<Dim>& mean, double s) {
     const auto [axis, fc] = grid_.face_coord(f);
     // (the domain's walls keep their zero)
     if (!grid_.is_boundary_face(axis, fc)) u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
+  }
+  // the walls beside air hold air velocities (apply_wall_and_solid_velocities): scaled alike
+  for (const int f : air_walls_) {
+    const int axis = grid_.face_coord(f).first;
+    u_[f] = mean[axis] + s * (u_[f] - mean[axis]);
   }
 }
 
