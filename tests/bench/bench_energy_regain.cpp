@@ -67,9 +67,11 @@ std::vector<Variant> variants() {
       // line 15's potential energy not paid by the kinetic energy (the default before slosh11)
       {"line15-free", [](StageSwitches& s) { s.line15_energy = Line15Energy::free; }},
       {"line15-no-debt", [](StageSwitches& s) { s.line15_carry_debt = false; }},
-      // every wall face zero after the solve, also beside air (before issue 16's departures
-      // item 16: liquid in flight was slowed a cell before it reached a wall)
+      // every wall face zero after the solve, also beside air (the default: departures item 16
+      // is off; liquid in flight is slowed a cell before it reaches a wall)
       {"walls-zero-in-air", [](StageSwitches& s) { s.air_walls_extrapolated = false; }},
+      // departures item 16 on: a wall face beside air keeps the extrapolated velocity
+      {"air-walls", [](StageSwitches& s) { s.air_walls_extrapolated = true; }},
   };
 }
 
