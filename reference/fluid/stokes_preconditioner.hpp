@@ -19,7 +19,9 @@
 /// A itself (a symmetric two-level composition): SPD for any choice of its parts. Between the
 /// sweeps and that inverse, on each side, an exact solve with A's principal block A_CC on the
 /// unknowns next to a curved solid (the cut block, StokesPreconditionerOptions::cut_threshold;
-/// docs/preconditioners.md, section 12).
+/// docs/preconditioners.md, section 12); between the outer sweeps and the cut solves, on each
+/// side, point Gauss-Seidel sweeps of A on the free surface's rows (StokesPreconditionerOptions::
+/// surface_sweeps, (P17), section 38).
 
 #include <memory>
 #include <string>
