@@ -288,6 +288,7 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
   }
   if (!pressure_only_ && options.inner_cg > 0) velocity_finest_ = velocity_.finest_operator();
   if (!pressure_only_ && options.cut_threshold > 0.0) build_cut_block();
+  if (!pressure_only_ && options.surface_sweeps > 0 && options.outer_sweeps > 0 && np_ > 0) build_surface_block();
   h_.setZero(n_);
   back_.setZero(n_);
   y1_.setZero(n_);
@@ -303,29 +304,86 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
 }
 
 template <int Dim>
-void StokesPreconditioner<Dim>::build_cut_block() {
-  // A with the system's own K (no W_F^s floor): the block is solved exactly
+SparseMatrix StokesPreconditioner<Dim>::rows_of_a(const std::vector<int>& list) const {
+  // A with the system's own K (no W_F^s floor)
   const SparseMatrix& k = f_.compliance_exact.size() ? f_.compliance_exact : f_.compliance;
   // rows `list` of A = B^T C B + blkdiag(K, 0), row-major |list| x n
-  auto rows_of = [&](const std::vector<int>& list) {
-    const int m = static_cast<int>(list.size());
-    std::vector<Triplet> t;
-    t.reserve(m);
-    for (int q = 0; q < m; ++q) t.emplace_back(q, list[q], 1.0);
-    SparseMatrix select(m, n_);
-    select.setFromTriplets(t.begin(), t.end());
-    const SparseMatrix bt = select * f_.b_transpose;
-    SparseMatrix rows = SparseMatrix(bt * sparse_diagonal(f_.c)) * f_.b;
-    t.clear();
-    for (int q = 0; q < m; ++q)
-      if (list[q] < ns_)
-        for (SparseMatrix::InnerIterator it(k, list[q]); it; ++it) t.emplace_back(q, static_cast<int>(it.col()), it.value());
-    SparseMatrix kpart(m, n_);
-    kpart.setFromTriplets(t.begin(), t.end());
-    rows += kpart;
-    rows.makeCompressed();
-    return rows;
-  };
+  const int m = static_cast<int>(list.size());
+  std::vector<Triplet> t;
+  t.reserve(m);
+  for (int q = 0; q < m; ++q) t.emplace_back(q, list[q], 1.0);
+  SparseMatrix select(m, n_);
+  select.setFromTriplets(t.begin(), t.end());
+  const SparseMatrix bt = select * f_.b_transpose;
+  SparseMatrix rows = SparseMatrix(bt * sparse_diagonal(f_.c)) * f_.b;
+  t.clear();
+  for (int q = 0; q < m; ++q)
+    if (list[q] < ns_)
+      for (SparseMatrix::InnerIterator it(k, list[q]); it; ++it) t.emplace_back(q, static_cast<int>(it.col()), it.value());
+  SparseMatrix kpart(m, n_);
+  kpart.setFromTriplets(t.begin(), t.end());
+  rows += kpart;
+  rows.makeCompressed();
+  return rows;
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::build_surface_block() {
+  // the pressure unknowns of the cells the liquid fills only in part (W_L^p < 1), without the
+  // near-empty cells, and the stress unknowns their rows of A reach (those on the faces of those
+  // cells): the free surface's rows, where the residual of the settling liquid sits
+  // (docs/preconditioners.md section 38)
+  std::vector<char> in(n_, 0), empty(np_, 0);
+  for (int k : empty_) empty[k] = 1;
+  std::vector<int> list;
+  for (int k = 0; k < np_; ++k)
+    if (f_.pressure_liquid[k] < 1.0 && !empty[k]) list.push_back(ns_ + k);
+  if (list.empty()) return;
+  for (int i : list) in[i] = 1;
+  {
+    // (the stress unknowns the seed's rows reach: those on the faces of the partly filled cells)
+    const SparseMatrix seed_rows = rows_of_a(list);
+    for (int q = 0; q < seed_rows.outerSize(); ++q)
+      for (SparseMatrix::InnerIterator it(seed_rows, q); it; ++it)
+        if (it.value() != 0.0 && it.col() < ns_) in[it.col()] = 1;
+  }
+  list.clear();
+  for (int i = 0; i < n_; ++i)
+    if (in[i]) list.push_back(i);
+  SparseMatrix rows = rows_of_a(list);
+  VectorX diagonal = VectorX::Zero(static_cast<int>(list.size()));
+  for (int q = 0; q < rows.outerSize(); ++q)
+    for (SparseMatrix::InnerIterator it(rows, q); it; ++it)
+      if (it.col() == list[q]) diagonal[q] += it.value();
+  surface_ = std::move(list);
+  surface_rows_.swap(rows);
+  surface_diagonal_ = std::move(diagonal);
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::surface_sweeps(bool reverse, const VectorX& r, VectorX& z) const {
+  // point Gauss-Seidel on A's rows of the surface set (the others fixed): SOR with omega 1 on
+  // the principal block A_SS, a contraction in the A norm; forward then (in the mirrored place of
+  // apply) backward, so P stays symmetric
+  const int m = static_cast<int>(surface_.size());
+  if (m == 0) return;
+  const int* outer = surface_rows_.outerIndexPtr();
+  const int* inner = surface_rows_.innerIndexPtr();
+  const double* value = surface_rows_.valuePtr();
+  for (int sweep = 0; sweep < options_.surface_sweeps; ++sweep)
+    for (int t = 0; t < m; ++t) {
+      const int q = reverse ? m - 1 - t : t;
+      if (!(surface_diagonal_[q] > 0.0)) continue;
+      const int i = surface_[q];
+      double s = r[i];
+      for (int e = outer[q]; e < outer[q + 1]; ++e) s -= value[e] * z[inner[e]];
+      z[i] += s / surface_diagonal_[q];
+    }
+}
+
+template <int Dim>
+void StokesPreconditioner<Dim>::build_cut_block() {
+  auto rows_of = [&](const std::vector<int>& list) { return rows_of_a(list); };
   std::vector<char> in(n_, 0);
   std::vector<int> list;
   auto collect = [&]() {
@@ -579,12 +637,14 @@ void StokesPreconditioner<Dim>::apply(const VectorX& r, VectorX& z) const {
   // divide by a diagonal up to 1e-16 of the median; the two-term step gives them their Jacobi
   // value)
   outer_sweeps(false, r, z, sweeps);
+  surface_sweeps(false, r, z);
   correct_cut(r, z);
   a_.apply(z, az_);
   res_ = r - az_;
   apply_two_term(res_, d_);
   z += d_;
   correct_cut(r, z);
+  surface_sweeps(true, r, z);
   outer_sweeps(true, r, z, sweeps);
 }
 
@@ -596,6 +656,7 @@ std::size_t StokesPreconditioner<Dim>::memory_bytes() const {
   };
   std::size_t bytes = csr(f_.b) + csr(f_.b_transpose) + csr(f_.compliance) + csr(kinv_);
   bytes += velocity_.memory_bytes() + pressure_.memory_bytes();
+  bytes += csr(surface_rows_) + sizeof(int) * surface_.size() + sizeof(double) * surface_diagonal_.size();
   if (cut_factor_)
     bytes += csr(cut_rows_) + sizeof(double) * 3 * cut_.size() + sizeof(int) * cut_.size() +
              (sizeof(double) + sizeof(int)) * static_cast<std::size_t>(cut_factor_->analysed_entries());

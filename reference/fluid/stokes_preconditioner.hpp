@@ -19,7 +19,9 @@
 /// A itself (a symmetric two-level composition): SPD for any choice of its parts. Between the
 /// sweeps and that inverse, on each side, an exact solve with A's principal block A_CC on the
 /// unknowns next to a curved solid (the cut block, StokesPreconditionerOptions::cut_threshold;
-/// docs/preconditioners.md, section 12).
+/// docs/preconditioners.md, section 12); between the outer sweeps and the cut solves, on each
+/// side, point Gauss-Seidel sweeps of A on the free surface's rows (StokesPreconditionerOptions::
+/// surface_sweeps, (P17), section 38).
 
 #include <memory>
 #include <string>
@@ -149,6 +151,16 @@ struct StokesPreconditionerOptions {
   /// dense panels and dense updates) instead of Eigen's simplicial one: the same factor up to
   /// round-off at a fraction of the time on large blocks (docs/preconditioners.md section 27).
   bool cut_supernodal = true;
+  /// Point Gauss-Seidel sweeps of A on the free surface's unknowns S (the pressure unknowns of
+  /// partly filled cells, W_L^p < 1, and the stress unknowns on their faces), after the forward
+  /// outer sweeps and, mirrored, before the backward ones: a symmetric multiplicative composition
+  /// as for the cut block, SPD as before [(P17)]. The residual of the settling liquid sits on
+  /// these rows (the off-diagonal stress unknowns with W_L^s < 1 and the partly filled cells:
+  /// 35-65 % of ||r||^2 and the maximum in most iterations of viscous-bunny-into-sphere-3d's
+  /// settling frames); 4 sweeps: 65 -> 55 PCG iterations on its frames 31-34 and 77 -> 65 on
+  /// 35-38 at about 7 % of an application (docs/preconditioners.md section 38). Only with
+  /// outer_sweeps > 0. 0: none.
+  int surface_sweeps = 4;
 };
 
 /// The preconditioner over the unknowns (tau, p) of StokesDofs. Holds a reference to `a` (the
@@ -169,6 +181,8 @@ class StokesPreconditioner : public Preconditioner {
   const Multigrid& pressure_multigrid() const { return pressure_; }
   /// The unknowns of the cut block C (increasing; empty when off or when there is none).
   const std::vector<int>& cut_unknowns() const { return cut_; }
+  /// The unknowns of the free-surface sweeps (increasing; empty when off or without W_L^p < 1).
+  const std::vector<int>& surface_unknowns() const { return surface_; }
   /// Entries of the cut block's LDL^T factor (0 without a block).
   long cut_factor_entries() const { return cut_factor_ ? static_cast<long>(cut_factor_->analysed_entries()) : 0; }
   /// Pi per pressure unknown (as the formula gives it, also on the near-empty cells).
@@ -202,6 +216,12 @@ class StokesPreconditioner : public Preconditioner {
   /// z_k = r_k / A22_kk on the near-empty cells.
   void add_empty_cells(const VectorX& r, VectorX& z) const;
   void build_cut_block();
+  /// Rows `list` of A = B^T C B + blkdiag(K, 0) (the system's own K), row-major |list| x n.
+  SparseMatrix rows_of_a(const std::vector<int>& list) const;
+  void build_surface_block();
+  /// options().surface_sweeps point Gauss-Seidel sweeps of A on the surface set (backward when
+  /// `reverse`).
+  void surface_sweeps(bool reverse, const VectorX& r, VectorX& z) const;
   /// z_C += A_CC^-1 (r - A z)_C.
   void correct_cut(const VectorX& r, VectorX& z) const;
   /// `count` outer SOR sweeps of A (backward when `reverse`) on the rows swept_ allows: on an
@@ -233,6 +253,9 @@ class StokesPreconditioner : public Preconditioner {
   Multigrid velocity_, pressure_;
   SparseMatrix velocity_finest_;  ///< V in the faces' numbering (inner_cg > 0 only)
   bool pressure_only_ = false;
+  std::vector<int> surface_;       ///< the unknowns of the surface set (increasing)
+  SparseMatrix surface_rows_;      ///< A_{S,:} (row-major, |S| x n)
+  VectorX surface_diagonal_;       ///< A_ii on them
   std::vector<int> cut_;    ///< the unknowns of C
   SparseMatrix cut_rows_;   ///< A_{C,:} (row-major, |C| x n)
   std::unique_ptr<SparseLdlt> cut_factor_;  ///< of A_CC
