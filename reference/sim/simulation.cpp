@@ -1614,7 +1614,9 @@ void Simulation<Dim>::correct_volume(double dt) {
   const bool local = switches_.line15_energy == Line15Energy::balance_local;
   const bool limit =
       switches_.line15_lift_within_energy && switches_.line15_energy == Line15Energy::balance;
-  std::vector<Vec<Dim>> before;
+  // (kept across steps: the copy reuses its storage)
+  std::vector<Vec<Dim>>& before = line15_before_;
+  before.clear();
   if (local || limit) before = particles_.x;
   // (departures item 15) a liquid that touches nothing (a drop in flight, more than a cell from every face of
   // the domain and from every solid) has no wall or body to push against: line 15's moves
@@ -1677,9 +1679,8 @@ void Simulation<Dim>::limit_line15_lift(const std::vector<Vec<Dim>>& before,
   if (before.size() != particles_.size()) return;
   const double rise = liquid_potential_energy() - potential_before;
   if (!(rise > 0.0)) return;
-  const double can_pay = relative_kinetic_energy();
-  if (rise + line15_credit_ <= can_pay) return;
-  const double s = std::clamp((can_pay - line15_credit_) / rise, 0.0, 1.0);
+  const double s = line15_lift_scale(rise, line15_credit_, relative_kinetic_energy());
+  if (s == 1.0) return;
   const long np = static_cast<long>(particles_.size());
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) particles_.x[p] = before[p] + s * (particles_.x[p] - before[p]);

@@ -56,6 +56,16 @@ enum class Line15Energy {
   balance_local,
 };
 
+/// (docs/derivations.md departures item 17) The factor by which line 15's moves are scaled so
+/// that their potential energy rise `rise` (> 0) with the account's `credit` (<= 0 banked, > 0
+/// owed) costs exactly what the kinetic energy `can_pay` holds: 1 when rise + credit <= can_pay,
+/// else (can_pay - credit) / rise clamped to [0, 1] (PE is linear in the positions, so the scaled
+/// moves raise it by s rise).
+inline double line15_lift_scale(double rise, double credit, double can_pay) {
+  if (!(rise > 0.0) || rise + credit <= can_pay) return 1.0;
+  return std::clamp((can_pay - credit) / rise, 0.0, 1.0);
+}
+
 /// Stages of the step that a diagnosis can switch off or replace, to measure what each one
 /// contributes (tests/bench/bench_still_water.cpp; docs/particles.md, "Still water"). The defaults
 /// are the simulator; scene files do not reach these switches.
@@ -386,6 +396,8 @@ class Simulation : public AnySimulation {
   void pay_line15_energy_locally(double gain, const std::vector<Vec<Dim>>& before);
   /// Line15Energy::balance: line 15's summed potential energy change not yet paid (<= 0, J)
   double line15_credit_ = 0.0;
+  /// The particles' positions before line 15's moves (balance_local's payment, item 17's scaling)
+  std::vector<Vec<Dim>> line15_before_;
   /// The energy ledger (only with StageSwitches::energy_ledger; otherwise nothing is measured):
   /// adds now() - (the energy after the previous stage) to stage and makes now() the energy
   /// after this one.
