@@ -1700,8 +1700,12 @@ void Simulation<Dim>::correct_volume(double dt) {
   const bool pay = switches_.line15_energy != Line15Energy::free;
   const double potential_before = pay ? liquid_potential_energy() : 0.0;
   const bool local = switches_.line15_energy == Line15Energy::balance_local;
-  std::vector<Vec<Dim>> before;
-  if (local) before = particles_.x;
+  const bool limit =
+      switches_.line15_lift_within_energy && switches_.line15_energy == Line15Energy::balance;
+  // (kept across steps: the copy reuses its storage)
+  std::vector<Vec<Dim>>& before = line15_before_;
+  before.clear();
+  if (local || limit) before = particles_.x;
   // (departures item 15) a liquid that touches nothing (a drop in flight, more than a cell from every face of
   // the domain and from every solid) has no wall or body to push against: line 15's moves
   // rearrange it and may not carry it, so its centre of mass is put back where it was after them
@@ -1729,6 +1733,7 @@ void Simulation<Dim>::correct_volume(double dt) {
     }
   }
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
+  if (limit) limit_line15_lift(before, potential_before);
   if (pay) {
     double gain = liquid_potential_energy() - potential_before;
     if (switches_.line15_energy != Line15Energy::per_step) {
@@ -1750,6 +1755,42 @@ void Simulation<Dim>::correct_volume(double dt) {
       account(frame_ledger_.density_projection, [&] { return particle_kinetic_energy(); });
     }
   }
+}
+
+template <int Dim>
+void Simulation<Dim>::limit_line15_lift(const std::vector<Vec<Dim>>& before,
+                                        double potential_before) {
+  // (departures item 17) line 15's rise dPE = PE(x) - PE(before) with the account's credit c
+  // (<= 0 banked, > 0 owed) costs dPE + c; the kinetic energy can pay KE_rel of it. The
+  // potential energy is linear in the positions, so the moves scaled by
+  //   s = (KE_rel - c) / dPE   (clamped to [0, 1])
+  // raise it by exactly what can be paid: x <- before + s (x - before).
+  if (before.size() != particles_.size()) return;
+  const double rise = liquid_potential_energy() - potential_before;
+  if (!(rise > 0.0)) return;
+  const double s = line15_lift_scale(rise, line15_credit_, relative_kinetic_energy());
+  if (s == 1.0) return;
+  const long np = static_cast<long>(particles_.size());
+#pragma omp parallel for schedule(static) num_threads(process_threads())
+  for (long p = 0; p < np; ++p) particles_.x[p] = before[p] + s * (particles_.x[p] - before[p]);
+  account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
+}
+
+template <int Dim>
+double Simulation<Dim>::relative_kinetic_energy() const {
+  const long np = static_cast<long>(particles_.size());
+  double mass = 0.0;
+  Vec<Dim> momentum = Vec<Dim>::Zero();
+  for (long p = 0; p < np; ++p) {
+    mass += particles_.mass[p];
+    momentum += particles_.mass[p] * particles_.v[p];
+  }
+  if (!(mass > 0.0)) return 0.0;
+  const Vec<Dim> mean = momentum / mass;
+  double relative = 0.0;
+  for (long p = 0; p < np; ++p)
+    relative += 0.5 * particles_.mass[p] * (particles_.v[p] - mean).squaredNorm();
+  return relative;
 }
 
 template <int Dim>

@@ -56,6 +56,16 @@ enum class Line15Energy {
   balance_local,
 };
 
+/// (docs/derivations.md departures item 17) The factor by which line 15's moves are scaled so
+/// that their potential energy rise `rise` (> 0) with the account's `credit` (<= 0 banked, > 0
+/// owed) costs exactly what the kinetic energy `can_pay` holds: 1 when rise + credit <= can_pay,
+/// else (can_pay - credit) / rise clamped to [0, 1] (PE is linear in the positions, so the scaled
+/// moves raise it by s rise).
+inline double line15_lift_scale(double rise, double credit, double can_pay) {
+  if (!(rise > 0.0) || rise + credit <= can_pay) return 1.0;
+  return std::clamp((can_pay - credit) / rise, 0.0, 1.0);
+}
+
 /// Stages of the step that a diagnosis can switch off or replace, to measure what each one
 /// contributes (tests/bench/bench_still_water.cpp; docs/particles.md, "Still water"). The defaults
 /// are the simulator; scene files do not reach these switches.
@@ -174,6 +184,13 @@ struct StageSwitches {
   /// next drops and the later motion, instead of being dropped (false: dropped, slosh9's form).
   /// On by default (docs/particles.md, slosh11: the floating box's pool at rest).
   bool line15_carry_debt = true;
+  /// With `balance`: line 15 lifts the liquid only by what it can pay. When its moves would raise
+  /// the potential energy by more than the account's credit and the liquid's relative kinetic
+  /// energy hold, every particle's move is scaled back by one factor so that the rise equals
+  /// that (docs/derivations.md departures item 17): a liquid held at rest out of equilibrium (packed against a
+  /// jammed raft of bodies) keeps its packing instead of being lifted for free every step.
+  /// false: the moves stay whole and the unpaid rise is a debt (line15_carry_debt).
+  bool line15_lift_within_energy = true;
   /// Line15Energy::balance_local's neighbourhoods: boxes of (2 reach + 1)^Dim cells
   int line15_pay_reach = 1;
   /// A test switch: false makes the per-step passes that follow the liquid and the moving bodies
@@ -398,11 +415,16 @@ class Simulation : public AnySimulation {
   /// from the liquid's kinetic energy (uniform scaling of the particles' v and c; all of it if
   /// the kinetic energy holds less)
   void pay_line15_energy(double gain);
+  /// StageSwitches::line15_lift_within_energy: line 15's moves since `before` scaled back so that
+  /// the potential energy they add is what the account and the kinetic energy can pay
+  void limit_line15_lift(const std::vector<Vec<Dim>>& before, double potential_before);
   /// Line15Energy::balance_local: `gain` taken from the particles near line 15's rises, from
   /// the positions before line 15's moves (docs/particles.md, slosh11)
   void pay_line15_energy_locally(double gain, const std::vector<Vec<Dim>>& before);
   /// Line15Energy::balance: line 15's summed potential energy change not yet paid (<= 0, J)
   double line15_credit_ = 0.0;
+  /// The particles' positions before line 15's moves (balance_local's payment, item 17's scaling)
+  std::vector<Vec<Dim>> line15_before_;
   /// The energy ledger (only with StageSwitches::energy_ledger; otherwise nothing is measured):
   /// adds now() - (the energy after the previous stage) to stage and makes now() the energy
   /// after this one.
@@ -424,6 +446,9 @@ class Simulation : public AnySimulation {
   double face_kinetic_energy() const;
   /// Kinetic energy of the particles, sum 1/2 m_p |v_p|^2.
   double particle_kinetic_energy() const;
+  /// sum_p 1/2 m_p |v_p - vbar|^2 with vbar the liquid's mass-weighted mean velocity: what
+  /// pay_line15_energy can take (J; 2D: J/m)
+  double relative_kinetic_energy() const;
   /// Potential energy of the dynamic bodies, -sum m g . x_c (x_c the centre of mass).
   double body_potential_energy() const;
   /// The body part of a step: RigidWorld::step, with its statistics added to the frame's.

@@ -559,3 +559,29 @@ TEST_CASE("eta per cell equals the particles' splat bit for bit, also where the 
     }
   }
 }
+
+TEST_CASE("line 15's moves are scaled to what the account and the kinetic energy pay (item 17)",
+          "[unit]") {
+  // s = line15_lift_scale(rise, credit, can_pay): the scaled rise s rise plus the credit is what
+  // can be paid whenever the whole rise could not be, and the moves stay whole otherwise.
+  // bunnies-onto-pool-2d's threefold run (slow_long_runs "[2d]") is the scene-level check: it
+  // regained 6.28 J over its bound without the rule and passes with it.
+  CHECK(line15_lift_scale(1.0, 0.0, 2.0) == 1.0);    // paid by the kinetic energy
+  CHECK(line15_lift_scale(1.0, -0.5, 0.5) == 1.0);   // banked drop + kinetic energy pay it
+  CHECK(line15_lift_scale(-1.0, 0.3, 0.0) == 1.0);   // a drop is never scaled
+  CHECK(line15_lift_scale(2.0, 0.0, 0.5) == 0.25);   // at rest but for 0.5 J
+  CHECK(line15_lift_scale(2.0, -0.5, 0.0) == 0.25);  // the credit pays a quarter
+  CHECK(line15_lift_scale(2.0, 0.7, 0.5) == 0.0);    // an old debt larger than the motion
+  for (double rise : {1e-9, 3e-3, 0.7, 12.0})
+    for (double credit : {-5.0, -1e-3, 0.0, 2e-4})
+      for (double can_pay : {0.0, 1e-6, 0.4, 9.0}) {
+        const double s = line15_lift_scale(rise, credit, can_pay);
+        INFO("rise " << rise << " credit " << credit << " can pay " << can_pay << ": s " << s);
+        CHECK(s >= 0.0);
+        CHECK(s <= 1.0);
+        if (s < 1.0 && s > 0.0)
+          CHECK(s * rise + credit == Approx(can_pay).margin(1e-12 * (rise + std::abs(credit))));
+        if (s < 1.0) CHECK(rise + credit > can_pay);
+        if (s == 0.0) CHECK(credit >= can_pay);
+      }
+}
