@@ -1733,9 +1733,10 @@ void Simulation<Dim>::correct_volume(double dt) {
     }
   }
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
-  if (limit) limit_line15_lift(before, potential_before);
+  const double potential_after =
+      limit ? limit_line15_lift(before, potential_before) : pay ? liquid_potential_energy() : 0.0;
   if (pay) {
-    double gain = liquid_potential_energy() - potential_before;
+    double gain = potential_after - potential_before;
     if (switches_.line15_energy != Line15Energy::per_step) {
       // a drop is kept as credit against the next rises
       gain += line15_credit_;
@@ -1758,26 +1759,28 @@ void Simulation<Dim>::correct_volume(double dt) {
 }
 
 template <int Dim>
-void Simulation<Dim>::limit_line15_lift(const std::vector<Vec<Dim>>& before,
-                                        double potential_before) {
+double Simulation<Dim>::limit_line15_lift(const std::vector<Vec<Dim>>& before,
+                                          double potential_before) {
   // (departures item 17) line 15's rise dPE = PE(x) - PE(before) with the account's credit c
   // (<= 0 banked, > 0 owed) costs dPE + c; the kinetic energy can pay KE_rel of it. The
   // potential energy is linear in the positions, so the moves scaled by
   //   s = (KE_rel - c) / dPE   (clamped to [0, 1])
   // raise it by exactly what can be paid: x <- before + s (x - before).
-  if (before.size() != particles_.size()) return;
-  const double rise = liquid_potential_energy() - potential_before;
-  if (!(rise > 0.0)) return;
-  const double s = line15_lift_scale(rise, line15_credit_, relative_kinetic_energy());
-  if (s == 1.0) return;
+  const double potential = liquid_potential_energy();
+  if (before.size() != particles_.size()) return potential;
+  const double rise = potential - potential_before;
+  if (!(rise > 0.0)) return potential;
+  const double s = line15_lift_scale(rise, line15_credit_, relative_motion().kinetic);
+  if (s == 1.0) return potential;
   const long np = static_cast<long>(particles_.size());
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) particles_.x[p] = before[p] + s * (particles_.x[p] - before[p]);
   account(frame_ledger_.density_projection, [&] { return liquid_potential_energy(); });
+  return liquid_potential_energy();
 }
 
 template <int Dim>
-double Simulation<Dim>::relative_kinetic_energy() const {
+typename Simulation<Dim>::RelativeMotion Simulation<Dim>::relative_motion() const {
   const long np = static_cast<long>(particles_.size());
   double mass = 0.0;
   Vec<Dim> momentum = Vec<Dim>::Zero();
@@ -1785,12 +1788,13 @@ double Simulation<Dim>::relative_kinetic_energy() const {
     mass += particles_.mass[p];
     momentum += particles_.mass[p] * particles_.v[p];
   }
-  if (!(mass > 0.0)) return 0.0;
-  const Vec<Dim> mean = momentum / mass;
-  double relative = 0.0;
+  RelativeMotion motion;
+  if (!(mass > 0.0)) return motion;
+  motion.has_mass = true;
+  motion.mean = momentum / mass;
   for (long p = 0; p < np; ++p)
-    relative += 0.5 * particles_.mass[p] * (particles_.v[p] - mean).squaredNorm();
-  return relative;
+    motion.kinetic += 0.5 * particles_.mass[p] * (particles_.v[p] - motion.mean).squaredNorm();
+  return motion;
 }
 
 template <int Dim>
@@ -1808,19 +1812,12 @@ void Simulation<Dim>::pay_line15_energy(double gain) {
   // test_coupled_validation's Fig. 8 free fall; slosh11). A drop of the potential energy is not
   // given back (line 15 may lose energy, never create it).
   if (!(gain > 0.0)) return;
-  const long np = static_cast<long>(particles_.size());
-  double mass = 0.0;
-  Vec<Dim> momentum = Vec<Dim>::Zero();
-  for (long p = 0; p < np; ++p) {
-    mass += particles_.mass[p];
-    momentum += particles_.mass[p] * particles_.v[p];
-  }
-  if (!(mass > 0.0)) return;
-  const Vec<Dim> mean = momentum / mass;
-  double relative = 0.0;
-  for (long p = 0; p < np; ++p)
-    relative += 0.5 * particles_.mass[p] * (particles_.v[p] - mean).squaredNorm();
+  const RelativeMotion motion = relative_motion();
+  if (!motion.has_mass) return;
+  const Vec<Dim>& mean = motion.mean;
+  const double relative = motion.kinetic;
   if (!(relative > 0.0)) return;
+  const long np = static_cast<long>(particles_.size());
   const double s = std::sqrt(std::max(0.0, 1.0 - gain / relative));
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (long p = 0; p < np; ++p) {

@@ -5,6 +5,7 @@
 /// dimension for the application. The state is read through Simulation's const accessors: the
 /// pictures (reference/viz/render.hpp) draw it from outside the solver core.
 
+#include <algorithm>
 #include <array>
 #include <csignal>
 #include <functional>
@@ -416,8 +417,9 @@ class Simulation : public AnySimulation {
   /// the kinetic energy holds less)
   void pay_line15_energy(double gain);
   /// StageSwitches::line15_lift_within_energy: line 15's moves since `before` scaled back so that
-  /// the potential energy they add is what the account and the kinetic energy can pay
-  void limit_line15_lift(const std::vector<Vec<Dim>>& before, double potential_before);
+  /// the potential energy they add is what the account and the kinetic energy can pay; returns
+  /// the liquid's potential energy after it (liquid_potential_energy())
+  double limit_line15_lift(const std::vector<Vec<Dim>>& before, double potential_before);
   /// Line15Energy::balance_local: `gain` taken from the particles near line 15's rises, from
   /// the positions before line 15's moves (docs/particles.md, slosh11)
   void pay_line15_energy_locally(double gain, const std::vector<Vec<Dim>>& before);
@@ -446,9 +448,14 @@ class Simulation : public AnySimulation {
   double face_kinetic_energy() const;
   /// Kinetic energy of the particles, sum 1/2 m_p |v_p|^2.
   double particle_kinetic_energy() const;
-  /// sum_p 1/2 m_p |v_p - vbar|^2 with vbar the liquid's mass-weighted mean velocity: what
-  /// pay_line15_energy can take (J; 2D: J/m)
-  double relative_kinetic_energy() const;
+  /// The liquid's mass-weighted mean velocity vbar and its kinetic energy relative to it,
+  /// KE_rel = sum_p 1/2 m_p |v_p - vbar|^2 (J; 2D: J/m): what pay_line15_energy can take
+  struct RelativeMotion {
+    bool has_mass = false;  ///< false: no particle mass (mean and kinetic are zero)
+    Vec<Dim> mean = Vec<Dim>::Zero();
+    double kinetic = 0.0;
+  };
+  RelativeMotion relative_motion() const;
   /// Potential energy of the dynamic bodies, -sum m g . x_c (x_c the centre of mass).
   double body_potential_energy() const;
   /// The body part of a step: RigidWorld::step, with its statistics added to the frame's.
