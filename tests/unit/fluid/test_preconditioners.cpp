@@ -110,6 +110,17 @@ Eigen::MatrixXd dense(const Preconditioner& m) {
   return out;
 }
 
+/// P symmetric to 1e-9 of its largest entry and positive definite: the eigenvalues of
+/// D^1/2 sym(P) D^1/2 (D the operator's diagonal, so that their scale is 1) all positive.
+void check_symmetric_positive_definite(const Preconditioner& m, const VectorX& diagonal) {
+  const Eigen::MatrixXd p = dense(m);
+  CHECK((p - p.transpose()).cwiseAbs().maxCoeff() < 1e-9 * p.cwiseAbs().maxCoeff());
+  const VectorX scale = diagonal.cwiseSqrt();
+  const Eigen::MatrixXd scaled = scale.asDiagonal() * (0.5 * (p + p.transpose())) * scale.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(scaled, Eigen::EigenvaluesOnly);
+  CHECK(es.eigenvalues().minCoeff() > 0.0);
+}
+
 double rel_diff(const VectorX& a, const VectorX& b) {
   const double scale = std::max(a.cwiseAbs().maxCoeff(), b.cwiseAbs().maxCoeff());
   return scale > 0.0 ? (a - b).cwiseAbs().maxCoeff() / scale : 0.0;
@@ -906,12 +917,7 @@ TEMPLATE_TEST_CASE_SIG("the cut block keeps the preconditioner symmetric positiv
                                       stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf, po.min_fluid_fraction), po);
     INFO("eta " << eta << ", block " << m.cut_unknowns().size() << " of " << m.size());
     REQUIRE(!m.cut_unknowns().empty());
-    const Eigen::MatrixXd p = dense(m);
-    CHECK((p - p.transpose()).cwiseAbs().maxCoeff() < 1e-9 * p.cwiseAbs().maxCoeff());
-    const VectorX scale = s.mf->diagonal().cwiseSqrt();
-    const Eigen::MatrixXd scaled = scale.asDiagonal() * (0.5 * (p + p.transpose())) * scale.asDiagonal();
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(scaled, Eigen::EigenvaluesOnly);
-    CHECK(es.eigenvalues().minCoeff() > 0.0);
+    check_symmetric_positive_definite(m, s.mf->diagonal());
   }
 }
 
@@ -955,12 +961,7 @@ TEMPLATE_TEST_CASE_SIG("the free-surface sweeps (P17): the partly filled cells a
     CHECK(reached == stresses);
     CHECK(static_cast<int>(set.size()) < m.size());
     // symmetric positive definite with the sweeps (the pool: no null space)
-    const Eigen::MatrixXd p = dense(m);
-    CHECK((p - p.transpose()).cwiseAbs().maxCoeff() < 1e-9 * p.cwiseAbs().maxCoeff());
-    const VectorX scale = s.mf->diagonal().cwiseSqrt();
-    const Eigen::MatrixXd scaled = scale.asDiagonal() * (0.5 * (p + p.transpose())) * scale.asDiagonal();
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(scaled, Eigen::EigenvaluesOnly);
-    CHECK(es.eigenvalues().minCoeff() > 0.0);
+    check_symmetric_positive_definite(m, s.mf->diagonal());
     // off: no set
     StokesPreconditionerOptions off = po;
     off.surface_sweeps = 0;
@@ -973,35 +974,35 @@ TEMPLATE_TEST_CASE_SIG("the free-surface sweeps (P17): the partly filled cells a
   int total_with = 0, total_without = 0;
   for (int blob = 0; blob < 2; ++blob)
     for (double eta : {5000.0, 1e5, 1e6}) {
-  CaseOptions o;
-  o.n = Dim == 2 ? 32 : 12;
-  o.blob = blob;
-  o.eta = eta;
-  const auto sc = make_case<Dim>(o);
-  const auto s = make_system(sc);
-  PcgSettings settings;
-  settings.max_iterations = 1000;
-  const StokesPreconditionerOptions on = small_options();
-  StokesPreconditionerOptions off = on;
-  off.surface_sweeps = 0;
-  const StokesFactors f = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf);
-  const StokesPreconditioner<Dim> with(sc.grid, *s.mf, f, on), without(sc.grid, *s.mf, f, off);
-  const StokesPreconditioner<Dim> with_ex(sc.grid, *s.ex, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, s.sys), on);
-  VectorX x1, x0, xe;
-  const PcgResult r1 = pcg_solve(*s.mf, s.mf->rhs(sc.u_star), x1, settings, with);
-  const PcgResult r0 = pcg_solve(*s.mf, s.mf->rhs(sc.u_star), x0, settings, without);
-  const PcgResult re = pcg_solve(*s.ex, s.sys.b, xe, settings, with_ex);
-  INFO("with the sweeps " << r1.iterations << " (explicit " << re.iterations << "), without " << r0.iterations
-                          << ", set " << with.surface_unknowns().size() << " of " << with.size());
-  CHECK(r1.converged);
-  CHECK(r0.converged);
-  CHECK(re.converged);
-  CHECK(r1.iterations <= r0.iterations);
-  total_with += r1.iterations;
-  total_without += r0.iterations;
-  CHECK(std::abs(re.iterations - r1.iterations) <= 1);
-  CHECK(rel_diff(x1, x0) < 1e-4);
-  CHECK(rel_diff(x1, xe) < 1e-4);
+      CaseOptions o;
+      o.n = Dim == 2 ? 32 : 12;
+      o.blob = blob;
+      o.eta = eta;
+      const auto sc = make_case<Dim>(o);
+      const auto s = make_system(sc);
+      PcgSettings settings;
+      settings.max_iterations = 1000;
+      const StokesPreconditionerOptions on = small_options();
+      StokesPreconditionerOptions off = on;
+      off.surface_sweeps = 0;
+      const StokesFactors f = stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf);
+      const StokesPreconditioner<Dim> with(sc.grid, *s.mf, f, on), without(sc.grid, *s.mf, f, off);
+      const StokesPreconditioner<Dim> with_ex(sc.grid, *s.ex, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, s.sys), on);
+      VectorX x1, x0, xe;
+      const PcgResult r1 = pcg_solve(*s.mf, s.mf->rhs(sc.u_star), x1, settings, with);
+      const PcgResult r0 = pcg_solve(*s.mf, s.mf->rhs(sc.u_star), x0, settings, without);
+      const PcgResult re = pcg_solve(*s.ex, s.sys.b, xe, settings, with_ex);
+      INFO("with the sweeps " << r1.iterations << " (explicit " << re.iterations << "), without " << r0.iterations
+                              << ", set " << with.surface_unknowns().size() << " of " << with.size());
+      CHECK(r1.converged);
+      CHECK(r0.converged);
+      CHECK(re.converged);
+      CHECK(r1.iterations <= r0.iterations);
+      total_with += r1.iterations;
+      total_without += r0.iterations;
+      CHECK(std::abs(re.iterations - r1.iterations) <= 1);
+      CHECK(rel_diff(x1, x0) < 1e-4);
+      CHECK(rel_diff(x1, xe) < 1e-4);
     }
   INFO("over the six cases: with the sweeps " << total_with << ", without " << total_without);
   CHECK(total_with < total_without);
