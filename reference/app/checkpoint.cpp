@@ -162,7 +162,7 @@ void write_checkpoint(const fs::path& path, const CheckpointRecord& record) {
   write_file_atomic(path, bytes, true);
 }
 
-CheckpointRecord read_checkpoint(const fs::path& path) {
+CheckpointRecord read_checkpoint(const fs::path& path, bool accept_other_build) {
   const std::string label = path.string() + ": ";
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(label + "no checkpoint to resume from (a run folder written with --checkpoint-every, or an interrupted run)");
@@ -189,9 +189,10 @@ CheckpointRecord read_checkpoint(const fs::path& path) {
   StateReader r(payload, path.string());
   r(record);
   r.finish();
-  if (record.build_id != build_id())
+  if (record.build_id != build_id() && !accept_other_build)
     throw InputError(label + "written by another build (" + record.build_id + "; this is " + build_id() +
-                     "): a checkpoint continues bit for bit only in the build that wrote it");
+                     "): a checkpoint continues bit for bit only in the build that wrote it (resume --any-build "
+                     "continues it anyway, not bit for bit)");
   return record;
 }
 

@@ -100,7 +100,9 @@ void write_checkpoint(const std::filesystem::path& path, const CheckpointRecord&
 
 /// Reads and checks a checkpoint: the file exists, has the magic, this format version, its full
 /// length and a matching checksum, and came from this build. Throws InputError naming the file
-/// and what is wrong.
-CheckpointRecord read_checkpoint(const std::filesystem::path& path);
+/// and what is wrong. With `accept_other_build` (`monolith resume --any-build`) a checkpoint of
+/// another build of the same format version is returned too (its `build_id` tells the caller);
+/// every other check still holds.
+CheckpointRecord read_checkpoint(const std::filesystem::path& path, bool accept_other_build = false);
 
 }  // namespace monolith

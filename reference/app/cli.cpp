@@ -32,7 +32,7 @@ const char* kUsage =
     "  monolith run SCENE [--frames N] [--out DIR] [--scheme NAME] [--backend matrixfree|explicit]\n"
     "                     [--threads N|auto] [--no-render] [--quiet] [--set KEY=VALUE]...\n"
     "                     [--checkpoint-every N]\n"
-    "  monolith resume DIR [--frames N] [--threads N|auto] [--quiet] [--checkpoint-every N]\n"
+    "  monolith resume DIR [--frames N] [--threads N|auto] [--quiet] [--checkpoint-every N] [--any-build]\n"
     "  monolith check SCENE [--set KEY=VALUE]...\n"
     "  monolith list\n"
     "  monolith convert IN.ppm OUT.png\n"
@@ -49,7 +49,8 @@ const char* kHelp =
     "                frames/frame_NNNNN.ppm, stats.jsonl and summary.json into the output folder\n"
     "  resume DIR    continue the run in the output folder DIR from its last checkpoint (written\n"
     "                by --checkpoint-every or when a run is interrupted), bit for bit as if it\n"
-    "                had not stopped; --frames N sets a new total frame count\n"
+    "                had not stopped; --frames N sets a new total frame count; --any-build\n"
+    "                continues a checkpoint of another build (not bit for bit)\n"
     "  check SCENE   validate SCENE and print every problem found (exit 0 if valid, 2 if not)\n"
     "  list          the built-in scenes: name, dimension, description\n"
     "  convert       re-encode a PPM picture (a frame or a plot) as PNG for web pages\n"
@@ -98,7 +99,7 @@ bool parse_nonneg_int(const std::string& s, long long max, long long& out) {
 
 /// Parses the arguments after the command name; throws InputError on a bad flag. `run_flags`:
 /// the flags of run; for resume the positional argument is the run folder and only --frames,
-/// --threads, --quiet and --checkpoint-every are taken.
+/// --threads, --quiet, --checkpoint-every and (resume's own) --any-build are taken.
 RunOptions parse_options(const std::string& command, const std::vector<std::string>& args, bool run_flags) {
   const bool resume = command == "resume";
   RunOptions o;
@@ -178,6 +179,8 @@ RunOptions parse_options(const std::string& command, const std::vector<std::stri
       o.no_render = true;
     } else if (run_flags && a == "--quiet" && !has_inline) {
       o.quiet = true;
+    } else if (resume && a == "--any-build" && !has_inline) {
+      o.any_build = true;
     } else {
       problems.push_back(command + ": unknown option \"" + args[i].substr(0, 80) + "\" (see monolith --help)");
     }

@@ -96,6 +96,7 @@ struct RunTotals {
   long steps = 0;
   double volume0 = 0.0, volume = 0.0;
   double earlier_wall_time = 0.0;  ///< of the run before a resume
+  std::string earlier_build;       ///< a resume --any-build: the build that wrote the checkpoint
 };
 
 /// The `totals` object of summary.json after `wall` seconds of this process's run.
@@ -107,6 +108,7 @@ json totals_json(const RunTotals& t, double wall) {
   j["initial_liquid_volume"] = t.volume0;
   j["final_liquid_volume"] = t.volume;
   j["volume_drift"] = t.volume0 > 0.0 ? (t.volume - t.volume0) / t.volume0 : 0.0;
+  if (!t.earlier_build.empty()) j["earlier_build"] = t.earlier_build;
   return j;
 }
 
@@ -389,7 +391,8 @@ int resume_run(const RunOptions& o, std::ostream& err, const SimulationFactory& 
   const fs::path dir(o.resume_dir);
   const fs::path file = checkpoint_path(dir);
   // every check before anything in the folder changes
-  const CheckpointRecord r = read_checkpoint(file);
+  const CheckpointRecord r = read_checkpoint(file, o.any_build);
+  const bool other_build = r.build_id != build_id();
   const std::string label = file.string() + ": ";
   json as_run = json::parse(r.scene_json, nullptr, false);
   if (as_run.is_discarded() || !as_run.is_object()) throw InputError(label + "the scene it holds is not valid JSON");
@@ -463,6 +466,11 @@ int resume_run(const RunOptions& o, std::ostream& err, const SimulationFactory& 
   totals.volume0 = r.initial_volume;
   totals.volume = r.volume;
   totals.earlier_wall_time = r.wall_time;
+  if (other_build) {
+    totals.earlier_build = r.build_id;
+    err << file.string() << ": written by another build (" << r.build_id << "; this is " << build_id()
+        << "): continued with --any-build, not bit for bit\n";
+  }
   if (!o.quiet) err << "resuming " << scene.source_label << " at frame " << r.frame << (r.mid_frame ? " (inside the next frame)" : "") << "\n";
   return run_frames(c, *sim, totals, err, renderer, true);
 }

@@ -35,6 +35,10 @@ struct RunOptions {
   /// and the new total frame count (-1: the scene's).
   std::string resume_dir;
   int resume_frames = -1;
+  /// `resume --any-build`: continue a checkpoint written by another build of the same checkpoint
+  /// format (A/B timing of late frames, a rebuilt binary); the continuation is then not bit for
+  /// bit, which stderr and summary.json (`totals.earlier_build`) say.
+  bool any_build = false;
 };
 
 using SimulationFactory = std::function<std::unique_ptr<AnySimulation>(const SceneDesc&)>;

@@ -218,6 +218,59 @@ TEST_CASE("checkpoints every N frames: resume from the last one after a longer r
   CHECK(cli({"resume"}).code == 2);
 }
 
+TEST_CASE("resume --any-build continues a checkpoint of another build, says so, and is refused for run", "[unit]") {
+  // The "other build" is this build with the checkpoint's build id rewritten, so the state is
+  // exactly what this build writes: the continuation must then equal the straight run, and the
+  // only differences are the stderr line and summary.json's totals.earlier_build.
+  const fs::path straight = temp_dir() / "any-build-straight";
+  const fs::path resumed = temp_dir() / "any-build-resumed";
+  fs::remove_all(straight);
+  fs::remove_all(resumed);
+  auto a = small("bunnies-onto-pool-2d", "[32,32]");
+  a.insert(a.begin(), "run");
+  auto b = a;
+  a.insert(a.end(), {"--frames", "3", "--out", straight.string()});
+  b.insert(b.end(), {"--frames", "1", "--out", resumed.string(), "--checkpoint-every", "1"});
+  REQUIRE(cli(a).code == 0);
+  REQUIRE(cli(b).code == 0);
+  const fs::path file = checkpoint_path(resumed);
+  CheckpointRecord record = read_checkpoint(file);
+  record.build_id = "0.0.0+another";
+  write_checkpoint(file, record);
+
+  // without the flag: refused, and the message names the flag
+  const auto files = folder_bytes(resumed);
+  const Result refused = cli({"resume", resumed.string(), "--frames", "3"});
+  CHECK(refused.code == 2);
+  CHECK(refused.err.find("another build") != std::string::npos);
+  CHECK(refused.err.find("--any-build") != std::string::npos);
+  CHECK(folder_bytes(resumed) == files);
+  // the flag is resume's only, and takes no value
+  CHECK(cli({"run", "dam-break-2d", "--any-build", "--frames", "0", "--out", (temp_dir() / "any-build-run").string()}).code == 2);
+  CHECK(cli({"resume", resumed.string(), "--any-build=yes"}).code == 2);
+  CHECK(folder_bytes(resumed) == files);
+
+  // with it, even under --quiet: the line on stderr, the earlier build in the summary, the run
+  // continued
+  const Result r = cli({"resume", resumed.string(), "--frames", "3", "--any-build", "--quiet"});
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  CHECK(r.err.find("0.0.0+another") != std::string::npos);
+  CHECK(r.err.find("not bit for bit") != std::string::npos);
+  check_same_run(straight, resumed, 3);
+  const json s = summary(resumed);
+  CHECK(s["status"] == "completed");
+  CHECK(s["totals"]["earlier_build"] == "0.0.0+another");
+  CHECK_FALSE(summary(straight)["totals"].contains("earlier_build"));
+  // the checkpoint it wrote is this build's again: a plain resume takes it, with no earlier build
+  CHECK(read_checkpoint(file).build_id == build_id());
+  const Result again = cli({"resume", resumed.string(), "--frames", "4", "--quiet"});
+  INFO(again.err);
+  REQUIRE(again.code == 0);
+  CHECK(again.err.find("another build") == std::string::npos);
+  CHECK_FALSE(summary(resumed)["totals"].contains("earlier_build"));
+}
+
 TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2 and nothing is overwritten", "[unit]") {
   const fs::path dir = temp_dir() / "damaged";
   const fs::path other = temp_dir() / "other-scene";
