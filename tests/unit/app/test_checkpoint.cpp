@@ -138,6 +138,15 @@ std::vector<std::string> small(const std::string& scene, const std::string& cell
   return {scene, "--set", "domain.cells=" + cells, "--set", "render.size=[48,48]", "--quiet"};
 }
 
+/// `run` of a small version of a built-in scene with more flags after it.
+std::vector<std::string> run_small(const std::string& scene, const std::string& cells,
+                                   const std::vector<std::string>& more) {
+  std::vector<std::string> args = small(scene, cells);
+  args.insert(args.begin(), "run");
+  args.insert(args.end(), more.begin(), more.end());
+  return args;
+}
+
 }  // namespace
 
 TEST_CASE("run N frames with checkpoints and resume to 2N: the same rows and frames as 2N straight", "[unit]") {
@@ -199,9 +208,7 @@ TEST_CASE("checkpoints every N frames: resume from the last one after a longer r
   // a run of 3 frames with a checkpoint every 2 (and at the end): the checkpoint is the end's
   const fs::path dir = temp_dir() / "every";
   fs::remove_all(dir);
-  auto args = small("dam-break-2d", "[32,16]");
-  args.insert(args.begin(), "run");
-  args.insert(args.end(), {"--frames", "3", "--out", dir.string(), "--checkpoint-every", "2"});
+  auto args = run_small("dam-break-2d", "[32,16]", {"--frames", "3", "--out", dir.string(), "--checkpoint-every", "2"});
   REQUIRE(cli(args).code == 0);
   // resuming a finished run with no more frames to go changes nothing and completes
   const auto before = stats_rows(dir);
@@ -226,13 +233,10 @@ TEST_CASE("resume --any-build continues a checkpoint of another build, says so, 
   const fs::path resumed = temp_dir() / "any-build-resumed";
   fs::remove_all(straight);
   fs::remove_all(resumed);
-  auto a = small("bunnies-onto-pool-2d", "[32,32]");
-  a.insert(a.begin(), "run");
-  auto b = a;
-  a.insert(a.end(), {"--frames", "3", "--out", straight.string()});
-  b.insert(b.end(), {"--frames", "1", "--out", resumed.string(), "--checkpoint-every", "1"});
-  REQUIRE(cli(a).code == 0);
-  REQUIRE(cli(b).code == 0);
+  REQUIRE(cli(run_small("bunnies-onto-pool-2d", "[32,32]", {"--frames", "3", "--out", straight.string()})).code == 0);
+  REQUIRE(cli(run_small("bunnies-onto-pool-2d", "[32,32]",
+                        {"--frames", "1", "--out", resumed.string(), "--checkpoint-every", "1"}))
+              .code == 0);
   const fs::path file = checkpoint_path(resumed);
   CheckpointRecord record = read_checkpoint(file);
   record.build_id = "0.0.0+another";
@@ -276,13 +280,9 @@ TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2
   const fs::path other = temp_dir() / "other-scene";
   fs::remove_all(dir);
   fs::remove_all(other);
-  auto args = small("dam-break-2d", "[32,16]");
-  args.insert(args.begin(), "run");
-  args.insert(args.end(), {"--frames", "2", "--out", dir.string(), "--checkpoint-every", "1"});
+  auto args = run_small("dam-break-2d", "[32,16]", {"--frames", "2", "--out", dir.string(), "--checkpoint-every", "1"});
   REQUIRE(cli(args).code == 0);
-  auto other_args = small("liquid-drop-bingham-2d", "[24,24]");
-  other_args.insert(other_args.begin(), "run");
-  other_args.insert(other_args.end(), {"--frames", "1", "--out", other.string(), "--checkpoint-every", "1"});
+  auto other_args = run_small("liquid-drop-bingham-2d", "[24,24]", {"--frames", "1", "--out", other.string(), "--checkpoint-every", "1"});
   REQUIRE(cli(other_args).code == 0);
   const fs::path file = checkpoint_path(dir);
   const std::string good = read_bytes(file);
@@ -426,9 +426,7 @@ TEST_CASE("SIGINT and SIGTERM stop a run with a checkpoint; resume finishes it l
 TEST_CASE("a solve that stops at max_iterations is reported per frame, even with --quiet", "[unit]") {
   const fs::path dir = temp_dir() / "unconverged";
   fs::remove_all(dir);
-  auto args = small("dam-break-2d", "[32,16]");
-  args.insert(args.begin(), "run");
-  args.insert(args.end(), {"--frames", "2", "--out", dir.string(), "--set", "solver.max_iterations=3"});
+  auto args = run_small("dam-break-2d", "[32,16]", {"--frames", "2", "--out", dir.string(), "--set", "solver.max_iterations=3"});
   Result r = cli(args);
   CHECK(r.code == 0);
   // one line per frame: the frame, the solve, its iterations and the residual reached
@@ -442,9 +440,7 @@ TEST_CASE("a solve that stops at max_iterations is reported per frame, even with
   CHECK(rows[1]["solver"]["converged"] == false);
   CHECK(summary(dir)["status"] == "completed");
   // a converged run prints nothing with --quiet
-  auto ok = small("dam-break-2d", "[32,16]");
-  ok.insert(ok.begin(), "run");
-  ok.insert(ok.end(), {"--frames", "1", "--out", dir.string()});
+  auto ok = run_small("dam-break-2d", "[32,16]", {"--frames", "1", "--out", dir.string()});
   r = cli(ok);
   CHECK(r.code == 0);
   CHECK(r.err.empty());
@@ -460,9 +456,7 @@ TEST_CASE("a solve that stops at max_iterations is reported per frame, even with
   CHECK(s["failed_frame"] == 1);
   CHECK(s["message"].get<std::string>().find("did not converge") != std::string::npos);
   // coupled scenes name the coupled solve
-  auto coupled = small("bunnies-onto-pool-2d", "[32,32]");
-  coupled.insert(coupled.begin(), "run");
-  coupled.insert(coupled.end(), {"--frames", "1", "--out", dir.string(), "--set", "solver.max_iterations=2"});
+  auto coupled = run_small("bunnies-onto-pool-2d", "[32,32]", {"--frames", "1", "--out", dir.string(), "--set", "solver.max_iterations=2"});
   r = cli(coupled);
   CHECK(r.code == 0);
   CHECK(r.err.find("frame 1: solver did not converge: coupled PC-unified solve") != std::string::npos);
@@ -497,9 +491,7 @@ TEST_CASE("outputs are written whole or not at all; write failures name the path
   const fs::path dir = temp_dir() / "blocked";
   fs::remove_all(dir);
   fs::create_directories(dir / "frames" / "frame_00002.ppm.tmp");  // a folder where the file goes
-  auto args = small("dam-break-2d", "[32,16]");
-  args.insert(args.begin(), "run");
-  args.insert(args.end(), {"--frames", "3", "--out", dir.string()});
+  auto args = run_small("dam-break-2d", "[32,16]", {"--frames", "3", "--out", dir.string()});
   const Result r = cli(args);
   CHECK(r.code == 3);
   CHECK(r.err.find("frame_00002.ppm") != std::string::npos);
