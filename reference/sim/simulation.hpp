@@ -147,7 +147,7 @@ struct StageSwitches {
   /// of liquid still in flight towards a wall that the solve had not seen, while the particles
   /// kept the velocity of that flight: potential energy not lost that the kick had paid for
   /// (viscous-pour-3d's landing, docs/particles.md "The landing frame of a viscous pour" and its
-  /// second form). Wall faces farther from the trusted faces keep the zero (item 16's first form
+  /// second form). Wall faces farther from the trusted faces keep the zero (item 16 as merged
   /// freed them all, and splash particles carried by the deeper extrapolation piled up at the far
   /// walls: dam-break-2d lost 1.44 % of its volume). false: every wall face zero (before pour18).
   bool air_walls_extrapolated = true;
@@ -370,7 +370,7 @@ class Simulation : public AnySimulation {
   bool trusted_within(int axis, const VecI<Dim>& coord, int layers) const;
   /// The wall faces that kept their extrapolated velocity in the step's
   /// apply_wall_and_solid_velocities (ascending): no particle mass at the step's transfer, no
-  /// liquid in the cell beside them. They are air faces from then on: a deeper extrapolation
+  /// liquid in the cell beside them, a trusted face within air_wall_layers layers (item 18). They are air faces from then on: a deeper extrapolation
   /// (extend_extrapolation) fills them and line 15's payment scales them with the air
   /// (rescale_face_velocity).
   std::vector<int> air_walls_;
