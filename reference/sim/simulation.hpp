@@ -139,18 +139,23 @@ struct StageSwitches {
   /// (correct_volume; docs/particles.md "A drop in flight: line 15 may not carry it"). false:
   /// the moves may carry it (the behaviour before; a comparison switch).
   bool line15_keeps_free_centre = true;
-  /// (docs/derivations.md, departures item 16) A wall face that holds no liquid (no particle
-  /// mass at the step's transfer, no liquid in the cell beside it) keeps the extrapolated air
+  /// (docs/derivations.md, departures items 16 and 18) A wall face that holds no liquid (no
+  /// particle mass at the step's transfer, no liquid in the cell beside it) and lies within
+  /// air_wall_layers layers of the extrapolation from a trusted face keeps the extrapolated air
   /// velocity after the solve instead of the wall's zero: the wall stops a particle when it
   /// reaches it (the advection's clamp), not a cell before. The zero read there slowed the drift
   /// of liquid still in flight towards a wall that the solve had not seen, while the particles
   /// kept the velocity of that flight: potential energy not lost that the kick had paid for
-  /// (viscous-pour-3d's landing, docs/particles.md "The landing frame of a viscous pour").
-  /// false (the default): every wall face zero. Off because with it dam-break-2d at 64x32 loses
-  /// 1.44 % of its volume (test_validation_volume's bound 1 %): splash particles reach the far
-  /// walls with the deeper extrapolation's velocity and pile up at the clamp (a measurement
-  /// switch until the faces it frees are only those the ordinary extrapolation reached).
-  bool air_walls_extrapolated = false;
+  /// (viscous-pour-3d's landing, docs/particles.md "The landing frame of a viscous pour" and its
+  /// second form). Wall faces farther from the trusted faces keep the zero (item 16 as merged
+  /// freed them all, and splash particles carried by the deeper extrapolation piled up at the far
+  /// walls: dam-break-2d lost 1.44 % of its volume). false: every wall face zero (before pour18).
+  bool air_walls_extrapolated = true;
+  /// (docs/derivations.md, departures item 18) The wall faces air_walls_extrapolated frees: those
+  /// within this many layers of the extrapolation from a trusted face (steps of one face along
+  /// one axis), whatever depth the extrapolation reaches; their values are then the same bits
+  /// for any depth. 0: none. A measurement switch (bench_energy_regain's air-walls-N).
+  int air_wall_layers = 2;
   /// Measure the energy change of every stage (energy_ledger()): several extra sweeps over the
   /// faces and particles per step, so off unless a diagnosis asks for it.
   bool energy_ledger = false;
@@ -360,9 +365,12 @@ class Simulation : public AnySimulation {
   /// air_walls_extrapolated); fully solid faces: the solid's velocity; then
   /// constrain_velocity_in_solids.
   void apply_wall_and_solid_velocities();
+  /// Whether a face of `axis` within `layers` extrapolation layers of the face at `coord` is
+  /// trusted (trusted_face).
+  bool trusted_within(int axis, const VecI<Dim>& coord, int layers) const;
   /// The wall faces that kept their extrapolated velocity in the step's
   /// apply_wall_and_solid_velocities (ascending): no particle mass at the step's transfer, no
-  /// liquid in the cell beside them. They are air faces from then on: a deeper extrapolation
+  /// liquid in the cell beside them, a trusted face within air_wall_layers layers (item 18). They are air faces from then on: a deeper extrapolation
   /// (extend_extrapolation) fills them and line 15's payment scales them with the air
   /// (rescale_face_velocity).
   std::vector<int> air_walls_;

@@ -67,11 +67,16 @@ std::vector<Variant> variants() {
       // line 15's potential energy not paid by the kinetic energy (the default before slosh11)
       {"line15-free", [](StageSwitches& s) { s.line15_energy = Line15Energy::free; }},
       {"line15-no-debt", [](StageSwitches& s) { s.line15_carry_debt = false; }},
-      // every wall face zero after the solve, also beside air (the default: departures item 16
-      // is off; liquid in flight is slowed a cell before it reaches a wall)
+      // every wall face zero after the solve, also beside air (the rule before pour18; liquid in
+      // flight is slowed a cell before it reaches a wall)
       {"walls-zero-in-air", [](StageSwitches& s) { s.air_walls_extrapolated = false; }},
-      // departures item 16 on: a wall face beside air keeps the extrapolated velocity
+      // departures items 16 and 18 (the default): a wall face beside air within two layers of a
+      // trusted face keeps the extrapolated velocity
       {"air-walls", [](StageSwitches& s) { s.air_walls_extrapolated = true; }},
+      // item 18's reach: the wall faces within 1, 3 or 8 layers of a trusted face (default 2)
+      {"air-walls-1", [](StageSwitches& s) { s.air_walls_extrapolated = true; s.air_wall_layers = 1; }},
+      {"air-walls-3", [](StageSwitches& s) { s.air_walls_extrapolated = true; s.air_wall_layers = 3; }},
+      {"air-walls-8", [](StageSwitches& s) { s.air_walls_extrapolated = true; s.air_wall_layers = 8; }},
   };
 }
 
