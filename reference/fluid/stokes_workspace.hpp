@@ -39,6 +39,13 @@ struct LiquidBand {
   bool valid = false;
   std::array<int, 3> cell_lo{}, cell_hi{};
   std::array<std::array<int, 3>, 3> face_lo{}, face_hi{};
+  /// (band18) Boxes of the faces of each axis outside which the solve's u* is +0 or -0, and
+  /// with it every velocity a solve of the step's sequence starts from (an update changes only
+  /// faces with W_L^u > 0, inside face_lo / face_hi, which these boxes contain): the round-off
+  /// bound's U = max_f |W_F^u u_f| (weighted_face_speed) is the maximum over these boxes.
+  /// speed_valid = false: no promise (the maximum over every face).
+  bool speed_valid = false;
+  std::array<std::array<int, 3>, 3> speed_lo{}, speed_hi{};
 };
 
 /// A double vector kept across steps that is 0 outside the spans [first, second) listed in
