@@ -144,7 +144,9 @@ MonolithicSystem<Dim>::MonolithicSystem(const MacGrid<Dim>& grid, StressForm for
   const VectorX v_one = group_velocities(bodies, BodyGroup::one_way);
   // rhs_round_off(): the bound (2 Dim / dx) U on the terms of b1, b2 (header)
   {
-    double speed = weighted_face_speed(w.pressure.fluid_face, u_star);
+    // (over the workspace's speed boxes when it promises u* = 0 outside them: the same value)
+    double speed = weighted_face_speed(grid, w.pressure.fluid_face, u_star,
+                                       workspace ? &workspace->band : nullptr);
     for (const VectorX* v : {&contacts.v_star, &v_one})
       for (int k = 0; k < v->size(); ++k)
         if (k % kBodyDofs<Dim> < Dim) speed = std::max(speed, std::abs((*v)[k]));

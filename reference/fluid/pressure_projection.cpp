@@ -651,9 +651,10 @@ void add_divergence_source(const std::vector<int>& cell_of_dof, const VectorX& l
 
 template <int Dim>
 double liquid_rhs_round_off(const MacGrid<Dim>& grid, const VectorX& fluid_face,
-                            const VectorX& u_star, const VectorX* divergence_source) {
+                            const VectorX& u_star, const VectorX* divergence_source,
+                            const LiquidBand* band) {
   constexpr double kEpsilon = std::numeric_limits<double>::epsilon();  // 2^-52
-  const double speed = weighted_face_speed(fluid_face, u_star);
+  const double speed = weighted_face_speed(grid, fluid_face, u_star, band);
   double source = 0.0;
   if (divergence_source && divergence_source->size() > 0) source = divergence_source->cwiseAbs().maxCoeff();
   return kRhsRoundOffUlps * kEpsilon * ((2.0 * Dim / grid.dx()) * speed + source);
@@ -720,7 +721,7 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
                                                  double, Backend, const PcgSettings&, \
                                                  VectorX&, PreconditionerKind, const VectorX*); \
   template double liquid_rhs_round_off<D>(const MacGrid<D>&, const VectorX&, const VectorX&,     \
-                                          const VectorX*);
+                                          const VectorX*, const LiquidBand*);
 MONOLITH_INSTANTIATE(2)
 MONOLITH_INSTANTIATE(3)
 #undef MONOLITH_INSTANTIATE

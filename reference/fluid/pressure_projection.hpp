@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstddef>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "reference/core/common.hpp"
@@ -225,6 +226,45 @@ inline double weighted_face_speed(const VectorX& fluid_face, const VectorX& u_st
   return speed;
 }
 
+/// The same U where `band` promises u* = +-0 outside its speed boxes (LiquidBand::speed_valid):
+/// the maximum over those boxes' faces only (issue 20, band18: a pass over every face per solve,
+/// 2.2-2.6 % of Fig. 2's samples at the paper's grid). Outside the boxes every term is
+/// |W_F^u (+-0)| = +0, which leaves a maximum that starts at +0 unchanged, and the maximum
+/// takes its terms in any order (above): the bits of the pass over every face. Without a band
+/// or its promise, and for vectors that are not the grid's, the pass over every face.
+template <int Dim>
+double weighted_face_speed(const MacGrid<Dim>& grid, const VectorX& fluid_face,
+                           const VectorX& u_star, const LiquidBand* band) {
+  if (band == nullptr || !band->speed_valid || fluid_face.size() != grid.num_faces() ||
+      u_star.size() != grid.num_faces())
+    return weighted_face_speed(fluid_face, u_star);
+  // the boxes' rows along x (first face, length), every axis
+  std::vector<std::pair<int, int>> rows;
+  long work = 0;
+  for (int a = 0; a < Dim; ++a) {
+    const VecI<Dim> dims = grid.face_dims(a);
+    VecI<Dim> lo, hi;
+    for (int d = 0; d < Dim; ++d) {
+      lo[d] = std::max(band->speed_lo[a][d], 0);
+      hi[d] = std::min(band->speed_hi[a][d], dims[d] - 1);
+    }
+    if ((lo.array() > hi.array()).any()) continue;
+    VecI<Dim> row_box = hi - lo + VecI<Dim>::Ones();
+    const int nx = row_box[0];
+    row_box[0] = 1;
+    for (int r = 0; r < row_box.prod(); ++r)
+      rows.emplace_back(grid.face_index(a, lo + lattice_coord<Dim>(r, row_box)), nx);
+    work += static_cast<long>(row_box.prod()) * nx;
+  }
+  double speed = 0.0;
+  const long count = static_cast<long>(rows.size());
+#pragma omp parallel for schedule(static) reduction(max : speed) num_threads(team_threads(work))
+  for (long r = 0; r < count; ++r)
+    for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
+      speed = std::max(speed, std::abs(fluid_face[f] * u_star[f]));
+  return speed;
+}
+
 /// The round-off level N of a liquid-only right-hand side b = B^T W_F^u u* (+ W_L^p d): the
 /// pressure rows W_L^p G^T W_F^u u* (eq. (8), solve_pressure) and the stress rows W_L^s M D
 /// W_F^u u* (eq. (8), solve_stokes), each a sum of at most about 2 x 2 Dim terms of size at most
@@ -236,8 +276,10 @@ inline double weighted_face_speed(const VectorX& fluid_face, const VectorX& u_st
 /// last bits of u* and of the sums (measured 0.64-1.06 (2 Dim / dx) U eps on
 /// viscous-bunny-into-sphere-3d's falling steps, 2-4). Passed as PcgSettings::zero_rhs: such a b
 /// gives x = 0 after no iteration. One formula from the inputs: the same on both back ends.
+/// `band` (optional): U from its speed boxes (weighted_face_speed above; the same value).
 template <int Dim>
 double liquid_rhs_round_off(const MacGrid<Dim>& grid, const VectorX& fluid_face,
-                            const VectorX& u_star, const VectorX* divergence_source);
+                            const VectorX& u_star, const VectorX* divergence_source,
+                            const LiquidBand* band = nullptr);
 
 }  // namespace monolith

@@ -68,7 +68,10 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
   // iteration, no preconditioner set-up (liquid_rhs_round_off; docs/preconditioners.md section 33)
   PcgSettings pcg = settings;
   pcg.zero_rhs = std::max(pcg.zero_rhs, liquid_rhs_round_off(grid, w.pressure.fluid_face, u,
-                                                             options.divergence_source));
+                                                             options.divergence_source,
+                                                             options.workspace
+                                                                 ? &options.workspace->band
+                                                                 : nullptr));
   if (options.preconditioner == PreconditionerKind::ssor || dofs.size() == 0) {
     result.pcg = pcg_solve(*op, b, x, pcg);
   } else {

@@ -556,10 +556,12 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   // the face scratch: zero on the rows any pass reads or writes (the active rows: apply's
   // faces_from_grid and the sweeps, which touch only faces with C_f != 0; the rows
   // grid_from_faces reads: apply and rhs), never touched elsewhere (uninitialised: a fresh
-  // allocation's pages there are not even mapped; issue 20, 200 MB at Fig. 2's paper grid)
-  if (workspace_ && workspace_->face_scratch.size() == num_faces_) face_scratch_.swap(workspace_->face_scratch);
+  // allocation's pages there are not even mapped; issue 20, 200 MB at Fig. 2's paper grid).
+  // Not kept in the workspace (band18): its values are never reused, so keeping it saves no
+  // pass; made here, it takes heap memory the step has freed (the liquid level set's block,
+  // released before the solve), and given back in the destructor it leaves that block whole
+  // for the next step's level set, instead of lying beside it at the step's peak (202 MB)
   face_scratch_.resize(num_faces_);
-  if (workspace_) workspace_->face_scratch = VectorX();
   for (int a = 0; a < Dim; ++a) {
     const Field& f = fields_[a];
     const int n0 = f.dims[0];
@@ -576,7 +578,7 @@ MatrixFreeStokesOperator<Dim>::~MatrixFreeStokesOperator() {
   // the storage back to the workspace, with the entries this operator may have left non-zero
   // (not -1): C_f on the spans it computed, the maps at its unknowns' DOFs and cells, the stress
   // and cell scratch on the rows the passes write (the active rows of their fields: scatter,
-  // grid_from_faces); the face scratch as it is (the next operator zeroes the rows it uses)
+  // grid_from_faces) (the face scratch is not kept: freed with the operator)
   StokesWorkspace& w = *workspace_;
   w.face_coefficient.values.swap(face_coefficient_);
   w.face_coefficient.dirty = std::move(coefficient_spans_);
@@ -599,7 +601,6 @@ MatrixFreeStokesOperator<Dim>::~MatrixFreeStokesOperator() {
   give_rows(w.cell_scratch, cell_scratch_, kCellField, kCellField);
   w.unknown_of_cell.values.swap(unknown_of_cell_);
   w.unknown_of_cell.dirty.assign(location_.begin() + num_stress_, location_.end());
-  w.face_scratch.swap(face_scratch_);
   w.lent = false;
 }
 

@@ -6,7 +6,8 @@
 ///
 /// MatrixFreeStokesOperator needs per step a face-sized vector of C_f and a face-sized scratch,
 /// a cell-sized scratch and grid -> unknown maps (202 + 202 + 67 + 33.6 MB at Fig. 2's
-/// 256x128x256 grid). Made fresh per step they are a whole-grid allocation, a zero (or -1) fill
+/// 256x128x256 grid); all but the face scratch are kept (band18: see face_coefficient below).
+/// Made fresh per step they are a whole-grid allocation, a zero (or -1) fill
 /// and the first touch of their pages in every step. A StokesWorkspace owned by the caller (the
 /// simulation) keeps them: an operator built with one borrows its vectors (moved, not copied)
 /// and gives them back when it is destroyed, with the list of the entries it left non-zero (the
@@ -38,6 +39,13 @@ struct LiquidBand {
   bool valid = false;
   std::array<int, 3> cell_lo{}, cell_hi{};
   std::array<std::array<int, 3>, 3> face_lo{}, face_hi{};
+  /// (band18) Boxes of the faces of each axis outside which the solve's u* is +0 or -0, and
+  /// with it every velocity a solve of the step's sequence starts from (an update changes only
+  /// faces with W_L^u > 0, inside face_lo / face_hi, which these boxes contain): the round-off
+  /// bound's U = max_f |W_F^u u_f| (weighted_face_speed) is the maximum over these boxes.
+  /// speed_valid = false: no promise (the maximum over every face).
+  bool speed_valid = false;
+  std::array<std::array<int, 3>, 3> speed_lo{}, speed_hi{};
 };
 
 /// A double vector kept across steps that is 0 outside the spans [first, second) listed in
@@ -83,11 +91,12 @@ struct StokesWorkspace {
   /// The liquid's band of this step (the owner sets it before each solve; see LiquidBand).
   LiquidBand band;
   /// MatrixFreeStokesOperator's storage while no operator holds it: C_f per face, the
-  /// per-DOF and per-cell unknown maps, the stress and cell scratch (0 outside `dirty`), and the
-  /// face scratch (any values: the operator zeroes the rows it uses).
+  /// per-DOF and per-cell unknown maps, the stress and cell scratch (0 outside `dirty`). Not the
+  /// face scratch (band18): its values are never reused (the operator zeroes the rows it uses),
+  /// so kept it saved no pass, and it lay beside the block the liquid level set frees before the
+  /// solve (202 MB of the step's peak at Fig. 2's paper grid) instead of reusing it.
   KeptZeros face_coefficient, stress_scratch, cell_scratch;
   KeptMinusOnes unknown_of_dof, unknown_of_cell;
-  VectorX face_scratch;
   /// An operator holds the storage above (it gives it back when destroyed).
   bool lent = false;
   /// false: the band only; operators make their own vectors (a measurement switch: the kept

@@ -2204,7 +2204,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   // the volume correction's divergence source (empty: none; StageSwitches::volume_source_gain)
   const VectorX source = volume_source(dt);
   in.divergence_source = source.size() > 0 ? &source : nullptr;
-  in.workspace = stokes_workspace_for(in.weights.pressure);
+  in.workspace = stokes_workspace_for(in.weights.pressure, in.u_star);
   solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options, r);
   in.divergence_source = nullptr;
   in.workspace = nullptr;
@@ -2248,7 +2248,8 @@ void Simulation<Dim>::solve_coupled(double dt) {
 }
 
 template <int Dim>
-StokesWorkspace* Simulation<Dim>::stokes_workspace_for(const PressureWeights& w) {
+StokesWorkspace* Simulation<Dim>::stokes_workspace_for(const PressureWeights& w,
+                                                       const VectorX& u_start) {
   stokes_workspace_.keep = switches_.kept_solve_storage;
   if (!stokes_workspace_.keep) {
     // (the storage a kept run left goes back to the heap)
@@ -2272,7 +2273,66 @@ StokesWorkspace* Simulation<Dim>::stokes_workspace_for(const PressureWeights& w)
       }
     }
   }
+  // The speed boxes (band18): u* is +-0 outside the boxes of the faces with mass grown by the
+  // air extrapolation's layers. particles_to_grid leaves +0 on every face without mass, which
+  // lie outside mass_boxes_ or inside them; gravity and the ballistic faces' PIC values are
+  // written on faces with mass only; extrapolate_into_air fills faces from same-axis
+  // neighbours, one face per layer along an axis (the whole axis where it wraps). Nothing
+  // else writes u between particles_to_grid and the solve. A later solve of the step's
+  // sequence starts from an earlier one's velocity, which differs from u* only on faces with
+  // W_L^u > 0 (the velocity updates): the band's face boxes, joined in. Not kept when the
+  // weights' band is not valid or the faces with mass have no boxes (no promise then).
+  band.speed_valid = band.valid && switches_.restricted_passes && mass_boxes_valid_ &&
+                     mass_faces_.data() == mass_boxes_data_;
+  if (band.speed_valid) {
+    const int reach = switches_.air_velocity ? kAirVelocityLayers : 0;
+    for (int a = 0; a < Dim; ++a) {
+      const VecI<Dim> dims = grid_.face_dims(a);
+      const VecI<Dim>& mlo = mass_boxes_.lo[a];
+      const VecI<Dim>& mhi = mass_boxes_.hi[a];
+      const bool mass_empty = (mlo.array() > mhi.array()).any();
+      const WrittenBox<Dim>& lb = liquid_face_boxes_[a];
+      const bool liquid_empty = (lb.lo.array() > lb.hi.array()).any();
+      for (int d = 0; d < Dim; ++d) {
+        int lo = dims[d], hi = -1;  // empty
+        if (!mass_empty) {
+          lo = grid_.periodic(d) ? 0 : std::max(mlo[d] - reach, 0);
+          hi = grid_.periodic(d) ? dims[d] - 1 : std::min(mhi[d] + reach, dims[d] - 1);
+        }
+        if (!liquid_empty) {
+          lo = std::min(lo, lb.lo[d]);
+          hi = std::max(hi, lb.hi[d]);
+        }
+        band.speed_lo[a][d] = lo;
+        band.speed_hi[a][d] = hi;
+      }
+      // (an empty box on one coordinate empties the box: kept as it is, lo > hi there)
+    }
+  }
+  if (speed_box_check_.on) check_speed_boxes(band, u_start);
   return &stokes_workspace_;
+}
+
+template <int Dim>
+void Simulation<Dim>::check_speed_boxes(const LiquidBand& band, const VectorX& u_start) {
+  // (tests) the promise of the speed boxes on this solve's starting velocity, and the faces
+  // the boxes leave out
+  ++speed_box_check_.solves;
+  if (!band.speed_valid || u_start.size() != grid_.num_faces()) return;
+  ++speed_box_check_.promised;
+  for (int a = 0; a < Dim; ++a) {
+    const VecI<Dim> dims = grid_.face_dims(a);
+    for (int k = 0; k < dims.prod(); ++k) {
+      const VecI<Dim> c = lattice_coord<Dim>(k, dims);
+      bool inside = true;
+      for (int d = 0; d < Dim; ++d)
+        inside = inside && c[d] >= band.speed_lo[a][d] && c[d] <= band.speed_hi[a][d];
+      if (inside) continue;
+      const int f = grid_.face_index(a, c);
+      ++speed_box_check_.left_out;
+      if (u_start[f] != 0.0) ++speed_box_check_.nonzero_outside;
+    }
+  }
 }
 
 template <int Dim>
@@ -2330,7 +2390,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     State out = from;
     StokesSolveOptions options = stokes_options(w.viscosity, dt);
     options.divergence_source = &source;
-    options.workspace = stokes_workspace_for(w.pressure);
+    options.workspace = stokes_workspace_for(w.pressure, out.u);
     const StokesSolveResult solve =
         solve_stokes(grid_, w, dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
                      backend, pcg_settings_, out.u, options);
@@ -2346,7 +2406,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
     w.viscosity = eta ? *eta : stress_eta_;
     State out = from;
     StokesSolveOptions options = stokes_options(w.viscosity, dt);
-    options.workspace = stokes_workspace_for(w.pressure);
+    options.workspace = stokes_workspace_for(w.pressure, out.u);
     const StokesSolveResult solve = solve_stokes(grid_, w, dt, StokesUnknowns::stress_only,
                                                  StressForm::full, backend, pcg_settings_, out.u,
                                                  options);

@@ -313,6 +313,16 @@ class Simulation : public AnySimulation {
   /// W_F^u = 0 (from the box of the solids' negative lattice points; lo > hi: none), the faces
   /// apply_wall_and_solid_velocities visits (docs/derivations.md, "Passes restricted to boxes").
   std::pair<VecI<Dim>, VecI<Dim>> solid_face_box(int axis) const;
+  /// (tests, band18) With `on`, every solve given the step's liquid band checks, over every
+  /// face, that its starting velocity is +-0 outside the band's speed boxes (the promise
+  /// weighted_face_speed relies on): solves seen, solves with the promise, faces the boxes
+  /// left out and those of them with a non-zero velocity, summed over the solves.
+  struct SpeedBoxCheck {
+    bool on = false;
+    long solves = 0, promised = 0, left_out = 0, nonzero_outside = 0;
+  };
+  void check_speed_boxes(bool on) { speed_box_check_.on = on; }
+  const SpeedBoxCheck& speed_box_check() const { return speed_box_check_; }
   /// Face velocities (MacGrid face numbering).
   const VectorX& velocity() const { return u_; }
   /// Cell pressures of the last solve (Pa; zero before the first step).
@@ -589,8 +599,11 @@ class Simulation : public AnySimulation {
   StokesWorkspace stokes_workspace_;
   /// The workspace with its band set from the boxes update_liquid_weights wrote W_L^p and W_L^u
   /// in (liquid_cell_box_, liquid_face_boxes_), when they are valid for `w`'s vectors (else no
-  /// band: the set-up passes over the grid).
-  StokesWorkspace* stokes_workspace_for(const PressureWeights& w);
+  /// band: the set-up passes over the grid), and the speed boxes outside which the solve's
+  /// starting velocity `u_start` is +-0 (band18; LiquidBand::speed_valid).
+  StokesWorkspace* stokes_workspace_for(const PressureWeights& w, const VectorX& u_start);
+  void check_speed_boxes(const LiquidBand& band, const VectorX& u_start);
+  SpeedBoxCheck speed_box_check_;
   /// The coupled step's input, kept across steps so that its grid-sized vectors are reused:
   /// its `solids` are the weights of the last update_moving_solids (whose lattice_phi has moved
   /// to solid_phi_), the rest is filled by solve_coupled.

@@ -7,10 +7,12 @@
 #include <catch2/catch.hpp>
 
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <random>
 
 #include "reference/app/scene_file.hpp"
+#include "reference/fluid/pressure_projection.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/particles/particles.hpp"
 #include "reference/sim/simulation.hpp"
@@ -283,4 +285,98 @@ TEST_CASE("static solids keep their normals: the dense passes' bits", "[unit]") 
   // no body moves: every face in the bowl keeps its normal from the first step
   CHECK(check_scene<2>("default", "[48,32]", 8) > 0);
   CHECK(check_scene<2>("pour-into-bowl-2d", "[40,40]", 25) > 0);
+}
+
+namespace {
+
+/// Runs a built-in scene with Simulation::check_speed_boxes on: every solve that gets the
+/// liquid's band checks, over every face, that its starting velocity is +-0 outside the band's
+/// speed boxes (the promise weighted_face_speed relies on, band18). Returns the check's sums.
+template <int Dim>
+typename Simulation<Dim>::SpeedBoxCheck check_speed_boxes(const std::string& name,
+                                                          const std::string& cells, int frames,
+                                                          std::vector<std::string> overrides = {}) {
+  INFO(name);
+  overrides.push_back("domain.cells=" + cells);
+  overrides.push_back("render.enabled=false");
+  const SceneFile scene = load_scene(name, overrides);
+  Simulation<Dim> sim(scene);
+  sim.check_speed_boxes(true);
+  for (int f = 0; f < frames; ++f) sim.advance_frame();
+  const auto check = sim.speed_box_check();
+  CHECK(check.nonzero_outside == 0);
+  CHECK(check.promised > 0);
+  return check;
+}
+
+}  // namespace
+
+TEST_CASE("u* = 0 outside the speed boxes at every banded solve (band18)", "[unit]") {
+  // coupled (PC-unified) scenes, 2D and 3D, a periodic axis, liquid-only viscous and
+  // non-Newtonian sequences (later solves start from an earlier one's velocity), the explicit
+  // back end; the boxes leave faces out where the liquid fills a part of the box
+  CHECK(check_speed_boxes<2>("bunny-onto-floating-bowl-2d", "[40,40]", 4).left_out > 0);
+  CHECK(check_speed_boxes<2>("bunny-onto-floating-bowl-2d", "[40,40]", 3,
+                             {"domain.boundary.x-=periodic", "domain.boundary.x+=periodic"})
+            .left_out > 0);
+  CHECK(check_speed_boxes<2>("liquid-bunny-into-bowl-2d", "[48,48]", 3, {"solver.backend=explicit"})
+            .left_out > 0);
+  CHECK(check_speed_boxes<2>("viscous-pour-2d", "[40,40]", 4).left_out > 0);
+  CHECK(check_speed_boxes<2>("liquid-drop-shear-thinning-2d", "[32,32]", 3).left_out > 0);
+  CHECK(check_speed_boxes<2>("hollow-spheres-viscous-2d", "[40,40]", 3).left_out > 0);
+  CHECK(check_speed_boxes<3>("liquid-bunny-into-bowl-3d", "[24,24,24]", 2).left_out > 0);
+}
+
+namespace {
+
+/// weighted_face_speed over a band's speed boxes against the pass over every face, for u zero
+/// (+0 or -0) outside the boxes and random W_F^u (some 0) and u inside (with a NaN term).
+template <int Dim>
+void check_boxed_speed(int n, unsigned seed) {
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> r(-3.0, 3.0);
+  LiquidBand band;
+  band.speed_valid = true;
+  for (int a = 0; a < Dim; ++a)
+    for (int d = 0; d < Dim; ++d) {
+      band.speed_lo[a][d] = 2 + a + d;
+      band.speed_hi[a][d] = n - 3 + (d == a ? 1 : 0);
+    }
+  VectorX fluid(grid.num_faces()), u(grid.num_faces());
+  for (int a = 0; a < Dim; ++a) {
+    const VecI<Dim> dims = grid.face_dims(a);
+    for (int k = 0; k < dims.prod(); ++k) {
+      const VecI<Dim> c = lattice_coord<Dim>(k, dims);
+      bool inside = true;
+      for (int d = 0; d < Dim; ++d)
+        inside = inside && c[d] >= band.speed_lo[a][d] && c[d] <= band.speed_hi[a][d];
+      const int f = grid.face_index(a, c);
+      fluid[f] = k % 7 == 0 ? 0.0 : std::abs(r(rng)) / 3.0;
+      u[f] = inside ? r(rng) : (k % 2 ? -0.0 : 0.0);
+    }
+  }
+  const double full = weighted_face_speed(fluid, u);
+  CHECK(full > 0.0);
+  CHECK(same_bits(weighted_face_speed(grid, fluid, u, &band), full));
+  // a NaN term inside: skipped by both
+  u[grid.face_index(0, VecI<Dim>::Constant(4))] = std::numeric_limits<double>::quiet_NaN();
+  CHECK(same_bits(weighted_face_speed(grid, fluid, u, &band), weighted_face_speed(fluid, u)));
+  // empty boxes on every axis: U = +0 when u is zero everywhere
+  band.speed_lo[0][0] = n + 5;
+  for (int a = 1; a < Dim; ++a) band.speed_hi[a][Dim - 1] = -1;
+  VectorX zero = VectorX::Zero(grid.num_faces());
+  CHECK(same_bits(weighted_face_speed(grid, fluid, zero, &band), 0.0));
+  CHECK(same_bits(weighted_face_speed(fluid, zero), 0.0));
+  // without the promise: the pass over every face
+  band.speed_valid = false;
+  CHECK(same_bits(weighted_face_speed(grid, fluid, u, &band), weighted_face_speed(fluid, u)));
+}
+
+}  // namespace
+
+TEST_CASE("weighted_face_speed over the speed boxes: the bits of every face (band18)", "[unit]") {
+  check_boxed_speed<2>(24, 3u);
+  check_boxed_speed<3>(12, 5u);
+  check_boxed_speed<2>(300, 7u);  // above the serial threshold: several threads
 }
