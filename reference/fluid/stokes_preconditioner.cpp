@@ -219,6 +219,8 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       cycles_ = std::max(1, cycles_ - 1);
     commutator_ = np_ > 0 && options.schur_correction && !options.additive_pressure &&
                   options.schur != SchurApproximation::cahouet_chabard;
+    if (!commutator_ && np_ > 0 && options.schur_correction && !options.additive_pressure)
+      bp_second_ = bp;  // (the second term's B_p: apply_penalised_inverse_pressure)
     if (commutator_) {
       bp_.swap(bp);  // (B_p and B_p^T as formed above)
       bpt_.swap(bpt);
@@ -590,6 +592,32 @@ void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, Vector
 }
 
 template <int Dim>
+void StokesPreconditioner<Dim>::apply_penalised_inverse_pressure(const VectorX& g, VectorX& y) const {
+  // apply_penalised_inverse for a g whose stress part is +0 (the second term's w): h's stress
+  // part is K^-1 (+0) = +0 (row sums from +0 of +-0 terms), so B h = B_p h_p: each row of B
+  // (stress columns first) sums +-0 terms onto +0 before its pressure terms, which leaves +0;
+  // the pressure terms then add in their stored order from +0, as in B_p's row. The same bits
+  // with a seventh of B's entries read (section 41). B_p: bp_ (the commutator's; without the
+  // near-empty cells' columns, where h_p = (Pi = 0) s / inf = +-0: terms that add nothing to a
+  // sum that is never -0) or bp_second_.
+  if (options_.inner_cg > 0 || (!commutator_ && bp_second_.rows() != nf_)) {
+    apply_penalised_inverse(g, y);
+    return;
+  }
+  const SparseMatrix& bp = commutator_ ? bp_ : bp_second_;
+  h_.head(ns_).setZero();
+  for (int k = 0; k < np_; ++k) h_[ns_ + k] = g[ns_ + k] / penalty_divisor_[k];
+  multiply(bp, h_.data() + ns_, face_.data());
+  velocity_.apply(face_, v_, cycles_);
+  // y = h - D^-1 B^T v
+  multiply(f_.b_transpose, v_.data(), back_.data());
+  y.resize(n_);
+  multiply(kinv_, back_.data(), y.data());
+  for (int i = 0; i < ns_; ++i) y[i] = h_[i] - y[i];
+  for (int k = 0; k < np_; ++k) y[ns_ + k] = h_[ns_ + k] - back_[ns_ + k] / penalty_divisor_[k];
+}
+
+template <int Dim>
 void StokesPreconditioner<Dim>::apply_two_term(const VectorX& r, VectorX& z) const {
   if (pressure_only_) {
     pressure_.apply(r, z, 1);  // MGPCG: one cell V-cycle (velocity_cycles concerns V)
@@ -615,7 +643,7 @@ void StokesPreconditioner<Dim>::apply_two_term(const VectorX& r, VectorX& z) con
   apply_schur(e_, s_);
   w_.head(ns_).setZero();
   for (int k = 0; k < np_; ++k) w_[ns_ + k] = penalty_used_[k] * s_[k];
-  apply_penalised_inverse(w_, y2_);
+  apply_penalised_inverse_pressure(w_, y2_);
   z = y1_ + y2_;
   add_empty_cells(r, z);
 }
