@@ -40,12 +40,6 @@ void multiply_rows(const SparseMatrix& m, int begin, int end, const double* x, d
 /// matrix marked as an rvalue. `m` is left empty (or with the target's old content).
 SparseMatrix& moved(SparseMatrix& m) { return m.markAsRValue(); }
 
-/// `f` with its sparse matrices marked by moved(): std::move(f) then moves them too.
-StokesFactors& moved(StokesFactors& f) {
-  for (SparseMatrix* m : {&f.b, &f.b_transpose, &f.compliance, &f.compliance_exact}) moved(*m);
-  return f;
-}
-
 /// B_p^T diag(w) with B_p^T row-major (compressed): each entry times its face's weight, the bits
 /// of Eigen's product with sparse_diagonal(w) (one term per entry).
 SparseMatrix weighted_rows(const SparseMatrix& bpt, const VectorX& w) {
@@ -100,7 +94,7 @@ template <int Dim>
 StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const LinearOperator& a,
                                                 StokesFactors factors,
                                                 const StokesPreconditionerOptions& options)
-    : a_(a), f_(std::move(moved(factors))), options_(options) {
+    : a_(a), f_(std::move(factors)), options_(options) {  // (StokesFactors moves: no copy)
   ns_ = f_.num_stress;
   np_ = f_.num_pressure;
   n_ = ns_ + np_;
@@ -225,6 +219,8 @@ StokesPreconditioner<Dim>::StokesPreconditioner(const MacGrid<Dim>& grid, const 
       cycles_ = std::max(1, cycles_ - 1);
     commutator_ = np_ > 0 && options.schur_correction && !options.additive_pressure &&
                   options.schur != SchurApproximation::cahouet_chabard;
+    if (!commutator_ && np_ > 0 && options.schur_correction && !options.additive_pressure)
+      bp_second_ = bp;  // (the second term's B_p: apply_penalised_inverse_pressure)
     if (commutator_) {
       bp_.swap(bp);  // (B_p and B_p^T as formed above)
       bpt_.swap(bpt);
@@ -307,23 +303,78 @@ template <int Dim>
 SparseMatrix StokesPreconditioner<Dim>::rows_of_a(const std::vector<int>& list) const {
   // A with the system's own K (no W_F^s floor)
   const SparseMatrix& k = f_.compliance_exact.size() ? f_.compliance_exact : f_.compliance;
-  // rows `list` of A = B^T C B + blkdiag(K, 0), row-major |list| x n
+  // rows `list` of A = B^T C B + blkdiag(K, 0), row-major |list| x n: the bits of Eigen's
+  // SparseMatrix(SparseMatrix(S B^T) * diag(C)) * B + [K rows] (S the selection, section 41):
+  // the rows of B^T copied (S B^T's entries are 1 x b: the same values), each entry times its C
+  // (weighted_rows: one term each), the product by sparse_row_product (Eigen's additions in its
+  // order, sorted columns, cancelled entries kept), then K's rows merged as Eigen's sparse sum
+  // merges them (x + y where both hold an entry, x + 0 or 0 + y where one does)
   const int m = static_cast<int>(list.size());
-  std::vector<Triplet> t;
-  t.reserve(m);
-  for (int q = 0; q < m; ++q) t.emplace_back(q, list[q], 1.0);
-  SparseMatrix select(m, n_);
-  select.setFromTriplets(t.begin(), t.end());
-  const SparseMatrix bt = select * f_.b_transpose;
-  SparseMatrix rows = SparseMatrix(bt * sparse_diagonal(f_.c)) * f_.b;
-  t.clear();
+  SparseMatrix bt(m, f_.b_transpose.cols());
+  {
+    Eigen::Index total = 0;
+    for (int q = 0; q < m; ++q)
+      for (SparseMatrix::InnerIterator it(f_.b_transpose, list[q]); it; ++it) ++total;
+    bt.resizeNonZeros(total);
+    int* outer = bt.outerIndexPtr();
+    int* inner = bt.innerIndexPtr();
+    double* value = bt.valuePtr();
+    int pos = 0;
+    outer[0] = 0;
+    for (int q = 0; q < m; ++q) {
+      for (SparseMatrix::InnerIterator it(f_.b_transpose, list[q]); it; ++it) {
+        inner[pos] = static_cast<int>(it.col());
+        value[pos++] = it.value();
+      }
+      outer[q + 1] = pos;
+    }
+  }
+  SparseMatrix bc = weighted_rows(bt, f_.c);
+  const SparseMatrix product = sparse_row_product(bc, f_.b, false);
+  // merge K's rows (sorted columns on both sides)
+  Eigen::Index total = product.nonZeros();
   for (int q = 0; q < m; ++q)
     if (list[q] < ns_)
-      for (SparseMatrix::InnerIterator it(k, list[q]); it; ++it) t.emplace_back(q, static_cast<int>(it.col()), it.value());
-  SparseMatrix kpart(m, n_);
-  kpart.setFromTriplets(t.begin(), t.end());
-  rows += kpart;
-  rows.makeCompressed();
+      for (SparseMatrix::InnerIterator it(k, list[q]); it; ++it) ++total;  // (an upper bound)
+  std::vector<int> outer(static_cast<std::size_t>(m) + 1, 0);
+  std::vector<int> inner;
+  std::vector<double> value;
+  inner.reserve(static_cast<std::size_t>(total));
+  value.reserve(static_cast<std::size_t>(total));
+  const int* p_outer = product.outerIndexPtr();
+  const int* p_inner = product.innerIndexPtr();
+  const double* p_value = product.valuePtr();
+  for (int q = 0; q < m; ++q) {
+    int e = p_outer[q];
+    const int end = p_outer[q + 1];
+    if (list[q] < ns_) {
+      for (SparseMatrix::InnerIterator it(k, list[q]); it; ++it) {
+        const int col = static_cast<int>(it.col());
+        for (; e < end && p_inner[e] < col; ++e) {
+          inner.push_back(p_inner[e]);
+          value.push_back(p_value[e] + 0.0);
+        }
+        if (e < end && p_inner[e] == col) {
+          inner.push_back(col);
+          value.push_back(p_value[e] + it.value());
+          ++e;
+        } else {
+          inner.push_back(col);
+          value.push_back(0.0 + it.value());
+        }
+      }
+    }
+    for (; e < end; ++e) {
+      inner.push_back(p_inner[e]);
+      value.push_back(p_value[e] + 0.0);
+    }
+    outer[static_cast<std::size_t>(q) + 1] = static_cast<int>(inner.size());
+  }
+  SparseMatrix rows(m, n_);
+  rows.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), rows.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), rows.innerIndexPtr());
+  std::copy(value.begin(), value.end(), rows.valuePtr());
   return rows;
 }
 
@@ -541,6 +592,32 @@ void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, Vector
 }
 
 template <int Dim>
+void StokesPreconditioner<Dim>::apply_penalised_inverse_pressure(const VectorX& g, VectorX& y) const {
+  // apply_penalised_inverse for a g whose stress part is +0 (the second term's w): h's stress
+  // part is K^-1 (+0) = +0 (row sums from +0 of +-0 terms), so B h = B_p h_p: each row of B
+  // (stress columns first) sums +-0 terms onto +0 before its pressure terms, which leaves +0;
+  // the pressure terms then add in their stored order from +0, as in B_p's row. The same bits
+  // with a seventh of B's entries read (section 41). B_p: bp_ (the commutator's; without the
+  // near-empty cells' columns, where h_p = (Pi = 0) s / inf = +-0: terms that add nothing to a
+  // sum that is never -0) or bp_second_.
+  if (options_.inner_cg > 0 || (!commutator_ && bp_second_.rows() != nf_)) {
+    apply_penalised_inverse(g, y);
+    return;
+  }
+  const SparseMatrix& bp = commutator_ ? bp_ : bp_second_;
+  h_.head(ns_).setZero();
+  for (int k = 0; k < np_; ++k) h_[ns_ + k] = g[ns_ + k] / penalty_divisor_[k];
+  multiply(bp, h_.data() + ns_, face_.data());
+  velocity_.apply(face_, v_, cycles_);
+  // y = h - D^-1 B^T v
+  multiply(f_.b_transpose, v_.data(), back_.data());
+  y.resize(n_);
+  multiply(kinv_, back_.data(), y.data());
+  for (int i = 0; i < ns_; ++i) y[i] = h_[i] - y[i];
+  for (int k = 0; k < np_; ++k) y[ns_ + k] = h_[ns_ + k] - back_[ns_ + k] / penalty_divisor_[k];
+}
+
+template <int Dim>
 void StokesPreconditioner<Dim>::apply_two_term(const VectorX& r, VectorX& z) const {
   if (pressure_only_) {
     pressure_.apply(r, z, 1);  // MGPCG: one cell V-cycle (velocity_cycles concerns V)
@@ -566,7 +643,7 @@ void StokesPreconditioner<Dim>::apply_two_term(const VectorX& r, VectorX& z) con
   apply_schur(e_, s_);
   w_.head(ns_).setZero();
   for (int k = 0; k < np_; ++k) w_[ns_ + k] = penalty_used_[k] * s_[k];
-  apply_penalised_inverse(w_, y2_);
+  apply_penalised_inverse_pressure(w_, y2_);
   z = y1_ + y2_;
   add_empty_cells(r, z);
 }

@@ -213,6 +213,9 @@ class StokesPreconditioner : public Preconditioner {
 
  private:
   void apply_two_term(const VectorX& r, VectorX& z) const;
+  /// apply_penalised_inverse for a g whose stress part is +0, with B_p in place of B (the same
+  /// bits; docs/preconditioners.md section 41).
+  void apply_penalised_inverse_pressure(const VectorX& g, VectorX& y) const;
   /// z_k = r_k / A22_kk on the near-empty cells.
   void add_empty_cells(const VectorX& r, VectorX& z) const;
   void build_cut_block();
@@ -241,6 +244,7 @@ class StokesPreconditioner : public Preconditioner {
   double free_surface_share_ = 0.0;
   bool commutator_ = false;  ///< the two-term form with a commutator S
   SparseMatrix bp_, bpt_;   ///< B_p (faces x n_p) and B_p^T (commutator only)
+  SparseMatrix bp_second_;  ///< B_p for the second term without a commutator (else empty)
   VectorX commutator_weight_;  ///< W (C or diag(V0)^-1) per face
   VectorX penalty_;         ///< Pi
   VectorX penalty_divisor_; ///< Pi in (P2) and S, divided by: +inf on the near-empty cells (Pi^-1 = 0)

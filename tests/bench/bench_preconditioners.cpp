@@ -17,6 +17,8 @@
 //       [--lean-share S (3D: one V-cycle fewer below this free-surface share; 0: off)]
 //       [--setup-only (the block preconditioner is built, not used: its set-up timed alone)]
 //       [--cut-simplicial (the cut block factored by Eigen's simplicial LDL^T, not by supernodes)]
+//       [--system-malloc (glibc's default allocator settings; by default the bench sets those of
+//        the `monolith` application, keep_freed_memory_for_reuse: docs/preconditioners.md section 41)]
 //
 // Scenes (unit box, walls, open top, rho = 1000, dt = 0.01, a smooth swirl plus one step of
 // gravity as u*):
@@ -35,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "reference/core/memory_policy.hpp"
 #include "reference/fluid/stokes_preconditioner.hpp"
 #include "reference/fluid/velocity_operator.hpp"
 #include "reference/solvers/pcg.hpp"
@@ -73,6 +76,7 @@ struct Config {
   bool ssor = true;
   int repeats = 1;
   bool setup_only = false;  ///< --setup-only: build the block preconditioner, no solve with it
+  bool app_memory_policy = true;  ///< false (--system-malloc): glibc's default allocator settings
   double noise = 0.0;
   StokesPreconditionerOptions options;
 };
@@ -342,11 +346,15 @@ int main(int argc, char** argv) {
     else if (a == "--no-renumber") cfg.options.renumber = false;
     else if (a == "--double-velocity") cfg.options.single_precision_velocity = false;
     else if (a == "--single-velocity") cfg.options.single_precision_velocity = true;
+    else if (a == "--system-malloc") cfg.app_memory_policy = false;
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;
     }
   }
+  // the allocator setting of the `monolith` application (reference/app/main.cpp): freed blocks
+  // stay in the heap for reuse, as the solves of a simulation run under it
+  if (cfg.app_memory_policy) keep_freed_memory_for_reuse();
   for (double n : cfg.n)
     for (double eta : cfg.eta) {
       if (cfg.dim == 2)
