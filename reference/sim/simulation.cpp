@@ -440,15 +440,23 @@ void Simulation<Dim>::settle(int steps) {
 
 template <int Dim>
 void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
+  make_liquid_phi();
+  liquid_weights_from_phi(stress, volume);
+}
+
+template <int Dim>
+void Simulation<Dim>::make_liquid_phi() {
+  ScopedTimer timer(stats_.timing[FramePhase::particles]);
+  // mirrored across the walls and the solids, so liquid against either reads as liquid up to
+  // it (docs/particles.md, "Still water")
+  // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
+  liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
+                        liquid_band_);
+}
+
+template <int Dim>
+void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
   liquid_weights_pending_ = false;
-  {
-    ScopedTimer timer(stats_.timing[FramePhase::particles]);
-    // mirrored across the walls and the solids, so liquid against either reads as liquid up to
-    // it (docs/particles.md, "Still water")
-    // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
-    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
-                          liquid_band_);
-  }
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
@@ -619,7 +627,7 @@ double Simulation<Dim>::cfl_dt() const {
   // face cut dt to 1e-7 s, the contacts' penetration recovery (-beta phi / dt, eq. (16))
   // then threw the bodies at km/s, which cut dt further (hollow-spheres-inviscid-3d stalled in
   // frame 9 at dt = 6e-28 s).
-  // (after update_liquid_volume_only W_L^u is the last step's: frame_end_dt_is_max showed at
+  // (after liquid_volume_from_phi W_L^u is the last step's: frame_end_dt_is_max showed at
   // the frame's end that no grid speed below its bound, hence none of the trusted faces',
   // changes the result, max_dt; the state has not changed since)
   double grid_speed = 0.0;
@@ -668,15 +676,66 @@ bool Simulation<Dim>::frame_end_dt_is_max() const {
   // a NaN in both). With S = max(particles, B), cfl dx / S >= max_dt (or S = 0) gives
   // min(max_dt, cfl dx / s) = max_dt for every s in [0, S] (the division is monotone), whatever
   // the trusted faces; the bodies' limit is applied after it alike.
+  // A trusted face has mass (0 outside mass_boxes_) or W_L^u > 0 of the frame's end, whose
+  // extended level set is negative only in the band of the level set just made (outside it
+  // phi_L is its background, at least the extension's reach: update_liquid_weights' `banded`);
+  // a face's fraction reads the lattice points of its control volume (2 c - 1 .. 2 c + 2 per
+  // axis) and their mirrors at the walls within a point: two faces more on each side bound the
+  // faces of the band. Without the boxes, every face.
   const auto faces = static_cast<Eigen::Index>(grid_.num_faces());
   double bound = 0.0;
   if (u_.size() == faces && weights_.fluid_face.size() == faces) {
     const int nf = grid_.num_faces();
     const double* u = u_.data();
     const double* fluid = weights_.fluid_face.data();
+    const bool boxed = switches_.restricted_passes && mass_boxes_valid_ &&
+                       mass_faces_.data() == mass_boxes_data_ &&
+                       mass_faces_.size() == static_cast<std::size_t>(nf) &&
+                       liquid_band_.background >= kLiquidSolidReach * grid_.dx();
+    if (boxed) {
+      FaceBoxes boxes;
+      for (int axis = 0; axis < Dim; ++axis) {
+        const VecI<Dim> fdims = grid_.face_dims(axis);
+        VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones();
+        if (!liquid_band_.empty())
+          for (int a = 0; a < Dim; ++a) {
+            lo[a] = grid_.periodic(a) ? 0 : std::max(liquid_band_.lo[a] / 2 - 3, 0);
+            hi[a] = grid_.periodic(a) ? fdims[a] - 1
+                                      : std::min(liquid_band_.hi[a] / 2 + 3, fdims[a] - 1);
+          }
+        const VecI<Dim>& mlo = mass_boxes_.lo[axis];
+        const VecI<Dim>& mhi = mass_boxes_.hi[axis];
+        const bool band_empty = (lo.array() > hi.array()).any();
+        const bool mass_empty = (mlo.array() > mhi.array()).any();
+        if (band_empty) {
+          lo = mlo;
+          hi = mhi;
+        } else if (!mass_empty) {
+          lo = lo.cwiseMin(mlo);
+          hi = hi.cwiseMax(mhi);
+        }
+        boxes.lo[axis] = lo;
+        boxes.hi[axis] = hi;
+      }
+      for (int axis = 0; axis < Dim; ++axis) {
+        const FaceRows rows_of_box = face_rows(boxes, axis);
+        const int rows = rows_of_box.rows(), nx = rows_of_box.nx;
+        if (rows == 0) continue;
+        double speed = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : speed) \
+    num_threads(team_threads(static_cast<long>(rows) * nx))
+        for (int r = 0; r < rows; ++r) {
+          const int first = rows_of_box.first(r);
+          for (int f = first; f < first + nx; ++f)
+            if (fluid[f] > 0.0) speed = std::max(speed, std::abs(u[f]));
+        }
+        bound = std::max(bound, speed);
+      }
+    } else {
 #pragma omp parallel for schedule(static) reduction(max : bound) num_threads(team_threads(nf))
-    for (int f = 0; f < nf; ++f)
-      if (fluid[f] > 0.0) bound = std::max(bound, std::abs(u[f]));
+      for (int f = 0; f < nf; ++f)
+        if (fluid[f] > 0.0) bound = std::max(bound, std::abs(u[f]));
+    }
   }
   const double speed = std::max(max_particle_speed(particles_), bound);
   const double max_dt = scene_.time.max_dt;
@@ -685,12 +744,7 @@ bool Simulation<Dim>::frame_end_dt_is_max() const {
 }
 
 template <int Dim>
-void Simulation<Dim>::update_liquid_volume_only() {
-  {
-    ScopedTimer timer(stats_.timing[FramePhase::particles]);
-    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
-                          liquid_band_);
-  }
+void Simulation<Dim>::liquid_volume_from_phi() {
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // update_liquid_weights' volume with solids: the cell fractions of the fluid level set
   // max(phi_L, -phi_S), negative only where phi_L is. There the box of the points to classify
@@ -2878,12 +2932,13 @@ FrameStats Simulation<Dim>::advance_frame() {
   // frame's end only the level set (pictures) and the volume (statistics) are read, and W_L^u by
   // the next frame's first CFL limit, unless that limit is max_dt whatever W_L^u is. Then W_L^p,
   // W_L^u and eta per cell are made only if read before the next step (weights(), cell_eta():
-  // the same values; update_liquid_volume_only)
+  // the same values; liquid_volume_from_phi)
   const bool solids = !solid_shapes_.empty() || coupled_;
+  make_liquid_phi();
   if (!reused && solids && !switches_.divergence_free_air && frame_end_dt_is_max())
-    update_liquid_volume_only();
+    liquid_volume_from_phi();
   else
-    update_liquid_weights(reused);
+    liquid_weights_from_phi(reused, true);
   liquid_weights_current_ = reused;
   fill_state_stats(stats_);
   ledger_ = frame_ledger_;

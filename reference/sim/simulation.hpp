@@ -333,6 +333,9 @@ class Simulation : public AnySimulation {
   /// Faces in solids that constrain_velocity_in_solids left out (deep in a fixed solid, far from
   /// the moving bodies: their value stays +0) since the start; for tests.
   long constrained_faces_left_out() const { return constrained_left_out_; }
+  /// Whether the last frame's end left W_L^p, W_L^u to be made when read (weights(): see
+  /// liquid_volume_from_phi); for tests.
+  bool frame_end_weights_pending() const { return liquid_weights_pending_; }
   /// Of those, the particles moved again in first half drifts (drift_guarded).
   long drift_reread_particles() const { return drift_reread_particles_; }
 
@@ -481,16 +484,21 @@ class Simulation : public AnySimulation {
   /// part): `stress_eta_made` when stress_eta_ was just made from the same particles.
   void update_cell_eta(bool stress_eta_made);
   /// A frame's end whose weights no step reuses (split_drift) and whose first CFL limit is
-  /// max_dt whatever the trusted faces (frame_end_dt_is_max): the level set and the reported
-  /// volume only (the same values as update_liquid_weights(false, true)); W_L^p, W_L^u and
+  /// max_dt whatever the trusted faces (frame_end_dt_is_max): from the level set just made, the
+  /// reported volume only (the same values as update_liquid_weights(false, true)); W_L^p, W_L^u and
   /// eta per cell are left pending until read (weights(), cell_eta(), save_state) or made anew
   /// by the next step's weights (docs/benchmarks.md, particles18).
-  void update_liquid_volume_only();
+  void liquid_volume_from_phi();
+  /// update_liquid_weights' two parts: the level set (liquid_phi_, liquid_band_) and what is
+  /// made from it.
+  void make_liquid_phi();
+  void liquid_weights_from_phi(bool stress, bool volume);
   /// Whether cfl_dt would return max_dt (or the bodies' limit) with any set of trusted faces:
   /// the particles' speed and the largest |u| on the faces with W_F^u > 0 (a bound of the
-  /// trusted faces' speed) already allow max_dt.
+  /// trusted faces' speed) already allow max_dt. Reads the band of the frame's end level set
+  /// (made first).
   bool frame_end_dt_is_max() const;
-  /// The pending parts of a frame's end (update_liquid_volume_only) as update_liquid_weights(false,
+  /// The pending parts of a frame's end (liquid_volume_from_phi) as update_liquid_weights(false,
   /// true) makes them; the frame's timing is kept.
   void complete_frame_end_weights();
   void complete_cell_eta();
@@ -699,7 +707,7 @@ class Simulation : public AnySimulation {
   std::vector<SolidFaceFrame> solid_frame_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
-  /// After update_liquid_volume_only: W_L^p, W_L^u (and their classes) are the last step's, not
+  /// After liquid_volume_from_phi: W_L^p, W_L^u (and their classes) are the last step's, not
   /// the frame's end; cell_eta_ is not made yet. Both are cleared by the next weights.
   bool liquid_weights_pending_ = false;
   bool cell_eta_pending_ = false;
