@@ -1216,31 +1216,8 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   for (std::size_t k = 0; k < run_start.size(); ++k) run_cell[k] = bucket[order[run_start[k]]];
   run_start.push_back(static_cast<int>(np));
   const int runs = static_cast<int>(run_cell.size());
-  // the bounds of each run's wrapped positions (pass 1 leaves out a neighbour run whose bounds
-  // are at least a particle's support away from it; without periodic axes)
-  std::vector<Vec<Dim>> run_lo, run_hi;
   TiledLattice<Dim, int> run_of(grid.cells(), -1);
   for (int k = 0; k < runs; ++k) *run_of.at(grid.cell_coord(run_cell[k])) = k;
-
-  bool periodic_axis = false;
-  for (int a = 0; a < Dim; ++a) periodic_axis = periodic_axis || grid.periodic(a);
-  if (!periodic_axis) {
-    // (std::min / std::max per component: a NaN position is passed over, a NaN first one leaves
-    // the bound NaN, whose gap is then 0: the run kept)
-    run_lo.resize(runs);
-    run_hi.resize(runs);
-#pragma omp parallel for schedule(static) num_threads(team_threads(np))
-    for (int k = 0; k < runs; ++k) {
-      Vec<Dim> lo = xs[run_start[k]], hi = lo;
-      for (int q = run_start[k] + 1; q < run_start[k + 1]; ++q)
-        for (int a = 0; a < Dim; ++a) {
-          lo[a] = std::min(lo[a], xs[q][a]);
-          hi[a] = std::max(hi[a], xs[q][a]);
-        }
-      run_lo[k] = lo;
-      run_hi[k] = hi;
-    }
-  }
 
   // cells to search around a particle's own: the support is one cell at the default 8 (4) particles
   // per cell, but (m / rho)^(1/Dim) rounds to a hair above dx / 2, and a plain ceil then searched
@@ -1306,7 +1283,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   long compressed = 0;
 #pragma omp parallel reduction(+ : compressed) num_threads(team)
   {
-    std::vector<int> near, cells, cand, near_end, kept;
+    std::vector<int> near, cells, cand;
     // the candidates' positions by axis (contiguous, for the distances of a whole run at once)
     // and a particle's squared distances to them
     std::array<std::vector<double>, Dim> cand_x;
@@ -1317,13 +1294,9 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
     for (int k = 0; k < runs; ++k) {
       neighbour_runs(k, near, cells);
       cand.clear();
-      near_end.clear();
-      for (int r : near) {
+      for (int r : near)
         for (int q = run_start[r]; q < run_start[r + 1]; ++q) cand.push_back(q);
-        near_end.push_back(static_cast<int>(cand.size()));
-      }
       const int m = static_cast<int>(cand.size());
-      const int near_count = static_cast<int>(near.size());
       for (int a = 0; a < Dim; ++a) {
         cand_x[a].resize(m);
         for (int i = 0; i < m; ++i) cand_x[a][i] = xs[cand[i]][a];
@@ -1345,61 +1318,32 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         const int first = static_cast<int>(buffer.size());
         // squared distances as squaredNorm() sums them (axis order), axis by axis over the
         // contiguous candidates; on a periodic axis through the minimum image
-        // The neighbour runs kept: without periodic axes, a run whose bounds lie at least h away
-        // along the axes' gaps g (g = x_p - hi or lo - x_p, rounded as the differences to its
-        // particles are, which are no smaller; summed and squared likewise) holds no particle
-        // with r2 < h2: left out, the same neighbours in the same order (about a quarter of the
-        // candidates at 8 particles per cell: the corner and edge cells beyond reach)
-        kept.clear();
         if (any_periodic) {
-          kept.push_back(0);
-          kept.push_back(m);
           for (int i = 0; i < m; ++i)
             cand_r2[i] = periodic_difference(grid, Vec<Dim>(xp - xs[cand[i]])).squaredNorm();
         } else {
-          for (int j = 0; j < near_count; ++j) {
-            const int r = near[j];
-            double gap2 = 0.0;
-            for (int a = 0; a < Dim; ++a) {
-              const double g = xp[a] > run_hi[r][a]   ? xp[a] - run_hi[r][a]
-                               : xp[a] < run_lo[r][a] ? run_lo[r][a] - xp[a]
-                                                      : 0.0;
-              gap2 += g * g;
-            }
-            if (!(gap2 < h2)) continue;
-            const int begin = j == 0 ? 0 : near_end[j - 1], end = near_end[j];
-            if (!kept.empty() && kept.back() == begin)
-              kept.back() = end;  // (adjacent ranges joined)
-            else {
-              kept.push_back(begin);
-              kept.push_back(end);
-            }
-          }
           const double* x0 = cand_x[0].data();
-          for (std::size_t u = 0; u < kept.size(); u += 2)
-            for (int i = kept[u]; i < kept[u + 1]; ++i) {
-              const double d = xp[0] - x0[i];
-              cand_r2[i] = d * d;
-            }
+          for (int i = 0; i < m; ++i) {
+            const double d = xp[0] - x0[i];
+            cand_r2[i] = d * d;
+          }
           for (int a = 1; a < Dim; ++a) {
             const double* xa = cand_x[a].data();
-            for (std::size_t u = 0; u < kept.size(); u += 2)
-              for (int i = kept[u]; i < kept[u + 1]; ++i) {
-                const double d = xp[a] - xa[i];
-                cand_r2[i] += d * d;
-              }
+            for (int i = 0; i < m; ++i) {
+              const double d = xp[a] - xa[i];
+              cand_r2[i] += d * d;
+            }
           }
         }
-        for (std::size_t u = 0; u < kept.size(); u += 2)
-          for (int i = kept[u]; i < kept[u + 1]; ++i) {
-            const int q = cand[i];
-            const double r2 = cand_r2[i];
-            if (!(r2 < h2) || q == slot) continue;
-            buffer.push_back(q);
-            close = close || r2 < min_distance2;
-            const double t = 1.0 - r2 * inv_h2;
-            if (t > 0.0) n += t * t * t;
-          }
+        for (int i = 0; i < m; ++i) {
+          const int q = cand[i];
+          const double r2 = cand_r2[i];
+          if (!(r2 < h2) || q == slot) continue;
+          buffer.push_back(q);
+          close = close || r2 < min_distance2;
+          const double t = 1.0 - r2 * inv_h2;
+          if (t > 0.0) n += t * t * t;
+        }
         neighbours_of[p] = {thread, first, static_cast<int>(buffer.size()) - first};
         if (close) close_pair[p] = 1;
         const double c = n / n0 - 1.0 - kCorrectionSlack;
