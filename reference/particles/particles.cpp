@@ -2282,15 +2282,19 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   const double h = lattice.spacing;
   const double dx = grid.dx();
 
-  // per-particle support and radius
+  // per-particle support and radius (the spacing's pow once per run of equal mass and density)
   std::vector<double> support(np), radius(np);
   double max_support = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : max_support) num_threads(process_threads())
-  for (long p = 0; p < np; ++p) {
-    const double s = particle_spacing(particles, p, dx);
-    support[p] = kSurfaceSupport * s;
-    radius[p] = ParticleTraits<Dim>::surface_radius * s;
-    max_support = std::max(max_support, support[p]);
+#pragma omp parallel reduction(max : max_support) num_threads(process_threads())
+  {
+    SpacingOf<Dim> spacing_of(particles, dx);
+#pragma omp for schedule(static)
+    for (long p = 0; p < np; ++p) {
+      const double s = spacing_of(p);
+      support[p] = kSurfaceSupport * s;
+      radius[p] = ParticleTraits<Dim>::surface_radius * s;
+      max_support = std::max(max_support, support[p]);
+    }
   }
 
   // slabs along the last axis, width > 2 R in lattice points
@@ -2437,11 +2441,68 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
       i0[0] = first0;
       i1[0] = last0;
       if (make_tiles && first0 <= last0) acc.mark_box(i0, i1, acc_flags);
+      // The points within R of the image (q2 < 1) of each row along axis 0 are a run around
+      // the row's point nearest the image on that axis, j* (its squared offset the smallest):
+      // q2 is the same squaredNorm of the same offsets as point by point, and it does not
+      // decrease with any one squared offset (every rounding is monotone), which along the row
+      // falls to j* and rises after it. So a row whose j* is not within R has no such point,
+      // and a row's run is found from j* outwards: the same points take the same k, each point
+      // once (rows of a segment's box are mostly outside its ball: about 70 of the 125 points of
+      // a 5^3 box were tested for nothing; docs/benchmarks.md, particles18)
+      if (!make_tiles && fits && first0 <= last0) {
+        int jstar = first0;
+        double smallest = std::numeric_limits<double>::infinity();
+        for (int j = first0; j <= last0; ++j) {
+          const double o = offset[0][j - base[0]];
+          if (o * o < smallest) {
+            smallest = o * o;
+            jstar = j;
+          }
+        }
+        const auto q2_at = [&](const VecI<Dim>& c) {
+          Vec<Dim> d;
+          for (int b = 0; b < Dim; ++b) d[b] = offset[b][c[b] - base[b]];
+          return d.squaredNorm() * inv_r2;
+        };
+        const auto add = [&](const VecI<Dim>& c, double q2) {
+          const double t = 1.0 - q2;
+          const double k = t * t * t;
+          double* sum = acc.find(c);
+          sum[0] += k;
+          sum[1] += k * rp;
+          for (int b = 0; b < Dim; ++b) sum[2 + b] += k * xi[b];
+        };
+        VecI<Dim> i = i0;
+        i[0] = jstar;
+        while (true) {
+          const double q2 = q2_at(i);
+          if (q2 < 1.0) {
+            add(i, q2);
+            VecI<Dim> c = i;
+            for (c[0] = jstar - 1; c[0] >= first0; --c[0]) {
+              const double q = q2_at(c);
+              if (!(q < 1.0)) break;
+              add(c, q);
+            }
+            for (c[0] = jstar + 1; c[0] <= last0; ++c[0]) {
+              const double q = q2_at(c);
+              if (!(q < 1.0)) break;
+              add(c, q);
+            }
+          }
+          int a = 1;
+          for (; a < Dim; ++a) {
+            if (++i[a] <= i1[a]) break;
+            i[a] = i0[a];
+          }
+          if (a == Dim) break;
+        }
+      }
       VecI<Dim> i = i0;
       // the sums of point i, found once per run of points along axis 0 within one tile (the
       // points of a tile row are consecutive in it), null until needed
       double* row = nullptr;
-      while (!make_tiles && first0 <= last0) {
+      while (!make_tiles && !fits && first0 <= last0) {
         Vec<Dim> d;
         if (fits) {
           for (int a = 0; a < Dim; ++a) d[a] = offset[a][i[a] - base[a]];

@@ -440,14 +440,23 @@ void Simulation<Dim>::settle(int steps) {
 
 template <int Dim>
 void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
-  {
-    ScopedTimer timer(stats_.timing[FramePhase::particles]);
-    // mirrored across the walls and the solids, so liquid against either reads as liquid up to
-    // it (docs/particles.md, "Still water")
-    // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
-    liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
-                          liquid_band_);
-  }
+  make_liquid_phi();
+  liquid_weights_from_phi(stress, volume);
+}
+
+template <int Dim>
+void Simulation<Dim>::make_liquid_phi() {
+  ScopedTimer timer(stats_.timing[FramePhase::particles]);
+  // mirrored across the walls and the solids, so liquid against either reads as liquid up to
+  // it (docs/particles.md, "Still water")
+  // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
+  liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
+                        liquid_band_);
+}
+
+template <int Dim>
+void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
+  liquid_weights_pending_ = false;
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   // the weights of eq. (8) see the liquid level set extended into the static solids, so that a
   // wall's fluid sliver next to the liquid is not a free surface (extend_liquid_into_solids)
@@ -527,33 +536,7 @@ void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
       }
     }
   }
-  if (!non_newtonian_) {
-    // eta per cell (the render's colour and the checkpoint). A constant field (every liquid
-    // inviscid: +0) is written into the kept vector: the splat made three cell-sized vectors and
-    // two cell-sized byte arrays per step (256 MiB at the paper's 256x128x256 grid, alive at the
-    // step's memory peak, so first touched by the kernel)
-    if (const auto c = constant_viscosity(particles_, liquid_eta_)) {
-      if (cell_eta_.size() == grid_.num_cells())
-        cell_eta_.setConstant(*c);
-      else
-        cell_eta_ = VectorX::Constant(grid_.num_cells(), *c);
-    } else if (stress_eta_made) {
-      // the cell centres are the diagonal stress DOFs' samples (stress_viscosity's component 0,
-      // the same sample_viscosity call as cell_viscosity): a copy instead of a second splat
-      const int nc = grid_.num_cells();
-      cell_eta_.resize(nc);
-      const double* from = stress_eta_.data() + stress_grid_.offset(0);
-#pragma omp parallel for schedule(static) num_threads(team_threads(nc))
-      for (int c = 0; c < nc; ++c) cell_eta_[c] = from[c];
-    } else {
-      cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
-    }
-  } else if (cell_eta_.size() != grid_.num_cells()) {
-    // before the first solve: each liquid at rest, the limiting viscosity eta0 of eq. (27)
-    std::vector<double> eta0;
-    for (const auto& m : mixture_.models) eta0.push_back(m.limiting_viscosity());
-    cell_eta_ = cell_viscosity(grid_, particles_, eta0);
-  }
+  update_cell_eta(stress_eta_made);
   // the reported volume is that of the particles' own level set outside the solids (its mirror
   // images and the extension reach into them)
   // (in the extended level set's buffer, which the weights no longer read: no new lattice-sized
@@ -604,6 +587,38 @@ void Simulation<Dim>::update_liquid_weights(bool stress, bool volume) {
 }
 
 template <int Dim>
+void Simulation<Dim>::update_cell_eta(bool stress_eta_made) {
+  cell_eta_pending_ = false;
+  if (!non_newtonian_) {
+    // eta per cell (the render's colour and the checkpoint). A constant field (every liquid
+    // inviscid: +0) is written into the kept vector: the splat made three cell-sized vectors and
+    // two cell-sized byte arrays per step (256 MiB at the paper's 256x128x256 grid, alive at the
+    // step's memory peak, so first touched by the kernel)
+    if (const auto c = constant_viscosity(particles_, liquid_eta_)) {
+      if (cell_eta_.size() == grid_.num_cells())
+        cell_eta_.setConstant(*c);
+      else
+        cell_eta_ = VectorX::Constant(grid_.num_cells(), *c);
+    } else if (stress_eta_made) {
+      // the cell centres are the diagonal stress DOFs' samples (stress_viscosity's component 0,
+      // the same sample_viscosity call as cell_viscosity): a copy instead of a second splat
+      const int nc = grid_.num_cells();
+      cell_eta_.resize(nc);
+      const double* from = stress_eta_.data() + stress_grid_.offset(0);
+#pragma omp parallel for schedule(static) num_threads(team_threads(nc))
+      for (int c = 0; c < nc; ++c) cell_eta_[c] = from[c];
+    } else {
+      cell_eta_ = cell_viscosity(grid_, particles_, liquid_eta_);
+    }
+  } else if (cell_eta_.size() != grid_.num_cells()) {
+    // before the first solve: each liquid at rest, the limiting viscosity eta0 of eq. (27)
+    std::vector<double> eta0;
+    for (const auto& m : mixture_.models) eta0.push_back(m.limiting_viscosity());
+    cell_eta_ = cell_viscosity(grid_, particles_, eta0);
+  }
+}
+
+template <int Dim>
 double Simulation<Dim>::cfl_dt() const {
   // the liquid's speed: its particles' and the grid velocity on the faces they take it from.
   // Faces below kTrustedLiquidFaceFraction are left out: their solved velocity is not physical
@@ -612,9 +627,12 @@ double Simulation<Dim>::cfl_dt() const {
   // face cut dt to 1e-7 s, the contacts' penetration recovery (-beta phi / dt, eq. (16))
   // then threw the bodies at km/s, which cut dt further (hollow-spheres-inviscid-3d stalled in
   // frame 9 at dt = 6e-28 s).
+  // (after liquid_volume_from_phi W_L^u is the last step's: frame_end_dt_is_max showed at
+  // the frame's end that no grid speed below its bound, hence none of the trusted faces',
+  // changes the result, max_dt; the state has not changed since)
   double grid_speed = 0.0;
   const auto faces = static_cast<Eigen::Index>(grid_.num_faces());
-  if (u_.size() == faces && weights_.fluid_face.size() == faces &&
+  if (!liquid_weights_pending_ && u_.size() == faces && weights_.fluid_face.size() == faces &&
       weights_.liquid_face.size() == faces &&
       mass_faces_.size() == static_cast<std::size_t>(grid_.num_faces())) {
     // (a maximum: the same for any split of the faces, and over any set that holds the
@@ -649,6 +667,134 @@ double Simulation<Dim>::cfl_dt() const {
   const double body_speed = rigid_ ? rigid_->max_point_speed() : 0.0;
   if (body_speed > 0.0) dt = std::min(dt, kBodyCellFraction * grid_.dx() / body_speed);
   return dt;
+}
+
+template <int Dim>
+bool Simulation<Dim>::frame_end_dt_is_max() const {
+  // cfl_dt's speed is max(particles, grid) with the grid's maximum over the trusted faces, each
+  // with W_F^u > 0: B = the largest |u| over every face with W_F^u > 0 bounds it (std::max drops
+  // a NaN in both). With S = max(particles, B), cfl dx / S >= max_dt (or S = 0) gives
+  // min(max_dt, cfl dx / s) = max_dt for every s in [0, S] (the division is monotone), whatever
+  // the trusted faces; the bodies' limit is applied after it alike.
+  // A trusted face has mass (0 outside mass_boxes_) or W_L^u > 0 of the frame's end, whose
+  // extended level set is negative only in the band of the level set just made (outside it
+  // phi_L is its background, at least the extension's reach: update_liquid_weights' `banded`);
+  // a face's fraction reads the lattice points of its control volume (2 c - 1 .. 2 c + 2 per
+  // axis) and their mirrors at the walls within a point: two faces more on each side bound the
+  // faces of the band. Without the boxes, every face.
+  const auto faces = static_cast<Eigen::Index>(grid_.num_faces());
+  double bound = 0.0;
+  if (u_.size() == faces && weights_.fluid_face.size() == faces) {
+    const int nf = grid_.num_faces();
+    const double* u = u_.data();
+    const double* fluid = weights_.fluid_face.data();
+    const bool boxed = switches_.restricted_passes && mass_boxes_valid_ &&
+                       mass_faces_.data() == mass_boxes_data_ &&
+                       mass_faces_.size() == static_cast<std::size_t>(nf) &&
+                       liquid_band_.background >= kLiquidSolidReach * grid_.dx();
+    if (boxed) {
+      FaceBoxes boxes;
+      for (int axis = 0; axis < Dim; ++axis) {
+        const VecI<Dim> fdims = grid_.face_dims(axis);
+        VecI<Dim> lo = VecI<Dim>::Zero(), hi = -VecI<Dim>::Ones();
+        if (!liquid_band_.empty())
+          for (int a = 0; a < Dim; ++a) {
+            lo[a] = grid_.periodic(a) ? 0 : std::max(liquid_band_.lo[a] / 2 - 3, 0);
+            hi[a] = grid_.periodic(a) ? fdims[a] - 1
+                                      : std::min(liquid_band_.hi[a] / 2 + 3, fdims[a] - 1);
+          }
+        const VecI<Dim>& mlo = mass_boxes_.lo[axis];
+        const VecI<Dim>& mhi = mass_boxes_.hi[axis];
+        const bool band_empty = (lo.array() > hi.array()).any();
+        const bool mass_empty = (mlo.array() > mhi.array()).any();
+        if (band_empty) {
+          lo = mlo;
+          hi = mhi;
+        } else if (!mass_empty) {
+          lo = lo.cwiseMin(mlo);
+          hi = hi.cwiseMax(mhi);
+        }
+        boxes.lo[axis] = lo;
+        boxes.hi[axis] = hi;
+      }
+      for (int axis = 0; axis < Dim; ++axis) {
+        const FaceRows rows_of_box = face_rows(boxes, axis);
+        const int rows = rows_of_box.rows(), nx = rows_of_box.nx;
+        if (rows == 0) continue;
+        double speed = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : speed) \
+    num_threads(team_threads(static_cast<long>(rows) * nx))
+        for (int r = 0; r < rows; ++r) {
+          const int first = rows_of_box.first(r);
+          for (int f = first; f < first + nx; ++f)
+            if (fluid[f] > 0.0) speed = std::max(speed, std::abs(u[f]));
+        }
+        bound = std::max(bound, speed);
+      }
+    } else {
+#pragma omp parallel for schedule(static) reduction(max : bound) num_threads(team_threads(nf))
+      for (int f = 0; f < nf; ++f)
+        if (fluid[f] > 0.0) bound = std::max(bound, std::abs(u[f]));
+    }
+  }
+  const double speed = std::max(max_particle_speed(particles_), bound);
+  const double max_dt = scene_.time.max_dt;
+  if (!(speed > 0.0)) return speed == 0.0;
+  return std::min(max_dt, scene_.time.cfl * grid_.dx() / speed) == max_dt;
+}
+
+template <int Dim>
+void Simulation<Dim>::liquid_volume_from_phi() {
+  ScopedTimer timer(stats_.timing[FramePhase::weights]);
+  // update_liquid_weights' volume with solids: the cell fractions of the fluid level set
+  // max(phi_L, -phi_S), negative only where phi_L is. There the box of the points to classify
+  // was that of the extended level set's negative points (which hold phi_L's); here it is
+  // phi_L's own (searched in the band, outside which phi_L is its positive background). Any
+  // box outside which the level set is nowhere negative gives the same classes
+  // (classify_lattice_cells_in_box), and the fluid values are written in it and one point
+  // around it (every corner read) as before: the same fractions, the same volume.
+  const bool extend = solid_phi_.size() == liquid_phi_.size() || solid_box_phi_.valid() ||
+                      solid_scratch_.union_parts.valid();
+  VecI<Dim> band_lo = VecI<Dim>::Zero(), band_hi = lattice_.dims - VecI<Dim>::Ones();
+  if (switches_.restricted_passes && liquid_band_.background > 0.0) {
+    band_lo = liquid_band_.lo;
+    band_hi = liquid_band_.hi;
+  }
+  const auto [liquid_lo, liquid_hi] =
+      negative_point_box_in<Dim>(lattice_, liquid_phi_, band_lo, band_hi);
+  VecI<Dim> lo = liquid_lo, hi = liquid_hi;
+  if ((liquid_lo.array() <= liquid_hi.array()).all())
+    for (int a = 0; a < Dim; ++a) {
+      lo[a] = std::max(lo[a] - 1, 0);
+      hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
+    }
+  if (extend)
+    overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
+      const double l = liquid_phi_[k];
+      if (l >= 0.0 && !solid_negative_at(k)) return l;
+      return std::max(l, -solid_phi_at(k));
+    }, phi_undo_);
+  classify_lattice_cells_in_box(grid_, lattice_, liquid_phi_, liquid_lo, liquid_hi, liquid_signs_);
+  cell_negative_fractions(grid_, lattice_, liquid_phi_, liquid_signs_, volume_cells_);
+  if (extend) restore_points(liquid_phi_, phi_undo_);
+  liquid_volume_ = volume_cells_.sum() * grid_.cell_volume();
+  volume_cells_ = VectorX();
+  liquid_weights_pending_ = true;
+  cell_eta_pending_ = true;
+}
+
+template <int Dim>
+void Simulation<Dim>::complete_frame_end_weights() {
+  const auto timing = stats_.timing;
+  update_liquid_weights(/*stress=*/false, /*volume=*/true);
+  stats_.timing = timing;
+}
+
+template <int Dim>
+void Simulation<Dim>::complete_cell_eta() {
+  const auto timing = stats_.timing;
+  update_cell_eta(/*stress_eta_made=*/false);
+  stats_.timing = timing;
 }
 
 template <int Dim>
@@ -2210,6 +2356,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   in.workspace = nullptr;
   if (eta.size() == stress_grid_.num_dofs())
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
+  cell_eta_pending_ = false;
   if (model) {
     record_viscosity_rounds(model->residuals());
     if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
@@ -2456,6 +2603,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
   if (!model) return;
   // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
   cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
+  cell_eta_pending_ = false;
   record_viscosity_rounds(model->residuals());
   if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
 }
@@ -2874,7 +3022,17 @@ FrameStats Simulation<Dim>::advance_frame() {
   // W_L^u (the next step's CFL limit reads the trusted faces) are made as before)
   if (coupled_) update_moving_solids();
   const bool reused = !split_drift();
-  update_liquid_weights(reused);
+  // With split_drift the next step makes every weight again after its first half drift: of this
+  // frame's end only the level set (pictures) and the volume (statistics) are read, and W_L^u by
+  // the next frame's first CFL limit, unless that limit is max_dt whatever W_L^u is. Then W_L^p,
+  // W_L^u and eta per cell are made only if read before the next step (weights(), cell_eta():
+  // the same values; liquid_volume_from_phi)
+  const bool solids = !solid_shapes_.empty() || coupled_;
+  make_liquid_phi();
+  if (!reused && solids && !switches_.divergence_free_air && frame_end_dt_is_max())
+    liquid_volume_from_phi();
+  else
+    liquid_weights_from_phi(reused, true);
   liquid_weights_current_ = reused;
   fill_state_stats(stats_);
   ledger_ = frame_ledger_;
@@ -2984,6 +3142,7 @@ std::vector<char> Simulation<Dim>::save_state() const {
   // itself goes on with its guard (the same values read either way)
   auto* self = const_cast<Simulation*>(this);
   const bool resolve = drift_guard_;
+  if (cell_eta_pending_) self->complete_cell_eta();
   self->resolve_drift_velocity();
   StateWriter w;
   self->state_fields(w);

@@ -307,8 +307,13 @@ class Simulation : public AnySimulation {
   /// frame's end (and the set-up) leaves it; empty while a frame is stopped between two steps
   /// (a step releases it after its weights: release_liquid_phi).
   const VectorX& liquid_phi() const { return liquid_phi_; }
-  /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis.
-  const PressureWeights& weights() const { return weights_; }
+  /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis; at a frame's end
+  /// those of the final state (made here when the frame's end left them to the next step:
+  /// complete_frame_end_weights).
+  const PressureWeights& weights() const {
+    if (liquid_weights_pending_) const_cast<Simulation*>(this)->complete_frame_end_weights();
+    return weights_;
+  }
   /// The inclusive box of `axis`'s face coordinates outside which no face off the walls has
   /// W_F^u = 0 (from the box of the solids' negative lattice points; lo > hi: none), the faces
   /// apply_wall_and_solid_velocities visits (docs/derivations.md, "Passes restricted to boxes").
@@ -329,7 +334,10 @@ class Simulation : public AnySimulation {
   const VectorX& pressure() const { return pressure_; }
   /// eta per cell: the liquids' viscosity, or for herschel-bulkley liquids the effective
   /// viscosity of the last solve (Pa s).
-  const VectorX& cell_eta() const { return cell_eta_; }
+  const VectorX& cell_eta() const {
+    if (cell_eta_pending_) const_cast<Simulation*>(this)->complete_cell_eta();
+    return cell_eta_;
+  }
   /// The static bodies' shapes (fixed for the whole run).
   const std::vector<ShapePtr<Dim>>& static_shapes() const { return solid_shapes_; }
   /// The moving bodies with their contacts (null in scenes without dynamic or kinematic bodies).
@@ -340,6 +348,9 @@ class Simulation : public AnySimulation {
   /// Faces in solids that constrain_velocity_in_solids left out (deep in a fixed solid, far from
   /// the moving bodies: their value stays +0) since the start; for tests.
   long constrained_faces_left_out() const { return constrained_left_out_; }
+  /// Whether the last frame's end left W_L^p, W_L^u to be made when read (weights(): see
+  /// liquid_volume_from_phi); for tests.
+  bool frame_end_weights_pending() const { return liquid_weights_pending_; }
   /// Of those, the particles moved again in first half drifts (drift_guarded).
   long drift_reread_particles() const { return drift_reread_particles_; }
 
@@ -487,6 +498,28 @@ class Simulation : public AnySimulation {
   /// moves the particles and its weights are made again). `volume` false: liquid_volume_ is left
   /// as it was (it is read at a frame's end only: fill_state_stats).
   void update_liquid_weights(bool stress = true, bool volume = true);
+  /// eta per cell from the particles (the render's colour and the checkpoint; update_liquid_weights'
+  /// part): `stress_eta_made` when stress_eta_ was just made from the same particles.
+  void update_cell_eta(bool stress_eta_made);
+  /// A frame's end whose weights no step reuses (split_drift) and whose first CFL limit is
+  /// max_dt whatever the trusted faces (frame_end_dt_is_max): from the level set just made, the
+  /// reported volume only (the same values as update_liquid_weights(false, true)); W_L^p, W_L^u and
+  /// eta per cell are left pending until read (weights(), cell_eta(), save_state) or made anew
+  /// by the next step's weights (docs/benchmarks.md, particles18).
+  void liquid_volume_from_phi();
+  /// update_liquid_weights' two parts: the level set (liquid_phi_, liquid_band_) and what is
+  /// made from it.
+  void make_liquid_phi();
+  void liquid_weights_from_phi(bool stress, bool volume);
+  /// Whether cfl_dt would return max_dt (or the bodies' limit) with any set of trusted faces:
+  /// the particles' speed and the largest |u| on the faces with W_F^u > 0 (a bound of the
+  /// trusted faces' speed) already allow max_dt. Reads the band of the frame's end level set
+  /// (made first).
+  bool frame_end_dt_is_max() const;
+  /// The pending parts of a frame's end (liquid_volume_from_phi) as update_liquid_weights(false,
+  /// true) makes them; the frame's timing is kept.
+  void complete_frame_end_weights();
+  void complete_cell_eta();
   /// On faces whose centre lies inside a solid, removes the velocity component into the solid
   /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
   /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
@@ -695,6 +728,10 @@ class Simulation : public AnySimulation {
   std::vector<SolidFaceFrame> solid_frame_;
   VectorX stress_fluid_, stress_liquid_;
   bool liquid_weights_current_ = false;  ///< liquid_phi_ and the weights match the particles
+  /// After liquid_volume_from_phi: W_L^p, W_L^u (and their classes) are the last step's, not
+  /// the frame's end; cell_eta_ is not made yet. Both are cleared by the next weights.
+  bool liquid_weights_pending_ = false;
+  bool cell_eta_pending_ = false;
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF
   // layout, eta per stress DOF and per cell (render)
   SolveSequence sequence_ = SolveSequence::pressure;
