@@ -510,7 +510,7 @@ void StokesPreconditioner<Dim>::apply_penalised_inverse(const VectorX& g, Vector
   // v ~ V^-1 B h
   multiply(f_.b, h_.data(), face_.data());
   if (options_.inner_cg <= 0) {
-    velocity_.apply(face_, v_, cycles_, options_.velocity_chebyshev);
+    velocity_.apply(face_, v_, cycles_);
   } else {
     // a few CG steps on V with the V-cycle as preconditioner, from zero
     const SparseMatrix& vm = velocity_finest_;  // V in the numbering of f_.face

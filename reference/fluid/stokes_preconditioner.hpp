@@ -99,11 +99,6 @@ struct StokesPreconditionerOptions {
   /// 128^3 (section 19). 0: velocity_cycles always.
   double cycle_ratio = 270.0;
   int max_velocity_cycles = 6;
-  /// > 0 (below 1): the velocity_cycles() V-cycles of each velocity solve accelerated by
-  /// Chebyshev polynomials on [velocity_chebyshev, 1] instead of the stationary iteration
-  /// (Multigrid::apply's chebyshev_lower, [(P18)]: still a fixed SPD operator for any value in
-  /// (0, 1); docs/preconditioners.md section 40). 0: the stationary cycles.
-  double velocity_chebyshev = 0.0;
   /// 3D: one V-cycle fewer (at least one) than the rule above gives when the free-surface share
   /// (the pressure unknowns with W_L^p < 1 over all pressure unknowns) is below this [(P9)]. A
   /// liquid that fills its box (the 64^3 tank of the benchmark: share 0.035) gets the same PCG

@@ -16,9 +16,6 @@ namespace monolith {
 
 namespace {
 
-/// At most this many over-relaxed cycles per apply (their weights on the stack).
-constexpr int kMaxWeightedCycles = 16;
-
 /// Below this many rows a loop runs on one thread (a parallel region costs more than it saves).
 constexpr int kParallelRows = 4096;
 
@@ -416,64 +413,31 @@ void Multigrid::cycle(int l, const VectorX& b, VectorX& x) const {
   for (int s = 0; s < smoothing_; ++s) sweep(l, b, x, true);
 }
 
-void Multigrid::apply(const VectorX& b, VectorX& x, int cycles, double chebyshev_lower) const {
-  if (!(chebyshev_lower >= 0.0 && chebyshev_lower < 1.0))
-    throw std::invalid_argument("Multigrid::apply: chebyshev_lower must lie in [0, 1)");
+void Multigrid::apply(const VectorX& b, VectorX& x, int cycles) const {
   const std::vector<int>* order = order_.empty() || order_[0].empty() ? nullptr : &order_[0];
   if (!order) {
-    apply_internal(b, x, cycles, chebyshev_lower);
+    apply_internal(b, x, cycles);
     return;
   }
   // into the finest level's internal numbering and back (scratch: no allocation)
   const int n = static_cast<int>(order->size());
   const int* o = order->data();
   for (int i = 0; i < n; ++i) apply_in_[i] = b[o[i]];
-  apply_internal(apply_in_, apply_out_, cycles, chebyshev_lower);
+  apply_internal(apply_in_, apply_out_, cycles);
   x.resize(n);
   for (int i = 0; i < n; ++i) x[o[i]] = apply_out_[i];
 }
 
-void Multigrid::apply_internal(const VectorX& b, VectorX& x, int cycles, double chebyshev_lower) const {
+void Multigrid::apply_internal(const VectorX& b, VectorX& x, int cycles) const {
   cycle(0, b, x);
+  if (cycles <= 1) return;
+  // further cycles of x <- x + Q (b - A x), in scratch sized at construction (no allocation)
   VectorX& r = apply_residual_;
   VectorX& d = apply_correction_;
-  if (chebyshev_lower <= 0.0) {
-    // further cycles of x <- x + Q (b - A x), in scratch sized at construction (no allocation)
-    for (int c = 1; c < cycles; ++c) {
-      level_residual(0, b, x, r);
-      cycle(0, r, d);
-      x += d;
-    }
-    return;
-  }
-  // (P18): the weight of cycle j is 1 / lambda_j, lambda_j = theta - delta cos((2j - 1) pi / k)
-  // (the roots of 1 + T_k on [a, 1], double but for lambda = 1), in decreasing order: the first
-  // cycle has weight 1 for odd k; without chebyshev_lower every weight is 1 (stationary cycles)
-  const double a = chebyshev_lower;
-  const double theta = 0.5 * (1.0 + a), delta = 0.5 * (1.0 - a);
-  const double pi = 3.14159265358979323846;
-  if (cycles > kMaxWeightedCycles)
-    throw std::invalid_argument("Multigrid::apply: at most " + std::to_string(kMaxWeightedCycles) +
-                                " over-relaxed cycles");
-  const int k = std::max(1, cycles);
-  std::array<double, kMaxWeightedCycles> w{};
-  for (int j = 1; j <= k; ++j) w[j - 1] = 1.0 / (theta - delta * std::cos((2.0 * j - 1.0) * pi / k));
-  std::sort(w.begin(), w.begin() + k);  // 1 / lambda_j increasing: lambda_j decreasing
-  const int n = static_cast<int>(x.size());
-  if (w[0] != 1.0) {
-    const double s = w[0];
-    for (int i = 0; i < n; ++i) x[i] *= s;
-  }
-  // further cycles of x <- x + w_j Q (b - A x)
-  for (int c = 1; c < k; ++c) {
+  for (int c = 1; c < cycles; ++c) {
     level_residual(0, b, x, r);
     cycle(0, r, d);
-    if (w[c] == 1.0) {
-      x += d;
-    } else {
-      const double s = w[c];
-      for (int i = 0; i < n; ++i) x[i] += s * d[i];
-    }
+    x += d;
   }
 }
 
@@ -491,8 +455,7 @@ std::size_t Multigrid::memory_bytes() const {
     bytes += sizeof(double) * (residual_[l].size() + coarse_rhs_[l].size() + coarse_x_[l].size() +
                                work_[l].size());
   }
-  bytes += sizeof(double) * (apply_residual_.size() + apply_correction_.size() + apply_in_.size() +
-                             apply_out_.size());
+  bytes += sizeof(double) * (apply_residual_.size() + apply_correction_.size() + apply_in_.size() + apply_out_.size());
   for (const std::vector<int>& o : order_) bytes += sizeof(int) * o.size();
   for (const std::vector<float>& v : value_f_) bytes += sizeof(float) * v.size();
   // the coarse factor: at most the dense triangle of the coarsest level

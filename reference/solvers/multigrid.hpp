@@ -106,20 +106,7 @@ class Multigrid {
 
   /// x = Q_k b: `cycles` V-cycles of the stationary iteration from x = 0 (cycles >= 1), b and x
   /// in the caller's numbering of the finest level.
-  ///
-  /// `chebyshev_lower` a in (0, 1): the cycles over-relaxed, x <- x + w_j Q (b - A x) with
-  /// w_j = 1 / lambda_j, lambda_j = (1 + a) / 2 - (1 - a) / 2 cos((2j - 1) pi / k), j = 1..k
-  /// (k = cycles) [(P18)]: the error polynomial becomes
-  /// r(lambda) = prod_j (1 - lambda / lambda_j) = (1 + T_k(x)) / (1 + T_k(x0)),
-  /// x = (1 + a - 2 lambda) / (1 - a), x0 = (1 + a) / (1 - a), which is at most
-  /// 2 / (1 + T_k(x0)) on [a, 1] (stationary cycles: (1 - a)^k) and lies in [0, 1) on all of
-  /// (0, 1], where the spectrum of QA lies (the file comment). So the result is again
-  /// (I - r(QA)) A^-1: SPD and at most A^-1 (the block preconditioner's Woodbury form needs the
-  /// latter), whatever the true lower end of the spectrum; a only sets where the error is damped
-  /// best (docs/preconditioners.md section 40). (The plain Chebyshev iteration's polynomial
-  /// T_k(x) / T_k(x0) goes negative: A^-1 overshot on [a, 1], the block preconditioner indefinite.)
-  /// 0: the stationary cycles.
-  void apply(const VectorX& b, VectorX& x, int cycles = 1, double chebyshev_lower = 0.0) const;
+  void apply(const VectorX& b, VectorX& x, int cycles = 1) const;
   /// One V-cycle on level l from x = 0: x = Q_l b (b and x of that level's size, in its
   /// internal numbering).
   void cycle(int level, const VectorX& b, VectorX& x) const;
@@ -141,7 +128,7 @@ class Multigrid {
   /// r = b - A_l x with the operator the level's sweeps use (rounded in single precision)
   void level_residual(int level, const VectorX& b, const VectorX& x, VectorX& r) const;
 
-  void apply_internal(const VectorX& b, VectorX& x, int cycles, double chebyshev_lower) const;
+  void apply_internal(const VectorX& b, VectorX& x, int cycles) const;
 
   std::vector<MultigridLevel> levels_;
   std::vector<std::vector<int>> order_;  ///< per level: internal -> caller's numbering (empty: same)
