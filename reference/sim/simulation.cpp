@@ -1468,19 +1468,44 @@ std::pair<VecI<Dim>, VecI<Dim>> Simulation<Dim>::solid_face_box(int axis) const 
   return {lo, hi};
 }
 
+namespace {
+
+/// The nonzero lattice offsets of L1 length at most `layers` (the faces the extrapolation's
+/// first `layers` layers fill a face from), in lexicographic order.
 template <int Dim>
-bool Simulation<Dim>::trusted_within(int axis, const VecI<Dim>& coord, int layers) const {
+std::vector<VecI<Dim>> l1_ball_offsets(int layers) {
+  std::vector<VecI<Dim>> ball;
+  if (layers <= 0) return ball;
+  const VecI<Dim> box = VecI<Dim>::Constant(2 * layers + 1);
+  for (int j = 0; j < box.prod(); ++j) {
+    const VecI<Dim> offset = lattice_coord<Dim>(j, box) - VecI<Dim>::Constant(layers);
+    if (offset.cwiseAbs().sum() <= layers && !offset.isZero()) ball.push_back(offset);
+  }
+  return ball;
+}
+
+}  // namespace
+
+template <int Dim>
+bool Simulation<Dim>::trusted_within(int axis, const VecI<Dim>& coord, int layers,
+                                     const std::vector<VecI<Dim>>& ball, bool have_boxes,
+                                     const FaceBoxes& boxes) const {
   // the faces of `axis` within `layers` steps of one face along one axis (wrapped on periodic
   // axes, cut at the lattice's ends): the faces the extrapolation's first `layers` layers fill
   // from, so a face with a trusted one among them is reached by every extrapolation at least
   // `layers` deep, with the same value (extrapolate_velocity: each layer reads only the trusted
   // faces and the layers before it)
   if (layers <= 0) return false;
+  if (have_boxes)
+    for (int b = 0; b < Dim; ++b) {
+      // no trusted face outside the box: none within `layers` of a face farther from it
+      if (boxes.lo[axis][b] > boxes.hi[axis][b]) return false;
+      if (!grid_.periodic(b) &&
+          (coord[b] < boxes.lo[axis][b] - layers || coord[b] > boxes.hi[axis][b] + layers))
+        return false;
+    }
   const VecI<Dim> dims = grid_.face_dims(axis);
-  VecI<Dim> box = VecI<Dim>::Constant(2 * layers + 1);
-  for (int j = 0; j < box.prod(); ++j) {
-    const VecI<Dim> offset = lattice_coord<Dim>(j, box) - VecI<Dim>::Constant(layers);
-    if (offset.cwiseAbs().sum() > layers || offset.isZero()) continue;
+  for (const VecI<Dim>& offset : ball) {
     VecI<Dim> g = coord + offset;
     bool inside = true;
     for (int b = 0; b < Dim && inside; ++b) {
@@ -1559,6 +1584,12 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
                          mass_faces_.size() == static_cast<std::size_t>(nf) &&
                          weights_.liquid_cell.size() == grid_.num_cells();
   air_walls_.clear();
+  // the trusted faces' boxes and the ball of offsets, once: the wall loop asks about every wall
+  // face beside air (at 256x128x256 most of some 260k wall faces, a ball of 24 faces each)
+  const int air_wall_layers = switches_.air_wall_layers;
+  const std::vector<VecI<Dim>> ball = air_walls ? l1_ball_offsets<Dim>(air_wall_layers) : std::vector<VecI<Dim>>();
+  FaceBoxes trusted_box{};
+  const bool have_boxes = air_walls && trusted_boxes(trusted_box);
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
     for (int side = 0; side < 2; ++side) {
@@ -1573,7 +1604,7 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
           VecI<Dim> cell = coord;
           if (side == 1) cell[axis] -= 1;
           if (weights_.liquid_cell[grid_.cell_index(cell)] == 0.0 && !trusted_face(f) &&
-              trusted_within(axis, coord, switches_.air_wall_layers)) {
+              trusted_within(axis, coord, air_wall_layers, ball, have_boxes, trusted_box)) {
             air_walls_.push_back(f);
             continue;
           }

@@ -386,9 +386,6 @@ class Simulation : public AnySimulation {
   /// air_walls_extrapolated); fully solid faces: the solid's velocity; then
   /// constrain_velocity_in_solids.
   void apply_wall_and_solid_velocities();
-  /// Whether a face of `axis` within `layers` extrapolation layers of the face at `coord` is
-  /// trusted (trusted_face).
-  bool trusted_within(int axis, const VecI<Dim>& coord, int layers) const;
   /// The wall faces that kept their extrapolated velocity in the step's
   /// apply_wall_and_solid_velocities (ascending): no particle mass at the step's transfer, no
   /// liquid in the cell beside them, a trusted face within air_wall_layers layers (item 18). They are air faces from then on: a deeper extrapolation
@@ -804,6 +801,13 @@ class Simulation : public AnySimulation {
   const char* mass_boxes_data_ = nullptr;
   bool mass_boxes_valid_ = false;
   bool trusted_boxes(FaceBoxes& boxes) const;
+  /// Whether a face of `axis` within `layers` extrapolation layers of the face at `coord` is
+  /// trusted (trusted_face): `ball` holds the nonzero offsets of L1 length <= layers
+  /// (l1_ball_offsets), `boxes` (when `have_boxes`, trusted_boxes) the boxes outside which no face
+  /// is trusted, so a face farther than `layers` from its axis's box along a non-periodic axis is
+  /// answered without visiting the ball (the same answers).
+  bool trusted_within(int axis, const VecI<Dim>& coord, int layers, const std::vector<VecI<Dim>>& ball,
+                      bool have_boxes, const FaceBoxes& boxes) const;
   /// density_diagonal_in_place of the faces' densities that particles_to_grid just wrote
   void density_diagonal_in_place_after_transfer();
   /// Something reads face_mass_ after the solve: the energy ledger's grid kinetic energy.
