@@ -639,20 +639,7 @@ double Simulation<Dim>::cfl_dt() const {
     // trusted faces: the boxes outside which none is, trusted_boxes)
     FaceBoxes boxes;
     if (trusted_boxes(boxes)) {
-      for (int axis = 0; axis < Dim; ++axis) {
-        const FaceRows face_rows_of_box = face_rows(boxes, axis);
-        const int rows = face_rows_of_box.rows(), nx = face_rows_of_box.nx;
-        if (rows == 0) continue;
-        double speed = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : speed) \
-    num_threads(team_threads(static_cast<long>(rows) * nx))
-        for (int r = 0; r < rows; ++r) {
-          const int first = face_rows_of_box.first(r);
-          for (int f = first; f < first + nx; ++f)
-            if (trusted_face(f)) speed = std::max(speed, std::abs(u_[f]));
-        }
-        grid_speed = std::max(grid_speed, speed);
-      }
+      grid_speed = std::max(grid_speed, max_abs_in_boxes(boxes, u_.data(), [&](int f) { return trusted_face(f); }));
     } else {
       const int nf = grid_.num_faces();
 #pragma omp parallel for schedule(static) reduction(max : grid_speed) num_threads(process_threads())
@@ -717,20 +704,7 @@ bool Simulation<Dim>::frame_end_dt_is_max() const {
         boxes.lo[axis] = lo;
         boxes.hi[axis] = hi;
       }
-      for (int axis = 0; axis < Dim; ++axis) {
-        const FaceRows rows_of_box = face_rows(boxes, axis);
-        const int rows = rows_of_box.rows(), nx = rows_of_box.nx;
-        if (rows == 0) continue;
-        double speed = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : speed) \
-    num_threads(team_threads(static_cast<long>(rows) * nx))
-        for (int r = 0; r < rows; ++r) {
-          const int first = rows_of_box.first(r);
-          for (int f = first; f < first + nx; ++f)
-            if (fluid[f] > 0.0) speed = std::max(speed, std::abs(u[f]));
-        }
-        bound = std::max(bound, speed);
-      }
+      bound = std::max(bound, max_abs_in_boxes(boxes, u, [&](int f) { return fluid[f] > 0.0; }));
     } else {
 #pragma omp parallel for schedule(static) reduction(max : bound) num_threads(team_threads(nf))
       for (int f = 0; f < nf; ++f)
@@ -943,6 +917,28 @@ typename Simulation<Dim>::FaceRows Simulation<Dim>::face_rows(const FaceBoxes& b
   rows.count = rows.rows_box.prod();
   rows.offset = grid_.face_offset(axis);
   return rows;
+}
+
+template <int Dim>
+template <class Keep>
+double Simulation<Dim>::max_abs_in_boxes(const FaceBoxes& boxes, const double* v, Keep&& keep) const {
+  // a maximum: the same for any split of each box's rows over the threads
+  double largest = 0.0;
+  for (int axis = 0; axis < Dim; ++axis) {
+    const FaceRows rows_of_box = face_rows(boxes, axis);
+    const int rows = rows_of_box.rows(), nx = rows_of_box.nx;
+    if (rows == 0) continue;
+    double speed = 0.0;
+#pragma omp parallel for schedule(static) reduction(max : speed) \
+    num_threads(team_threads(static_cast<long>(rows) * nx))
+    for (int r = 0; r < rows; ++r) {
+      const int first = rows_of_box.first(r);
+      for (int f = first; f < first + nx; ++f)
+        if (keep(f)) speed = std::max(speed, std::abs(v[f]));
+    }
+    largest = std::max(largest, speed);
+  }
+  return largest;
 }
 
 template <int Dim>

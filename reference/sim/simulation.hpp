@@ -795,6 +795,11 @@ class Simulation : public AnySimulation {
   /// faces must be independent)
   template <class Fn>
   void for_faces_in_boxes(const FaceBoxes& boxes, Fn&& fn) const;
+  /// The largest |v[f]| over the faces f of the boxes with keep(f) (0 for none), on several
+  /// threads (a maximum: the same bits for any thread count): the CFL limit's trusted faces and
+  /// the frame end's bound of them (frame_end_dt_is_max)
+  template <class Keep>
+  double max_abs_in_boxes(const FaceBoxes& boxes, const double* v, Keep&& keep) const;
   /// the boxes outside which mass_faces_ is 0 (valid for the storage mass_boxes_data_), and
   /// with W_L^u's boxes those outside which no face is trusted; false when not known
   FaceBoxes mass_boxes_;
