@@ -473,6 +473,45 @@ double Multigrid::operator_complexity() const {
 
 namespace {
 
+/// Row i of a b (Gustavson's row: the entries of a's row i in stored order, the first term of a
+/// column assigned and the others added), its columns written from inner[start] (mark[j] == i:
+/// column j seen in this row, its sum in sum[j]), sorted when asked, the exact zeros dropped when
+/// asked (Eigen's prune(0, 0)) and the values written beside them. Returns the end of the row's
+/// kept entries. Both forms of sparse_row_product form their rows here.
+inline int form_product_row(int i, int start, const SparseMatrix& a, const SparseMatrix& b, bool drop_zeros,
+                            bool sort_columns, int* mark, double* sum, int* inner, double* value) {
+  const int* a_outer = a.outerIndexPtr();
+  const int* a_inner = a.innerIndexPtr();
+  const double* a_value = a.valuePtr();
+  const int* b_outer = b.outerIndexPtr();
+  const int* b_inner = b.innerIndexPtr();
+  const double* b_value = b.valuePtr();
+  int end = start;
+  for (int e = a_outer[i]; e < a_outer[i + 1]; ++e) {
+    const int k = a_inner[e];
+    const double x = a_value[e];
+    for (int q = b_outer[k]; q < b_outer[k + 1]; ++q) {
+      const int j = b_inner[q];
+      if (mark[j] != i) {
+        mark[j] = i;
+        sum[j] = x * b_value[q];
+        inner[end++] = j;
+      } else {
+        sum[j] += x * b_value[q];
+      }
+    }
+  }
+  if (sort_columns) std::sort(inner + start, inner + end);
+  int out = start;
+  for (int e = start; e < end; ++e) {
+    const double v = sum[inner[e]];
+    if (drop_zeros && !(std::abs(v) > 0.0)) continue;
+    inner[out] = inner[e];
+    value[out++] = v;
+  }
+  return out;
+}
+
 /// sparse_row_product on one thread in a single pass (section 41 of docs/preconditioners.md):
 /// the result's storage is reserved for an upper bound of its entries (per row, the sum of the
 /// lengths of the rows of b it reaches: address space only, the pages a row does not write are
@@ -483,10 +522,7 @@ SparseMatrix sparse_row_product_serial(const SparseMatrix& a, const SparseMatrix
   const int m = static_cast<int>(a.rows()), n = static_cast<int>(b.cols());
   const int* a_outer = a.outerIndexPtr();
   const int* a_inner = a.innerIndexPtr();
-  const double* a_value = a.valuePtr();
   const int* b_outer = b.outerIndexPtr();
-  const int* b_inner = b.innerIndexPtr();
-  const double* b_value = b.valuePtr();
   long long bound = 0;
   long long row_bound_max = 0;
   for (int i = 0; i < m; ++i) {
@@ -506,30 +542,7 @@ SparseMatrix sparse_row_product_serial(const SparseMatrix& a, const SparseMatrix
   int pos = 0;
   for (int i = 0; i < m; ++i) {
     outer[i] = pos;
-    int end = pos;
-    for (int e = a_outer[i]; e < a_outer[i + 1]; ++e) {
-      const int k = a_inner[e];
-      const double x = a_value[e];
-      for (int q = b_outer[k]; q < b_outer[k + 1]; ++q) {
-        const int j = b_inner[q];
-        if (mark[j] != i) {
-          mark[j] = i;
-          sum[j] = x * b_value[q];
-          inner[end++] = j;
-        } else {
-          sum[j] += x * b_value[q];
-        }
-      }
-    }
-    if (sort_columns) std::sort(inner + pos, inner + end);
-    int out = pos;
-    for (int e = pos; e < end; ++e) {
-      const double v = sum[inner[e]];
-      if (drop_zeros && !(std::abs(v) > 0.0)) continue;  // Eigen's prune(0, 0)
-      inner[out] = inner[e];
-      value[out++] = v;
-    }
-    pos = out;
+    pos = form_product_row(i, pos, a, b, drop_zeros, sort_columns, mark.data(), sum.data(), inner, value);
   }
   outer[m] = pos;
   c.resizeNonZeros(pos);  // shrinks the size only
@@ -545,10 +558,8 @@ SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bo
   const int m = static_cast<int>(a.rows()), n = static_cast<int>(b.cols());
   const int* a_outer = a.outerIndexPtr();
   const int* a_inner = a.innerIndexPtr();
-  const double* a_value = a.valuePtr();
   const int* b_outer = b.outerIndexPtr();
   const int* b_inner = b.innerIndexPtr();
-  const double* b_value = b.valuePtr();
   // (Gustavson's row-by-row product: row i of the result accumulates a_ik b_k: over the entries
   // of a's row i in stored order, each row by one thread, the first term of a column assigned and
   // the others added: the additions of Eigen's conservative product, in its order, without its
@@ -589,29 +600,7 @@ SparseMatrix sparse_row_product(const SparseMatrix& a, const SparseMatrix& b, bo
     std::vector<double> sum(static_cast<std::size_t>(n));
 #pragma omp for schedule(static)
     for (int i = 0; i < m; ++i) {
-      int end = outer[i];
-      for (int e = a_outer[i]; e < a_outer[i + 1]; ++e) {
-        const int k = a_inner[e];
-        const double x = a_value[e];
-        for (int q = b_outer[k]; q < b_outer[k + 1]; ++q) {
-          const int j = b_inner[q];
-          if (mark[j] != i) {
-            mark[j] = i;
-            sum[j] = x * b_value[q];
-            inner[end++] = j;
-          } else {
-            sum[j] += x * b_value[q];
-          }
-        }
-      }
-      if (sort_columns) std::sort(inner + outer[i], inner + end);
-      int out = outer[i];
-      for (int e = outer[i]; e < end; ++e) {
-        const double v = sum[inner[e]];
-        if (drop_zeros && !(std::abs(v) > 0.0)) continue;  // Eigen's prune(0, 0)
-        inner[out] = inner[e];
-        value[out++] = v;
-      }
+      const int out = form_product_row(i, outer[i], a, b, drop_zeros, sort_columns, mark.data(), sum.data(), inner, value);
       if (drop_zeros) kept[i] = out - outer[i];
     }
   }
