@@ -1586,29 +1586,100 @@ void Simulation<Dim>::apply_wall_and_solid_velocities() {
   const std::vector<VecI<Dim>> ball = air_walls ? l1_ball_offsets<Dim>(air_wall_layers) : std::vector<VecI<Dim>>();
   FaceBoxes trusted_box{};
   const bool have_boxes = air_walls && trusted_boxes(trusted_box);
+  // (issue 20, setup19) The wall layers row by row (a row runs along the layer's first axis other
+  // than `axis`), every layer in one parallel region, each layer's rows split statically. Only
+  // the faces within reach of the trusted boxes are asked the air-wall question: a face farther
+  // than air_wall_layers from its axis's box along a non-periodic axis, or any face when that
+  // box is empty, has trusted_within false (its own first test), so it is zeroed without reading
+  // its mass flag, the liquid cell beside it and its weights (four strided reads per face of the
+  // x walls, serial, before). The same faces zeroed and the same air walls: each face is
+  // written by one thread, and the air walls gathered per thread are sorted below, as before.
+  struct WallLayer {
+    int axis, side, run, rows, n_run, stride;
+    VecI<Dim> row_dims, lo, hi;  // the rows' lattice; the reach box (lo > hi: none)
+    bool any;                    // any face of the layer within reach
+  };
+  std::vector<WallLayer> layers;
+  long total = 0;
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid_.periodic(axis)) continue;
     for (int side = 0; side < 2; ++side) {
       if (boundary_[2 * axis + side] != BoundaryType::wall) continue;
-      VecI<Dim> layer = grid_.face_dims(axis);
+      WallLayer w;
+      w.axis = axis;
+      w.side = side;
+      w.run = axis == 0 ? 1 : 0;
+      const VecI<Dim> fdims = grid_.face_dims(axis);
+      VecI<Dim> layer = fdims;
       layer[axis] = 1;
-      for (int j = 0; j < layer.prod(); ++j) {
-        VecI<Dim> coord = lattice_coord<Dim>(j, layer);
-        coord[axis] = side == 0 ? 0 : grid_.cells()[axis];
-        const int f = grid_.face_index(axis, coord);
-        if (air_walls && !mass_faces_[f]) {
-          VecI<Dim> cell = coord;
-          if (side == 1) cell[axis] -= 1;
-          if (weights_.liquid_cell[grid_.cell_index(cell)] == 0.0 && !trusted_face(f) &&
-              trusted_within(axis, coord, air_wall_layers, ball, have_boxes, trusted_box)) {
-            air_walls_.push_back(f);
-            continue;
+      w.n_run = layer[w.run];
+      w.row_dims = layer;
+      w.row_dims[w.run] = 1;
+      w.rows = w.row_dims.prod();
+      VecI<Dim> step = VecI<Dim>::Zero();
+      step[w.run] = 1;
+      w.stride = grid_.face_index(axis, step) - grid_.face_index(axis, VecI<Dim>::Zero());
+      // the reach box: every face without boxes, none when the axis's trusted box is empty
+      w.lo = VecI<Dim>::Zero();
+      w.hi = fdims - VecI<Dim>::Ones();
+      if (!air_walls) {
+        w.hi = -VecI<Dim>::Ones();
+      } else if (have_boxes) {
+        const bool empty = (trusted_box.lo[axis].array() > trusted_box.hi[axis].array()).any();
+        for (int b = 0; b < Dim; ++b) {
+          if (empty) {
+            w.hi[b] = -1;
+          } else if (!grid_.periodic(b)) {
+            w.lo[b] = std::max(w.lo[b], trusted_box.lo[axis][b] - air_wall_layers);
+            w.hi[b] = std::min(w.hi[b], trusted_box.hi[axis][b] + air_wall_layers);
           }
         }
-        u_[f] = 0.0;
+      }
+      const int pos = side == 0 ? 0 : grid_.cells()[axis];
+      w.any = (w.lo.array() <= w.hi.array()).all() && pos >= w.lo[axis] && pos <= w.hi[axis];
+      total += static_cast<long>(w.rows) * w.n_run;
+      layers.push_back(w);
+    }
+  }
+  const int team = team_threads(total);
+  std::vector<std::vector<int>> found(team);
+  long asked = 0;
+#pragma omp parallel num_threads(team) reduction(+ : asked)
+  {
+    std::vector<int>& mine = found[omp_get_thread_num()];
+    for (const WallLayer& w : layers) {
+      const int axis = w.axis;
+#pragma omp for schedule(static) nowait
+      for (int r = 0; r < w.rows; ++r) {
+        VecI<Dim> coord = lattice_coord<Dim>(r, w.row_dims);
+        coord[axis] = w.side == 0 ? 0 : grid_.cells()[axis];
+        const int first = grid_.face_index(axis, coord);
+        // the row's faces within reach: [begin, end] along the run (none when the row's other
+        // coordinates are out of the box)
+        bool row_in = w.any;
+        for (int b = 0; b < Dim && row_in; ++b)
+          if (b != w.run) row_in = coord[b] >= w.lo[b] && coord[b] <= w.hi[b];
+        const int begin = row_in ? w.lo[w.run] : w.n_run, end = row_in ? w.hi[w.run] : -1;
+        for (int i = 0; i < w.n_run; ++i) {
+          const int f = first + i * w.stride;
+          if (i >= begin && i <= end && !mass_faces_[f]) {
+            ++asked;
+            coord[w.run] = i;
+            VecI<Dim> cell = coord;
+            if (w.side == 1) cell[axis] -= 1;
+            if (weights_.liquid_cell[grid_.cell_index(cell)] == 0.0 && !trusted_face(f) &&
+                trusted_within(axis, coord, air_wall_layers, ball, have_boxes, trusted_box)) {
+              mine.push_back(f);
+              continue;
+            }
+          }
+          u_[f] = 0.0;
+        }
       }
     }
   }
+  for (const std::vector<int>& part : found) air_walls_.insert(air_walls_.end(), part.begin(), part.end());
+  wall_faces_asked_ = asked;
   std::sort(air_walls_.begin(), air_walls_.end());
   constrain_velocity_in_solids();
 }

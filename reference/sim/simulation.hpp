@@ -348,6 +348,11 @@ class Simulation : public AnySimulation {
   /// Faces in solids that constrain_velocity_in_solids left out (deep in a fixed solid, far from
   /// the moving bodies: their value stays +0) since the start; for tests.
   long constrained_faces_left_out() const { return constrained_left_out_; }
+  /// The wall faces beside air that kept their extrapolated velocity in the last step
+  /// (ascending; air_walls_), and the wall faces the last step asked about them (those within
+  /// reach of the trusted boxes: apply_wall_and_solid_velocities); for tests.
+  const std::vector<int>& air_walls() const { return air_walls_; }
+  long wall_faces_asked() const { return wall_faces_asked_; }
   /// Whether the last frame's end left W_L^p, W_L^u to be made when read (weights(): see
   /// liquid_volume_from_phi); for tests.
   bool frame_end_weights_pending() const { return liquid_weights_pending_; }
@@ -392,6 +397,7 @@ class Simulation : public AnySimulation {
   /// (extend_extrapolation) fills them and line 15's payment scales them with the air
   /// (rescale_face_velocity).
   std::vector<int> air_walls_;
+  long wall_faces_asked_ = 0;
   /// The air cells beside the liquid made divergence-free (StageSwitches::divergence_free_air).
   void divergence_free_air();
   /// Whether the faces the extrapolation did not reach are marked (NaN) while the particles read

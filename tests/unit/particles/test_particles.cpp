@@ -166,6 +166,41 @@ TEST_CASE("seeding: count, stratification, determinism, solids", "[unit]") {
   check_seeding<3>();
 }
 
+TEST_CASE("seeding: the same particles on any team, over several chunks of candidates (setup19)",
+          "[unit]") {
+  // seed_particles draws its candidates serially and tests them on the team in chunks of 65536:
+  // two overlapping liquids (the second's candidates inside the first are claimed by it) and a
+  // solid, about 200k candidates per liquid at 48^3 with 8 per cell, so three or four chunks
+  const MacGrid<3> grid = unit_grid<3>(48);
+  const Vec<3> a(0.45, 0.5, 0.5), b(0.6, 0.45, 0.5);
+  auto first = std::make_shared<TestBall<3>>(a, 0.3);
+  auto second = std::make_shared<TestBall<3>>(b, 0.25);
+  const SolidField<3> solid = solid_ball<3>(Vec<3>(0.5, 0.2, 0.5), 0.12);
+  const std::vector<LiquidSpec> specs = {liquid_spec<3>(a, 900.0), liquid_spec<3>(b, 1100.0)};
+  const bool monitor = core_monitor();
+  set_core_monitor(false);
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const Particles<3> one = seed_particles<3>(grid, specs, {first, second}, solid, 8, 5u);
+  REQUIRE(one.size() > 100000);
+  long from_second = 0;
+  for (int l : one.liquid) from_second += l == 1;
+  CHECK(from_second > 0);
+  for (int threads : {2, 3}) {
+    CAPTURE(threads);
+    omp_set_num_threads(threads);
+    const Particles<3> many = seed_particles<3>(grid, specs, {first, second}, solid, 8, 5u);
+    REQUIRE(many.size() == one.size());
+    long differ = 0;
+    for (std::size_t i = 0; i < one.size(); ++i)
+      differ += !(many.x[i] == one.x[i]) || !(many.v[i] == one.v[i]) ||
+                many.liquid[i] != one.liquid[i] || many.mass[i] != one.mass[i];
+    CHECK(differ == 0);
+  }
+  omp_set_num_threads(saved);
+  set_core_monitor(monitor);
+}
+
 TEST_CASE("seeding: velocity, rotation and APIC matrix of a liquid", "[unit]") {
   const MacGrid<2> grid2 = unit_grid<2>(20);
   LiquidSpec spec2 = liquid_spec<2>(Vec<2>(0.5, 0.4));
