@@ -139,6 +139,11 @@ inline void stored_correction(const double* inv, const double* r, int m, double*
 }
 static_assert(kPackedMax == 6, "stored_correction has a case for every packed size");
 
+/// The row length of a 3D MAC velocity level's interior rows (the face, its 6 neighbours along
+/// and across its axis, the 8 faces of the other axes around it): most rows of the finest level,
+/// relaxed by relax_uniform.
+constexpr int kUniformRowLength = 15;
+
 /// Relaxes a patch of M unknowns whose rows all hold exactly LEN entries, fully unrolled: r_i =
 /// b_i - sum_q a_iq x_q over row i's entries in stored order (every row its own chain, as
 /// row_sums forms it), d = inv r (packed_correction), x_P += d: the operations of the general

@@ -16,12 +16,6 @@
 
 namespace monolith {
 
-/// The row length of a 3D MAC velocity level's interior rows (the face, its 6 neighbours along
-/// and across its axis, the 8 faces of the other axes around it): row_sums has an unrolled loop
-/// for four rows of this length (most rows of the finest level; section 42 of
-/// docs/preconditioners.md).
-constexpr int kUniformRowLength = 15;
-
 /// One term of a row sum: s - a x (a residual's) or s + a x (a product's).
 template <bool Subtract, typename V>
 inline double row_sum_term(double s, V a, double x) {
@@ -44,22 +38,6 @@ inline void row_sums(const int* outer, const int* inner, const V* value, const d
     const int e0 = outer[rows[t] + 1], e1 = outer[rows[t + 1] + 1], e2 = outer[rows[t + 2] + 1],
               e3 = outer[rows[t + 3] + 1];
     double s0 = out[t], s1 = out[t + 1], s2 = out[t + 2], s3 = out[t + 3];
-    if (e0 - q0 == kUniformRowLength && e1 - q1 == kUniformRowLength && e2 - q2 == kUniformRowLength &&
-        e3 - q3 == kUniformRowLength) {
-      // four interior rows of a 3D MAC level: the same loop with a fixed count, unrolled (no exit
-      // that depends on the data)
-      for (int c = 0; c < kUniformRowLength; ++c) {
-        s0 = row_sum_term<Subtract>(s0, value[q0 + c], x[inner[q0 + c]]);
-        s1 = row_sum_term<Subtract>(s1, value[q1 + c], x[inner[q1 + c]]);
-        s2 = row_sum_term<Subtract>(s2, value[q2 + c], x[inner[q2 + c]]);
-        s3 = row_sum_term<Subtract>(s3, value[q3 + c], x[inner[q3 + c]]);
-      }
-      out[t] = s0;
-      out[t + 1] = s1;
-      out[t + 2] = s2;
-      out[t + 3] = s3;
-      continue;
-    }
     const int common = std::min(std::min(e0 - q0, e1 - q1), std::min(e2 - q2, e3 - q3));
     for (int c = 0; c < common; ++c) {
       s0 = row_sum_term<Subtract>(s0, value[q0 + c], x[inner[q0 + c]]);

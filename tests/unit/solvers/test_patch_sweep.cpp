@@ -6,8 +6,7 @@
 // triangles and relaxes patches of 4 and 6 unknowns whose rows hold 15 entries by an unrolled
 // kernel; this test covers patches of 1 to 9 unknowns, rows of 15 entries and of other lengths,
 // in double and in single precision, and checks that the comparison has teeth (the same inverse
-// applied with its sums in another order differs). Also row_sums' fixed-length case (four rows
-// of 15 entries) against the plain row loop.
+// applied with its sums in another order differs).
 #include <catch2/catch.hpp>
 
 #include <Eigen/Dense>
@@ -15,7 +14,6 @@
 #include <vector>
 
 #include "reference/solvers/multigrid.hpp"
-#include "reference/solvers/row_sums.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -119,7 +117,7 @@ TEST_CASE("patch sweep: packed inverses and the unrolled 4- and 6-unknown patche
       const int m = ps.start[k + 1] - ps.start[k];
       bool all = m == 4 || m == 6;
       for (int q = ps.start[k]; q < ps.start[k + 1]; ++q)
-        all = all && a.outerIndexPtr()[ps.index[q] + 1] - a.outerIndexPtr()[ps.index[q]] == kUniformRowLength;
+        all = all && a.outerIndexPtr()[ps.index[q] + 1] - a.outerIndexPtr()[ps.index[q]] == 15;  // (multigrid.cpp's kUniformRowLength)
       uniform += all;
     }
     CHECK(uniform > ps.size() / 2);
@@ -137,42 +135,4 @@ TEST_CASE("patch sweep: packed inverses and the unrolled 4- and 6-unknown patche
     }
     CHECK(differing(y, z) > 0);  // teeth: the inverse's sums in another order change bits
   }
-}
-
-TEST_CASE("row_sums: four rows of the fixed length, the bits of the plain row loop", "[unit]") {
-  // rows of 15 entries (the unrolled case) mixed with rows of 14 and 16, float and double values
-  const int n = 257;
-  const VectorX r = random_vector(n * 40, 51);
-  std::vector<int> outer{0}, inner;
-  std::vector<double> value;
-  int q = 0;
-  for (int i = 0; i < n; ++i) {
-    const int length = i % 11 == 3 ? 14 : i % 13 == 5 ? 16 : kUniformRowLength;
-    for (int k = 0; k < length; ++k) {
-      inner.push_back(static_cast<int>(0.5 * (r[q] + 1.0) * n) % n);
-      value.push_back(r[q + 1] * 1e3);
-      q += 2;
-    }
-    outer.push_back(static_cast<int>(inner.size()));
-  }
-  std::vector<float> value_f(value.begin(), value.end());
-  const VectorX x = random_vector(n, 52), b = random_vector(n, 53);
-  VectorX y(n), yf(n), p(n);
-  csr_row_sums<true>(outer.data(), inner.data(), value.data(), 0, n, b.data(), x.data(), y.data(), false);
-  csr_row_sums<true, float>(outer.data(), inner.data(), value_f.data(), 0, n, b.data(), x.data(), yf.data(), false);
-  csr_row_sums<false>(outer.data(), inner.data(), value.data(), 0, n, nullptr, x.data(), p.data(), false);
-  int wrong = 0, reordered_differs = 0;
-  for (int i = 0; i < n; ++i) {
-    double s = b[i], sf = b[i], sp = 0.0, back = b[i];
-    for (int e = outer[i]; e < outer[i + 1]; ++e) {
-      s -= value[e] * x[inner[e]];
-      sf -= static_cast<double>(value_f[e]) * x[inner[e]];
-      sp += value[e] * x[inner[e]];
-    }
-    for (int e = outer[i + 1] - 1; e >= outer[i]; --e) back -= value[e] * x[inner[e]];
-    wrong += !same_bits(y[i], s) + !same_bits(yf[i], sf) + !same_bits(p[i], sp);
-    reordered_differs += !same_bits(back, s);
-  }
-  CHECK(wrong == 0);
-  CHECK(reordered_differs > 0);
 }
