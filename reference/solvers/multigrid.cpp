@@ -76,6 +76,96 @@ inline void patch_correction(const double* inv, const double* r, int m, double* 
   }
 }
 
+/// Patches of at most this many unknowns (every patch of the 3D MAC levels: cells of 6 faces,
+/// stress elements of 4) keep their inverse as its packed upper triangle, m (m + 1) / 2 entries
+/// instead of m^2 (docs/preconditioners.md section 42): the inverse is exactly symmetric
+/// (compute_patch_inverses symmetrises it), so entry (i, j) and (j, i) are one number.
+constexpr int kPackedMax = 6;
+
+/// Stored entries of the inverse of a patch of m unknowns.
+inline int inverse_entries(int m) { return m <= kPackedMax ? m * (m + 1) / 2 : m * m; }
+
+/// Position of entry (i, j) of a symmetric m x m block stored as its upper triangle row by row.
+constexpr int packed_index(int i, int j, int m) {
+  return i <= j ? i * m - i * (i - 1) / 2 + (j - i) : j * m - j * (j - 1) / 2 + (i - j);
+}
+
+/// d = inv r for a packed inverse of fixed size M: every d_i summed over j in order from 0, as
+/// patch_correction sums it (the same products of the same numbers: the same bits); with M
+/// known, every loop is unrolled and each stored entry is loaded once for both its places.
+template <int M>
+inline void packed_correction(const double* p, const double* r, double* d) {
+  int i = 0;
+  for (; i + 4 <= M; i += 4) {
+    double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
+    for (int j = 0; j < M; ++j) {
+      d0 += p[packed_index(i, j, M)] * r[j];
+      d1 += p[packed_index(i + 1, j, M)] * r[j];
+      d2 += p[packed_index(i + 2, j, M)] * r[j];
+      d3 += p[packed_index(i + 3, j, M)] * r[j];
+    }
+    d[i] = d0;
+    d[i + 1] = d1;
+    d[i + 2] = d2;
+    d[i + 3] = d3;
+  }
+  for (; i + 2 <= M; i += 2) {
+    double d0 = 0.0, d1 = 0.0;
+    for (int j = 0; j < M; ++j) {
+      d0 += p[packed_index(i, j, M)] * r[j];
+      d1 += p[packed_index(i + 1, j, M)] * r[j];
+    }
+    d[i] = d0;
+    d[i + 1] = d1;
+  }
+  for (; i < M; ++i) {
+    double s = 0.0;
+    for (int j = 0; j < M; ++j) s += p[packed_index(i, j, M)] * r[j];
+    d[i] = s;
+  }
+}
+
+/// d = inv r for a patch of m unknowns, its inverse stored as inverse_entries(m) says.
+inline void stored_correction(const double* inv, const double* r, int m, double* d) {
+  switch (m) {
+    case 1: packed_correction<1>(inv, r, d); return;
+    case 2: packed_correction<2>(inv, r, d); return;
+    case 3: packed_correction<3>(inv, r, d); return;
+    case 4: packed_correction<4>(inv, r, d); return;
+    case 5: packed_correction<5>(inv, r, d); return;
+    case 6: packed_correction<6>(inv, r, d); return;
+    default: patch_correction(inv, r, m, d);
+  }
+}
+static_assert(kPackedMax == 6, "stored_correction has a case for every packed size");
+
+/// The row length of a 3D MAC velocity level's interior rows (the face, its 6 neighbours along
+/// and across its axis, the 8 faces of the other axes around it): most rows of the finest level,
+/// relaxed by relax_uniform.
+constexpr int kUniformRowLength = 15;
+
+/// Relaxes a patch of M unknowns whose rows all hold exactly LEN entries, fully unrolled: r_i =
+/// b_i - sum_q a_iq x_q over row i's entries in stored order (every row its own chain, as
+/// row_sums forms it), d = inv r (packed_correction), x_P += d: the operations of the general
+/// relaxation in the same order per row, hence the same bits, without its loop exits that
+/// depend on the row lengths. Returns false (and changes nothing) when a row has another length.
+template <int M, int LEN, typename V>
+inline bool relax_uniform(const int* outer, const int* inner, const V* value, const double* b, double* x,
+                          const int* idx, const double* inv) {
+  int q[M];
+  for (int i = 0; i < M; ++i) {
+    q[i] = outer[idx[i]];
+    if (outer[idx[i] + 1] - q[i] != LEN) return false;
+  }
+  double r[M], d[M];
+  for (int i = 0; i < M; ++i) r[i] = b[idx[i]];
+  for (int c = 0; c < LEN; ++c)
+    for (int i = 0; i < M; ++i) r[i] = row_sum_term<true>(r[i], value[q[i] + c], x[inner[q[i] + c]]);
+  packed_correction<M>(inv, r, d);
+  for (int i = 0; i < M; ++i) x[idx[i]] += d[i];
+  return true;
+}
+
 /// The unknowns of a level in the order the forward sweep first touches them (colours, groups,
 /// patches, members), then the unknowns of no patch in increasing order: new -> old.
 std::vector<int> sweep_order(const PatchSet& ps, int n) {
@@ -138,12 +228,15 @@ SparseMatrix permuted(const SparseMatrix& m, const std::vector<int>& row_order, 
 /// double sums, rounded up. The difference (rounded - a) then has a symmetric part that is
 /// diagonally dominant with a non-negative diagonal, hence positive semi-definite, so the rounded
 /// matrix is SPD whenever a is ((P12) in docs/derivations.md).
-std::vector<float> rounded_dominant(const SparseMatrix& a) {
+RawArray<float> rounded_dominant(const SparseMatrix& a) {
   const int n = static_cast<int>(a.rows());
   const int* outer = a.outerIndexPtr();
   const int* inner = a.innerIndexPtr();
   const double* value = a.valuePtr();
-  std::vector<float> r(static_cast<std::size_t>(a.nonZeros()));
+  // every entry is written below, off the diagonal in the first pass, on it in the second (an
+  // entry is either): no zero fill
+  RawArray<float> r;
+  r.allocate(static_cast<std::size_t>(a.nonZeros()));
   std::vector<double> error(static_cast<std::size_t>(n), 0.0);  // row sums + column sums of |e|
   for (int i = 0; i < n; ++i)
     for (int e = outer[i]; e < outer[i + 1]; ++e) {
@@ -232,7 +325,8 @@ Multigrid::Multigrid(std::vector<MultigridLevel> levels, int smoothing, bool ren
   if (single_precision_) {
     // the rounded operators (after the renumbering: in the stored order of the rows) and the patch
     // inverses of the rounded blocks
-    value_f_.assign(levels_.size(), {});
+    value_f_.clear();
+    value_f_.resize(levels_.size());
     for (int l = 0; l + 1 < num; ++l) {
       value_f_[l] = rounded_dominant(levels_[l].a);
       compute_patch_inverses(l);
@@ -251,9 +345,10 @@ void Multigrid::compute_patch_inverses(int l) {
   offset.assign(ps.size() + 1, 0);
   for (int k = 0; k < ps.size(); ++k) {
     const int m = ps.start[k + 1] - ps.start[k];
-    offset[k + 1] = offset[k] + m * m;
+    offset[k + 1] = offset[k] + inverse_entries(m);
   }
-  inverse_[l].assign(offset.back(), 0.0);
+  inverse_[l].allocate(static_cast<std::size_t>(offset.back()));  // (every entry written below)
+  int singular = 0;  // (set by any thread that finds a block whose inverse is not finite)
 #pragma omp parallel if (ps.size() > 1024) num_threads(process_threads())
   {
   // the block gathered by one pass over each member's row (`slot`: member position of a column)
@@ -275,13 +370,21 @@ void Multigrid::compute_patch_inverses(int l) {
     Eigen::LDLT<Block> ldlt(block);
     Block inv = ldlt.solve(Block::Identity(m, m));
     inv = 0.5 * (inv + inv.transpose()).eval();  // exactly symmetric
+    if (!inv.allFinite()) {
+#pragma omp atomic write
+      singular = 1;
+    }
     double* out = inverse_[l].data() + offset[k];
-    for (int i = 0; i < m; ++i)
-      for (int j = 0; j < m; ++j) out[i * m + j] = inv(i, j);
+    if (m <= kPackedMax) {
+      for (int i = 0; i < m; ++i)
+        for (int j = i; j < m; ++j) out[packed_index(i, j, m)] = inv(i, j);
+    } else {
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; j < m; ++j) out[i * m + j] = inv(i, j);
+    }
   }
   }
-  for (double v : inverse_[l])
-    if (!std::isfinite(v)) throw std::invalid_argument("Multigrid: singular patch block");
+  if (singular) throw std::invalid_argument("Multigrid: singular patch block");
 }
 
 void Multigrid::renumber() {
@@ -356,15 +459,21 @@ void Multigrid::sweep_values(int l, const VectorX& b, VectorX& x, bool backward,
   const double* inverse = inverse_[l].data();
   const int* offset = inverse_start_[l].data();
   double* xs = x.data();
+  const double* bs = b.data();
   auto relax = [&](int k) {
     const int* idx = ps.index.data() + ps.start[k];
     const int m = ps.start[k + 1] - ps.start[k];
+    const double* inv = inverse + offset[k];
+    // the common patches of a 3D MAC level (stress elements of 4 faces, cells of 6) whose rows
+    // are interior rows: unrolled, the same bits
+    if (m == 4 && relax_uniform<4, kUniformRowLength>(outer, inner, value, bs, xs, idx, inv)) return;
+    if (m == 6 && relax_uniform<6, kUniformRowLength>(outer, inner, value, bs, xs, idx, inv)) return;
     // r_P = (b - A x)_P, then x_P += A_PP^-1 r_P (d depends on r only, so all of x_P is
     // updated after d is complete, as the row-by-row loop did)
     std::array<double, PatchSet::kMaxPatchSize> r, d;
-    for (int i = 0; i < m; ++i) r[i] = b[idx[i]];
+    for (int i = 0; i < m; ++i) r[i] = bs[idx[i]];
     row_sums<true, V>(outer, inner, value, xs, idx, m, r.data());
-    patch_correction(inverse + offset[k], r.data(), m, d.data());
+    stored_correction(inv, r.data(), m, d.data());
     for (int i = 0; i < m; ++i) xs[idx[i]] += d[i];
   };
   const int num_colours = static_cast<int>(ps.colours.size());
@@ -457,7 +566,7 @@ std::size_t Multigrid::memory_bytes() const {
   }
   bytes += sizeof(double) * (apply_residual_.size() + apply_correction_.size() + apply_in_.size() + apply_out_.size());
   for (const std::vector<int>& o : order_) bytes += sizeof(int) * o.size();
-  for (const std::vector<float>& v : value_f_) bytes += sizeof(float) * v.size();
+  for (const RawArray<float>& v : value_f_) bytes += sizeof(float) * v.size();
   // the coarse factor: at most the dense triangle of the coarsest level
   const std::size_t nc = levels_.empty() ? 0 : static_cast<std::size_t>(levels_.back().a.rows());
   bytes += sizeof(double) * std::min(nc * nc / 2, static_cast<std::size_t>(levels_.back().a.nonZeros()) * 8);

@@ -34,6 +34,28 @@
 
 namespace monolith {
 
+/// An array whose elements are left uninitialised when it is allocated (default-initialised, so
+/// no zero fill: fresh pages are first touched by the loop that writes every element, in parallel
+/// where that loop is parallel). For buffers written in full right after allocation.
+template <typename T>
+class RawArray {
+ public:
+  void allocate(std::size_t n) {
+    data_.reset(n ? new T[n] : nullptr);
+    size_ = n;
+  }
+  T* data() { return data_.get(); }
+  const T* data() const { return data_.get(); }
+  std::size_t size() const { return size_; }
+  bool empty() const { return size_ == 0; }
+  T& operator[](std::size_t i) { return data_[i]; }
+  const T& operator[](std::size_t i) const { return data_[i]; }
+
+ private:
+  std::unique_ptr<T[]> data_;
+  std::size_t size_ = 0;
+};
+
 /// The patches of one level's smoother: patch k owns the unknowns
 /// index[start[k]] .. index[start[k + 1] - 1] (each at most kMaxPatchSize, listed once). Patches
 /// are relaxed in groups: group g is the patches group_start[g] .. group_start[g + 1] - 1, relaxed
@@ -134,13 +156,15 @@ class Multigrid {
   std::vector<std::vector<int>> order_;  ///< per level: internal -> caller's numbering (empty: same)
   std::vector<SparseMatrix> restriction_;        ///< prolongation transposes, row-major
   std::vector<std::vector<int>> inverse_start_;  ///< per level, per patch: offset into inverse_
-  std::vector<std::vector<double>> inverse_;     ///< per level: dense patch inverses, row-major
+  /// per level: dense patch inverses, patch after patch: the packed upper triangle of patches of
+  /// at most 6 unknowns, row-major m x m above (inverse_entries in multigrid.cpp)
+  std::vector<RawArray<double>> inverse_;
   std::unique_ptr<SparseLdlt> coarse_;  ///< movable
   int smoothing_ = 1;
   bool single_precision_ = false;
   /// per smoothed level in single precision: the rounded operator's values (rounded_dominant in
   /// multigrid.cpp), in the stored order of levels_[l].a; empty otherwise
-  std::vector<std::vector<float>> value_f_;
+  std::vector<RawArray<float>> value_f_;
   // scratch per level
   mutable std::vector<VectorX> residual_, coarse_rhs_, coarse_x_, work_;
   mutable VectorX apply_residual_, apply_correction_;  ///< cycles >= 2 of apply (finest size)
