@@ -102,16 +102,9 @@ struct BoxedLattice {
   VectorX materialise() const {
     if (!made) return VectorX();
     if (whole()) return values;
-    VectorX out = VectorX::Constant(dims.prod(), background);
-    if (box_empty()) return out;
-    // the box's rows along x copied into the lattice's
-    VecI<Dim> rows = hi - lo + VecI<Dim>::Ones();
-    const int nx = rows[0];
-    rows[0] = 1;
-    for (int q = 0; q < rows.prod(); ++q) {
-      const VecI<Dim> c = lo + lattice_coord<Dim>(q, rows);
-      std::copy_n(values.data() + entry(c), nx, out.data() + lattice_index<Dim>(c, dims));
-    }
+    const int n = dims.prod();
+    VectorX out(n);
+    for (int k = 0; k < n; ++k) out[k] = (*this)(k);
     return out;
   }
   /// The storage back to the heap.
