@@ -116,16 +116,17 @@ void restore_points(BoxedLattice<Dim>& phi,
     for (const auto& [e, old] : list) phi.values[e] = old;
 }
 
-/// Throws std::logic_error unless the lattice points [lo, hi] grown by `grow` points (clamped to
-/// the lattice; nothing when [lo, hi] is empty) that a
-/// reader of the level set reads lie in its stored box (the readers of LatticeValues read
-/// through the box's strides: a point outside it would be another point's entry).
 /// Lattice points the liquid level set is stored beyond its band on every side (band19): the
 /// weights read the band and two points around it (liquid_weights_from_phi: the non-positive
 /// lattice cells of the extended level set start at most one point before the band, and the
-/// fluid level set is written and classified one point around their box and its far corners).
+/// fluid level set is written and classified one point around their box and its far corners;
+/// docs/derivations.md, "The liquid level set stored over its band").
 inline constexpr int kLiquidPhiMargin = 2;
 
+/// Throws std::logic_error unless the lattice points [lo, hi] grown by `grow` points (clamped to
+/// the lattice; nothing when [lo, hi] is empty), which a reader of the level set reads, lie in
+/// its stored box (the readers of LatticeValues read through the box's strides: a point outside
+/// it would be another point's entry).
 template <int Dim>
 void require_stored(const BoxedLattice<Dim>& phi, VecI<Dim> lo, VecI<Dim> hi, int grow,
                     const char* what) {
