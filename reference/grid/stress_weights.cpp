@@ -17,6 +17,13 @@ VecI<Dim> stress_control_volume_lower(const StressGrid<Dim>& stress, int index) 
 template <int Dim>
 void stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
                                const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out) {
+  stress_negative_fractions<Dim>(stress, lattice, whole_lattice_values(lattice, phi), signs, out);
+}
+
+template <int Dim>
+void stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
+                               const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs,
+                               VectorX& out) {
   if (out.size() != stress.num_dofs()) out.resize(stress.num_dofs());
   // component k's control volumes start at lattice point 2 c + 2 shift(k) - 1: offset -1 on its
   // node-aligned axes, 0 on the cell-centred ones (every component in one parallel region)
@@ -108,6 +115,9 @@ VectorX stress_liquid_weights(const StressGrid<Dim>& stress, const SampleLattice
                                             const VectorX&);                                   \
   template void stress_negative_fractions<D>(const StressGrid<D>&, const SampleLattice<D>&,    \
                                              const VectorX&, const LatticeSigns<D>&, VectorX&); \
+  template void stress_negative_fractions<D>(const StressGrid<D>&, const SampleLattice<D>&,    \
+                                             const LatticeValues<D>&, const LatticeSigns<D>&,  \
+                                             VectorX&);                                        \
   template void stress_fluid_weights<D>(const StressGrid<D>&, const SampleLattice<D>&,         \
                                         const VectorX&, const LatticeSigns<D>&,                \
                                         const std::array<BoundaryType, 2 * D>&, VectorX&);

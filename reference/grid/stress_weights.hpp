@@ -54,6 +54,12 @@ VectorX stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLat
 template <int Dim>
 void stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
                                const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out);
+/// The same of a level set stored over a box (LatticeValues: the points read are the corners
+/// of the mixed lattice cells, volume_fractions.hpp).
+template <int Dim>
+void stress_negative_fractions(const StressGrid<Dim>& stress, const SampleLattice<Dim>& lattice,
+                               const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs,
+                               VectorX& out);
 
 /// W_F^s (section 3.1.2): diagonal, num_stress_dofs x num_stress_dofs, stored as its diagonal:
 /// the fluid (non-solid) fraction of each stress control volume, in [0, 1], with the wall and

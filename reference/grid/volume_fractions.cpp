@@ -197,12 +197,12 @@ inline void for_slab(VecI<Dim> c, const VecI<Dim>& lo, const VecI<Dim>& hi, Fn&&
 /// row, the rows' starts, then the fractions, each row on one thread (fixed rows, each value
 /// independent: the same table for any thread count).
 template <int Dim>
-void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
+void mixed_cell_fractions(const SampleLattice<Dim>& /*lattice*/, const LatticeValues<Dim>& phi,
                           LatticeSigns<Dim>& signs) {
   using Signs = LatticeSigns<Dim>;
   constexpr int kCorners = 1 << Dim;
-  signs.phi_data = phi.data();
-  signs.phi_size = static_cast<long>(phi.size());
+  signs.phi_data = phi.data;
+  signs.phi_size = phi.size;
   signs.mixed_x.clear();
   signs.mixed_fraction.clear();
   if (!signs.any_negative()) {
@@ -213,9 +213,7 @@ void mixed_cell_fractions(const SampleLattice<Dim>& lattice, const VectorX& phi,
   VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
   row_dims[0] = 1;
   const int rows = row_dims.prod();
-  VecI<Dim> pstride;
-  pstride[0] = 1;
-  for (int a = 1; a < Dim; ++a) pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
+  const VecI<Dim> pstride = phi.stride;
   // the classes are stored over the written box, which holds [lo, hi]
   const VecI<Dim> cstride = signs.box_strides(), wlo = signs.written_lo;
   // corner k of a lattice cell: point offset of its bits
@@ -274,6 +272,14 @@ template <int Dim>
 std::pair<VecI<Dim>, VecI<Dim>> negative_point_box_in(const SampleLattice<Dim>& lattice,
                                                       const VectorX& phi, VecI<Dim> search_lo,
                                                       VecI<Dim> search_hi) {
+  return negative_point_box_in<Dim>(lattice, whole_lattice_values(lattice, phi), search_lo,
+                                    search_hi);
+}
+
+template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> negative_point_box_in(const SampleLattice<Dim>& lattice,
+                                                      const LatticeValues<Dim>& phi,
+                                                      VecI<Dim> search_lo, VecI<Dim> search_hi) {
   VecI<Dim> lo = lattice.dims, hi = -VecI<Dim>::Ones();
   for (int a = 0; a < Dim; ++a) {
     search_lo[a] = std::max(search_lo[a], 0);
@@ -291,7 +297,7 @@ std::pair<VecI<Dim>, VecI<Dim>> negative_point_box_in(const SampleLattice<Dim>& 
 #pragma omp for schedule(static)
     for (int q = 0; q < rows; ++q) {
       VecI<Dim> a = search_lo + lattice_coord<Dim>(q, row_dims);
-      const double* row = phi.data() + static_cast<std::size_t>(lattice.index(a));
+      const double* row = phi.data + (phi.index(a) - phi.shift);
       // a count first (no branch per point), the ends only in rows that hold a negative
       int negatives = 0;
       for (int x = 0; x < nx; ++x) negatives += row[x] < 0.0;
@@ -326,22 +332,36 @@ template <int Dim>
 void classify_lattice_cells_searching(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                       const VectorX& phi, const VecI<Dim>& search_lo,
                                       const VecI<Dim>& search_hi, LatticeSigns<Dim>& signs) {
-  const auto [lo, hi] = negative_point_box_in(lattice, phi, search_lo, search_hi);
-  classify_lattice_cells_in_box(grid, lattice, phi, lo, hi, signs);
+  classify_lattice_cells_searching<Dim>(grid, lattice, whole_lattice_values(lattice, phi), search_lo,
+                                        search_hi, signs);
+}
+
+template <int Dim>
+void classify_lattice_cells_searching(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                      const LatticeValues<Dim>& phi, const VecI<Dim>& search_lo,
+                                      const VecI<Dim>& search_hi, LatticeSigns<Dim>& signs) {
+  const auto [lo, hi] = negative_point_box_in<Dim>(lattice, phi, search_lo, search_hi);
+  classify_lattice_cells_in_box<Dim>(grid, lattice, phi, lo, hi, signs);
 }
 
 template <int Dim>
 void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                                    const VectorX& phi, const VecI<Dim>& point_lo,
                                    const VecI<Dim>& point_hi, LatticeSigns<Dim>& signs) {
+  classify_lattice_cells_in_box<Dim>(grid, lattice, whole_lattice_values(lattice, phi), point_lo,
+                                     point_hi, signs);
+}
+
+template <int Dim>
+void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                   const LatticeValues<Dim>& phi, const VecI<Dim>& point_lo,
+                                   const VecI<Dim>& point_hi, LatticeSigns<Dim>& signs) {
   using Signs = LatticeSigns<Dim>;
   constexpr int kCorners = 1 << Dim;
   constexpr int kRows = 1 << (Dim - 1);  // point rows along x that hold a row of cells' corners
   const VecI<Dim> cells = 2 * grid.cells();
   signs.cells = cells;
-  VecI<Dim> pstride;
-  pstride[0] = 1;
-  for (int a = 1; a < Dim; ++a) pstride[a] = pstride[a - 1] * lattice.dims[a - 1];
+  const VecI<Dim> pstride = phi.stride;
   // the lattice cells with a corner in the point box: cell l spans points l and l + 1
   VecI<Dim> from, to;
   for (int a = 0; a < Dim; ++a) {
@@ -435,7 +455,7 @@ struct ControlVolumePass {
   using Signs = LatticeSigns<Dim>;
   static constexpr int kCorners = 1 << Dim;
   const MacGrid<Dim>* grid_ = nullptr;
-  const VectorX* phi_ = nullptr;
+  LatticeValues<Dim> phi_;
   const Signs* signs_ = nullptr;
   VecI<Dim> dims, lower_offset;
   double* out = nullptr;
@@ -465,7 +485,7 @@ struct ControlVolumePass {
   void fill() const {
     const int first_slab = fractions ? from[Dim - 1] : 0, last_slab = fractions ? to[Dim - 1] : -1;
     const MacGrid<Dim>& grid = *grid_;
-    const VectorX& phi = *phi_;
+    const LatticeValues<Dim>& phi = phi_;
     const Signs& signs = *signs_;
 #pragma omp for schedule(static) nowait
     for (int t = first_slab; t <= last_slab; ++t) {
@@ -530,13 +550,14 @@ struct ControlVolumePass {
 
 template <int Dim>
 ControlVolumePass<Dim> plan_control_volume(const MacGrid<Dim>& grid,
-                                           const SampleLattice<Dim>& lattice, const VectorX& phi,
+                                           const SampleLattice<Dim>& /*lattice*/,
+                                           const LatticeValues<Dim>& phi,
                                            const LatticeSigns<Dim>& signs, const VecI<Dim>& dims,
                                            const VecI<Dim>& lower_offset, double* out,
                                            WrittenBox<Dim>* written) {
   ControlVolumePass<Dim> pass;
   pass.grid_ = &grid;
-  pass.phi_ = &phi;
+  pass.phi_ = phi;
   pass.signs_ = &signs;
   pass.dims = dims;
   pass.lower_offset = lower_offset;
@@ -564,7 +585,7 @@ ControlVolumePass<Dim> plan_control_volume(const MacGrid<Dim>& grid,
     written->valid = true;
   }
   // the mixed lattice cells' fractions made with the classes (when made from this level set)
-  pass.memo = signs.phi_data == phi.data() && signs.phi_size == static_cast<long>(phi.size());
+  pass.memo = signs.phi_data == phi.data && signs.phi_size == phi.size;
   // control volumes c whose lattice cells 2 c + off + {0, 1} (mirrored at walls: at most one
   // lattice cell inwards) can reach the box [lo, hi]; every c on a periodic axis
   pass.fractions = signs.any_negative();
@@ -584,11 +605,11 @@ ControlVolumePass<Dim> plan_control_volume(const MacGrid<Dim>& grid,
     written->lo = pass.from;
     written->hi = pass.to;
   }
-  pass.pstride[0] = pass.ostride[0] = 1;
+  pass.ostride[0] = 1;
   for (int a = 1; a < Dim; ++a) {
-    pass.pstride[a] = pass.pstride[a - 1] * lattice.dims[a - 1];
     pass.ostride[a] = pass.ostride[a - 1] * dims[a - 1];
   }
+  pass.pstride = phi.stride;
   // the classes of the written box (kPositive outside it)
   pass.cstride = signs.box_strides();
   pass.wlo = signs.written_lo;
@@ -619,7 +640,7 @@ void run_control_volume_passes(const ControlVolumePass<Dim>* passes, int count) 
 
 template <int Dim>
 void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs,
                                        const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
                                        double* out, WrittenBox<Dim>* written) {
   // the zeros (what the last call wrote, or every entry) and the fractions in one parallel
@@ -631,7 +652,7 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
 
 template <int Dim>
 void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs,
                                        const std::vector<VecI<Dim>>& dims,
                                        const std::vector<VecI<Dim>>& lower_offsets,
                                        const std::vector<double*>& out) {
@@ -644,7 +665,7 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
 
 template <int Dim>
 void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs, VectorX& out,
                              WrittenBox<Dim>* written) {
   if (out.size() != grid.num_cells()) out.resize(grid.num_cells());
   // the cell control volume is the 2^Dim lattice cells starting at lattice point 2c
@@ -654,7 +675,7 @@ void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
 
 template <int Dim>
 void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
-                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs, VectorX& out,
                              std::array<WrittenBox<Dim>, Dim>* written) {
   if (out.size() != grid.num_faces()) out.resize(grid.num_faces());
   // the face control volume starts half a cell before the face along its normal
@@ -668,6 +689,42 @@ void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>&
                                             written ? &(*written)[axis] : nullptr);
   }
   run_control_volume_passes(passes.data(), Dim);
+}
+
+// the whole-lattice vector forms: views of it (whole_lattice_values)
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const VecI<Dim>& dims, const VecI<Dim>& lower_offset,
+                                       double* out, WrittenBox<Dim>* written) {
+  control_volume_negative_fractions<Dim>(grid, lattice, whole_lattice_values(lattice, phi), signs,
+                                         dims, lower_offset, out, written);
+}
+
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const VectorX& phi, const LatticeSigns<Dim>& signs,
+                                       const std::vector<VecI<Dim>>& dims,
+                                       const std::vector<VecI<Dim>>& lower_offsets,
+                                       const std::vector<double*>& out) {
+  control_volume_negative_fractions<Dim>(grid, lattice, whole_lattice_values(lattice, phi), signs,
+                                         dims, lower_offsets, out);
+}
+
+template <int Dim>
+void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             WrittenBox<Dim>* written) {
+  cell_negative_fractions<Dim>(grid, lattice, whole_lattice_values(lattice, phi), signs, out,
+                               written);
+}
+
+template <int Dim>
+void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const VectorX& phi, const LatticeSigns<Dim>& signs, VectorX& out,
+                             std::array<WrittenBox<Dim>, Dim>* written) {
+  face_negative_fractions<Dim>(grid, lattice, whole_lattice_values(lattice, phi), signs, out,
+                               written);
 }
 
 template <int Dim>
@@ -914,6 +971,26 @@ void extend_liquid_into_solids_in_box(const MacGrid<Dim>& grid, const VectorX& l
   template void face_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
                                            const VectorX&, const LatticeSigns<D>&, VectorX&,      \
                                            std::array<WrittenBox<D>, D>*);                        \
+  template std::pair<VecI<D>, VecI<D>> negative_point_box_in<D>(                                \
+      const SampleLattice<D>&, const LatticeValues<D>&, VecI<D>, VecI<D>);                        \
+  template void classify_lattice_cells_searching<D>(const MacGrid<D>&, const SampleLattice<D>&,   \
+                                                    const LatticeValues<D>&, const VecI<D>&,      \
+                                                    const VecI<D>&, LatticeSigns<D>&);            \
+  template void classify_lattice_cells_in_box<D>(const MacGrid<D>&, const SampleLattice<D>&,      \
+                                                 const LatticeValues<D>&, const VecI<D>&,         \
+                                                 const VecI<D>&, LatticeSigns<D>&);               \
+  template void control_volume_negative_fractions<D>(                                            \
+      const MacGrid<D>&, const SampleLattice<D>&, const LatticeValues<D>&, const LatticeSigns<D>&, \
+      const VecI<D>&, const VecI<D>&, double*, WrittenBox<D>*);                                  \
+  template void control_volume_negative_fractions<D>(                                            \
+      const MacGrid<D>&, const SampleLattice<D>&, const LatticeValues<D>&, const LatticeSigns<D>&, \
+      const std::vector<VecI<D>>&, const std::vector<VecI<D>>&, const std::vector<double*>&);      \
+  template void cell_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
+                                           const LatticeValues<D>&, const LatticeSigns<D>&,       \
+                                           VectorX&, WrittenBox<D>*);                             \
+  template void face_negative_fractions<D>(const MacGrid<D>&, const SampleLattice<D>&,            \
+                                           const LatticeValues<D>&, const LatticeSigns<D>&,       \
+                                           VectorX&, std::array<WrittenBox<D>, D>*);              \
   template void clamp_liquid_face_weights_in_place<D>(const MacGrid<D>&, VectorX&,                \
                                                       const VectorX&);                            \
   template void clamp_liquid_face_weights_in_place<D>(const MacGrid<D>&, VectorX&,                \

@@ -23,6 +23,7 @@
 #include "reference/core/parallel.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
+#include "reference/grid/boxed_lattice.hpp"
 #include "reference/grid/mac_grid.hpp"
 
 namespace monolith {
@@ -215,6 +216,47 @@ void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLat
                                        const std::vector<VecI<Dim>>& dims,
                                        const std::vector<VecI<Dim>>& lower_offsets,
                                        const std::vector<double*>& out);
+
+/// The forms above and below of a level set stored over a box (LatticeValues, boxed_lattice.hpp:
+/// a BoxedLattice's view, or whole_lattice_values of a vector): the same arithmetic with the
+/// view's strides. Every point they read must lie in the stored box: the search box of
+/// negative_point_box_in; the corners of the lattice cells with a corner in the point box of
+/// classify_lattice_cells_in_box (that box and one point around it); the corners of the mixed
+/// cells for the fractions (which the classes' memo holds when made from the same view).
+/// (The whole-lattice VectorX forms are these with whole_lattice_values.)
+template <int Dim>
+std::pair<VecI<Dim>, VecI<Dim>> negative_point_box_in(const SampleLattice<Dim>& lattice,
+                                                      const LatticeValues<Dim>& phi,
+                                                      VecI<Dim> search_lo, VecI<Dim> search_hi);
+template <int Dim>
+void classify_lattice_cells_searching(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                      const LatticeValues<Dim>& phi, const VecI<Dim>& search_lo,
+                                      const VecI<Dim>& search_hi, LatticeSigns<Dim>& signs);
+template <int Dim>
+void classify_lattice_cells_in_box(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                   const LatticeValues<Dim>& phi, const VecI<Dim>& point_lo,
+                                   const VecI<Dim>& point_hi, LatticeSigns<Dim>& signs);
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const LatticeValues<Dim>& phi,
+                                       const LatticeSigns<Dim>& signs, const VecI<Dim>& dims,
+                                       const VecI<Dim>& lower_offset, double* out,
+                                       WrittenBox<Dim>* written = nullptr);
+template <int Dim>
+void control_volume_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                                       const LatticeValues<Dim>& phi,
+                                       const LatticeSigns<Dim>& signs,
+                                       const std::vector<VecI<Dim>>& dims,
+                                       const std::vector<VecI<Dim>>& lower_offsets,
+                                       const std::vector<double*>& out);
+template <int Dim>
+void cell_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs,
+                             VectorX& out, WrittenBox<Dim>* written = nullptr);
+template <int Dim>
+void face_negative_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
+                             const LatticeValues<Dim>& phi, const LatticeSigns<Dim>& signs,
+                             VectorX& out, std::array<WrittenBox<Dim>, Dim>* written = nullptr);
 
 /// Signed distance to the union of the solids, shifted inward by the shrinkage zeta of section
 /// 4.4.6: returns min_k d_k(x) + shrink_in_metres at every lattice point (positive outside the

@@ -2751,22 +2751,46 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
                            const std::array<BoundaryType, 2 * Dim>& boundary,
                            const SolidField<Dim>& solids, VectorX& phi,
                            LiquidPhiBand<Dim>& band) {
-  const int nl = lattice.size();
+  // the boxed form over the whole lattice, in phi's own buffer
+  BoxedLattice<Dim> whole;
+  whole.values.swap(phi);
+  liquid_phi_on_lattice(particles, grid, lattice, boundary, solids, whole, band, 0,
+                        std::numeric_limits<double>::infinity());
+  phi.swap(whole.values);
+}
+
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, BoxedLattice<Dim>& phi,
+                           LiquidPhiBand<Dim>& band, int margin, double boxed_from) {
   band = LiquidPhiBand<Dim>();
+  const VecI<Dim> last = lattice.dims - VecI<Dim>::Ones();
+  // the stored box: the band grown by `margin` points, or the whole lattice
+  const auto store = [&](double background) {
+    if (background >= boxed_from && band.empty())
+      phi.set_box(lattice.dims, VecI<Dim>::Zero(), -VecI<Dim>::Ones(), background);
+    else if (background >= boxed_from)
+      phi.set_box(lattice.dims, band.lo - VecI<Dim>::Constant(margin),
+                  band.hi + VecI<Dim>::Constant(margin), background);
+    else
+      phi.set_box(lattice.dims, VecI<Dim>::Zero(), last, background);
+    fill_in_parallel(phi.values.data(), static_cast<long>(phi.values.size()), background);
+  };
   if (particles.size() == 0) {
-    phi.setConstant(nl, 3.0 * grid.dx());
     band.background = 3.0 * grid.dx();
+    store(band.background);
     return;
   }
   TiledLattice<Dim, double, Dim + 2> acc;
   const double max_support = surface_sums(particles, grid, lattice, boundary, solids, acc);
   // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
   // (every point outside the tiles)
-  phi.resize(nl);
-  fill_in_parallel(phi.data(), nl, max_support);
   band.background = max_support;
   const int slots = acc.num_tile_slots();
-  // the box of the points written, per thread then merged (a min and max: any split gives it)
+  // the box of the points with a value of their own, per thread then merged (a min and max: any
+  // split gives it), before the store is sized to it
   const int threads = process_threads();
   std::vector<VecI<Dim>> lo(threads, lattice.dims), hi(threads, -VecI<Dim>::Ones());
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -2775,7 +2799,6 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
     VecI<Dim>& thi = hi[omp_get_thread_num()];
     acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
       if (sum[0] > 0.0) {
-        phi[lattice.index(c)] = surface_phi(lattice, c, sum);
         tlo = tlo.cwiseMin(c);
         thi = thi.cwiseMax(c);
       }
@@ -2785,6 +2808,14 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   for (int t = 0; t < threads; ++t) {
     band.lo = band.lo.cwiseMin(lo[t]);
     band.hi = band.hi.cwiseMax(hi[t]);
+  }
+  store(max_support);
+  double* values = phi.values.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int tile = 0; tile < slots; ++tile) {
+    acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
+      if (sum[0] > 0.0) values[phi.entry(c)] = surface_phi(lattice, c, sum);
+    });
   }
 }
 
@@ -2838,6 +2869,11 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                        const SampleLattice<D>&,                                    \
                                        const std::array<BoundaryType, 2 * D>&,                     \
                                        const SolidField<D>&, VectorX&, LiquidPhiBand<D>&);         \
+  template void liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                     \
+                                       const SampleLattice<D>&,                                    \
+                                       const std::array<BoundaryType, 2 * D>&,                     \
+                                       const SolidField<D>&, BoxedLattice<D>&, LiquidPhiBand<D>&,  \
+                                       int, double);                                               \
   template VectorX liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                   \
                                          const SampleLattice<D>&,                                  \
                                          const std::array<BoundaryType, 2 * D>&,                   \

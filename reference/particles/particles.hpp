@@ -12,6 +12,7 @@
 #include "reference/fluid/liquid_spec.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
+#include "reference/grid/boxed_lattice.hpp"
 #include "reference/grid/mac_grid.hpp"
 
 namespace monolith {
@@ -268,6 +269,17 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
                            const SampleLattice<Dim>& lattice,
                            const std::array<BoundaryType, 2 * Dim>& boundary,
                            const SolidField<Dim>& solids, VectorX& phi, LiquidPhiBand<Dim>& band);
+/// The same level set stored over its band (issue 20, branch band19): when the background is at
+/// least `boxed_from`, `phi` keeps the band's box grown by `margin` points on every side
+/// (clamped to the lattice; empty with the band) and the background outside it, so the call
+/// fills and touches no lattice-sized vector; otherwise phi's box is the whole lattice (the
+/// same values as the VectorX form). Every stored value has the VectorX form's bits.
+template <int Dim>
+void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
+                           const SampleLattice<Dim>& lattice,
+                           const std::array<BoundaryType, 2 * Dim>& boundary,
+                           const SolidField<Dim>& solids, BoxedLattice<Dim>& phi,
+                           LiquidPhiBand<Dim>& band, int margin, double boxed_from);
 
 /// Largest particle speed (for the CFL condition).
 template <int Dim>

@@ -69,32 +69,72 @@ std::vector<double> to_std(const Vec<Dim>& x) {
   return std::vector<double>(x.data(), x.data() + Dim);
 }
 
-/// phi[k] = value(k) for every point k of the lattice box [lo, hi] (inclusive, clamped), on
-/// several threads (rows along x shared statically); every point whose bits change is listed
-/// with its old value in `undo` (one list per thread, cleared first), so that restore_points
-/// gives phi back exactly. The lists hold the changed points only: the level sets are changed
-/// in a band (issue 20: no second lattice-sized vector for a modified copy).
+/// phi(k) = value(k, phi(k)) for every point k of the lattice box [lo, hi] (inclusive, clamped to
+/// the lattice) of a level set stored over a box (BoxedLattice), on several threads (rows along
+/// x shared statically); every point whose bits change is listed with its entry and old value in
+/// `undo` (one list per thread, cleared first), so that restore_points gives phi back exactly.
+/// The lists hold the changed points only: the level sets are changed in a band (issue 20: no
+/// second lattice-sized vector for a modified copy). [lo, hi] must lie in phi's stored box
+/// (checked: std::logic_error).
 template <int Dim, class Value>
 void overwrite_in_box(const SampleLattice<Dim>& lattice, VecI<Dim> lo, VecI<Dim> hi,
-                      VectorX& phi, Value&& value,
+                      BoxedLattice<Dim>& phi, Value&& value,
                       std::vector<std::vector<std::pair<int, double>>>& undo) {
   const int threads = process_threads();
   if (static_cast<int>(undo.size()) < threads) undo.resize(threads);
   for (auto& list : undo) list.clear();
+  for (int a = 0; a < Dim; ++a) {
+    lo[a] = std::max(lo[a], 0);
+    hi[a] = std::min(hi[a], lattice.dims[a] - 1);
+    if (lo[a] > hi[a]) return;
+  }
+  if (!phi.holds_box(lo, hi))
+    throw std::logic_error("overwrite_in_box: the box is not in the level set's stored box");
+  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
+  row_dims[0] = 1;
+  const int rows = row_dims.prod(), nx = hi[0] - lo[0] + 1;
+  double* values = phi.values.data();
   // (rows on several threads, each thread listing the points it changed)
-  for_each_lattice_point_in_box(lattice, lo, hi, [&](int k) {
-    const double old = phi[k], v = value(k);
-    if (std::memcmp(&old, &v, sizeof(double)) == 0) return;
-    undo[omp_get_thread_num()].emplace_back(k, old);
-    phi[k] = v;
-  });
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int q = 0; q < rows; ++q) {
+    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+    const int k0 = lattice.index(c), e0 = phi.entry(c);
+    for (int x = 0; x < nx; ++x) {
+      const double old = values[e0 + x], v = value(k0 + x, old);
+      if (std::memcmp(&old, &v, sizeof(double)) == 0) continue;
+      undo[omp_get_thread_num()].emplace_back(e0 + x, old);
+      values[e0 + x] = v;
+    }
+  }
 }
 
 /// Undoes overwrite_in_box (each point is listed once, so the order does not matter).
-inline void restore_points(VectorX& phi,
-                           const std::vector<std::vector<std::pair<int, double>>>& undo) {
+template <int Dim>
+void restore_points(BoxedLattice<Dim>& phi,
+                    const std::vector<std::vector<std::pair<int, double>>>& undo) {
   for (const auto& list : undo)
-    for (const auto& [k, old] : list) phi[k] = old;
+    for (const auto& [e, old] : list) phi.values[e] = old;
+}
+
+/// Lattice points the liquid level set is stored beyond its band on every side (band19): the
+/// weights read the band and two points around it (liquid_weights_from_phi: the non-positive
+/// lattice cells of the extended level set start at most one point before the band, and the
+/// fluid level set is written and classified one point around their box and its far corners;
+/// docs/derivations.md, "The liquid level set stored over its band").
+inline constexpr int kLiquidPhiMargin = 2;
+
+/// Throws std::logic_error unless the lattice points [lo, hi] grown by `grow` points (clamped to
+/// the lattice; nothing when [lo, hi] is empty), which a reader of the level set reads, lie in
+/// its stored box (the readers of LatticeValues read through the box's strides: a point outside
+/// it would be another point's entry).
+template <int Dim>
+void require_stored(const BoxedLattice<Dim>& phi, VecI<Dim> lo, VecI<Dim> hi, int grow,
+                    const char* what) {
+  if ((lo.array() > hi.array()).any()) return;  // no point
+  lo = (lo - VecI<Dim>::Constant(grow)).cwiseMax(VecI<Dim>::Zero());
+  hi = (hi + VecI<Dim>::Constant(grow)).cwiseMin(phi.dims - VecI<Dim>::Ones());
+  if (!phi.holds_box(lo, hi))
+    throw std::logic_error(std::string(what) + ": reads the liquid level set outside its box");
 }
 
 /// A shape's signed distance where it matters: farther than `far` from its bounds box, the
@@ -450,8 +490,14 @@ void Simulation<Dim>::make_liquid_phi() {
   // mirrored across the walls and the solids, so liquid against either reads as liquid up to
   // it (docs/particles.md, "Still water")
   // (written into liquid_phi_'s own buffer: no second lattice-sized vector during the call)
+  // Stored over its band (issue 20, band19): the band's box and kLiquidPhiMargin points around
+  // it, which hold every point the weights read (liquid_weights_from_phi); the whole lattice when
+  // those passes are not restricted to the band (`banded` there) or divergence_free_air reads it
+  const bool boxed = switches_.restricted_passes && !switches_.divergence_free_air;
   liquid_phi_on_lattice(particles_, grid_, lattice_, boundary_, solids_, liquid_phi_,
-                        liquid_band_);
+                        liquid_band_, kLiquidPhiMargin,
+                        boxed ? kLiquidSolidReach * grid_.dx()
+                              : std::numeric_limits<double>::infinity());
 }
 
 template <int Dim>
@@ -466,7 +512,7 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
   // lattice-sized copy is made (541 MB at the paper's 256x128x256 grid); the values the weights
   // read are those of extend_liquid_into_solids_in_box
   const bool solids = !solid_shapes_.empty() || coupled_;
-  const bool extend = solids && (solid_phi_.size() == liquid_phi_.size() ||
+  const bool extend = solids && (solid_phi_.size() == lattice_.size() ||
                                   solid_box_phi_.valid() || solid_scratch_.union_parts.valid());
   // The liquid's band (issue 20): outside the box of the points liquid_phi_on_lattice wrote,
   // the level set is its background value; when that is at least the extension's reach, the
@@ -484,12 +530,14 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
     const double dx = grid_.dx();
     // liquid_extended_into_solid, which reads only the solids' sign (solid_negative_at)
     overwrite_in_box<Dim>(lattice_, solid_lo_.cwiseMax(band_lo), solid_hi_.cwiseMin(band_hi),
-                          liquid_phi_, [&](int k) {
-      const double l = liquid_phi_[k];
+                          liquid_phi_, [&](int k, double l) {
       return l < reach && solid_negative_at(k) ? std::min(l, -0.5 * dx) : l;
     }, phi_undo_);
   }
-  const VectorX& phi = liquid_phi_;
+  // (the level set through its box's view; the classes read the band and one point around it,
+  // the fractions the corners of the mixed lattice cells among those)
+  require_stored(liquid_phi_, band_lo, band_hi, 1, "liquid_weights_from_phi");
+  const LatticeValues<Dim> phi = liquid_phi_.view();
   classify_lattice_cells_searching(grid_, lattice_, phi, band_lo, band_hi, liquid_signs_);
   // the points where the extended level set is negative (the box of its non-positive cells)
   const VecI<Dim> liquid_lo = liquid_signs_.lo, liquid_hi = liquid_signs_.hi + VecI<Dim>::Ones();
@@ -557,14 +605,14 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
         hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
       }
     if (extend)
-      overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
+      overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k, double l) {
         // where phi_L >= 0 and the solids' union is not negative, -phi_S <= 0 <= phi_L and the
         // maximum is phi_L itself (the union's value, closed forms per body, is not needed)
-        const double l = liquid_phi_[k];
         if (l >= 0.0 && !solid_negative_at(k)) return l;
         return std::max(l, -solid_phi_at(k));
       }, phi_undo_);
-    const VectorX& fluid_phi = liquid_phi_;
+    require_stored(liquid_phi_, liquid_lo, liquid_hi, 1, "liquid_weights_from_phi");
+    const LatticeValues<Dim> fluid_phi = liquid_phi_.view();
     classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
                                   liquid_signs_);
     cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
@@ -727,15 +775,16 @@ void Simulation<Dim>::liquid_volume_from_phi() {
   // box outside which the level set is nowhere negative gives the same classes
   // (classify_lattice_cells_in_box), and the fluid values are written in it and one point
   // around it (every corner read) as before: the same fractions, the same volume.
-  const bool extend = solid_phi_.size() == liquid_phi_.size() || solid_box_phi_.valid() ||
+  const bool extend = solid_phi_.size() == lattice_.size() || solid_box_phi_.valid() ||
                       solid_scratch_.union_parts.valid();
   VecI<Dim> band_lo = VecI<Dim>::Zero(), band_hi = lattice_.dims - VecI<Dim>::Ones();
   if (switches_.restricted_passes && liquid_band_.background > 0.0) {
     band_lo = liquid_band_.lo;
     band_hi = liquid_band_.hi;
   }
+  require_stored(liquid_phi_, band_lo, band_hi, 0, "liquid_volume_from_phi");
   const auto [liquid_lo, liquid_hi] =
-      negative_point_box_in<Dim>(lattice_, liquid_phi_, band_lo, band_hi);
+      negative_point_box_in<Dim>(lattice_, liquid_phi_.view(), band_lo, band_hi);
   VecI<Dim> lo = liquid_lo, hi = liquid_hi;
   if ((liquid_lo.array() <= liquid_hi.array()).all())
     for (int a = 0; a < Dim; ++a) {
@@ -743,13 +792,14 @@ void Simulation<Dim>::liquid_volume_from_phi() {
       hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
     }
   if (extend)
-    overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k) {
-      const double l = liquid_phi_[k];
+    overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k, double l) {
       if (l >= 0.0 && !solid_negative_at(k)) return l;
       return std::max(l, -solid_phi_at(k));
     }, phi_undo_);
-  classify_lattice_cells_in_box(grid_, lattice_, liquid_phi_, liquid_lo, liquid_hi, liquid_signs_);
-  cell_negative_fractions(grid_, lattice_, liquid_phi_, liquid_signs_, volume_cells_);
+  require_stored(liquid_phi_, liquid_lo, liquid_hi, 1, "liquid_volume_from_phi");
+  classify_lattice_cells_in_box<Dim>(grid_, lattice_, liquid_phi_.view(), liquid_lo, liquid_hi,
+                                     liquid_signs_);
+  cell_negative_fractions<Dim>(grid_, lattice_, liquid_phi_.view(), liquid_signs_, volume_cells_);
   if (extend) restore_points(liquid_phi_, phi_undo_);
   liquid_volume_ = volume_cells_.sum() * grid_.cell_volume();
   volume_cells_ = VectorX();
@@ -1194,7 +1244,7 @@ void Simulation<Dim>::release_liquid_phi() {
   // a lattice-sized vector alive and unread (541 MB at the paper's 256x128x256 grid).
   // (The guard's velocity copy, reached_u_, is dead here too, but releasing it left the paper
   // grid's peak as it was: not done)
-  if (!switches_.divergence_free_air) liquid_phi_ = VectorX();
+  if (!switches_.divergence_free_air) liquid_phi_.release();
 }
 
 template <int Dim>
@@ -1427,7 +1477,10 @@ void Simulation<Dim>::divergence_free_air() {
   // face_flags_ holds the faces the extrapolation reached (or trusted)
   std::vector<char> trusted;
   trusted_faces(trusted);
-  divergence_free_air_velocity(grid_, lattice_, liquid_phi_, weights_.fluid_face, trusted,
+  // (with this switch the level set is stored over the whole lattice: make_liquid_phi)
+  if (!liquid_phi_.whole())
+    throw std::logic_error("divergence_free_air: the liquid level set is not whole");
+  divergence_free_air_velocity(grid_, lattice_, liquid_phi_.values, weights_.fluid_face, trusted,
                                face_flags_, layers,
                                switches_.divergence_free_surface_cells ? 1.0 : 0.0, u_);
 }
@@ -2252,11 +2305,11 @@ void Simulation<Dim>::update_moving_solids() {
   // the union's level set is written into solid_phi_'s buffer (lent to solids for the call:
   // solid_weights overwrites every entry, and nothing reads solids.lattice_phi after it), so
   // one lattice-sized vector serves both
-  // When the union's last buffer is gone (update_liquid_weights releases it), the storage of
-  // the liquid level set is lent instead: update_liquid_weights always follows this call and
-  // makes that level set anew (nothing reads it in between), so while the solids' weights are
-  // made only one lattice-sized vector is alive (541 MB at the paper's 256x128x256 grid)
-  solids.lattice_phi.swap(solid_phi_.size() > 0 ? solid_phi_ : liquid_phi_);
+  // When the union's last buffer is gone (update_liquid_weights releases it), nothing is lent:
+  // the liquid level set is stored over its band (band19), not in a lattice-sized buffer, and
+  // solid_weights leaves the lent buffer unwritten when it keeps the union per body (it sizes
+  // it itself otherwise)
+  solids.lattice_phi.swap(solid_phi_);
   // W_F^u likewise: weights_.fluid_face's buffer is lent as the output (solid_weights overwrites
   // every entry) and comes back below, so one face-sized vector holds it (solids.fluid_face is
   // left empty: read by nothing after this)
@@ -2284,20 +2337,16 @@ void Simulation<Dim>::update_moving_solids() {
   // The union is read from here on only by update_liquid_weights, which follows: in the box of
   // the bodies (their bounds grown by 2 dx, where solid_weights evaluates them) it is kept, and
   // outside it is the closed form solid_weights wrote there (BoxedUnionPhi: the same bits). The
-  // lattice-sized buffer goes back to liquid_phi_, which update_liquid_weights overwrites with
-  // the new liquid level set: one lattice-sized vector for both level sets instead of two (541
-  // MB at the paper's 256x128x256 grid, alive at the step's memory peak)
+  // lattice-sized buffer goes back to the heap (it went to the liquid level set, which is now
+  // stored over its band: band19)
   if (solid_scratch_.union_parts.valid()) {
-    // the union is kept per body: the lent buffer (unwritten) goes back to the liquid level set
-    if (liquid_phi_.size() == 0) liquid_phi_.swap(solid_phi_);
+    // the union is kept per body: the lent buffer (unwritten) is not needed
     solid_phi_ = VectorX();
   } else {
     std::vector<Box<Dim>> bounds;
     for (const CouplingBody<Dim>& b : bodies) bounds.push_back(b.shape->bounds());
-    if (solid_box_phi_.assign(lattice_, bounds, 2.0 * grid_.dx(), shrink, solid_phi_)) {
-      if (liquid_phi_.size() == 0) liquid_phi_.swap(solid_phi_);
+    if (solid_box_phi_.assign(lattice_, bounds, 2.0 * grid_.dx(), shrink, solid_phi_))
       solid_phi_ = VectorX();
-    }
   }
   stress_fluid_ = VectorX();
   // (without stress solves W_F^s was not made: solids.fluid_stress is empty, see above)

@@ -305,8 +305,10 @@ class Simulation : public AnySimulation {
   const Particles<Dim>& particles() const { return particles_; }
   /// Liquid signed distance of the particles (negative inside) on half_lattice(grid()), as a
   /// frame's end (and the set-up) leaves it; empty while a frame is stopped between two steps
-  /// (a step releases it after its weights: release_liquid_phi).
-  const VectorX& liquid_phi() const { return liquid_phi_; }
+  /// (a step releases it after its weights: release_liquid_phi). Every lattice point's value,
+  /// made on demand from the band the level set is stored in (liquid_phi_; a lattice-sized
+  /// vector per call).
+  VectorX liquid_phi() const { return liquid_phi_.materialise(); }
   /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis; at a frame's end
   /// those of the final state (made here when the frame's end left them to the next step:
   /// complete_frame_end_weights).
@@ -752,7 +754,11 @@ class Simulation : public AnySimulation {
   VectorX previous_shear_rate_;
   // the liquid: particles, their level set and volume, and the grid fields of the last step
   Particles<Dim> particles_;
-  VectorX liquid_phi_;
+  /// the liquid level set on half_lattice(grid_), stored over its band (issue 20, band19): the
+  /// box of liquid_band_ grown by kLiquidPhiMargin points, the background outside; the whole
+  /// lattice when the passes are not restricted to the band (restricted_passes off, the
+  /// divergence_free_air switch, a background below the extension's reach)
+  BoxedLattice<Dim> liquid_phi_;
   double liquid_volume_ = 0.0;  ///< sum W_L^p dx^Dim of liquid_phi_ (not extended)
   /// (the faces' densities of particles_to_grid go straight into weights_.face_density)
   VectorX u_, face_mass_, pressure_, stress_;

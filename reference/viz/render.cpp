@@ -11,7 +11,8 @@ template <int Dim>
 RenderView<Dim> render_view(const Simulation<Dim>& sim) {
   RenderView<Dim> view;
   view.grid = &sim.grid();
-  view.liquid_phi = &sim.liquid_phi();
+  view.liquid_phi_store = std::make_shared<const VectorX>(sim.liquid_phi());
+  view.liquid_phi = view.liquid_phi_store.get();
   view.particles = &sim.particles().x;
   view.velocity = &sim.velocity();
   view.pressure = &sim.pressure();

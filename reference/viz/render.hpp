@@ -6,6 +6,7 @@
 /// the 3D ray marcher in dim3/render_3d.cpp.
 
 #include <array>
+#include <memory>
 #include <vector>
 
 #include "reference/core/common.hpp"
@@ -30,6 +31,10 @@ struct RenderView {
   const MacGrid<Dim>* grid = nullptr;
   /// Liquid signed distance (negative inside) on half_lattice(*grid).
   const VectorX* liquid_phi = nullptr;
+  /// render_view's whole-lattice copy of the simulation's level set, which is stored over its
+  /// band (Simulation::liquid_phi(): made on demand); liquid_phi points into it (shared: the
+  /// view stays valid when copied or moved)
+  std::shared_ptr<const VectorX> liquid_phi_store;
   const std::vector<Vec<Dim>>* particles = nullptr;
   const VectorX* velocity = nullptr;  ///< face field
   const VectorX* pressure = nullptr;  ///< cell field (zero in air)
@@ -42,7 +47,8 @@ struct RenderView {
 
 /// The view of a simulation's current state: its grid, liquid level set, particles, velocity,
 /// pressure and cell viscosity; its static solids (brown), dynamic bodies (blue) and kinematic
-/// bodies (green) at their current pose. Holds references into `sim`.
+/// bodies (green) at their current pose. Holds references into `sim` (and its own copy of the
+/// liquid level set).
 template <int Dim>
 RenderView<Dim> render_view(const Simulation<Dim>& sim);
 

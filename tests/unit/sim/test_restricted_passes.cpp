@@ -13,6 +13,7 @@
 
 #include "reference/app/scene_file.hpp"
 #include "reference/fluid/pressure_projection.hpp"
+#include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/particles/particles.hpp"
 #include "reference/sim/simulation.hpp"
@@ -131,6 +132,73 @@ void check_liquid_band(int n) {
   liquid_phi_on_lattice(Particles<Dim>{}, grid, lattice, boundary, SolidField<Dim>{}, phi, band);
   CHECK(band.empty());
   CHECK(same_bits(phi[0], band.background));
+}
+
+/// The level set stored over its band (band19): the box is the band grown by `margin` points
+/// (clamped), the values there and the background elsewhere are the dense vector's bits, and
+/// the classes and the cell, face and stress fractions read through the box's view are those of
+/// the dense vector (a reader reading outside the box would read another point's entry).
+template <int Dim>
+void check_boxed_liquid_phi(int n) {
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const SampleLattice<Dim> lattice = half_lattice(grid);
+  const Vec<Dim> centre = Vec<Dim>::Constant(0.3);
+  auto ball = std::make_shared<TestBall<Dim>>(centre, 0.12);
+  const Particles<Dim> particles = seed_particles<Dim>(
+      grid, {water_at<Dim>(centre, 0.12)}, {ball}, SolidField<Dim>{}, Dim == 2 ? 4 : 8, 5u);
+  REQUIRE(particles.size() > 0);
+  const auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+  VectorX plain;
+  LiquidPhiBand<Dim> plain_band, band;
+  liquid_phi_on_lattice(particles, grid, lattice, boundary, SolidField<Dim>{}, plain, plain_band);
+  const int margin = 2;
+  const double reach = kLiquidSolidReach * grid.dx();
+  BoxedLattice<Dim> boxed;
+  liquid_phi_on_lattice(particles, grid, lattice, boundary, SolidField<Dim>{}, boxed, band, margin,
+                        reach);
+  REQUIRE(!band.empty());
+  CHECK((band.lo.array() == plain_band.lo.array()).all());
+  CHECK((band.hi.array() == plain_band.hi.array()).all());
+  CHECK(same_bits(band.background, plain_band.background));
+  const VecI<Dim> last = lattice.dims - VecI<Dim>::Ones();
+  CHECK((boxed.lo.array() == (band.lo - VecI<Dim>::Constant(margin)).cwiseMax(VecI<Dim>::Zero()).array()).all());
+  CHECK((boxed.hi.array() == (band.hi + VecI<Dim>::Constant(margin)).cwiseMin(last).array()).all());
+  CHECK(boxed.values.size() < lattice.size() / 2);
+  CHECK(!boxed.whole());
+  CHECK(monolith::testing::differing(boxed.materialise(), plain) == 0);
+  // the readers through the view: the same classes and fractions as through the dense vector
+  LatticeSigns<Dim> dense_signs, boxed_signs;
+  classify_lattice_cells_searching(grid, lattice, plain, band.lo, band.hi, dense_signs);
+  classify_lattice_cells_searching<Dim>(grid, lattice, boxed.view(), band.lo, band.hi, boxed_signs);
+  REQUIRE(dense_signs.any_negative());
+  CHECK(dense_signs.all_classes() == boxed_signs.all_classes());
+  VectorX dense_cells, boxed_cells, dense_faces, boxed_faces, dense_stress, boxed_stress;
+  cell_negative_fractions(grid, lattice, plain, dense_signs, dense_cells);
+  cell_negative_fractions<Dim>(grid, lattice, boxed.view(), boxed_signs, boxed_cells);
+  face_negative_fractions(grid, lattice, plain, dense_signs, dense_faces);
+  face_negative_fractions<Dim>(grid, lattice, boxed.view(), boxed_signs, boxed_faces);
+  const StressGrid<Dim> stress(grid);
+  stress_negative_fractions(stress, lattice, plain, dense_signs, dense_stress);
+  stress_negative_fractions<Dim>(stress, lattice, boxed.view(), boxed_signs, boxed_stress);
+  CHECK(dense_cells.sum() > 0.0);
+  CHECK(monolith::testing::differing(dense_cells, boxed_cells) == 0);
+  CHECK(monolith::testing::differing(dense_faces, boxed_faces) == 0);
+  CHECK(monolith::testing::differing(dense_stress, boxed_stress) == 0);
+  // below the background's threshold: the whole lattice, the dense vector's bits
+  liquid_phi_on_lattice(particles, grid, lattice, boundary, SolidField<Dim>{}, boxed, band, margin,
+                        std::numeric_limits<double>::infinity());
+  CHECK(boxed.whole());
+  CHECK(monolith::testing::differing(boxed.values, plain) == 0);
+  // no particle: an empty box, the background everywhere
+  liquid_phi_on_lattice(Particles<Dim>{}, grid, lattice, boundary, SolidField<Dim>{}, boxed, band,
+                        margin, reach);
+  CHECK(boxed.box_empty());
+  CHECK(boxed.values.size() == 0);
+  const VectorX empty = boxed.materialise();
+  REQUIRE(empty.size() == lattice.size());
+  CHECK(same_bits(empty[lattice.size() - 1], 3.0 * grid.dx()));
+  boxed.release();
+  CHECK(boxed.materialise().size() == 0);
 }
 
 using monolith::testing::differing;  // and, for particle positions:
@@ -317,6 +385,12 @@ TEST_CASE("negative points searched in a box: the dense box and classes", "[unit
 TEST_CASE("liquid level set band: same values, background outside", "[unit]") {
   check_liquid_band<2>(32);
   check_liquid_band<3>(20);
+}
+
+TEST_CASE("liquid level set stored over its band: the dense bits through the view (band19)",
+          "[unit]") {
+  check_boxed_liquid_phi<2>(32);
+  check_boxed_liquid_phi<3>(20);
 }
 
 TEST_CASE("restricted passes give the dense passes' bits (Fig. 17)", "[unit]") {
