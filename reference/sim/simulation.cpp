@@ -2946,7 +2946,18 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     }
     const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
                                   : (coupled_ ? solid_velocity(x, bounds) : Vec<Dim>::Zero());
-    if (keep) solid_frame_[j] = {n, vs, u_[f]};
+    const double own = u_[f];
+    if (keep) solid_frame_[j] = {n, vs, own};
+    // A face the guard of advect left NaN (not reached: std::numeric_limits' quiet NaN) is one of
+    // the corners its component's interpolation reads (x is its centre; a weight of 0 still
+    // gives NaN), so v[axis] and then vn are that NaN, passed on unchanged by the arithmetic
+    // (no invalid operation makes a new one), and the value is vn: the face's own value. It is
+    // kept without the interpolation (about half of the bunny's shell faces once the liquid
+    // has landed, every one while it falls)
+    if (std::isnan(own)) {
+      values[j] = own;
+      continue;
+    }
     Vec<Dim> v = grid_.interpolate_velocity(u_, x);
     const double vn = (v - vs).dot(n);
     if (vn < 0.0) v -= vn * n;
