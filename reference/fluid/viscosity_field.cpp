@@ -125,14 +125,16 @@ void sample_viscosity_into(const MacGrid<Dim>& grid, const Vec<Dim>& shift, cons
           !owned(st[kLast].index[1] - lo[kLast]))
         continue;
       for (int a = 0; a < kLast; ++a) st[a] = axis_stencil(xw, a);
-      // MacGrid::stencil's corners and weights, the index in the box's lattice
+      // MacGrid::stencil's corners and weights, the index in the box's lattice (its layer, the
+      // index over a plane, is the corner's index along the last axis: no division)
       for (int corner = 0; corner < kCorners; ++corner) {
         int index = 0;
         double w = 1.0;
         for (int a = Dim - 1; a >= 0; --a)
           index = index * bdims[a] + (st[a].index[(corner >> a) & 1] - lo[a]);
         for (int a = 0; a < Dim; ++a) w *= st[a].weight[(corner >> a) & 1];
-        if (w == 0.0 || !owned(static_cast<int>(index / plane))) continue;
+        if (w == 0.0) continue;
+        if (slabs > 1 && !owned(st[kLast].index[(corner >> kLast) & 1] - lo[kLast])) continue;
         mass[index] += w * mp;
         mass_eta[index] += w * mp * eta;
       }
