@@ -31,7 +31,8 @@ namespace {
 /// visits samples at most r axis steps from a reached one), so it takes the liquid's mean, which
 /// the last pass writes. Inside, the box's own lattice in the same index order (the last axis
 /// slowest) holds the same sums in the same particle order, the same rings in the same order:
-/// the same bits as the splat over the whole lattice (docs/derivations.md, departures item 19).
+/// the same bits as the splat over the whole lattice (docs/derivations.md, "Passes restricted to
+/// boxes").
 /// The reached box comes from the particles' bounding box: the lattice coordinate
 /// (x - origin) / dx - shift, floor, clamp and min of axis_stencil are monotone, so the stencil
 /// of the smallest and of the largest coordinate bound every particle's stencil on that axis.
