@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
 
 #include "reference/core/parallel.hpp"
 
@@ -18,27 +20,70 @@ std::vector<double> liquid_viscosities(const std::vector<LiquidSpec>& liquids) {
   return eta;
 }
 
+namespace {
+
+/// sample_viscosity written into out[0, dims.prod()) (a component's segment of stress_viscosity's
+/// vector, or a vector of its own).
+///
+/// Every pass but the last visits the box of samples a particle's stencil reaches, grown by
+/// kViscosityFillLayers on every side (the whole axis when it is periodic): a sample outside it
+/// is not reached (no particle's stencil lies there) and no ring of the fill reaches it (ring r
+/// visits samples at most r axis steps from a reached one), so it takes the liquid's mean, which
+/// the last pass writes. Inside, the box's own lattice in the same index order (the last axis
+/// slowest) holds the same sums in the same particle order, the same rings in the same order:
+/// the same bits as the splat over the whole lattice (docs/derivations.md, "Passes restricted to
+/// boxes").
+/// The reached box comes from the particles' bounding box: the lattice coordinate
+/// (x - origin) / dx - shift, floor, clamp and min of axis_stencil are monotone, so the stencil
+/// of the smallest and of the largest coordinate bound every particle's stencil on that axis.
 template <int Dim>
-VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const VecI<Dim>& dims,
-                         const Particles<Dim>& particles, const std::vector<double>& liquid_eta) {
+void sample_viscosity_into(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const VecI<Dim>& dims,
+                           const Particles<Dim>& particles, const std::vector<double>& liquid_eta,
+                           double* out) {
   constexpr int kCorners = 1 << Dim;
   constexpr int kLast = Dim - 1;
   const int n = dims.prod();
   const long np = static_cast<long>(particles.size());
+  // the particles' bounding box (non-periodic axes; a non-finite coordinate: the whole lattice)
+  Vec<Dim> xmin = Vec<Dim>::Constant(std::numeric_limits<double>::infinity());
+  Vec<Dim> xmax = Vec<Dim>::Constant(-std::numeric_limits<double>::infinity());
+  bool finite = true;
+  for (long p = 0; p < np; ++p) {
+    const Vec<Dim>& x = particles.x[p];
+    for (int a = 0; a < Dim; ++a) {
+      finite = finite && std::isfinite(x[a]);
+      xmin[a] = std::min(xmin[a], x[a]);
+      xmax[a] = std::max(xmax[a], x[a]);
+    }
+  }
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = dims - VecI<Dim>::Ones();
+  if (finite && np > 0)
+    for (int a = 0; a < Dim; ++a) {
+      if (grid.periodic(a)) continue;
+      const auto coordinate = [&](double x) { return (x - grid.origin()[a]) / grid.dx() - shift[a]; };
+      lo[a] = std::max(grid.axis_stencil(a, coordinate(xmin[a]), dims[a]).index[0] -
+                           kViscosityFillLayers, 0);
+      hi[a] = std::min(grid.axis_stencil(a, coordinate(xmax[a]), dims[a]).index[1] +
+                           kViscosityFillLayers, dims[a] - 1);
+    }
+  const VecI<Dim> bdims = hi - lo + VecI<Dim>::Ones();
+  const int bn = np > 0 ? bdims.prod() : 0;
   // mass-weighted sums over the particles. On several threads (one called from the outside,
   // not from stress_viscosity's components, which run side by side on one thread each): the
-  // samples are split into slabs of layers of the last axis (contiguous index ranges, the last
-  // axis being the slowest), one per thread; each thread walks all particles in order, skips
+  // box's samples are split into slabs of layers of the last axis (contiguous index ranges, the
+  // last axis being the slowest), one per thread; each thread walks all particles in order, skips
   // those whose stencil misses its slab and adds only into its own samples, so every sample sums
   // its particles in the order of the serial loop (the same bits for any team). The slabs cut
   // the particles' layers into equal counts (any bounds give the same bits). The totals are
   // summed in particle order by the first slab's thread.
-  const int layers = dims[kLast];
-  const long plane = n / std::max(1, layers);
-  const double shift_last = shift[kLast];
-  const auto last_stencil = [&](long p) {
-    const double xl = grid.wrap_position(particles.x[p])[kLast];
-    return grid.axis_stencil(kLast, (xl - grid.origin()[kLast]) / grid.dx() - shift_last, layers);
+  const int layers = bn > 0 ? bdims[kLast] : 0;
+  const long plane = bn / std::max(1, layers);
+  using AxisStencil = typename MacGrid<Dim>::AxisStencil;
+  const auto axis_stencil = [&](const Vec<Dim>& xw, int a) {
+    return grid.axis_stencil(a, (xw[a] - grid.origin()[a]) / grid.dx() - shift[a], dims[a]);
+  };
+  const auto last_layer = [&](long p) {
+    return axis_stencil(grid.wrap_position(particles.x[p]), kLast).index[0] - lo[kLast];
   };
   const int slabs = static_cast<int>(std::max(1L, std::min<long>(team_threads(np), layers)));
   std::vector<int> slab_first(slabs + 1, 0);
@@ -46,7 +91,7 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
   if (slabs > 1) {
     std::vector<int> layer_of(np);
 #pragma omp parallel for schedule(static) num_threads(slabs)
-    for (long p = 0; p < np; ++p) layer_of[p] = last_stencil(p).index[0];
+    for (long p = 0; p < np; ++p) layer_of[p] = last_layer(p);
     std::vector<long> histogram(layers + 1, 0);
     for (long p = 0; p < np; ++p) ++histogram[layer_of[p] + 1];
     for (int l = 0; l < layers; ++l) histogram[l + 1] += histogram[l];
@@ -57,7 +102,7 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
       slab_first[k] = std::max(l, slab_first[k - 1]);
     }
   }
-  VectorX mass(n), mass_eta(n);
+  std::vector<double> mass(bn), mass_eta(bn);
   double total_mass = 0.0, total_mass_eta = 0.0;
 #pragma omp parallel for schedule(static, 1) num_threads(slabs)
   for (int slab = 0; slab < slabs; ++slab) {
@@ -65,8 +110,7 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
     std::fill(mass.data() + first * plane, mass.data() + end * plane, 0.0);
     std::fill(mass_eta.data() + first * plane, mass_eta.data() + end * plane, 0.0);
     const auto owned = [&](int layer) { return layer >= first && layer < end; };
-    std::array<int, kCorners> idx;
-    std::array<double, kCorners> w;
+    std::array<AxisStencil, Dim> st;
     for (long p = 0; p < np; ++p) {
       const int liquid = particles.liquid[p];
       const double eta =
@@ -76,51 +120,62 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
         total_mass += mp;
         total_mass_eta += mp * eta;
       }
-      if (slabs > 1) {
-        const auto st = last_stencil(p);
-        if (!owned(st.index[0]) && !owned(st.index[1])) continue;
-      }
-      grid.stencil(grid.wrap_position(particles.x[p]), shift, dims, idx, w);
-      for (int k = 0; k < kCorners; ++k) {
-        if (w[k] == 0.0 || !owned(static_cast<int>(idx[k] / plane))) continue;
-        mass[idx[k]] += w[k] * mp;
-        mass_eta[idx[k]] += w[k] * mp * eta;
+      const Vec<Dim> xw = grid.wrap_position(particles.x[p]);
+      st[kLast] = axis_stencil(xw, kLast);
+      if (slabs > 1 && !owned(st[kLast].index[0] - lo[kLast]) &&
+          !owned(st[kLast].index[1] - lo[kLast]))
+        continue;
+      for (int a = 0; a < kLast; ++a) st[a] = axis_stencil(xw, a);
+      // MacGrid::stencil's corners and weights, the index in the box's lattice (its layer, the
+      // index over a plane, is the corner's index along the last axis: no division)
+      for (int corner = 0; corner < kCorners; ++corner) {
+        int index = 0;
+        double w = 1.0;
+        for (int a = Dim - 1; a >= 0; --a)
+          index = index * bdims[a] + (st[a].index[(corner >> a) & 1] - lo[a]);
+        for (int a = 0; a < Dim; ++a) w *= st[a].weight[(corner >> a) & 1];
+        if (w == 0.0) continue;
+        if (slabs > 1 && !owned(st[kLast].index[(corner >> kLast) & 1] - lo[kLast])) continue;
+        mass[index] += w * mp;
+        mass_eta[index] += w * mp * eta;
       }
     }
   }
-  VectorX eta(n);
-  std::vector<char> known(n);  // (each entry written below)
+  std::vector<double> eta(bn);
+  std::vector<char> known(bn);  // (each entry written below)
   // the samples a particle reached, in index order (fixed blocks joined in order)
-  std::vector<int> frontier = gather_in_order<int>(n, [&](int i, std::vector<int>& out) {
+  std::vector<int> frontier = gather_in_order<int>(bn, [&](int i, std::vector<int>& list) {
     if (mass[i] > 0.0) {
       eta[i] = mass_eta[i] / mass[i];
       known[i] = 1;
-      out.push_back(i);
+      list.push_back(i);
     } else {
       eta[i] = 0.0;
       known[i] = 0;
     }
   });
-  // the axis neighbour of c in direction s along a, -1 outside a non-periodic lattice
+  // the axis neighbour of c in direction s along a within the box, -1 outside a non-periodic
+  // lattice (a periodic axis is whole in the box; beyond the box on another axis no sample is
+  // known or a candidate: see above)
   auto neighbour = [&](const VecI<Dim>& c, int a, int s) {
     VecI<Dim> d = c;
     d[a] += s;
     if (grid.periodic(a))
-      d[a] = (d[a] % dims[a] + dims[a]) % dims[a];
-    else if (d[a] < 0 || d[a] >= dims[a])
+      d[a] = (d[a] % bdims[a] + bdims[a]) % bdims[a];
+    else if (d[a] < 0 || d[a] >= bdims[a])
       return -1;
-    return lattice_index<Dim>(d, dims);
+    return lattice_index<Dim>(d, bdims);
   };
   // fill: unreached samples take the mean of their reached axis neighbours, ring by ring. Only
   // the unreached neighbours of the last ring are visited (the lattice is mostly far from the
   // liquid); each takes the same sum in the same neighbour order as a sweep over the whole
   // lattice would, and reads only samples known before the ring.
-  std::vector<char> queued(n, 0);
+  std::vector<char> queued(bn, 0);
   std::vector<int> candidates, filled;
   for (int layer = 0; layer < kViscosityFillLayers && !frontier.empty(); ++layer) {
     candidates.clear();
     for (int i : frontier) {
-      const VecI<Dim> c = lattice_coord<Dim>(i, dims);
+      const VecI<Dim> c = lattice_coord<Dim>(i, bdims);
       for (int a = 0; a < Dim; ++a)
         for (int s : {-1, 1}) {
           const int j = neighbour(c, a, s);
@@ -133,7 +188,7 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
     filled.clear();
     for (int i : candidates) {
       queued[i] = 0;
-      const VecI<Dim> c = lattice_coord<Dim>(i, dims);
+      const VecI<Dim> c = lattice_coord<Dim>(i, bdims);
       double sum = 0.0;
       int count = 0;
       for (int a = 0; a < Dim; ++a)
@@ -151,11 +206,30 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
     for (int i : filled) known[i] = 1;
     frontier.swap(filled);
   }
-  // the rest: the mean viscosity of the whole liquid
+  // the rest: the mean viscosity of the whole liquid; the box's rows (along axis 0) copied in
   const double mean = total_mass > 0.0 ? total_mass_eta / total_mass : 0.0;
-#pragma omp parallel for schedule(static) num_threads(team_threads(n))
-  for (int i = 0; i < n; ++i)
-    if (!known[i]) eta[i] = mean;
+  const int rows = bn / std::max(1, bdims[0]);
+#pragma omp parallel num_threads(team_threads(n))
+  {
+#pragma omp for schedule(static)
+    for (int i = 0; i < n; ++i) out[i] = mean;
+#pragma omp for schedule(static)
+    for (int r = 0; r < rows; ++r) {
+      const int first = r * bdims[0];
+      const int to = lattice_index<Dim>(lattice_coord<Dim>(first, bdims) + lo, dims);
+      for (int i = 0; i < bdims[0]; ++i)
+        out[to + i] = known[first + i] ? eta[first + i] : mean;
+    }
+  }
+}
+
+}  // namespace
+
+template <int Dim>
+VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const VecI<Dim>& dims,
+                         const Particles<Dim>& particles, const std::vector<double>& liquid_eta) {
+  VectorX eta(dims.prod());
+  sample_viscosity_into(grid, shift, dims, particles, liquid_eta, eta.data());
   return eta;
 }
 
@@ -174,9 +248,8 @@ VectorX stress_viscosity(const StressGrid<Dim>& stress, const Particles<Dim>& pa
 #pragma omp parallel for schedule(dynamic, 1) num_threads(team_threads(static_cast<long>(particles.size()) * distinct))
   for (int i = 0; i < distinct; ++i) {
     const int k = i == 0 ? 0 : Dim - 1 + i;
-    eta.segment(stress.offset(k), stress.num_dofs(k)) =
-        sample_viscosity(stress.grid(), StressGrid<Dim>::shift(k), stress.dims(k), particles,
-                         liquid_eta);
+    sample_viscosity_into(stress.grid(), StressGrid<Dim>::shift(k), stress.dims(k), particles,
+                          liquid_eta, eta.data() + stress.offset(k));
   }
   // the copies in fixed blocks on several threads
   const long n0 = stress.num_dofs(0);

@@ -597,32 +597,11 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
   // box and one point around it and undone after its fractions. Outside, liquid_phi_ has the
   // signs the extended level set had there, >= 0, and no value of it is read)
   if (extend) restore_points(liquid_phi_, phi_undo_);
-  if (volume && solids) {
-    VecI<Dim> lo = liquid_lo, hi = liquid_hi;
-    if (liquid_signs_.any_negative())
-      for (int a = 0; a < Dim; ++a) {
-        lo[a] = std::max(lo[a] - 1, 0);
-        hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
-      }
-    if (extend)
-      overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k, double l) {
-        // where phi_L >= 0 and the solids' union is not negative, -phi_S <= 0 <= phi_L and the
-        // maximum is phi_L itself (the union's value, closed forms per body, is not needed)
-        if (l >= 0.0 && !solid_negative_at(k)) return l;
-        return std::max(l, -solid_phi_at(k));
-      }, phi_undo_);
-    require_stored(liquid_phi_, liquid_lo, liquid_hi, 1, "liquid_weights_from_phi");
-    const LatticeValues<Dim> fluid_phi = liquid_phi_.view();
-    classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi,
-                                  liquid_signs_);
-    cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_);
-    if (extend) restore_points(liquid_phi_, phi_undo_);
-  }
-  if (volume)
-    liquid_volume_ = (!solids ? weights_.liquid_cell : volume_cells_).sum() * grid_.cell_volume();
-  // (read by nothing else: a cell-sized vector, 64 MiB at the paper's 256x128x256 grid, that
-  // the solve's vectors reuse instead of keeping it alive through the step)
-  volume_cells_ = VectorX();
+  if (volume && solids)
+    liquid_volume_ =
+        fluid_volume_in_box(liquid_lo, liquid_hi, liquid_signs_.any_negative(), extend);
+  else if (volume)
+    liquid_volume_ = weights_.liquid_cell.sum() * grid_.cell_volume();
   // with moving bodies the solids' level set is made again with the next weights
   // (update_moving_solids always runs before this) and read by nothing else (the velocity
   // constraints use the faces in solids found with it): its buffer goes back to the heap too
@@ -635,7 +614,7 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
 }
 
 template <int Dim>
-void Simulation<Dim>::update_cell_eta(bool stress_eta_made) {
+void Simulation<Dim>::update_cell_eta(bool stress_eta_made) const {
   cell_eta_pending_ = false;
   if (!non_newtonian_) {
     // eta per cell (the render's colour and the checkpoint). A constant field (every liquid
@@ -785,39 +764,49 @@ void Simulation<Dim>::liquid_volume_from_phi() {
   require_stored(liquid_phi_, band_lo, band_hi, 0, "liquid_volume_from_phi");
   const auto [liquid_lo, liquid_hi] =
       negative_point_box_in<Dim>(lattice_, liquid_phi_.view(), band_lo, band_hi);
+  liquid_volume_ = fluid_volume_in_box(liquid_lo, liquid_hi,
+                                       (liquid_lo.array() <= liquid_hi.array()).all(), extend);
+  liquid_weights_pending_ = true;
+  cell_eta_pending_ = true;
+}
+
+template <int Dim>
+double Simulation<Dim>::fluid_volume_in_box(const VecI<Dim>& liquid_lo, const VecI<Dim>& liquid_hi,
+                                            bool grow, bool extend) {
+  // The fluid level set max(phi_L, -phi_S) is negative only where phi_L is: its values are
+  // written into liquid_phi_ (with `extend`; without, it is phi_L) in the box [liquid_lo,
+  // liquid_hi] outside which phi_L is nowhere negative and, with `grow`, one point around it
+  // (the corners of every lattice cell the classes and fractions read), classified in the box,
+  // its cell fractions summed, and the writes undone. Outside the box liquid_phi_ keeps values
+  // >= 0 and none of them is read.
   VecI<Dim> lo = liquid_lo, hi = liquid_hi;
-  if ((liquid_lo.array() <= liquid_hi.array()).all())
+  if (grow)
     for (int a = 0; a < Dim; ++a) {
       lo[a] = std::max(lo[a] - 1, 0);
       hi[a] = std::min(hi[a] + 1, lattice_.dims[a] - 1);
     }
   if (extend)
     overwrite_in_box<Dim>(lattice_, lo, hi, liquid_phi_, [&](int k, double l) {
+      // where phi_L >= 0 and the solids' union is not negative, -phi_S <= 0 <= phi_L and the
+      // maximum is phi_L itself (the union's value, closed forms per body, is not needed)
       if (l >= 0.0 && !solid_negative_at(k)) return l;
       return std::max(l, -solid_phi_at(k));
     }, phi_undo_);
-  require_stored(liquid_phi_, liquid_lo, liquid_hi, 1, "liquid_volume_from_phi");
-  classify_lattice_cells_in_box<Dim>(grid_, lattice_, liquid_phi_.view(), liquid_lo, liquid_hi,
-                                     liquid_signs_);
-  cell_negative_fractions<Dim>(grid_, lattice_, liquid_phi_.view(), liquid_signs_, volume_cells_);
+  require_stored(liquid_phi_, liquid_lo, liquid_hi, 1, "fluid_volume_in_box");
+  const LatticeValues<Dim> fluid_phi = liquid_phi_.view();
+  classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi, liquid_signs_);
+  // (a cell-sized vector read by nothing else, 64 MiB at the paper's 256x128x256 grid: given
+  // back at the return, so the solve's vectors reuse it instead of keeping it alive)
+  VectorX cells;
+  cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, cells);
   if (extend) restore_points(liquid_phi_, phi_undo_);
-  liquid_volume_ = volume_cells_.sum() * grid_.cell_volume();
-  volume_cells_ = VectorX();
-  liquid_weights_pending_ = true;
-  cell_eta_pending_ = true;
+  return cells.sum() * grid_.cell_volume();
 }
 
 template <int Dim>
 void Simulation<Dim>::complete_frame_end_weights() {
   const auto timing = stats_.timing;
   update_liquid_weights(/*stress=*/false, /*volume=*/true);
-  stats_.timing = timing;
-}
-
-template <int Dim>
-void Simulation<Dim>::complete_cell_eta() {
-  const auto timing = stats_.timing;
-  update_cell_eta(/*stress_eta_made=*/false);
   stats_.timing = timing;
 }
 
@@ -3077,7 +3066,18 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     }
     const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
                                   : (coupled_ ? solid_velocity(x, bounds) : Vec<Dim>::Zero());
-    if (keep) solid_frame_[j] = {n, vs, u_[f]};
+    const double own = u_[f];
+    if (keep) solid_frame_[j] = {n, vs, own};
+    // A face the guard of advect left NaN (not reached: std::numeric_limits' quiet NaN) is one of
+    // the corners its component's interpolation reads (x is its centre; a weight of 0 still
+    // gives NaN), so v[axis] and then vn are that NaN, passed on unchanged by the arithmetic
+    // (no invalid operation makes a new one), and the value is vn: the face's own value. It is
+    // kept without the interpolation (about half of the bunny's shell faces once the liquid
+    // has landed, every one while it falls)
+    if (std::isnan(own)) {
+      values[j] = own;
+      continue;
+    }
     Vec<Dim> v = grid_.interpolate_velocity(u_, x);
     const double vn = (v - vs).dot(n);
     if (vn < 0.0) v -= vn * n;
@@ -3289,7 +3289,7 @@ std::vector<char> Simulation<Dim>::save_state() const {
   // itself goes on with its guard (the same values read either way)
   auto* self = const_cast<Simulation*>(this);
   const bool resolve = drift_guard_;
-  if (cell_eta_pending_) self->complete_cell_eta();
+  if (cell_eta_pending_) update_cell_eta(/*stress_eta_made=*/false);
   self->resolve_drift_velocity();
   StateWriter w;
   self->state_fields(w);

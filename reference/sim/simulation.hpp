@@ -337,7 +337,7 @@ class Simulation : public AnySimulation {
   /// eta per cell: the liquids' viscosity, or for herschel-bulkley liquids the effective
   /// viscosity of the last solve (Pa s).
   const VectorX& cell_eta() const {
-    if (cell_eta_pending_) const_cast<Simulation*>(this)->complete_cell_eta();
+    if (cell_eta_pending_) update_cell_eta(/*stress_eta_made=*/false);
     return cell_eta_;
   }
   /// The static bodies' shapes (fixed for the whole run).
@@ -504,8 +504,10 @@ class Simulation : public AnySimulation {
   /// as it was (it is read at a frame's end only: fill_state_stats).
   void update_liquid_weights(bool stress = true, bool volume = true);
   /// eta per cell from the particles (the render's colour and the checkpoint; update_liquid_weights'
-  /// part): `stress_eta_made` when stress_eta_ was just made from the same particles.
-  void update_cell_eta(bool stress_eta_made);
+  /// part): `stress_eta_made` when stress_eta_ was just made from the same particles. Const: a
+  /// frame's end may leave eta per cell pending, made when first read (cell_eta(), save_state)
+  /// into the mutable cell_eta_ from the particles, which have not moved since.
+  void update_cell_eta(bool stress_eta_made) const;
   /// A frame's end whose weights no step reuses (split_drift) and whose first CFL limit is
   /// max_dt whatever the trusted faces (frame_end_dt_is_max): from the level set just made, the
   /// reported volume only (the same values as update_liquid_weights(false, true)); W_L^p, W_L^u and
@@ -524,7 +526,12 @@ class Simulation : public AnySimulation {
   /// The pending parts of a frame's end (liquid_volume_from_phi) as update_liquid_weights(false,
   /// true) makes them; the frame's timing is kept.
   void complete_frame_end_weights();
-  void complete_cell_eta();
+  /// The reported volume with solids (update_liquid_weights, liquid_volume_from_phi): the cell
+  /// fractions of the fluid level set max(phi_L, -phi_S) (liquid_phi_ holds phi_L) classified in
+  /// the box [liquid_lo, liquid_hi] outside which phi_L is nowhere negative, its values written
+  /// into liquid_phi_ in that box (grown by a point with `grow`) when `extend` and undone after.
+  double fluid_volume_in_box(const VecI<Dim>& liquid_lo, const VecI<Dim>& liquid_hi, bool grow,
+                             bool extend);
   /// On faces whose centre lies inside a solid, removes the velocity component into the solid
   /// relative to the solid's own velocity (v <- v - min((v - v_s).n, 0) n, n the solid's outward
   /// normal, v_s zero for static solids and the body's point velocity for moving ones), so
@@ -653,9 +660,8 @@ class Simulation : public AnySimulation {
   // the weights of eq. (8): W_F^u, W_L^p, W_L^u, P (weights_), W_F^s, W_L^s
   PressureWeights weights_;
   // buffers of update_liquid_weights kept across steps (no grid-sized allocation per step): the
-  // cell fractions of the unextended level set (the reported volume), the lattice-cell sign
-  // classes (the liquid level set is extended into the solids in place, see phi_undo_)
-  VectorX volume_cells_;
+  // lattice-cell sign classes (the liquid level set is extended into the solids in place, see
+  // phi_undo_)
   /// the points of liquid_phi_ that update_liquid_weights overwrites in place (the extension
   /// into the solids, then the reported volume's level set) with their values, per thread
   std::vector<std::vector<std::pair<int, double>>> phi_undo_;
@@ -736,13 +742,14 @@ class Simulation : public AnySimulation {
   /// After liquid_volume_from_phi: W_L^p, W_L^u (and their classes) are the last step's, not
   /// the frame's end; cell_eta_ is not made yet. Both are cleared by the next weights.
   bool liquid_weights_pending_ = false;
-  bool cell_eta_pending_ = false;
+  mutable bool cell_eta_pending_ = false;
   // viscosity (section 3.1): the solves the scheme runs, eta of each liquid, the stress DOF
   // layout, eta per stress DOF and per cell (render)
   SolveSequence sequence_ = SolveSequence::pressure;
   std::vector<double> liquid_eta_;
   StressGrid<Dim> stress_grid_;
-  VectorX stress_eta_, cell_eta_;
+  VectorX stress_eta_;
+  mutable VectorX cell_eta_;  // (made when read while pending: update_cell_eta)
   // non-Newtonian liquids (section 5): the liquids' models and mass fractions per stress DOF;
   // cell_eta_ is then the effective viscosity of the last solve (its cell-centred diagonal DOFs)
   bool non_newtonian_ = false;
