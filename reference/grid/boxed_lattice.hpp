@@ -10,7 +10,7 @@
 /// shift = lo . stride, so a reader that walks the points with strides reads a boxed store and
 /// a whole-lattice vector (stride = the lattice's, shift 0) with the same index arithmetic. A
 /// view holds only the stored box: its readers read inside it (their callers promise it; the
-/// simulation checks the boxes it hands them, Simulation::require_liquid_phi_stored).
+/// simulation checks the boxes it hands them, require_stored in sim/simulation.cpp).
 
 #include <algorithm>
 #include <cmath>
@@ -102,9 +102,16 @@ struct BoxedLattice {
   VectorX materialise() const {
     if (!made) return VectorX();
     if (whole()) return values;
-    const int n = dims.prod();
-    VectorX out(n);
-    for (int k = 0; k < n; ++k) out[k] = (*this)(k);
+    VectorX out = VectorX::Constant(dims.prod(), background);
+    if (box_empty()) return out;
+    // the box's rows along x copied into the lattice's
+    VecI<Dim> rows = hi - lo + VecI<Dim>::Ones();
+    const int nx = rows[0];
+    rows[0] = 1;
+    for (int q = 0; q < rows.prod(); ++q) {
+      const VecI<Dim> c = lo + lattice_coord<Dim>(q, rows);
+      std::copy_n(values.data() + entry(c), nx, out.data() + lattice_index<Dim>(c, dims));
+    }
     return out;
   }
   /// The storage back to the heap.
