@@ -105,10 +105,13 @@ TEST_CASE("Fig. 4 in 2D: every step within 60 iterations; the frame's count sums
       if (c.frame == static_cast<int>(f) + 1) summed += c.iterations;
     CHECK(summed == whole[f].solver.iterations);
   }
-  // frame 3: about two dozen steps, so a frame total above 60 (measured 122) is no miss of the
-  // per-solve goal
+  // frame 3: about two dozen steps that all iterate, so its total (measured 122) is many times
+  // its largest step (measured 7) and says nothing about the per-solve goal
   CHECK(whole[2].steps >= 20);
-  CHECK(whole[2].solver.iterations > 60);
+  long frame3_largest = 0;
+  for (const StepCount& c : run.steps)
+    if (c.frame == 3) frame3_largest = std::max(frame3_largest, c.iterations);
+  CHECK(whole[2].solver.iterations >= 10 * frame3_largest);
   CHECK(whole.back().contact_count > 0);
   // the bound has teeth: the paper's SSOR takes hundreds per step once the ball is at the wall
   const SteppedRun ssor = run_by_steps(name, 2, {"solver.preconditioner=ssor"});
