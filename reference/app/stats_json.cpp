@@ -59,6 +59,7 @@ json frame_stats_json(const FrameStats& s) {
   // solver
   j["solver"] = {{"scheme", enum_name(s.solver.scheme)},
                  {"iterations", s.solver.iterations},
+                 {"max_step_iterations", s.solver.max_step_iterations},
                  {"staggered_iterations", s.solver.staggered_iterations},
                  {"max_relative_residual", number(s.solver.max_relative_residual)},
                  {"converged", s.solver.converged},

@@ -67,6 +67,11 @@ struct UnconvergedSolve {
 struct SolverStats {
   CouplingScheme scheme = CouplingScheme::pvc_unified;
   long iterations = 0;            ///< summed over the frame's steps
+  /// The largest iteration count of one step of the frame (all its solves together): the
+  /// per-step view of `iterations`, whose frame sum grows with the steps a CFL or body limit
+  /// asks for (a frame of 23 steps of 4-7 iterations sums to 122; docs/preconditioners.md
+  /// section 43).
+  long max_step_iterations = 0;
   int staggered_iterations = 0;   ///< summed over the frame's steps
   double max_relative_residual = 0.0;
   bool converged = true;          ///< all solves of the frame converged

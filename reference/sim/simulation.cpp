@@ -3147,7 +3147,10 @@ FrameStats Simulation<Dim>::advance_frame() {
     const double dt_cfl = cfl_dt();
     const double n = std::max(1.0, std::ceil(remaining / dt_cfl - 1e-9));
     const double dt = remaining / n;
+    const long iterations_before = stats_.solver.iterations;
     step(dt);
+    stats_.solver.max_step_iterations =
+        std::max(stats_.solver.max_step_iterations, stats_.solver.iterations - iterations_before);
     time_ = n == 1.0 ? frame_end : time_ + dt;
     ++stats_.steps;
     stats_.dt_min = std::min(stats_.dt_min, dt);
@@ -3200,6 +3203,7 @@ void step_stats_fields(Archive& a, FrameStats& s) {
   a(s.max_penetration);
   SolverStats& v = s.solver;
   a(v.iterations);
+  a(v.max_step_iterations);
   a(v.staggered_iterations);
   a(v.max_relative_residual);
   a(v.converged);

@@ -310,12 +310,12 @@ TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2
     refused(read_bytes(checkpoint_path(other)), "another scene");
   }
   SECTION("an older format version") {
-    // version 4 (before the first half drift's velocity joined the state), the rest of the file
-    // as it was
+    // version 5 (before the frame's largest step count joined the step statistics), the rest of
+    // the file as it was
     std::string old = good;
-    const std::uint32_t version = 4;
+    const std::uint32_t version = 5;
     std::memcpy(&old[8], &version, 4);
-    refused(old, "checkpoint format version 4 (this build reads version 5");
+    refused(old, "checkpoint format version 5 (this build reads version 6");
   }
   SECTION("written by another build") {
     CheckpointRecord record = read_checkpoint(file);

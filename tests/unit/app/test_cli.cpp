@@ -398,7 +398,7 @@ TEST_CASE("frame_stats_json has every key of the contract", "[unit]") {
   CHECK(j["contacts"]["count"] == 0);
   CHECK(j["contacts"]["max_penetration"].is_null());  // non-finite numbers become null
   for (const char* k : {"name", "position", "velocity", "pressure"}) CHECK(j["probes"][0].contains(k));
-  for (const char* k : {"scheme", "iterations", "staggered_iterations", "max_relative_residual", "converged", "dofs"})
+  for (const char* k : {"scheme", "iterations", "max_step_iterations", "staggered_iterations", "max_relative_residual", "converged", "dofs"})
     CHECK(j["solver"].contains(k));
   for (const char* k : {"pressure", "stress", "contact", "friction"}) CHECK(j["solver"]["dofs"].contains(k));
   CHECK(j["solver"]["dofs"]["pressure"] == 12);
