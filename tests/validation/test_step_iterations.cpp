@@ -101,10 +101,16 @@ TEST_CASE("Fig. 4 in 2D: every step within 60 iterations; the frame's count sums
     CHECK(run.frames[f].steps == whole[f].steps);
     CHECK(run.frames[f].solver.iterations == whole[f].solver.iterations);
     CHECK(run.frames[f].kinetic_energy_liquid == whole[f].kinetic_energy_liquid);
-    long summed = 0;
+    long summed = 0, frame_largest = 0;
     for (const StepCount& c : run.steps)
-      if (c.frame == static_cast<int>(f) + 1) summed += c.iterations;
+      if (c.frame == static_cast<int>(f) + 1) {
+        summed += c.iterations;
+        frame_largest = std::max(frame_largest, c.iterations);
+      }
     CHECK(summed == whole[f].solver.iterations);
+    // stats.jsonl's per-step view (solver.max_step_iterations), also across a frame run step by step
+    CHECK(whole[f].solver.max_step_iterations == frame_largest);
+    CHECK(run.frames[f].solver.max_step_iterations == frame_largest);
   }
   // frame 3: about two dozen steps that all iterate, so its total (measured 122) is many times
   // its largest step (measured 7) and says nothing about the per-solve goal
