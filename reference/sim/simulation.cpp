@@ -1167,18 +1167,49 @@ void Simulation<Dim>::ballistic_faces_take_pic(double dt) {
   ScopedTimer timer(stats_.timing[FramePhase::particles]);
   const bool everywhere = switches_.ballistic_faces_pic_everywhere;
   const int nf = grid_.num_faces();
-  // the faces, per thread over fixed ranges, joined in thread order: ascending
-  const int threads = process_threads();
+  const auto keep = [&](int f) {
+    return mass_faces_[f] && ballistic_face(f) && (everywhere || face_beside_support(f));
+  };
+  // the faces, per thread over fixed ranges, joined in range order: ascending. With the mass
+  // boxes (mass_faces_ is 0 outside them, and a face without mass is never listed) the ranges
+  // are of the boxes' rows, axis after axis: a row's faces are consecutive and ascending, the
+  // rows of an axis ascending and the axes' faces in axis order, so the joined list is that of
+  // the pass over every face (800k faces on the 64^3 bunny, its boxes ~50k)
+  const bool boxed = switches_.restricted_passes && mass_boxes_valid_ &&
+                     mass_faces_.data() == mass_boxes_data_ &&
+                     mass_faces_.size() == static_cast<std::size_t>(nf);
+  std::array<FaceRows, Dim> rows_of;
+  std::array<long, Dim + 1> row_start{};
+  long work = nf;
+  if (boxed) {
+    work = 0;
+    for (int axis = 0; axis < Dim; ++axis) {
+      rows_of[axis] = face_rows(mass_boxes_, axis);
+      row_start[axis + 1] = row_start[axis] + rows_of[axis].rows();
+      work += static_cast<long>(rows_of[axis].rows()) * rows_of[axis].nx;
+    }
+  }
+  const int threads = team_threads(work);
   std::vector<std::vector<int>> found(threads);
 #pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num(), nt = omp_get_num_threads();
     for (int r = t; r < threads; r += nt) {
+      if (boxed) {
+        const long lo = row_start[Dim] * r / threads, hi = row_start[Dim] * (r + 1) / threads;
+        int axis = 0;
+        for (long k = lo; k < hi; ++k) {
+          while (k >= row_start[axis + 1]) ++axis;
+          const int first = rows_of[axis].first(static_cast<int>(k - row_start[axis]));
+          for (int f = first; f < first + rows_of[axis].nx; ++f)
+            if (keep(f)) found[r].push_back(f);
+        }
+        continue;
+      }
       const int lo = static_cast<int>(static_cast<long>(nf) * r / threads);
       const int hi = static_cast<int>(static_cast<long>(nf) * (r + 1) / threads);
       for (int f = lo; f < hi; ++f)
-        if (mass_faces_[f] && ballistic_face(f) && (everywhere || face_beside_support(f)))
-          found[r].push_back(f);
+        if (keep(f)) found[r].push_back(f);
     }
   }
   pic_faces_.clear();
@@ -3033,59 +3064,82 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     }
     const bool use_deep =
         skip_deep && !unbounded && static_cast<int>(fixed_face_deep_.size()) == fixed_total;
-    rows.reserve(faces.size());
-    for (int j = 0; j < count; ++j) {
-      const int i = use_deep ? solid_face_fixed_[j] : -1;
-      if (i >= 0 && fixed_face_deep_[i]) {
-        const auto [axis, coord] = grid_.face_coord(faces[j]);
-        if (far_from_bodies(grid_.face_center(axis, coord))) continue;
+    // (listed per thread over fixed ranges of the faces, joined in range order: the ascending
+    // list of the serial loop, for any team; the bunny's shell has ~100k faces)
+    const int parts = team_threads(count);
+    std::vector<std::vector<int>> part(parts);
+#pragma omp parallel num_threads(parts)
+    {
+      const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+      for (int k = t; k < parts; k += nt) {
+        const int first = static_cast<int>(static_cast<long>(count) * k / parts);
+        const int end = static_cast<int>(static_cast<long>(count) * (k + 1) / parts);
+        std::vector<int>& out = part[k];
+        out.reserve(end - first);
+        for (int j = first; j < end; ++j) {
+          const int i = use_deep ? solid_face_fixed_[j] : -1;
+          if (i >= 0 && fixed_face_deep_[i]) {
+            const auto [axis, coord] = grid_.face_coord(faces[j]);
+            if (far_from_bodies(grid_.face_center(axis, coord))) continue;
+          }
+          out.push_back(j);
+        }
       }
-      rows.push_back(j);
     }
+    std::size_t total = 0;
+    for (const auto& list : part) total += list.size();
+    rows.reserve(total);
+    for (const auto& list : part) rows.insert(rows.end(), list.begin(), list.end());
     constrained_left_out_ += count - static_cast<long>(rows.size());
   }
   const int nrows = static_cast<int>(rows.size());
-#pragma omp parallel for schedule(static) num_threads(team_threads(nrows))
-  for (int r = 0; r < nrows; ++r) {
-    const int j = rows[r];
-    const int f = faces[j];
-    const auto [axis, coord] = grid_.face_coord(f);
-    const Vec<Dim> x = grid_.face_center(axis, coord);
-    Vec<Dim> n;
-    if (same_pose) {
-      n = solid_frame_[j].normal;
-    } else if (split && solid_face_fixed_[j] >= 0) {
-      const FixedFaceFrame& frame = fixed_face_frame_[solid_face_fixed_[j]];
-      double d = frame.distance;
-      std::size_t best = frame.nearest;
-      nearest_solid<Dim>(solid_field_shapes_, solid_field_boxes_, far, x, fixed_shapes,
-                         solid_field_shapes_.size(), d, best);
-      n = best < fixed_shapes ? frame.normal : solid_field_shapes_[best]->gradient(x);
-    } else {
-      n = solids_.gradient(x);
+  // the new values (every read before any write), then after the barrier their writes: each
+  // listed face is one face of the ascending, distinct list, written by one thread
+#pragma omp parallel num_threads(team_threads(nrows))
+  {
+#pragma omp for schedule(static)
+    for (int r = 0; r < nrows; ++r) {
+      const int j = rows[r];
+      const int f = faces[j];
+      const auto [axis, coord] = grid_.face_coord(f);
+      const Vec<Dim> x = grid_.face_center(axis, coord);
+      Vec<Dim> n;
+      if (same_pose) {
+        n = solid_frame_[j].normal;
+      } else if (split && solid_face_fixed_[j] >= 0) {
+        const FixedFaceFrame& frame = fixed_face_frame_[solid_face_fixed_[j]];
+        double d = frame.distance;
+        std::size_t best = frame.nearest;
+        nearest_solid<Dim>(solid_field_shapes_, solid_field_boxes_, far, x, fixed_shapes,
+                           solid_field_shapes_.size(), d, best);
+        n = best < fixed_shapes ? frame.normal : solid_field_shapes_[best]->gradient(x);
+      } else {
+        n = solids_.gradient(x);
+      }
+      const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
+                                    : (coupled_ ? solid_velocity(x, bounds) : Vec<Dim>::Zero());
+      const double own = u_[f];
+      if (keep) solid_frame_[j] = {n, vs, own};
+      // A face the guard of advect left NaN (not reached: std::numeric_limits' quiet NaN) is one of
+      // the corners its component's interpolation reads (x is its centre; a weight of 0 still
+      // gives NaN), so v[axis] and then vn are that NaN, passed on unchanged by the arithmetic
+      // (no invalid operation makes a new one), and the value is vn: the face's own value. It is
+      // kept without the interpolation (about half of the bunny's shell faces once the liquid
+      // has landed, every one while it falls)
+      if (std::isnan(own)) {
+        values[j] = own;
+        continue;
+      }
+      Vec<Dim> v = grid_.interpolate_velocity(u_, x);
+      const double vn = (v - vs).dot(n);
+      if (vn < 0.0) v -= vn * n;
+      // (a NaN in any component, a face the guard of advect marks unread, makes the value NaN: the
+      // comparison above would drop it)
+      values[j] = std::isnan(vn) ? vn : v[axis];
     }
-    const Vec<Dim> vs = same_pose ? solid_frame_[j].velocity
-                                  : (coupled_ ? solid_velocity(x, bounds) : Vec<Dim>::Zero());
-    const double own = u_[f];
-    if (keep) solid_frame_[j] = {n, vs, own};
-    // A face the guard of advect left NaN (not reached: std::numeric_limits' quiet NaN) is one of
-    // the corners its component's interpolation reads (x is its centre; a weight of 0 still
-    // gives NaN), so v[axis] and then vn are that NaN, passed on unchanged by the arithmetic
-    // (no invalid operation makes a new one), and the value is vn: the face's own value. It is
-    // kept without the interpolation (about half of the bunny's shell faces once the liquid
-    // has landed, every one while it falls)
-    if (std::isnan(own)) {
-      values[j] = own;
-      continue;
-    }
-    Vec<Dim> v = grid_.interpolate_velocity(u_, x);
-    const double vn = (v - vs).dot(n);
-    if (vn < 0.0) v -= vn * n;
-    // (a NaN in any component, a face the guard of advect marks unread, makes the value NaN: the
-    // comparison above would drop it)
-    values[j] = std::isnan(vn) ? vn : v[axis];
+#pragma omp for schedule(static)
+    for (int r = 0; r < nrows; ++r) u_[faces[rows[r]]] = values[rows[r]];
   }
-  for (int r = 0; r < nrows; ++r) u_[faces[rows[r]]] = values[rows[r]];
 }
 
 template <int Dim>

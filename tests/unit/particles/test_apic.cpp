@@ -580,6 +580,59 @@ void check_unread_flags() {
   }
 }
 
+TEST_CASE("velocity extrapolation gives the same bits for any thread count above its layers' "
+          "serial fall-back", "[unit]") {
+  // A layer's averages, writes and fresh flags run on the team once its candidates' neighbour
+  // reads (2 Dim per candidate) reach kParallelMinWork (the landed viscous bunny: 3k-17k
+  // candidates per layer). A ball of valid faces on 40^3 cells lists ~10k candidates in its first
+  // layer: 1, 2, 3 and 5 threads (the team exactly that: the core monitor off) give the same
+  // velocities and flags, walled and periodic.
+  const bool monitor = core_monitor();
+  set_core_monitor(false);
+  const int saved = omp_get_max_threads();
+  for (bool periodic : {false, true}) {
+    CAPTURE(periodic);
+    const MacGrid<3> grid = make_grid<3>(40, periodic);
+    const int nf = grid.num_faces();
+    VectorX u0 = VectorX::Zero(nf);
+    std::vector<char> valid0(nf, 0);
+    for (int f = 0; f < nf; ++f) {
+      const auto [axis, coord] = grid.face_coord(f);
+      if (grid.face_center(axis, coord).norm() > 0.3) continue;
+      valid0[f] = 1;
+      u0[f] = std::sin(0.37 * f) + 0.1 * (f % 7);
+    }
+    // the first layer alone: enough candidates for the team (the faces it fills are some of them)
+    {
+      omp_set_num_threads(1);
+      VectorX u = u0;
+      std::vector<char> valid = valid0;
+      extrapolate_velocity(grid, u, valid, 1);
+      long filled = 0;
+      for (int f = 0; f < nf; ++f) filled += valid[f] && !valid0[f];
+      REQUIRE(filled * 2 * 3 >= kParallelMinWork);
+    }
+    omp_set_num_threads(1);
+    VectorX u1 = u0;
+    std::vector<char> valid1 = valid0;
+    extrapolate_velocity(grid, u1, valid1, 6);
+    long reached = 0;
+    for (int f = 0; f < nf; ++f) reached += valid1[f] && !valid0[f];
+    CHECK(reached > 0);
+    for (int threads : {2, 3, 5}) {
+      CAPTURE(threads);
+      omp_set_num_threads(threads);
+      VectorX u = u0;
+      std::vector<char> valid = valid0;
+      extrapolate_velocity(grid, u, valid, 6);
+      REQUIRE(valid == valid1);
+      REQUIRE(std::memcmp(u.data(), u1.data(), sizeof(double) * nf) == 0);
+    }
+  }
+  omp_set_num_threads(saved);
+  set_core_monitor(monitor);
+}
+
 TEST_CASE("transfers and advection flag the particles that read NaN faces and leave them be",
           "[unit]") {
   check_unread_flags<2>();
