@@ -1373,7 +1373,14 @@ void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   // 256x128x256 grid)
   const int nf = grid_.num_faces();
   reached_u_.swap(u_);
-  u_.resize(nf);
+  // The stream goes into the face masses' storage when nothing reads them before the next
+  // particles_to_grid, which writes every face of it (band20: a fresh face-sized block per step,
+  // 202 MB at the paper's 256x128x256 grid, first touched whole by this stream above the solve's
+  // transient blocks); advect gives the copy's storage back to the masses
+  if (!masses_read_after_solve() && face_mass_.size() == nf && u_.size() == 0)
+    u_.swap(face_mass_);
+  else
+    u_.resize(nf);
   const double nan = std::numeric_limits<double>::quiet_NaN();
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) u_[f] = face_flags_[f] ? reached_u_[f] : nan;
@@ -1825,6 +1832,9 @@ void Simulation<Dim>::advect(double dt) {
       drift_guard_ = true;
       drift_rescales_.clear();
     } else {
+      // (to the face masses when the extrapolation took their storage: the next
+      // particles_to_grid writes every face of it, band20)
+      if (face_mass_.size() == 0) face_mass_.swap(reached_u_);
       reached_u_ = VectorX();
     }
     extended_u_ = VectorX();
@@ -1912,7 +1922,10 @@ void Simulation<Dim>::first_half_drift(double dt) {
   }
   throw_if_unread(unread_, time_, frame_ + 1, " (first half drift)");
   drop_drift_guard();
-  reached_u_ = VectorX();  // (advect's copy, kept for the drift, dead until the next step's)
+  // (advect's copy, kept for the drift, dead until the next step's; its storage to the face
+  // masses when the extrapolation took theirs: particles_to_grid writes every face, band20)
+  if (face_mass_.size() == 0) face_mass_.swap(reached_u_);
+  reached_u_ = VectorX();
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
   liquid_weights_current_ = false;
 }
