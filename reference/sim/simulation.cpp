@@ -584,7 +584,16 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
       }
     }
   }
-  update_cell_eta(stress_eta_made);
+  // eta per cell is read only at a frame's end (the render, save_state, cell_eta()): with every
+  // liquid inviscid it is +0 at every cell whatever the particles (constant_viscosity, or the
+  // splat of zeros), so it is left pending until read instead of written whole here (band20: a
+  // cell-sized fill first touched in the set-up, 67 MB at the paper's 256x128x256 grid, read
+  // by nothing in a run without pictures or checkpoints)
+  if (!non_newtonian_ && !liquid_eta_.empty() &&
+      std::all_of(liquid_eta_.begin(), liquid_eta_.end(), [](double e) { return e == 0.0; }))
+    cell_eta_pending_ = true;
+  else
+    update_cell_eta(stress_eta_made);
   // the reported volume is that of the particles' own level set outside the solids (its mirror
   // images and the extension reach into them)
   // (in the extended level set's buffer, which the weights no longer read: no new lattice-sized
