@@ -90,14 +90,13 @@ void overwrite_in_box(const SampleLattice<Dim>& lattice, VecI<Dim> lo, VecI<Dim>
   }
   if (!phi.holds_box(lo, hi))
     throw std::logic_error("overwrite_in_box: the box is not in the level set's stored box");
-  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
-  row_dims[0] = 1;
-  const int rows = row_dims.prod(), nx = hi[0] - lo[0] + 1;
+  const BoxRows<Dim> box(lattice.dims, lo, hi);
+  const int rows = box.rows(), nx = box.nx;
   double* values = phi.values.data();
   // (rows on several threads, each thread listing the points it changed)
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int q = 0; q < rows; ++q) {
-    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+    const VecI<Dim> c = box.start(q);
     const int k0 = lattice.index(c), e0 = phi.entry(c);
     for (int x = 0; x < nx; ++x) {
       const double old = values[e0 + x], v = value(k0 + x, old);
@@ -955,14 +954,8 @@ template <int Dim>
 typename Simulation<Dim>::FaceRows Simulation<Dim>::face_rows(const FaceBoxes& boxes,
                                                                int axis) const {
   FaceRows rows;
-  const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
-  if ((lo.array() > hi.array()).any()) return rows;
-  rows.lo = lo;
-  rows.fdims = grid_.face_dims(axis);
-  rows.rows_box = hi - lo + VecI<Dim>::Ones();
-  rows.nx = rows.rows_box[0];
-  rows.rows_box[0] = 1;
-  rows.count = rows.rows_box.prod();
+  rows.box = BoxRows<Dim>(grid_.face_dims(axis), boxes.lo[axis], boxes.hi[axis]);
+  rows.nx = rows.box.nx;
   rows.offset = grid_.face_offset(axis);
   return rows;
 }
