@@ -2505,9 +2505,12 @@ void Simulation<Dim>::solve_coupled(double dt) {
   solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options, r);
   in.divergence_source = nullptr;
   in.workspace = nullptr;
-  if (eta.size() == stress_grid_.num_dofs())
+  // (a non-Newtonian solve's eta per cell; otherwise eta per cell stays as the weights left it,
+  // made or pending: band20)
+  if (eta.size() == stress_grid_.num_dofs()) {
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
-  cell_eta_pending_ = false;
+    cell_eta_pending_ = false;
+  }
   if (model) {
     record_viscosity_rounds(model->residuals());
     if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();
