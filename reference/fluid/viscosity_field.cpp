@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "reference/core/parallel.hpp"
+#include "reference/grid/box_rows.hpp"
 
 namespace monolith {
 
@@ -208,16 +209,17 @@ void sample_viscosity_into(const MacGrid<Dim>& grid, const Vec<Dim>& shift, cons
   }
   // the rest: the mean viscosity of the whole liquid; the box's rows (along axis 0) copied in
   const double mean = total_mass > 0.0 ? total_mass_eta / total_mass : 0.0;
-  const int rows = bn / std::max(1, bdims[0]);
+  const BoxRows<Dim> box = bn > 0 ? BoxRows<Dim>(dims, lo, hi) : BoxRows<Dim>();
+  const int rows = box.rows();
 #pragma omp parallel num_threads(team_threads(n))
   {
 #pragma omp for schedule(static)
     for (int i = 0; i < n; ++i) out[i] = mean;
 #pragma omp for schedule(static)
     for (int r = 0; r < rows; ++r) {
-      const int first = r * bdims[0];
-      const int to = lattice_index<Dim>(lattice_coord<Dim>(first, bdims) + lo, dims);
-      for (int i = 0; i < bdims[0]; ++i)
+      const int first = box.box_first(r);
+      const int to = box.first(r);
+      for (int i = 0; i < box.nx; ++i)
         out[to + i] = known[first + i] ? eta[first + i] : mean;
     }
   }

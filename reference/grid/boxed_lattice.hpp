@@ -17,6 +17,7 @@
 
 #include "reference/core/common.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/grid/box_rows.hpp"
 #include "reference/grid/mac_grid.hpp"
 
 namespace monolith {
@@ -105,13 +106,9 @@ struct BoxedLattice {
     VectorX out = VectorX::Constant(dims.prod(), background);
     if (box_empty()) return out;
     // the box's rows along x copied into the lattice's
-    VecI<Dim> rows = hi - lo + VecI<Dim>::Ones();
-    const int nx = rows[0];
-    rows[0] = 1;
-    for (int q = 0; q < rows.prod(); ++q) {
-      const VecI<Dim> c = lo + lattice_coord<Dim>(q, rows);
-      std::copy_n(values.data() + entry(c), nx, out.data() + lattice_index<Dim>(c, dims));
-    }
+    const BoxRows<Dim> box(dims, lo, hi);
+    for (int q = 0; q < box.rows(); ++q)
+      std::copy_n(values.data() + box.box_first(q), box.nx, out.data() + box.first(q));
     return out;
   }
   /// The storage back to the heap.

@@ -90,14 +90,13 @@ void overwrite_in_box(const SampleLattice<Dim>& lattice, VecI<Dim> lo, VecI<Dim>
   }
   if (!phi.holds_box(lo, hi))
     throw std::logic_error("overwrite_in_box: the box is not in the level set's stored box");
-  VecI<Dim> row_dims = hi - lo + VecI<Dim>::Ones();
-  row_dims[0] = 1;
-  const int rows = row_dims.prod(), nx = hi[0] - lo[0] + 1;
+  const BoxRows<Dim> box(lattice.dims, lo, hi);
+  const int rows = box.rows(), nx = box.nx;
   double* values = phi.values.data();
   // (rows on several threads, each thread listing the points it changed)
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int q = 0; q < rows; ++q) {
-    const VecI<Dim> c = lo + lattice_coord<Dim>(q, row_dims);
+    const VecI<Dim> c = box.start(q);
     const int k0 = lattice.index(c), e0 = phi.entry(c);
     for (int x = 0; x < nx; ++x) {
       const double old = values[e0 + x], v = value(k0 + x, old);
@@ -584,7 +583,16 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
       }
     }
   }
-  update_cell_eta(stress_eta_made);
+  // eta per cell is read only at a frame's end (the render, save_state, cell_eta()): with every
+  // liquid inviscid it is +0 at every cell whatever the particles (constant_viscosity, or the
+  // splat of zeros), so it is left pending until read instead of written whole here (band20: a
+  // cell-sized fill first touched in the set-up, 67 MB at the paper's 256x128x256 grid, read
+  // by nothing in a run without pictures or checkpoints)
+  if (!non_newtonian_ && !liquid_eta_.empty() &&
+      std::all_of(liquid_eta_.begin(), liquid_eta_.end(), [](double e) { return e == 0.0; }))
+    cell_eta_pending_ = true;
+  else
+    update_cell_eta(stress_eta_made);
   // the reported volume is that of the particles' own level set outside the solids (its mirror
   // images and the extension reach into them)
   // (in the extended level set's buffer, which the weights no longer read: no new lattice-sized
@@ -946,14 +954,8 @@ template <int Dim>
 typename Simulation<Dim>::FaceRows Simulation<Dim>::face_rows(const FaceBoxes& boxes,
                                                                int axis) const {
   FaceRows rows;
-  const VecI<Dim> lo = boxes.lo[axis], hi = boxes.hi[axis];
-  if ((lo.array() > hi.array()).any()) return rows;
-  rows.lo = lo;
-  rows.fdims = grid_.face_dims(axis);
-  rows.rows_box = hi - lo + VecI<Dim>::Ones();
-  rows.nx = rows.rows_box[0];
-  rows.rows_box[0] = 1;
-  rows.count = rows.rows_box.prod();
+  rows.box = BoxRows<Dim>(grid_.face_dims(axis), boxes.lo[axis], boxes.hi[axis]);
+  rows.nx = rows.box.nx;
   rows.offset = grid_.face_offset(axis);
   return rows;
 }
@@ -1404,7 +1406,14 @@ void Simulation<Dim>::extrapolate_from_trusted_faces(double dt) {
   // 256x128x256 grid)
   const int nf = grid_.num_faces();
   reached_u_.swap(u_);
-  u_.resize(nf);
+  // The stream goes into the face masses' storage when nothing reads them before the next
+  // particles_to_grid, which writes every face of it (band20: a fresh face-sized block per step,
+  // 202 MB at the paper's 256x128x256 grid, first touched whole by this stream above the solve's
+  // transient blocks); advect gives the copy's storage back to the masses
+  if (!masses_read_after_solve() && face_mass_.size() == nf && u_.size() == 0)
+    u_.swap(face_mass_);
+  else
+    u_.resize(nf);
   const double nan = std::numeric_limits<double>::quiet_NaN();
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) u_[f] = face_flags_[f] ? reached_u_[f] : nan;
@@ -1856,6 +1865,9 @@ void Simulation<Dim>::advect(double dt) {
       drift_guard_ = true;
       drift_rescales_.clear();
     } else {
+      // (to the face masses when the extrapolation took their storage: the next
+      // particles_to_grid writes every face of it, band20)
+      if (face_mass_.size() == 0) face_mass_.swap(reached_u_);
       reached_u_ = VectorX();
     }
     extended_u_ = VectorX();
@@ -1943,7 +1955,10 @@ void Simulation<Dim>::first_half_drift(double dt) {
   }
   throw_if_unread(unread_, time_, frame_ + 1, " (first half drift)");
   drop_drift_guard();
-  reached_u_ = VectorX();  // (advect's copy, kept for the drift, dead until the next step's)
+  // (advect's copy, kept for the drift, dead until the next step's; its storage to the face
+  // masses when the extrapolation took theirs: particles_to_grid writes every face, band20)
+  if (face_mass_.size() == 0) face_mass_.swap(reached_u_);
+  reached_u_ = VectorX();
   account(frame_ledger_.advection, [&] { return liquid_potential_energy(); });
   liquid_weights_current_ = false;
 }
@@ -2521,9 +2536,12 @@ void Simulation<Dim>::solve_coupled(double dt) {
   solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options, r);
   in.divergence_source = nullptr;
   in.workspace = nullptr;
-  if (eta.size() == stress_grid_.num_dofs())
+  // (a non-Newtonian solve's eta per cell; otherwise eta per cell stays as the weights left it,
+  // made or pending: band20)
+  if (eta.size() == stress_grid_.num_dofs()) {
     cell_eta_ = eta.segment(stress_grid_.offset(0), grid_.num_cells());
-  cell_eta_pending_ = false;
+    cell_eta_pending_ = false;
+  }
   if (model) {
     record_viscosity_rounds(model->residuals());
     if (scene_.solver.viscosity_warm_start) previous_shear_rate_ = model->previous_shear_rate();

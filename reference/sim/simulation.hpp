@@ -23,6 +23,7 @@
 #include "reference/fluid/stokes_system.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
+#include "reference/grid/box_rows.hpp"
 #include "reference/grid/boxed_union_phi.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
@@ -796,14 +797,13 @@ class Simulation : public AnySimulation {
     std::array<VecI<Dim>, Dim> lo, hi;
   };
   /// One box of FaceBoxes as rows along x: rows() rows of nx faces each, row r's first face
-  /// first(r) (face indices of the whole grid); no rows where the box is empty
+  /// first(r) (face indices of the whole grid); no rows where the box is empty. The rows of the
+  /// box in its axis's face lattice (BoxRows, grid/box_rows.hpp) and the axis's face offset.
   struct FaceRows {
-    VecI<Dim> lo, rows_box, fdims;
-    int nx = 0, offset = 0, count = 0;
-    int rows() const { return count; }
-    int first(int r) const {
-      return offset + lattice_index<Dim>(lo + lattice_coord<Dim>(r, rows_box), fdims);
-    }
+    BoxRows<Dim> box;
+    int nx = 0, offset = 0;
+    int rows() const { return box.rows(); }
+    int first(int r) const { return offset + box.first(r); }
   };
   FaceRows face_rows(const FaceBoxes& boxes, int axis) const;
   /// The faces a particle's stencil in particles_to_grid can reach (the cells of the particles'

@@ -4,7 +4,9 @@
 
 #include <cmath>
 #include <random>
+#include <vector>
 
+#include "reference/grid/box_rows.hpp"
 #include "reference/grid/mac_grid.hpp"
 
 using namespace monolith;
@@ -66,4 +68,45 @@ TEST_CASE("MacGrid::interpolate_velocity is the stencil's sum per component, bit
     }
     CHECK(differ == 0);
   }
+}
+
+namespace {
+
+/// BoxRows' rows against the box's points listed by a loop over the whole lattice: the same
+/// points in the same (index) order, row r at box index r nx. Returns the points visited.
+template <int Dim>
+long check_box_rows(const VecI<Dim>& dims, const VecI<Dim>& lo, const VecI<Dim>& hi) {
+  std::vector<int> expected;
+  std::vector<int> expected_box;
+  const bool empty = (lo.array() > hi.array()).any();
+  for (int k = 0; k < dims.prod(); ++k) {
+    const VecI<Dim> c = lattice_coord<Dim>(k, dims);
+    if (empty || (c.array() < lo.array()).any() || (c.array() > hi.array()).any()) continue;
+    expected.push_back(k);
+    expected_box.push_back(lattice_index<Dim>(c - lo, (hi - lo + VecI<Dim>::Ones()).eval()));
+  }
+  const BoxRows<Dim> box(dims, lo, hi);
+  std::vector<int> got, got_box;
+  for (int r = 0; r < box.rows(); ++r) {
+    CHECK(box.first(r) == lattice_index<Dim>(box.start(r), dims));
+    for (int x = 0; x < box.nx; ++x) {
+      got.push_back(box.first(r) + x);
+      got_box.push_back(box.box_first(r) + x);
+    }
+  }
+  CHECK(got == expected);
+  CHECK(got_box == expected_box);
+  return static_cast<long>(got.size());
+}
+
+}  // namespace
+
+TEST_CASE("BoxRows visits a box's points row by row in the lattice's order (band20)", "[grid]") {
+  CHECK(check_box_rows<2>(VecI<2>(7, 5), VecI<2>(2, 1), VecI<2>(5, 3)) == 12);
+  CHECK(check_box_rows<2>(VecI<2>(7, 5), VecI<2>(0, 0), VecI<2>(6, 4)) == 35);
+  CHECK(check_box_rows<3>(VecI<3>(6, 4, 5), VecI<3>(1, 0, 2), VecI<3>(3, 3, 4)) == 36);
+  CHECK(check_box_rows<3>(VecI<3>(6, 4, 5), VecI<3>(4, 2, 4), VecI<3>(4, 2, 4)) == 1);
+  // empty boxes: no rows
+  CHECK(check_box_rows<3>(VecI<3>(6, 4, 5), VecI<3>(3, 2, 1), VecI<3>(2, 3, 4)) == 0);
+  CHECK(BoxRows<2>(VecI<2>(7, 5), VecI<2>(0, 4), VecI<2>(6, 3)).rows() == 0);
 }
