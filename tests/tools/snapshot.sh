@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # snapshot.sh MONOLITH OUT [FRAMES] [THREADS]
 # Runs every built-in scene of `MONOLITH list` (not the `-paper` grids, too large for a routine
-# check) for FRAMES frames (default 3) on THREADS threads (default 2) into OUT/<scene>; the 2D scenes also on the
-# explicit back end (OUT/<scene>--explicit). OUT/rc.txt gets one exit code per run and OUT/DONE
+# check) for FRAMES frames (default 3) on THREADS threads (default 2) into OUT/<scene>; the 2D
+# scenes also on the explicit back end (OUT/<scene>--explicit). OUT/rc.txt gets one exit code per run and OUT/DONE
 # marks a finished snapshot; a restarted snapshot skips the runs that already exited 0.
 # Two snapshots are compared with tests/tools/compare_snapshots.py (docs/validation.md,
 # "Bit-for-bit snapshots").
