@@ -3082,32 +3082,16 @@ void Simulation<Dim>::constrain_velocity_in_solids(bool same_pose) {
     }
     const bool use_deep =
         skip_deep && !unbounded && static_cast<int>(fixed_face_deep_.size()) == fixed_total;
-    // (listed per thread over fixed ranges of the faces, joined in range order: the ascending
-    // list of the serial loop, for any team; the bunny's shell has ~100k faces)
-    const int parts = team_threads(count);
-    std::vector<std::vector<int>> part(parts);
-#pragma omp parallel num_threads(parts)
-    {
-      const int t = omp_get_thread_num(), nt = omp_get_num_threads();
-      for (int k = t; k < parts; k += nt) {
-        const int first = static_cast<int>(static_cast<long>(count) * k / parts);
-        const int end = static_cast<int>(static_cast<long>(count) * (k + 1) / parts);
-        std::vector<int>& out = part[k];
-        out.reserve(end - first);
-        for (int j = first; j < end; ++j) {
-          const int i = use_deep ? solid_face_fixed_[j] : -1;
-          if (i >= 0 && fixed_face_deep_[i]) {
-            const auto [axis, coord] = grid_.face_coord(faces[j]);
-            if (far_from_bodies(grid_.face_center(axis, coord))) continue;
-          }
-          out.push_back(j);
-        }
+    // (listed in blocks on the team, joined in block order: the ascending list of the serial
+    // loop for any team; the bunny's shell has ~100k faces)
+    rows = gather_in_order<int>(count, [&](int j, std::vector<int>& out) {
+      const int i = use_deep ? solid_face_fixed_[j] : -1;
+      if (i >= 0 && fixed_face_deep_[i]) {
+        const auto [axis, coord] = grid_.face_coord(faces[j]);
+        if (far_from_bodies(grid_.face_center(axis, coord))) return;
       }
-    }
-    std::size_t total = 0;
-    for (const auto& list : part) total += list.size();
-    rows.reserve(total);
-    for (const auto& list : part) rows.insert(rows.end(), list.begin(), list.end());
+      out.push_back(j);
+    });
     constrained_left_out_ += count - static_cast<long>(rows.size());
   }
   const int nrows = static_cast<int>(rows.size());
