@@ -21,6 +21,7 @@
 #include <utility>
 
 #include "reference/core/errors.hpp"
+#include "reference/core/huge_pages.hpp"
 #include "reference/core/state_io.hpp"
 #include "reference/core/timer.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
@@ -383,12 +384,46 @@ void Simulation<Dim>::reserve_step_buffers() {
   if (guards_reads()) solid_frame_.reserve(2 * solid_faces_.size());
   // W_L^p and W_L^u (their first fill zeroes them whole: no valid WrittenBox yet) and the
   // pressure (frame_zero zeroes it)
-  if (weights_.liquid_cell.size() == 0) weights_.liquid_cell.resize(grid_.num_cells());
-  if (weights_.liquid_face.size() == 0) weights_.liquid_face.resize(grid_.num_faces());
-  if (pressure_.size() == 0) pressure_.resize(grid_.num_cells());
+  // (huge21) W_L^p and W_L^u are written in the liquid's band only when their WrittenBox is
+  // valid: made here, they are zeroed without writing their pages (zero_by_release: fresh
+  // storage, given back whole) and their boxes set to "nothing written", so the first fill
+  // writes its band only, like every later one (the same zeros elsewhere; the pages outside
+  // the band are never provided). Without restricted passes every fill zeroes them whole.
+  if (weights_.liquid_cell.size() == 0) {
+    weights_.liquid_cell.resize(grid_.num_cells());
+    if (switches_.restricted_passes) {
+      zero_by_release(weights_.liquid_cell.data(),
+                      sizeof(double) * static_cast<std::size_t>(weights_.liquid_cell.size()));
+      liquid_cell_box_ = WrittenBox<Dim>{};
+      liquid_cell_box_.data = weights_.liquid_cell.data();
+      liquid_cell_box_.size = weights_.liquid_cell.size();
+      liquid_cell_box_.valid = true;
+    }
+  }
+  if (weights_.liquid_face.size() == 0) {
+    weights_.liquid_face.resize(grid_.num_faces());
+    if (switches_.restricted_passes) {
+      zero_by_release(weights_.liquid_face.data(),
+                      sizeof(double) * static_cast<std::size_t>(weights_.liquid_face.size()));
+      for (int a = 0; a < Dim; ++a) {
+        liquid_face_boxes_[a] = WrittenBox<Dim>{};
+        liquid_face_boxes_[a].data = weights_.liquid_face.data() + grid_.face_offset(a);
+        liquid_face_boxes_[a].size = grid_.face_dims(a).prod();
+        liquid_face_boxes_[a].valid = true;
+      }
+    }
+  }
+  // the pressure (written whole by every solve) on huge pages (core/huge_pages.hpp)
+  if (pressure_.size() == 0) resize_on_huge_pages(pressure_, grid_.num_cells());
   // eta per cell likewise (a non-Newtonian liquid's is made before the first solve when its
   // size is not the grid's: left to update_liquid_weights)
   if (!non_newtonian_ && cell_eta_.size() == 0) cell_eta_.resize(grid_.num_cells());
+  // (huge21) u, the face masses and the faces' densities: kept across steps and written whole
+  // by every particles_to_grid (its resize to the same size keeps this storage): sized here,
+  // after the blocks above as before (frame_zero's transfer made them next), on huge pages
+  resize_on_huge_pages(u_, faces);
+  resize_on_huge_pages(face_mass_, faces);
+  resize_on_huge_pages(weights_.face_density, faces);
 }
 
 template <int Dim>
