@@ -400,6 +400,16 @@ void Simulation<Dim>::reserve_step_buffers() {
       liquid_cell_box_.valid = true;
     }
   }
+  // the reported volume's cell fractions likewise (fluid_volume_in_box)
+  if (switches_.restricted_passes && volume_cells_.size() == 0) {
+    volume_cells_.resize(grid_.num_cells());
+    zero_by_release(volume_cells_.data(),
+                    sizeof(double) * static_cast<std::size_t>(volume_cells_.size()));
+    volume_cells_box_ = WrittenBox<Dim>{};
+    volume_cells_box_.data = volume_cells_.data();
+    volume_cells_box_.size = volume_cells_.size();
+    volume_cells_box_.valid = true;
+  }
   if (weights_.liquid_face.size() == 0) {
     weights_.liquid_face.resize(grid_.num_faces());
     if (switches_.restricted_passes) {
@@ -838,8 +848,18 @@ double Simulation<Dim>::fluid_volume_in_box(const VecI<Dim>& liquid_lo, const Ve
   require_stored(liquid_phi_, liquid_lo, liquid_hi, 1, "fluid_volume_in_box");
   const LatticeValues<Dim> fluid_phi = liquid_phi_.view();
   classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi, liquid_signs_);
-  // (a cell-sized vector read by nothing else, 64 MiB at the paper's 256x128x256 grid: given
-  // back at the return, so the solve's vectors reuse it instead of keeping it alive)
+  // (a cell-sized vector read by nothing else, 64 MiB at the paper's 256x128x256 grid.) With
+  // restricted passes it is kept (huge21): made in reserve_step_buffers with its zeros from the
+  // kernel and reset where the last call wrote (its WrittenBox), so its pages outside the
+  // liquid's band are never written (they read as the kernel's zero page) and it holds no more
+  // memory than the band; the same values as a fresh vector, the same sum. Else made here and
+  // given back at the return, so the solve's vectors reuse it instead of keeping it alive.
+  if (switches_.restricted_passes && volume_cells_.size() == grid_.num_cells()) {
+    cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_,
+                            &volume_cells_box_);
+    if (extend) restore_points(liquid_phi_, phi_undo_);
+    return volume_cells_.sum() * grid_.cell_volume();
+  }
   VectorX cells;
   cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, cells);
   if (extend) restore_points(liquid_phi_, phi_undo_);
