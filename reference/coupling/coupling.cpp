@@ -1,5 +1,6 @@
 #include "reference/coupling/coupling.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/core/huge_pages.hpp"
 
 #include <algorithm>
 #include <array>
@@ -200,8 +201,14 @@ void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lat
     w = face_negative_fractions(grid, lattice, phi);
     return;
   }
-  if (w.size() != grid.num_faces()) w.resize(grid.num_faces());
-  w.setZero();
+  // (huge21) fresh storage takes its zeros from the kernel (core/huge_pages.hpp): the pages
+  // outside the body's faces are not written
+  if (w.size() != grid.num_faces()) {
+    w.resize(grid.num_faces());
+    zero_by_release(w.data(), sizeof(double) * static_cast<std::size_t>(w.size()));
+  } else {
+    w.setZero();
+  }
   std::vector<int> near;
   faces_near_box<Dim>(grid, box, near);
   face_fractions_of_cubes<Dim>(grid, near, w, [&](const VecI<Dim>& lower) {
@@ -309,8 +316,11 @@ template <int Dim, class Phi>
 void body_face_fractions_at(const MacGrid<Dim>& grid, const Phi& phi, const Box<Dim>& box,
                             VectorX& w, bool zero_all, std::vector<int>& near) {
   if (w.size() != grid.num_faces()) {
+    // (huge21) fresh storage: its zeros from the kernel, the pages outside the body's faces
+    // never written (core/huge_pages.hpp)
     w.resize(grid.num_faces());
-    zero_all = true;
+    zero_by_release(w.data(), sizeof(double) * static_cast<std::size_t>(w.size()));
+    zero_all = false;
   }
   if (zero_all) w.setZero();
   faces_near_box<Dim>(grid, box, near);

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/core/huge_pages.hpp"
 
 namespace monolith {
 
@@ -55,12 +56,15 @@ struct KeptZeros {
   std::vector<std::pair<long, long>> dirty;
   /// `out` becomes a vector of n zeros: the kept storage with its dirty spans zeroed when it
   /// has n entries (the spans then forgotten), else a fresh zero vector (the storage dropped).
+  /// (huge21) The fresh vector's zeros are given by the kernel (zero_by_release): its pages are
+  /// provided only where the borrower writes (the band's rows), not all at the first lend.
   void lend(long n, VectorX& out) {
     if (values.size() == n) {
       for (const auto& [b, e] : dirty) values.segment(b, e - b).setZero();
       out.swap(values);
     } else {
-      out.setZero(n);
+      out.resize(n);
+      zero_by_release(out.data(), sizeof(double) * static_cast<std::size_t>(n));
     }
     values = VectorX();
     dirty.clear();

@@ -21,6 +21,7 @@
 #include <utility>
 
 #include "reference/core/errors.hpp"
+#include "reference/core/huge_pages.hpp"
 #include "reference/core/state_io.hpp"
 #include "reference/core/timer.hpp"
 #include "reference/coupling/coupled_schemes.hpp"
@@ -383,12 +384,56 @@ void Simulation<Dim>::reserve_step_buffers() {
   if (guards_reads()) solid_frame_.reserve(2 * solid_faces_.size());
   // W_L^p and W_L^u (their first fill zeroes them whole: no valid WrittenBox yet) and the
   // pressure (frame_zero zeroes it)
-  if (weights_.liquid_cell.size() == 0) weights_.liquid_cell.resize(grid_.num_cells());
-  if (weights_.liquid_face.size() == 0) weights_.liquid_face.resize(grid_.num_faces());
-  if (pressure_.size() == 0) pressure_.resize(grid_.num_cells());
+  // (huge21) W_L^p and W_L^u are written in the liquid's band only when their WrittenBox is
+  // valid: made here, they are zeroed without writing their pages (zero_by_release: fresh
+  // storage, given back whole) and their boxes set to "nothing written", so the first fill
+  // writes its band only, like every later one (the same zeros elsewhere; the pages outside
+  // the band are never provided). Without restricted passes every fill zeroes them whole.
+  if (weights_.liquid_cell.size() == 0) {
+    weights_.liquid_cell.resize(grid_.num_cells());
+    if (switches_.restricted_passes) {
+      zero_by_release(weights_.liquid_cell.data(),
+                      sizeof(double) * static_cast<std::size_t>(weights_.liquid_cell.size()));
+      liquid_cell_box_ = WrittenBox<Dim>{};
+      liquid_cell_box_.data = weights_.liquid_cell.data();
+      liquid_cell_box_.size = weights_.liquid_cell.size();
+      liquid_cell_box_.valid = true;
+    }
+  }
+  // the reported volume's cell fractions likewise (fluid_volume_in_box)
+  if (switches_.restricted_passes && volume_cells_.size() == 0) {
+    volume_cells_.resize(grid_.num_cells());
+    zero_by_release(volume_cells_.data(),
+                    sizeof(double) * static_cast<std::size_t>(volume_cells_.size()));
+    volume_cells_box_ = WrittenBox<Dim>{};
+    volume_cells_box_.data = volume_cells_.data();
+    volume_cells_box_.size = volume_cells_.size();
+    volume_cells_box_.valid = true;
+  }
+  if (weights_.liquid_face.size() == 0) {
+    weights_.liquid_face.resize(grid_.num_faces());
+    if (switches_.restricted_passes) {
+      zero_by_release(weights_.liquid_face.data(),
+                      sizeof(double) * static_cast<std::size_t>(weights_.liquid_face.size()));
+      for (int a = 0; a < Dim; ++a) {
+        liquid_face_boxes_[a] = WrittenBox<Dim>{};
+        liquid_face_boxes_[a].data = weights_.liquid_face.data() + grid_.face_offset(a);
+        liquid_face_boxes_[a].size = grid_.face_dims(a).prod();
+        liquid_face_boxes_[a].valid = true;
+      }
+    }
+  }
+  // the pressure (written whole by every solve) on huge pages (core/huge_pages.hpp)
+  if (pressure_.size() == 0) resize_on_huge_pages(pressure_, grid_.num_cells());
   // eta per cell likewise (a non-Newtonian liquid's is made before the first solve when its
   // size is not the grid's: left to update_liquid_weights)
   if (!non_newtonian_ && cell_eta_.size() == 0) cell_eta_.resize(grid_.num_cells());
+  // (huge21) u, the face masses and the faces' densities: kept across steps and written whole
+  // by every particles_to_grid (its resize to the same size keeps this storage): sized here,
+  // after the blocks above as before (frame_zero's transfer made them next), on huge pages
+  resize_on_huge_pages(u_, faces);
+  resize_on_huge_pages(face_mass_, faces);
+  resize_on_huge_pages(weights_.face_density, faces);
 }
 
 template <int Dim>
@@ -803,8 +848,18 @@ double Simulation<Dim>::fluid_volume_in_box(const VecI<Dim>& liquid_lo, const Ve
   require_stored(liquid_phi_, liquid_lo, liquid_hi, 1, "fluid_volume_in_box");
   const LatticeValues<Dim> fluid_phi = liquid_phi_.view();
   classify_lattice_cells_in_box(grid_, lattice_, fluid_phi, liquid_lo, liquid_hi, liquid_signs_);
-  // (a cell-sized vector read by nothing else, 64 MiB at the paper's 256x128x256 grid: given
-  // back at the return, so the solve's vectors reuse it instead of keeping it alive)
+  // (a cell-sized vector read by nothing else, 64 MiB at the paper's 256x128x256 grid.) With
+  // restricted passes it is kept (huge21): made in reserve_step_buffers with its zeros from the
+  // kernel and reset where the last call wrote (its WrittenBox), so its pages outside the
+  // liquid's band are never written (they read as the kernel's zero page) and it holds no more
+  // memory than the band; the same values as a fresh vector, the same sum. Else made here and
+  // given back at the return, so the solve's vectors reuse it instead of keeping it alive.
+  if (switches_.restricted_passes && volume_cells_.size() == grid_.num_cells()) {
+    cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, volume_cells_,
+                            &volume_cells_box_);
+    if (extend) restore_points(liquid_phi_, phi_undo_);
+    return volume_cells_.sum() * grid_.cell_volume();
+  }
   VectorX cells;
   cell_negative_fractions(grid_, lattice_, fluid_phi, liquid_signs_, cells);
   if (extend) restore_points(liquid_phi_, phi_undo_);

@@ -717,6 +717,11 @@ class Simulation : public AnySimulation {
   /// next one zeroes only those (WrittenBox)
   WrittenBox<Dim> liquid_cell_box_;
   std::array<WrittenBox<Dim>, Dim> liquid_face_boxes_;
+  /// (huge21) the reported volume's cell fractions (fluid_volume_in_box) kept across steps with
+  /// restricted passes: made in reserve_step_buffers with zeros from the kernel, reset where the
+  /// last call wrote them (volume_cells_box_): only the liquid's band of it is ever written
+  VectorX volume_cells_;
+  WrittenBox<Dim> volume_cells_box_;
   /// per fixed face: 1 if every face that the interpolation of the velocity at its centre reads
   /// (each component's 2^Dim stencil of MacGrid::axis_stencil) had W_F^u = 0 (or
   /// was a wall's) while no moving body came near (constrain_velocity_in_solids); built with
