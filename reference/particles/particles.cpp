@@ -13,7 +13,6 @@
 
 #include "reference/grid/tiled_lattice.hpp"
 #include "reference/grid/volume_fractions.hpp"
-#include "reference/particles/projection_cg.hpp"
 #include "reference/particles/slab_bounds.hpp"
 
 namespace monolith {
@@ -2136,15 +2135,27 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
                 nonzero + row_start[r]);
     }
   }
-  // Eigen's diagonally preconditioned CG, bit for bit, with its row products and entrywise
-  // updates on a team whose size is measured (projection_cg.hpp: its dot products stay Eigen's
-  // own, on one thread). Eigen's own product would open a region per iteration (the 64^3 viscous
-  // bunny: 8k rows, 54k non-zeros, ~45 iterations): the CG's CPU time rose from 2.6 to 14 ms per
-  // frame on two threads at load 8 (docs/benchmarks.md, threads14); one region per solve with the
-  // team chosen by measurement falls back to one thread under such load (outside21).
-  VectorX psi;  // in units of dx^2
-  stats.iterations =
-      cg_in_eigen_order(A, rhs, kProjectionTolerance, 4L * n + 100, psi).iterations;
+  Eigen::ConjugateGradient<SparseMatrix, Eigen::Lower | Eigen::Upper,
+                           Eigen::DiagonalPreconditioner<double>>
+      cg;
+  cg.setTolerance(kProjectionTolerance);
+  cg.setMaxIterations(4 * n + 100);
+  cg.compute(A);
+  // On one thread: Eigen would split each product of the CG (a row-major view above 20000
+  // non-zeros) over the process team, a parallel region per iteration around a few tens of
+  // microseconds of work (the 64^3 viscous bunny: 8k rows, 54k non-zeros, ~45 iterations), and
+  // the vector operations between them are serial anyway; the regions cost more than they saved
+  // on two threads (the CG's CPU time rose from 2.6 to 14 ms per frame, measured at load 8;
+  // docs/benchmarks.md, threads14). Each row's product is
+  // summed by one thread either way: the same bits.
+  // (threads15 ran the whole CG in one parallel region, Eigen's steps and bits with five
+  // barriers per iteration: at load 7-8 its two threads took 16 ms each per frame against
+  // 2.7 ms on one, for at most ~1 ms to gain on an idle machine; docs/benchmarks.md, threads15)
+  const int eigen_threads = Eigen::nbThreads();
+  Eigen::setNbThreads(1);
+  const VectorX psi = cg.solve(rhs);  // in units of dx^2
+  Eigen::setNbThreads(eigen_threads);
+  stats.iterations = static_cast<int>(cg.iterations());
 
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
   // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell

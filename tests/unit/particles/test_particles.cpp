@@ -2,21 +2,17 @@
 // position correction.
 #include <omp.h>
 
-#include <Eigen/IterativeLinearSolvers>
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <random>
-#include <string>
 
 #include "reference/core/parallel.hpp"
 #include "reference/fluid/viscosity_field.hpp"
 #include "reference/grid/stress_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/particles/particles.hpp"
-#include "reference/particles/projection_cg.hpp"
 #include "reference/particles/slab_bounds.hpp"
 #include "tests/support/test_helpers.hpp"
 
@@ -1242,123 +1238,6 @@ TEST_CASE("density projection: to_solve lists the surface band's deficits and mo
   check_projection_lists_surface_deficits<2>();
   check_projection_lists_surface_deficits<3>();
 }
-
-namespace {
-
-/// The projection's kind of matrix on an m^3 block of cells: -L dx^2 with random face weights in
-/// (0, 1] (some faces closed), the diagonal shifted as project_density_once does, rows in cell
-/// order; symmetric positive definite.
-SparseMatrix projection_like_matrix(int m, std::mt19937& rng) {
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  const int n = m * m * m;
-  const auto index = [m](int i, int j, int k) { return i + m * (j + m * k); };
-  // a weight per face (axis, lower cell), 0 on about a tenth of them
-  std::vector<std::array<double, 3>> w(n);
-  for (auto& face : w)
-    for (double& x : face) x = u(rng) < 0.1 ? 0.0 : 0.05 + 0.95 * u(rng);
-  std::vector<Eigen::Triplet<double>> entries;
-  for (int k = 0; k < m; ++k)
-    for (int j = 0; j < m; ++j)
-      for (int i = 0; i < m; ++i) {
-        const int c = index(i, j, k);
-        double diag = 0.0;
-        const int cell[3] = {i, j, k};
-        for (int a = 0; a < 3; ++a)
-          for (int s : {-1, 1}) {
-            int nb[3] = {i, j, k};
-            nb[a] += s;
-            // the face to the minus neighbour is that neighbour's plus face; a wall face (outside
-            // the block) keeps its weight on the diagonal, like a face to air
-            const double wf = s < 0 ? (cell[a] > 0 ? w[index(nb[0], nb[1], nb[2])][a] : w[c][a])
-                                    : w[c][a];
-            if (!(wf > 0.0)) continue;
-            diag += wf;
-            if (nb[a] >= 0 && nb[a] < m) entries.emplace_back(c, index(nb[0], nb[1], nb[2]), -wf);
-          }
-        entries.emplace_back(c, c, diag * (1.0 + 1e-6) + 1e-12);
-      }
-  SparseMatrix a(n, n);
-  a.setFromTriplets(entries.begin(), entries.end());
-  a.makeCompressed();
-  return a;
-}
-
-}  // namespace
-
-TEST_CASE("density projection's CG: Eigen's ConjugateGradient bit for bit with 1, 2, 3 and 5 "
-          "threads (converged, stopped by the iteration cap, zero and converged right-hand sides)",
-          "[unit]") {
-  std::mt19937 rng(5);
-  const SparseMatrix a = projection_like_matrix(20, rng);  // 8000 rows, ~53k non-zeros
-  REQUIRE(a.nonZeros() > kParallelMinWork);
-  const int n = static_cast<int>(a.rows());
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  VectorX rhs(n);
-  for (int i = 0; i < n; ++i) rhs[i] = u(rng) < -0.5 ? 0.0 : u(rng);
-  const double tolerance = 1e-4;
-  // Eigen's solver, as project_density_once used it
-  const auto eigen = [&](const VectorX& b, long cap, VectorX& x) {
-    Eigen::ConjugateGradient<SparseMatrix, Eigen::Lower | Eigen::Upper,
-                             Eigen::DiagonalPreconditioner<double>>
-        cg;
-    cg.setTolerance(tolerance);
-    cg.setMaxIterations(cap);
-    cg.compute(a);
-    const int saved = Eigen::nbThreads();
-    Eigen::setNbThreads(1);
-    x = cg.solve(b);
-    Eigen::setNbThreads(saved);
-    return std::make_pair(static_cast<int>(cg.iterations()), cg.error());
-  };
-  // the team exactly t threads
-  const bool monitor = core_monitor();
-  const bool adaptive = adaptive_teams();
-  set_core_monitor(false);
-  set_adaptive_teams(false);
-  const int threads = omp_get_max_threads();
-  struct Case {
-    const char* name;
-    VectorX b;
-    long cap;
-  };
-  // a right-hand side whose squared norm is below the smallest normal double: the start's
-  // residual is below Eigen's threshold (no iteration)
-  VectorX tiny = VectorX::Zero(n);
-  tiny[7] = 1e-160;
-  const std::vector<Case> cases = {{"converged", rhs, 4L * n + 100},
-                                   {"stopped by the cap", rhs, 6},
-                                   {"zero", VectorX::Zero(n), 4L * n + 100},
-                                   {"tiny", tiny, 4L * n + 100}};
-  for (const Case& c : cases) {
-    INFO(c.name);
-    VectorX expected;
-    const auto [iterations, error] = eigen(c.b, c.cap, expected);
-    if (std::string(c.name) == "converged") {
-      CHECK(iterations > 10);
-      CHECK(error <= tolerance);
-    }
-    if (std::string(c.name) == "stopped by the cap") {
-      CHECK(iterations == 6);
-      CHECK(error > tolerance);
-    }
-    if (std::string(c.name) == "tiny") CHECK(iterations == 0);
-    for (int t : {1, 2, 3, 5}) {
-      INFO(t << " threads");
-      omp_set_num_threads(t);
-      VectorX x = VectorX::Constant(n, 3.0);  // overwritten whole
-      const EigenOrderCgResult result = cg_in_eigen_order(a, c.b, tolerance, c.cap, x);
-      omp_set_num_threads(threads);
-      CHECK(result.team == t);
-      CHECK(result.iterations == iterations);
-      CHECK(std::memcmp(&result.error, &error, sizeof(double)) == 0);
-      REQUIRE(x.size() == n);
-      CHECK(std::memcmp(x.data(), expected.data(), sizeof(double) * n) == 0);
-    }
-  }
-  set_adaptive_teams(adaptive);
-  set_core_monitor(monitor);
-}
-
 TEST_CASE("balanced_slab_bounds: bounds that cover the output layers in order and give the "
           "least largest visit count (against every split, 2 and 3 slabs)",
           "[unit]") {
