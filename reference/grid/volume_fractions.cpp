@@ -859,13 +859,56 @@ void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
     return;
   }
   if ((cells.lo.array() > cells.hi.array()).any()) return;  // no cell with liquid
-  // the same raise (a maximum per face: the order of the cells does not matter) over the cells
-  // of the box, outside which every cell fraction is 0
-  const VecI<Dim> box = cells.hi - cells.lo + VecI<Dim>::Ones();
-  for (int j = 0; j < box.prod(); ++j) {
-    const VecI<Dim> c = cells.lo + lattice_coord<Dim>(j, box);
-    if (!(liquid_cell_weights[grid.cell_index(c)] > 0.0)) continue;
-    raise_faces_of_cell(grid, w, c);
+  // the same raise over the cells of the box, outside which every cell fraction is 0, made face
+  // by face: a face of the box's cells (c and c + e_axis along axis; the seam face 0 of a
+  // periodic axis lies in the box, which spans that axis whole) is raised when its minus or its
+  // plus cell lies in the box with a liquid fraction. The raise is a maximum, which raising once
+  // or twice, in any order, gives alike; each face is written by one thread (rows of the faces'
+  // boxes along axis 0 on several threads; the cells' loop, serial, was 0.4 ms per step on the
+  // 64^3 viscous bunny)
+  std::array<VecI<Dim>, Dim> face_lo, face_hi;
+  std::array<int, Dim + 1> row_start{};
+  for (int axis = 0; axis < Dim; ++axis) {
+    face_lo[axis] = cells.lo;
+    face_hi[axis] = cells.hi;
+    face_hi[axis][axis] = std::min(cells.hi[axis] + 1, grid.face_dims(axis)[axis] - 1);
+    // (a periodic axis: every face, should the box not span the axis whole; its seam face 0 is
+    // the last cell's plus face)
+    if (grid.periodic(axis)) {
+      face_lo[axis][axis] = 0;
+      face_hi[axis][axis] = grid.face_dims(axis)[axis] - 1;
+    }
+    VecI<Dim> rows = face_hi[axis] - face_lo[axis] + VecI<Dim>::Ones();
+    rows[0] = 1;
+    row_start[axis + 1] = row_start[axis] + rows.prod();
+  }
+  const auto in_box = [&](const VecI<Dim>& c) {
+    return (c.array() >= cells.lo.array()).all() && (c.array() <= cells.hi.array()).all();
+  };
+  const auto liquid = [&](const VecI<Dim>& c) {
+    return in_box(c) && liquid_cell_weights[grid.cell_index(c)] > 0.0;
+  };
+  const int total_rows = row_start[Dim];
+  const long row_length = cells.hi[0] - cells.lo[0] + 2;
+#pragma omp parallel for schedule(static) num_threads(team_threads(total_rows * row_length))
+  for (int r = 0; r < total_rows; ++r) {
+    int axis = 0;
+    while (r >= row_start[axis + 1]) ++axis;
+    VecI<Dim> rows = face_hi[axis] - face_lo[axis] + VecI<Dim>::Ones();
+    const int nx = rows[0];
+    rows[0] = 1;
+    VecI<Dim> f = face_lo[axis] + lattice_coord<Dim>(r - row_start[axis], rows);
+    const int n_axis = grid.cells()[axis];
+    for (int x = 0; x < nx; ++x) {
+      f[0] = face_lo[axis][0] + x;
+      // the face's cells: f - e_axis (wrapped across a periodic seam) and f
+      VecI<Dim> minus = f;
+      minus[axis] -= 1;
+      if (grid.periodic(axis) && minus[axis] < 0) minus[axis] += n_axis;
+      if (!liquid(minus) && !liquid(f)) continue;
+      double& v = w[grid.face_index(axis, f)];
+      v = std::max(v, kMinLiquidFaceFraction);
+    }
   }
   // the faces of the box's cells: c and c + e_axis along axis (the seam face 0 of a periodic
   // axis lies in the box, which spans that axis whole)

@@ -13,6 +13,7 @@
 
 #include "reference/grid/tiled_lattice.hpp"
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/particles/slab_bounds.hpp"
 
 namespace monolith {
 
@@ -500,15 +501,15 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   }
   const int threads = std::max(1, std::min(process_threads(), layers));
   // slab t owns the face layers [first[t], first[t + 1]); the face lattices along the last axis
-  // have at most layers + 1 samples
-  std::vector<int> first(threads + 1, 0);
-  for (int t = 1; t < threads; ++t) {
-    const long target = np * t / threads;
-    int c = first[t - 1];
-    while (c < layers && per_layer[c] < target) ++c;
-    first[t] = c;
+  // have at most layers + 1 samples. A particle of cell layer c writes face layers c - 1 .. c + 1
+  // (as `reaches` below has it): the bounds balance the particles each slab visits, the layers
+  // beside a bound counted on both sides (slab_bounds.hpp)
+  std::vector<int> first;
+  {
+    std::vector<long> count(layers);
+    for (int c = 0; c < layers; ++c) count[c] = per_layer[c + 1] - per_layer[c];
+    first = balanced_slab_bounds(count, layers + 1, threads, -1, 1);
   }
-  first[threads] = layers + 1;
 
 #pragma omp parallel num_threads(threads)
   {
@@ -1818,8 +1819,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // order, skips those whose five layers miss its slab and adds only into its own cells, so every
   // cell sums its contributions in the order of the serial loop (the same bits for any number of
   // threads, and as before)
-  // The slabs' bounds cut the particles' layers into equal counts (equal widths left one thread
-  // most of a blob's particles; any bounds give the same bits).
+  // The slabs' bounds balance the particles each slab visits (equal widths left one thread most
+  // of a blob's particles; any bounds give the same bits).
   const int layers = grid.cells()[kLast];
   const int slabs = std::max(1, std::min(process_threads(), layers));
   std::vector<int> slab_first(slabs + 1, 0);
@@ -1844,16 +1845,14 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     }
   }
   if (slabs > 1) {
-    std::vector<long> histogram(layers + 1, 0);
+    // a particle of cell layer l writes cell layers l - 2 .. l + 2 (clamped or wrapped): the
+    // bounds balance the particles each slab visits, those beside a bound counted on both sides
+    // (slab_bounds.hpp; the first layer where the running count reached k / slabs of np left one
+    // slab the bound's layers more)
+    std::vector<long> per_layer(layers, 0);
     for (const auto& count : counts)
-      for (int l = 0; l <= layers; ++l) histogram[l] += count[l];
-    for (int l = 0; l < layers; ++l) histogram[l + 1] += histogram[l];
-    int l = 0;
-    for (int k = 1; k < slabs; ++k) {
-      // slab k starts at the first layer whose running count reaches k / slabs of np
-      while (l < layers && histogram[l + 1] * slabs < np * k) ++l;
-      slab_first[k] = std::max(l, slab_first[k - 1]);
-    }
+      for (int l = 0; l < layers; ++l) per_layer[l] += count[l + 1];
+    slab_first = balanced_slab_bounds(per_layer, layers, slabs, -2, 2);
   }
 #pragma omp parallel for schedule(static, 1) num_threads(process_threads())
   for (int slab = 0; slab < slabs; ++slab) {

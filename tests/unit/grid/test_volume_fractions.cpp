@@ -1,9 +1,12 @@
 // Volume fractions (section 3.1.2) and the solid shrinkage of section 4.4.6.
+#include <omp.h>
+
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <random>
 
 #include "reference/core/huge_pages.hpp"
+#include "reference/core/parallel.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "tests/support/test_helpers.hpp"
 
@@ -581,4 +584,48 @@ TEMPLATE_TEST_CASE_SIG("fraction buffers zeroed by release with boxes of nothing
     ++calls;
   }
   CHECK(calls == 4);
+}
+
+TEMPLATE_TEST_CASE_SIG("the boxed clamp of the faces' liquid fractions above its serial fall-back: "
+                       "the plain clamp's bits with 1, 2, 3 and 5 threads",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // a ball of liquid (and a drop cut by the periodic seam of x) whose cells' box holds more face
+  // rows times row length than kParallelMinWork, so the raise runs on the team
+  const int n = Dim == 2 ? 240 : 48;
+  for (int periodic_x = 0; periodic_x < 2; ++periodic_x) {
+    INFO("periodic x " << periodic_x);
+    const MacGrid<Dim> grid = unit_grid<Dim>(n, periodic_x == 1);
+    const SampleLattice<Dim> lattice = half_lattice(grid);
+    const VectorX phi = sample_lattice<Dim>(lattice, [&](const Vec<Dim>& x) {
+      Vec<Dim> c = Vec<Dim>::Constant(0.45), d = Vec<Dim>::Constant(0.5);
+      d[0] = 0.99;
+      return std::min((x - c).norm() - 0.3, (x - d).norm() - 0.05);
+    });
+    LatticeSigns<Dim> signs;
+    classify_lattice_cells(grid, lattice, phi, signs);
+    VectorX cells, faces_plain;
+    WrittenBox<Dim> cell_box;
+    cell_negative_fractions(grid, lattice, phi, signs, cells, &cell_box);
+    face_negative_fractions(grid, lattice, phi, signs, faces_plain);
+    const VectorX unclamped = faces_plain;
+    clamp_liquid_face_weights_in_place(grid, faces_plain, cells);
+    REQUIRE(cell_box.valid);
+    const VecI<Dim> box = cell_box.hi - cell_box.lo + VecI<Dim>::Ones();
+    REQUIRE(static_cast<long>(box.prod()) * Dim > kParallelMinWork);
+    CHECK(monolith::testing::differing(faces_plain, unclamped) > 0);  // the clamp raised faces
+    const bool monitor = core_monitor();
+    set_core_monitor(false);
+    const int threads = omp_get_max_threads();
+    for (int t : {1, 2, 3, 5}) {
+      INFO(t << " threads");
+      omp_set_num_threads(t);
+      VectorX faces;
+      std::array<WrittenBox<Dim>, Dim> face_boxes;
+      face_negative_fractions<Dim>(grid, lattice, phi, signs, faces, &face_boxes);
+      clamp_liquid_face_weights_in_place<Dim>(grid, faces, cells, cell_box, face_boxes);
+      omp_set_num_threads(threads);
+      CHECK(monolith::testing::differing(faces, faces_plain) == 0);
+    }
+    set_core_monitor(monitor);
+  }
 }

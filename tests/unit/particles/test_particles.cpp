@@ -2,8 +2,10 @@
 // position correction.
 #include <omp.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "reference/core/parallel.hpp"
@@ -11,6 +13,7 @@
 #include "reference/grid/stress_grid.hpp"
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/particles/particles.hpp"
+#include "reference/particles/slab_bounds.hpp"
 #include "tests/support/test_helpers.hpp"
 
 using namespace monolith;
@@ -1234,4 +1237,45 @@ TEST_CASE("density projection: to_solve lists the surface band's deficits and mo
           "[unit]") {
   check_projection_lists_surface_deficits<2>();
   check_projection_lists_surface_deficits<3>();
+}
+TEST_CASE("balanced_slab_bounds: bounds that cover the output layers in order and give the "
+          "least largest visit count (against every split, 2 and 3 slabs)",
+          "[unit]") {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> draw(0, 40);
+  for (int trial = 0; trial < 200; ++trial) {
+    const int layers = 1 + trial % 17;
+    std::vector<long> count(layers);
+    for (long& c : count) c = trial % 5 == 0 && draw(rng) < 20 ? 0 : draw(rng);
+    const int reach_lo = -(trial % 3), reach_hi = (trial / 3) % 3;
+    const int outputs = layers + (trial % 2);
+    // the particles a slab [a, b) visits: layers within reach of its outputs
+    const auto visited = [&](int a, int b) {
+      long v = 0;
+      if (a >= b) return v;
+      for (int l = 0; l < layers; ++l)
+        if (l + reach_hi >= a && l + reach_lo <= b - 1) v += count[l];
+      return v;
+    };
+    for (int slabs : {2, 3}) {
+      INFO("trial " << trial << ", slabs " << slabs);
+      const std::vector<int> first = balanced_slab_bounds(count, outputs, slabs, reach_lo, reach_hi);
+      REQUIRE(static_cast<int>(first.size()) == slabs + 1);
+      CHECK(first.front() == 0);
+      CHECK(first.back() == outputs);
+      long largest = 0;
+      for (int s = 0; s < slabs; ++s) {
+        CHECK(first[s] <= first[s + 1]);
+        largest = std::max(largest, visited(first[s], first[s + 1]));
+      }
+      long best = std::numeric_limits<long>::max();
+      for (int b1 = 0; b1 <= outputs; ++b1)
+        for (int b2 = b1; b2 <= (slabs == 3 ? outputs : b1); ++b2) {
+          const long m = slabs == 2 ? std::max(visited(0, b1), visited(b1, outputs))
+                                    : std::max({visited(0, b1), visited(b1, b2), visited(b2, outputs)});
+          best = std::min(best, m);
+        }
+      CHECK(largest == best);
+    }
+  }
 }
