@@ -13,8 +13,8 @@
 ///   that are kept and written whole (a huge page is provided whole, so a buffer written in a
 ///   few rows only would take more memory with it). Call it before the buffer's first write:
 ///   pages already present stay small pages until the kernel's background collapse (if ever).
-///   Off with the environment variable MONOLITH_HUGE_PAGES=0 (docs/cli.md); a no-op elsewhere
-///   than Linux. Advice only: the values in the buffer never change.
+///   Opt-in: on with the environment variable MONOLITH_HUGE_PAGES=1 or set_huge_pages(true)
+///   (docs/cli.md); a no-op elsewhere than Linux. Advice only: the values in the buffer never change.
 /// - zero_by_release: zero bytes over a range without writing its whole pages. The kernel's
 ///   fresh anonymous pages are zero, so the pages inside the range are given back
 ///   (MADV_DONTNEED: private anonymous memory reads as zero afterwards and is provided again
@@ -26,6 +26,7 @@
 /// Both act on memory of the process's own heap (Eigen vectors, std::vector storage), which is
 /// private anonymous memory with any allocator the project uses.
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -59,14 +60,30 @@ constexpr AddressSpan aligned_interior(std::uintptr_t start, std::size_t bytes,
   return begin < end ? AddressSpan{begin, end} : AddressSpan{begin, begin};
 }
 
-/// false when the environment sets MONOLITH_HUGE_PAGES=0 (read once per process).
-inline bool huge_pages_enabled() {
-  static const bool enabled = [] {
-    const char* value = std::getenv("MONOLITH_HUGE_PAGES");
-    return !(value && std::strcmp(value, "0") == 0);
-  }();
-  return enabled;
+/// The switch of advise_huge_pages: -1 until decided, then 0 (off) or 1 (on).
+inline std::atomic<int>& huge_pages_flag() {
+  static std::atomic<int> flag{-1};
+  return flag;
 }
+
+/// Whether advise_huge_pages advises: off unless the environment sets MONOLITH_HUGE_PAGES=1
+/// (read the first time it is asked) or set_huge_pages(true) was called first. Off by default
+/// because on the development machine (a virtual machine) the advice made the 64^3 viscous
+/// bunny's frames 20-50 % slower on one thread in every alternated pair measured, while the
+/// paper grid's run gained nothing measurable (docs/benchmarks.md, "The twentieth session's
+/// merged tree on a quiet machine").
+inline bool huge_pages_enabled() {
+  int flag = huge_pages_flag().load();
+  if (flag < 0) {
+    const char* value = std::getenv("MONOLITH_HUGE_PAGES");
+    flag = (value && std::strcmp(value, "1") == 0) ? 1 : 0;
+    huge_pages_flag().store(flag);
+  }
+  return flag == 1;
+}
+
+/// Decides the switch for the process (tests; a program that embeds the core).
+inline void set_huge_pages(bool on) { huge_pages_flag().store(on ? 1 : 0); }
 
 /// Advises the 2 MiB-aligned interior of [data, data + bytes) for transparent huge pages (see
 /// the file comment). Returns the bytes advised: 0 for a range without a whole aligned 2 MiB

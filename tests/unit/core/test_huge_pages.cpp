@@ -8,8 +8,10 @@
 #include <catch2/catch.hpp>
 
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <string>
 #include <vector>
 
 #include "reference/core/huge_pages.hpp"
@@ -62,6 +64,26 @@ TEST_CASE("aligned_interior: the whole 2 MiB blocks inside a range (huge21)", "[
   }
 }
 
+TEST_CASE("huge pages are opt-in: MONOLITH_HUGE_PAGES=1 turns the advice on, unset or any other "
+          "value leaves it off", "[unit]") {
+  const char* env = std::getenv("MONOLITH_HUGE_PAGES");
+  const std::string saved = env ? env : "";
+  const bool was = huge_pages_enabled();
+  const auto decided_by = [](const char* value) {
+    if (value) setenv("MONOLITH_HUGE_PAGES", value, 1);
+    else unsetenv("MONOLITH_HUGE_PAGES");
+    huge_pages_flag().store(-1);  // undecided: read the environment again
+    return huge_pages_enabled();
+  };
+  CHECK_FALSE(decided_by(nullptr));
+  CHECK(decided_by("1"));
+  CHECK_FALSE(decided_by("0"));
+  CHECK_FALSE(decided_by("yes"));
+  if (env) setenv("MONOLITH_HUGE_PAGES", saved.c_str(), 1);
+  else unsetenv("MONOLITH_HUGE_PAGES");
+  set_huge_pages(was);
+}
+
 TEST_CASE("advise_huge_pages advises the aligned interior and leaves the values (huge21)",
           "[unit]") {
   // 9 MiB + 24 bytes of doubles from wherever the heap puts them: the interior is 3 or 4 blocks
@@ -73,6 +95,12 @@ TEST_CASE("advise_huge_pages advises the aligned interior and leaves the values 
   const AddressSpan interior = aligned_interior(reinterpret_cast<std::uintptr_t>(v.data()), bytes, H);
   CHECK(interior.bytes() >= 3 * H);
   CHECK(interior.bytes() % H == 0);
+  // off unless asked for (MONOLITH_HUGE_PAGES=1 or set_huge_pages): switched off, nothing is
+  // advised; then switched on for the checks below, and back to what it was
+  const bool was = huge_pages_enabled();
+  set_huge_pages(false);
+  CHECK(advise_huge_pages(v.data(), bytes) == 0);
+  set_huge_pages(true);
   const std::size_t advised = advise_huge_pages(v.data(), bytes);
   // the interior or nothing (switched off, or a kernel without transparent huge pages)
   CHECK((advised == interior.bytes() || advised == 0));
@@ -84,6 +112,7 @@ TEST_CASE("advise_huge_pages advises the aligned interior and leaves the values 
   // a range without a whole block is not advised
   CHECK(advise_huge_pages(v.data() + 1, H / 2) == 0);
   CHECK(advise_huge_pages(nullptr, 4 * H) == 0);
+  set_huge_pages(was);
   // resize_on_huge_pages: the same size keeps storage and values; another size makes n entries
   const double* before = v.data();
   resize_on_huge_pages(v, n);
