@@ -238,7 +238,17 @@ VectorX sample_viscosity(const MacGrid<Dim>& grid, const Vec<Dim>& shift, const 
 template <int Dim>
 VectorX stress_viscosity(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
                          const std::vector<double>& liquid_eta) {
-  VectorX eta(stress.num_dofs());
+  VectorX eta;
+  stress_viscosity_into(stress, particles, liquid_eta, eta);
+  return eta;
+}
+
+template <int Dim>
+void stress_viscosity_into(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
+                           const std::vector<double>& liquid_eta, VectorX& eta) {
+  // every entry is written below (each component's segment whole by sample_viscosity_into or
+  // the copies), so a kept vector of the right size is reused as it is
+  if (eta.size() != stress.num_dofs()) eta.resize(stress.num_dofs());
   // The diagonal components all sit at the cell centres (shift 1/2 on every axis, dims = the
   // cells: StressGrid), so their samples are one splat, made once (component 0) and copied to the
   // other Dim - 1 (the same bits: the same call). The distinct components (0, then the
@@ -264,7 +274,6 @@ VectorX stress_viscosity(const StressGrid<Dim>& stress, const Particles<Dim>& pa
       std::copy(from + b * kBlock, from + std::min(n0, (b + 1) * kBlock),
                 eta.data() + stress.offset(k) + b * kBlock);
     }
-  return eta;
 }
 
 template <int Dim>
@@ -291,6 +300,8 @@ std::vector<VectorX> liquid_stress_fractions(const StressGrid<Dim>& stress,
                                     const Particles<D>&, const std::vector<double>&);             \
   template VectorX stress_viscosity(const StressGrid<D>&, const Particles<D>&,                    \
                                     const std::vector<double>&);                                  \
+  template void stress_viscosity_into(const StressGrid<D>&, const Particles<D>&,                 \
+                                     const std::vector<double>&, VectorX&);                       \
   template VectorX cell_viscosity(const MacGrid<D>&, const Particles<D>&,                         \
                                   const std::vector<double>&);                                    \
   template std::vector<VectorX> liquid_stress_fractions(const StressGrid<D>&, const Particles<D>&, \

@@ -41,6 +41,13 @@ template <int Dim>
 VectorX stress_viscosity(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
                          const std::vector<double>& liquid_eta);
 
+/// stress_viscosity written into `eta` (resized to stress.num_dofs() only when its size differs):
+/// the same values, without a fresh grid-sized vector (and its first-touch page faults) per call
+/// when the caller keeps `eta` across steps.
+template <int Dim>
+void stress_viscosity_into(const StressGrid<Dim>& stress, const Particles<Dim>& particles,
+                           const std::vector<double>& liquid_eta, VectorX& eta);
+
 /// eta per cell (cell centres), for RenderView::viscosity.
 template <int Dim>
 VectorX cell_viscosity(const MacGrid<Dim>& grid, const Particles<Dim>& particles,

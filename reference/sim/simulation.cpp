@@ -608,10 +608,14 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
   if (stress_eta_made) {
     stress_negative_fractions(stress_grid_, lattice_, phi, liquid_signs_, stress_liquid_);
     // (a non-Newtonian liquid's eta here is 0, and the only liquid's fractions are 1: constants
-    // without the splat, the same bits)
-    stress_eta_ = stress_viscosity_constant_or(stress_grid_, particles_, liquid_eta_, [&] {
-      return stress_viscosity(stress_grid_, particles_, liquid_eta_);
-    });
+    // without the splat, the same bits). Written into stress_eta_'s kept storage (the solve
+    // lends it and gives it back): no fresh grid-sized vector per step, whose first touch was
+    // 16 % of the splat's time on the 64^3 bunny (docs/benchmarks.md, "Kept buffers and one
+    // more pass on the team")
+    if (const auto c = constant_viscosity(particles_, liquid_eta_))
+      stress_eta_.setConstant(stress_grid_.num_dofs(), *c);
+    else
+      stress_viscosity_into(stress_grid_, particles_, liquid_eta_, stress_eta_);
     if (non_newtonian_) {
       const int liquids = static_cast<int>(mixture_.models.size());
       if (liquids == 1)

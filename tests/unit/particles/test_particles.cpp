@@ -1085,7 +1085,7 @@ void check_splats_deterministic_above_serial_fallback() {
   set_core_monitor(false);
   const int threads = omp_get_max_threads();
   struct Result {
-    VectorX cells, dofs, phi;
+    VectorX cells, dofs, dofs_kept, phi;
     Particles<Dim> moved, moved_by_solid, corrected, corrected_kept;
     long cells_projected = 0;
     VectorX faces, faces_again, extrapolated;
@@ -1093,11 +1093,17 @@ void check_splats_deterministic_above_serial_fallback() {
   };
   // correct_positions' buffers, kept from one run to the next (filled by other team sizes)
   PositionCorrectionBuffers kept;
+  // stress_viscosity_into's vector, kept from one run to the next at its size, every entry NaN
+  // before each call (an entry it did not write would stay NaN)
+  VectorX kept_eta;
   const auto run = [&](int t) {
     omp_set_num_threads(t);
     Result r;
     r.cells = cell_viscosity(grid, start, eta);
     r.dofs = stress_viscosity(stress, start, eta);
+    if (kept_eta.size() > 0) kept_eta.setConstant(std::numeric_limits<double>::quiet_NaN());
+    stress_viscosity_into(stress, start, eta, kept_eta);
+    r.dofs_kept = kept_eta;
     r.phi = liquid_phi_on_lattice(start, grid, lattice, walls<Dim>());
     r.moved = start;
     r.cells_projected =
@@ -1140,6 +1146,8 @@ void check_splats_deterministic_above_serial_fallback() {
     for (std::size_t i = 0; i < start.size(); ++i)
       kept_differ += one.corrected_kept.x[i] != one.corrected.x[i];
     CHECK(kept_differ == 0);
+    CHECK(one.dofs_kept.size() == stress.num_dofs());
+    CHECK(differing(one.dofs_kept, one.dofs) == 0);
   }
   // the projection's row assembly leaves its serial fall-back too (its team is sized by the
   // rows' 2 Dim + 1 entry slots: 10308 rows in 2D, 4118 in 3D)
@@ -1156,6 +1164,7 @@ void check_splats_deterministic_above_serial_fallback() {
     const Result other = run(t);
     CHECK(differing(other.cells, one.cells) == 0);
     CHECK(differing(other.dofs, one.dofs) == 0);
+    CHECK(differing(other.dofs_kept, one.dofs) == 0);
     CHECK(differing(other.phi, one.phi) == 0);
     // particles whose positions differ between two sets
     const auto positions_differ = [&](const auto& a, const auto& b) {
