@@ -1747,7 +1747,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
                                             const VectorX& fluid_face,
                                             const SolidField<Dim>& solids,
                                             const std::array<BoundaryType, 2 * Dim>& boundary,
-                                            SurfaceDeficits surface_deficits) {
+                                            SurfaceDeficits surface_deficits,
+                                            KeptZeros& move_scratch) {
   DensityProjectionStats stats;
   const long np = static_cast<long>(particles.size());
   if (np == 0) return stats;
@@ -1762,16 +1763,12 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // only at lattice points within the support R of a particle (2 R with solids: a particle's
   // image across a solid reaches points inside it), and T_c reads the lattice points of
   // [c - 1/2, c + 3/2] dx per axis, so T_c > 0 needs a particle with |c - c_p| < 3/2 + R / dx
-  // (in one pass with the particles' cells (wrapped, clamped) and the range of their layers of
-  // the last axis, which the move below zeroes: the particles do not move before it; min, max
-  // and logical and give the same result for any split)
+  // (in one pass with the particles' cells (wrapped, clamped): max gives the same result for
+  // any split)
   constexpr int kLast = Dim - 1;
   double max_support = 0.0;
   std::vector<VecI<Dim>> particle_cell(np);
-  int lo_layer = grid.cells()[kLast], hi_layer = -1;
-  bool finite = true;
-#pragma omp parallel reduction(max : max_support) reduction(min : lo_layer) \
-    reduction(max : hi_layer) reduction(&& : finite) num_threads(process_threads())
+#pragma omp parallel reduction(max : max_support) num_threads(process_threads())
   {
     SpacingOf<Dim> spacing_of(particles, dx);
 #pragma omp for schedule(static)
@@ -1779,9 +1776,6 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       max_support = std::max(max_support, kSurfaceSupport * spacing_of(p));
       const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
       particle_cell[p] = c;
-      finite = finite && particles.x[p].allFinite();
-      lo_layer = std::min(lo_layer, c[kLast]);
-      hi_layer = std::max(hi_layer, c[kLast]);
     }
   }
   const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
@@ -2160,44 +2154,24 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // displacement on the faces: -omega grad psi (psi = 0 in air), zero through walls and solids;
   // nonzero only on the faces of the unknowns. Each face is written by one cell: its minus cell
   // if that is an unknown, else its plus cell.
-  // (zeroed only in the face layers of the last axis that are read or written: the particles'
-  // stencils read the samples within one layer of their cells (clamped stencils too), the rows
-  // write the faces of their cells, layer ci or ci + 1. So the layers from one below the lowest
-  // particle or unknown cell to one above the highest; every layer on a periodic last axis or
-  // when a position is not finite. The other faces are neither read nor written: the whole-grid
-  // fill was most of this pass, 800k faces on a 64^3 grid for a liquid in a few layers)
-  VectorX move(nf);
+  // (issue 20, p2g21) The storage is the caller's, kept across calls: zero on every face at the
+  // lend (the faces the last call wrote zeroed, the rest zero since; a fresh one's zeros from
+  // the kernel, KeptZeros::lend), so every face the particles' stencils read holds what the
+  // whole-grid fill gave, and no face outside the rows' is written. The faces each component's
+  // rows write lie in [written_lo[a], written_hi[a]] (min and max: the same for any split),
+  // handed back as the dirty spans the next lend zeroes. Before, a fresh 202 MB vector per call
+  // at Fig. 2's paper grid had the liquid's layers zeroed: first touches at every call.
+  VectorX move;
+  move_scratch.lend(nf, move);
+  long written_lo[Dim], written_hi[Dim];
+  for (int a = 0; a < Dim; ++a) {
+    written_lo[a] = nf;
+    written_hi[a] = -1;
+  }
   {
-    // (cells is sorted and the last axis varies slowest: its ends hold the unknowns' extremes)
-    lo_layer = std::min(lo_layer, grid.cell_coord(cells.front())[kLast]);
-    hi_layer = std::max(hi_layer, grid.cell_coord(cells.back())[kLast]);
-    const bool all = grid.periodic(kLast) || !finite;
-    // the zeroed layers of every axis, then (after a barrier) the rows' faces: one parallel
-    // region (the zeros in fixed blocks of kParallelMinWork faces)
-    std::array<long, Dim> zero_first, zero_count;
-    long zero_total = 0;
-    for (int a = 0; a < Dim; ++a) {
-      const VecI<Dim> dims = grid.face_dims(a);
-      const long per = dims.prod() / dims[kLast];  // faces per layer
-      const int lo = all ? 0 : std::max(lo_layer - 1, 0);
-      const int hi = all ? dims[kLast] - 1 : std::min(hi_layer + 1, dims[kLast] - 1);
-      zero_first[a] = grid.face_offset(a) + lo * per;
-      zero_count[a] = std::max(0L, (hi - lo + 1) * per);
-      zero_total += zero_count[a];
-    }
-#pragma omp parallel num_threads(team_threads(std::max<long>(zero_total, n)))
+#pragma omp parallel num_threads(team_threads(n))
     {
-      for (int a = 0; a < Dim; ++a) {
-        const long blocks = (zero_count[a] + kParallelMinWork - 1) / kParallelMinWork;
-#pragma omp for schedule(static) nowait
-        for (long b = 0; b < blocks; ++b) {
-          const long from = zero_first[a] + b * kParallelMinWork;
-          const long to = zero_first[a] + std::min(zero_count[a], (b + 1) * kParallelMinWork);
-          std::fill(move.data() + from, move.data() + to, 0.0);
-        }
-      }
-#pragma omp barrier
-#pragma omp for schedule(static)
+#pragma omp for schedule(static) reduction(min : written_lo[:Dim]) reduction(max : written_hi[:Dim])
       for (int r = 0; r < n; ++r) {
         const VecI<Dim> ci = grid.cell_coord(cells[r]);
         for (int a = 0; a < Dim; ++a) {
@@ -2217,6 +2191,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
             const double pm = s == 0 ? 0.0 : psi[r];
             const double pp = s == 0 ? psi[r] : (r_plus >= 0 ? psi[r_plus] : 0.0);
             move[f] = -kProjectionRelaxation * (pp - pm) * dx;  // psi dx^2 / dx
+            written_lo[a] = std::min<long>(written_lo[a], f);
+            written_hi[a] = std::max<long>(written_hi[a], f);
           }
         }
       }
@@ -2237,6 +2213,11 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     particles.x[p] = x;
   }
   stats.max_move = max_move;
+  // the storage back to the caller, with the spans its rows wrote
+  move_scratch.values.swap(move);
+  for (int a = 0; a < Dim; ++a)
+    if (written_lo[a] <= written_hi[a])
+      move_scratch.dirty.emplace_back(written_lo[a], written_hi[a] + 1);
   return stats;
 }
 
@@ -2262,11 +2243,14 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
                                                 const SolidField<Dim>& solids,
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
                                                 int iterations,
-                                                SurfaceDeficits surface_deficits) {
+                                                SurfaceDeficits surface_deficits,
+                                                KeptZeros* move_scratch) {
   DensityProjectionStats total;
+  KeptZeros own;  // the displacement's storage when the caller keeps none (over the iterations)
+  KeptZeros& scratch = move_scratch ? *move_scratch : own;
   for (int it = 0; it < iterations; ++it) {
-    const DensityProjectionStats one = project_density_once(particles, grid, lattice, fluid_face,
-                                                            solids, boundary, surface_deficits);
+    const DensityProjectionStats one = project_density_once(
+        particles, grid, lattice, fluid_face, solids, boundary, surface_deficits, scratch);
     if (it == 0)
       total = one;
     else {
@@ -2868,7 +2852,8 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                   PositionCorrectionBuffers*);                                     \
   template DensityProjectionStats project_particle_density(                                        \
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
-      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, SurfaceDeficits);         \
+      const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, SurfaceDeficits,          \
+      KeptZeros*);                                                                                 \
   template void liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                     \
                                        const SampleLattice<D>&,                                    \
                                        const std::array<BoundaryType, 2 * D>&,                     \

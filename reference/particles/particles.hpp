@@ -10,6 +10,7 @@
 
 #include "reference/core/common.hpp"
 #include "reference/fluid/liquid_spec.hpp"
+#include "reference/fluid/stokes_workspace.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/boxed_lattice.hpp"
@@ -209,6 +210,11 @@ enum class SurfaceDeficits {
 /// `surface_deficits`: on the liquid side of the surface band (1/2 <= T_c < 0.999) a deficit is
 /// corrected in the share SurfaceDeficits says (by default always; the other rules are
 /// measurement switches, docs/particles.md "Sloshing").
+/// `move_scratch` (issue 20, p2g21): the face-sized displacement's storage, kept by the caller
+/// across calls (0 outside its dirty spans, which are the faces the last call wrote: each call
+/// zeroes only those, so after the first call no page beyond the liquid's faces is touched, and
+/// the first call's zeros come from the kernel). Without it every call makes its own (one per
+/// call, kept over its iterations). The results are the same bits either way.
 template <int Dim>
 DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                                 const SampleLattice<Dim>& lattice,
@@ -217,7 +223,8 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
                                                 int iterations = 1,
                                                 SurfaceDeficits surface_deficits =
-                                                    SurfaceDeficits::all);
+                                                    SurfaceDeficits::all,
+                                                KeptZeros* move_scratch = nullptr);
 
 /// Iterations of project_particle_density applied to freshly seeded particles (the simulation
 /// does this once before frame 0, so the particle volume and the level set's agree from the

@@ -352,7 +352,7 @@ Simulation<Dim>::Simulation(const SceneDesc& scene, const StageSwitches& switche
     volume_errors_ =
         project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_,
                                  boundary_, kSeedProjectionIterations,
-                                 switches_.density_projection_surface_deficits)
+                                 switches_.density_projection_surface_deficits, &density_move_)
             .surface_deficits;
   reserve_step_buffers();
   frame_zero();
@@ -2147,7 +2147,8 @@ void Simulation<Dim>::correct_volume(double dt) {
   if (switches_.density_projection && switches_.density_projection_in_steps)
     volume_errors_ =
         project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_,
-                                 boundary_, 1, switches_.density_projection_surface_deficits)
+                                 boundary_, 1, switches_.density_projection_surface_deficits,
+                                 &density_move_)
             .surface_deficits;
   if (free_centre) {
     // (the moves are a small part of a cell, far below the margin: the shifted liquid still

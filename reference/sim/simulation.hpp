@@ -676,6 +676,9 @@ class Simulation : public AnySimulation {
   std::vector<char> face_flags_;
   /// correct_positions' neighbour lists, kept across steps (speed only; not state)
   PositionCorrectionBuffers correction_buffers_;
+  /// The density projection's face-sized displacement, kept across steps (issue 20, p2g21):
+  /// 0 outside the spans the last projection wrote, which the next zeroes (KeptZeros).
+  KeptZeros density_move_;
   // the guard of the particles' reads (guards_reads): the velocity after the extrapolation
   // (before the faces not reached become NaN; on those the solve's values), a deeper extrapolation's velocity and flags, the particles that read a face
   // not reached, the layers of the last extrapolation

@@ -849,6 +849,88 @@ void check_projection_deterministic(bool with_solid) {
   }
 }
 
+/// (issue 20, p2g21) The displacement's storage kept across calls (project_particle_density's
+/// move_scratch) with a block that moves along the last axis and then shrinks, a call on another
+/// grid in between and a call without particles: the same positions, bit for bit, as calls that
+/// each make their own storage (on 1 thread against 3), and after every call the kept storage
+/// holds +0 on every face outside the spans it lists.
+template <int Dim>
+void check_projection_kept_scratch() {
+  const MacGrid<Dim> grid = unit_grid<Dim>(Dim == 2 ? 40 : 16);
+  const MacGrid<Dim> other = unit_grid<Dim>(Dim == 2 ? 24 : 10);
+  const VectorX fluid = open_fluid_faces(grid), fluid_other = open_fluid_faces(other);
+  Particles<Dim> a = seeded_corner_block<Dim>(grid);
+  for (auto& x : a.x) x *= 0.8;
+  Particles<Dim> b = a;
+  KeptZeros scratch;
+  const int threads = omp_get_max_threads();
+  const auto zeros_outside_dirty = [&](long n) {
+    REQUIRE(scratch.values.size() == n);
+    std::vector<char> listed(n, 0);
+    for (const auto& [from, to] : scratch.dirty) {
+      REQUIRE(0 <= from);
+      REQUIRE(from < to);
+      REQUIRE(to <= n);
+      for (long f = from; f < to; ++f) listed[f] = 1;
+    }
+    long nonzero = 0;
+    for (long f = 0; f < n; ++f) {
+      if (listed[f]) {
+        nonzero += scratch.values[f] != 0.0;
+        continue;
+      }
+      REQUIRE(scratch.values[f] == 0.0);
+      REQUIRE(!std::signbit(scratch.values[f]));
+    }
+    return nonzero;
+  };
+  long written = 0;
+  for (int call = 0; call < 7; ++call) {
+    if (call >= 1 && call <= 3) {
+      // the block moves up by a few cells per call (its written faces move with it)
+      Vec<Dim> up = Vec<Dim>::Zero();
+      up[Dim - 1] = 0.12;
+      for (auto& x : a.x) x += up;
+      for (auto& x : b.x) x += up;
+    } else if (call == 4 || call == 5) {
+      // the block shrinks: the particles beyond the first axis' middle of it leave
+      const auto keep = [](Particles<Dim>& p) {
+        std::vector<char> leave(p.size(), 0);
+        for (std::size_t i = 0; i < p.size(); ++i) leave[i] = p.x[i][0] >= 0.22;
+        p.remove_flagged(leave);
+      };
+      keep(a);
+      keep(b);
+    }
+    if (call == 5) {
+      // another grid (the storage made anew), then no particles (the storage left as it was)
+      Particles<Dim> c = seeded_corner_block<Dim>(other);
+      project_particle_density(c, other, half_lattice(other), fluid_other, SolidField<Dim>{},
+                               walls<Dim>(), 1, SurfaceDeficits::all, &scratch);
+      zeros_outside_dirty(other.num_faces());
+      Particles<Dim> none;
+      project_particle_density(none, other, half_lattice(other), fluid_other, SolidField<Dim>{},
+                               walls<Dim>(), 1, SurfaceDeficits::all, &scratch);
+      zeros_outside_dirty(other.num_faces());
+    }
+    omp_set_num_threads(3);
+    project_particle_density(a, grid, half_lattice(grid), fluid, SolidField<Dim>{}, walls<Dim>(),
+                             call == 0 ? 2 : 1, SurfaceDeficits::all, &scratch);
+    omp_set_num_threads(1);
+    project_particle_density(b, grid, half_lattice(grid), fluid, SolidField<Dim>{}, walls<Dim>(),
+                             call == 0 ? 2 : 1);
+    omp_set_num_threads(threads);
+    INFO("dim " << Dim << ", call " << call << ", " << a.size() << " particles");
+    REQUIRE(a.size() == b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) REQUIRE(a.x[i] == b.x[i]);
+    written += zeros_outside_dirty(grid.num_faces());
+    // one span per component at most, each within its component's faces
+    REQUIRE(scratch.dirty.size() <= static_cast<std::size_t>(Dim));
+  }
+  // the projection moved something (the spans held displacements)
+  CHECK(written > 0);
+}
+
 /// Spread (standard deviation over the columns along y) of the liquid height sum_y W_L^p dx, in
 /// cells: how rough the particle level set's surface is.
 template <int Dim>
@@ -1032,6 +1114,13 @@ TEST_CASE("density projection: a compressed block regains its volume, never into
 TEST_CASE("density projection: water at rest in an open tank stays at rest", "[unit]") {
   check_projection_keeps_water_at_rest<2>();
   check_projection_keeps_water_at_rest<3>();
+}
+
+TEST_CASE("density projection: kept displacement storage over a moving, shrinking block equals "
+          "fresh storage (p2g21)",
+          "[unit]") {
+  check_projection_kept_scratch<2>();
+  check_projection_kept_scratch<3>();
 }
 
 TEST_CASE("density projection: identical with 1, 2, 3 and 5 threads", "[unit]") {
