@@ -13,7 +13,8 @@ import os
 import sys
 
 MACHINE_WORDS = ("second", "wall", "timing", "memory", "rss", "thread", "build", "version", "cpu", "host", "date")
-SKIPPED_FILES = ("rc.txt", "DONE", "scenes.txt")
+# bookkeeping of a snapshot folder, not results (COMMIT: a note of the commit it was taken on)
+SKIPPED_FILES = ("rc.txt", "DONE", "scenes.txt", "COMMIT")
 
 
 def strip(value, ignored):
