@@ -140,4 +140,13 @@ inline std::size_t zero_by_release(void* data, std::size_t bytes) {
   return 0;
 }
 
+/// `v` (an Eigen vector or a std::vector of arithmetic values) becomes n zeros in fresh storage
+/// whose zeros come from the kernel (zero_by_release): its pages are provided only where they
+/// are written later. For a buffer written in a band only; its old contents are dropped.
+template <class Vector>
+void resize_to_released_zeros(Vector& v, long n) {
+  v.resize(n);
+  if (n > 0) zero_by_release(v.data(), sizeof(*v.data()) * static_cast<std::size_t>(n));
+}
+
 }  // namespace monolith

@@ -204,8 +204,7 @@ void body_face_fractions(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lat
   // (huge21) fresh storage takes its zeros from the kernel (core/huge_pages.hpp): the pages
   // outside the body's faces are not written
   if (w.size() != grid.num_faces()) {
-    w.resize(grid.num_faces());
-    zero_by_release(w.data(), sizeof(double) * static_cast<std::size_t>(w.size()));
+    resize_to_released_zeros(w, grid.num_faces());
   } else {
     w.setZero();
   }
@@ -318,8 +317,7 @@ void body_face_fractions_at(const MacGrid<Dim>& grid, const Phi& phi, const Box<
   if (w.size() != grid.num_faces()) {
     // (huge21) fresh storage: its zeros from the kernel, the pages outside the body's faces
     // never written (core/huge_pages.hpp)
-    w.resize(grid.num_faces());
-    zero_by_release(w.data(), sizeof(double) * static_cast<std::size_t>(w.size()));
+    resize_to_released_zeros(w, grid.num_faces());
     zero_all = false;
   }
   if (zero_all) w.setZero();

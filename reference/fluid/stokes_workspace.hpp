@@ -63,8 +63,7 @@ struct KeptZeros {
       for (const auto& [b, e] : dirty) values.segment(b, e - b).setZero();
       out.swap(values);
     } else {
-      out.resize(n);
-      zero_by_release(out.data(), sizeof(double) * static_cast<std::size_t>(n));
+      resize_to_released_zeros(out, n);
     }
     values = VectorX();
     dirty.clear();

@@ -1,6 +1,7 @@
 #include "reference/grid/volume_fractions.hpp"
 #include "reference/core/huge_pages.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/grid/box_rows.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -866,21 +867,19 @@ void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
   // or twice, in any order, gives alike; each face is written by one thread (rows of the faces'
   // boxes along axis 0 on several threads; the cells' loop, serial, was 0.4 ms per step on the
   // 64^3 viscous bunny)
-  std::array<VecI<Dim>, Dim> face_lo, face_hi;
+  std::array<BoxRows<Dim>, Dim> face_rows;
   std::array<int, Dim + 1> row_start{};
   for (int axis = 0; axis < Dim; ++axis) {
-    face_lo[axis] = cells.lo;
-    face_hi[axis] = cells.hi;
-    face_hi[axis][axis] = std::min(cells.hi[axis] + 1, grid.face_dims(axis)[axis] - 1);
+    VecI<Dim> lo = cells.lo, hi = cells.hi;
+    hi[axis] = std::min(cells.hi[axis] + 1, grid.face_dims(axis)[axis] - 1);
     // (a periodic axis: every face, should the box not span the axis whole; its seam face 0 is
     // the last cell's plus face)
     if (grid.periodic(axis)) {
-      face_lo[axis][axis] = 0;
-      face_hi[axis][axis] = grid.face_dims(axis)[axis] - 1;
+      lo[axis] = 0;
+      hi[axis] = grid.face_dims(axis)[axis] - 1;
     }
-    VecI<Dim> rows = face_hi[axis] - face_lo[axis] + VecI<Dim>::Ones();
-    rows[0] = 1;
-    row_start[axis + 1] = row_start[axis] + rows.prod();
+    face_rows[axis] = BoxRows<Dim>(grid.face_dims(axis), lo, hi);
+    row_start[axis + 1] = row_start[axis] + face_rows[axis].rows();
   }
   const auto in_box = [&](const VecI<Dim>& c) {
     return (c.array() >= cells.lo.array()).all() && (c.array() <= cells.hi.array()).all();
@@ -894,19 +893,19 @@ void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
   for (int r = 0; r < total_rows; ++r) {
     int axis = 0;
     while (r >= row_start[axis + 1]) ++axis;
-    VecI<Dim> rows = face_hi[axis] - face_lo[axis] + VecI<Dim>::Ones();
-    const int nx = rows[0];
-    rows[0] = 1;
-    VecI<Dim> f = face_lo[axis] + lattice_coord<Dim>(r - row_start[axis], rows);
+    const BoxRows<Dim>& rows = face_rows[axis];
+    const int row = r - row_start[axis];
+    VecI<Dim> f = rows.start(row);
+    const int first = grid.face_offset(axis) + rows.first(row);  // the row's first face
     const int n_axis = grid.cells()[axis];
-    for (int x = 0; x < nx; ++x) {
-      f[0] = face_lo[axis][0] + x;
+    for (int x = 0; x < rows.nx; ++x) {
+      f[0] = rows.lo[0] + x;
       // the face's cells: f - e_axis (wrapped across a periodic seam) and f
       VecI<Dim> minus = f;
       minus[axis] -= 1;
       if (grid.periodic(axis) && minus[axis] < 0) minus[axis] += n_axis;
       if (!liquid(minus) && !liquid(f)) continue;
-      double& v = w[grid.face_index(axis, f)];
+      double& v = w[first + x];
       v = std::max(v, kMinLiquidFaceFraction);
     }
   }

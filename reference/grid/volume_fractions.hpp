@@ -192,6 +192,14 @@ struct WrittenBox {
   long size = 0;
   bool valid = false;
   bool valid_for(const double* out, long n) const { return valid && data == out && size == n; }
+  /// The box of storage [data, data + size) that holds 0 everywhere: valid, nothing written.
+  static WrittenBox nothing_written(const double* data, long size) {
+    WrittenBox box;
+    box.data = data;
+    box.size = size;
+    box.valid = true;
+    return box;
+  }
 };
 
 /// The fraction where phi < 0 of the control volumes c in [0, dims) (x fastest) whose cube of

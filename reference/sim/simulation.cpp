@@ -389,38 +389,28 @@ void Simulation<Dim>::reserve_step_buffers() {
   // storage, given back whole) and their boxes set to "nothing written", so the first fill
   // writes its band only, like every later one (the same zeros elsewhere; the pages outside
   // the band are never provided). Without restricted passes every fill zeroes them whole.
+  // (fresh storage of n zeros from the kernel, and the box that says nothing is written in it)
+  const auto fresh_zeros = [](VectorX& v, long n) {
+    resize_to_released_zeros(v, n);
+    return WrittenBox<Dim>::nothing_written(v.data(), n);
+  };
   if (weights_.liquid_cell.size() == 0) {
-    weights_.liquid_cell.resize(grid_.num_cells());
-    if (switches_.restricted_passes) {
-      zero_by_release(weights_.liquid_cell.data(),
-                      sizeof(double) * static_cast<std::size_t>(weights_.liquid_cell.size()));
-      liquid_cell_box_ = WrittenBox<Dim>{};
-      liquid_cell_box_.data = weights_.liquid_cell.data();
-      liquid_cell_box_.size = weights_.liquid_cell.size();
-      liquid_cell_box_.valid = true;
-    }
+    if (switches_.restricted_passes)
+      liquid_cell_box_ = fresh_zeros(weights_.liquid_cell, grid_.num_cells());
+    else
+      weights_.liquid_cell.resize(grid_.num_cells());
   }
   // the reported volume's cell fractions likewise (fluid_volume_in_box)
-  if (switches_.restricted_passes && volume_cells_.size() == 0) {
-    volume_cells_.resize(grid_.num_cells());
-    zero_by_release(volume_cells_.data(),
-                    sizeof(double) * static_cast<std::size_t>(volume_cells_.size()));
-    volume_cells_box_ = WrittenBox<Dim>{};
-    volume_cells_box_.data = volume_cells_.data();
-    volume_cells_box_.size = volume_cells_.size();
-    volume_cells_box_.valid = true;
-  }
+  if (switches_.restricted_passes && volume_cells_.size() == 0)
+    volume_cells_box_ = fresh_zeros(volume_cells_, grid_.num_cells());
   if (weights_.liquid_face.size() == 0) {
-    weights_.liquid_face.resize(grid_.num_faces());
     if (switches_.restricted_passes) {
-      zero_by_release(weights_.liquid_face.data(),
-                      sizeof(double) * static_cast<std::size_t>(weights_.liquid_face.size()));
-      for (int a = 0; a < Dim; ++a) {
-        liquid_face_boxes_[a] = WrittenBox<Dim>{};
-        liquid_face_boxes_[a].data = weights_.liquid_face.data() + grid_.face_offset(a);
-        liquid_face_boxes_[a].size = grid_.face_dims(a).prod();
-        liquid_face_boxes_[a].valid = true;
-      }
+      fresh_zeros(weights_.liquid_face, grid_.num_faces());
+      for (int a = 0; a < Dim; ++a)
+        liquid_face_boxes_[a] = WrittenBox<Dim>::nothing_written(
+            weights_.liquid_face.data() + grid_.face_offset(a), grid_.face_dims(a).prod());
+    } else {
+      weights_.liquid_face.resize(grid_.num_faces());
     }
   }
   // the pressure (written whole by every solve) on huge pages (core/huge_pages.hpp)
