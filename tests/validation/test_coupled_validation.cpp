@@ -140,6 +140,45 @@ TEST_CASE("Couette flow under a kinematic plate sliding along a periodic channel
   }
 }
 
+TEST_CASE("bodies collide across a periodic face: momentum kept, centres wrapped (2D)",
+          "[validation][contact]") {
+  // source: conservation of momentum in frictionless impacts. Two disks (r = 0.05) and a box
+  // (0.1 x 0.1) of density 500 slide on the floor of a channel periodic along x (no liquid):
+  // disk a at x = 0.1 moving at -1 m/s crosses the face x = 0 and hits disk b (x = 0.8, at rest)
+  // from the right, which then meets the box coming at 0.8 m/s. Before the periodic images
+  // (probe22) disk a left the domain and never met b (it ended at x = -0.86 with its -1 m/s).
+  // Measured after: a rebounds at +0.352 m/s, b -0.049, the box -0.223; the x momentum
+  // 0.0730092 kg m/s per m before and after (frame 1 and 25); tolerance 0.01 of |m v| of one
+  // disk.
+  nlohmann::json j = base_scene(2, {1.0, 0.5}, 64, "PC-unified", 25, true, false);
+  j["domain"]["boundary"]["x-"] = "periodic";
+  j["domain"]["boundary"]["x+"] = "periodic";
+  auto disk = [](double x, double v) {
+    return nlohmann::json{{"density", 500.0}, {"restitution", 0.5}, {"velocity", {v, 0.0}},
+                          {"shape", {{"type", "sphere"}, {"center", {x, 0.06}}, {"radius", 0.05}}}};
+  };
+  j["bodies"].push_back(disk(0.1, -1.0));
+  j["bodies"].push_back(disk(0.8, 0.0));
+  j["bodies"].push_back({{"density", 500.0}, {"velocity", {0.8, 0.0}},
+                         {"shape", {{"type", "box"}, {"center", {0.5, 0.06}}, {"half_size", {0.05, 0.05}}}}});
+  const std::vector<FrameStats> s = run_frames(j, 25);
+  const double m_disk = 500.0 * kPi * 0.05 * 0.05, m_box = 500.0 * 0.1 * 0.1;
+  auto momentum = [&](const FrameStats& f) {
+    return m_disk * (f.bodies[0].velocity[0] + f.bodies[1].velocity[0]) + m_box * f.bodies[2].velocity[0];
+  };
+  bool inside = true;
+  for (std::size_t f = 1; f < s.size(); ++f)
+    for (const auto& b : s[f].bodies) inside = inside && b.position[0] >= 0.0 && b.position[0] < 1.0;
+  const FrameStats& last = s.back();
+  WARN("across the seam: velocities " << last.bodies[0].velocity[0] << ", " << last.bodies[1].velocity[0]
+                                      << ", " << last.bodies[2].velocity[0] << "; momentum "
+                                      << momentum(s[1]) << " -> " << momentum(last));
+  CHECK(inside);
+  CHECK(last.bodies[0].velocity[0] > 0.1);   // disk a rebounded off b across the seam
+  CHECK(last.bodies[2].velocity[0] < 0.0);   // and b passed the impact on to the box
+  CHECK(std::abs(momentum(last) - momentum(s[1])) <= 0.01 * m_disk);
+}
+
 TEST_CASE("buoyancy: a body of the liquid's density stays put, up to its discrete buoyancy deficit (2D)",
           "[validation][coupling]") {
   // source: Archimedes (zero net force). Section 4.4.7 gives the body its true-geometry mass
