@@ -13,7 +13,9 @@
 #include <cstdlib>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include "reference/app/embedded_scenes.hpp"
@@ -494,6 +496,7 @@ struct PlacedShape {
   std::string path;     ///< e.g. "liquids[0].shape"
   std::string owner;    ///< e.g. "liquids[0]"
   bool is_liquid;
+  bool needs_volume = false;  ///< a dynamic or kinematic body: its mass needs a bounded shape
 };
 
 /// Builds each shape and checks it overlaps the domain; returns the number of cells covered by
@@ -514,6 +517,12 @@ double check_shapes_in_domain(const SceneFile& s, const std::vector<PlacedShape>
       // overlap of the shape's bounds with the domain, of positive extent on every axis
       const ShapePtr<Dim> shape = make_shape<Dim>(*ps.spec, ps.path);
       const Box<Dim> b = shape->bounds();
+      if (ps.needs_volume && !b.isEmpty() && !(b.min().allFinite() && b.max().allFinite())) {
+        // what make_bodies would refuse when the run starts (mass_properties), found by check too
+        p.add(ps.path, "a dynamic or kinematic body needs a shape of finite volume; this one is unbounded (a halfspace, or a union or difference with one)",
+              "a bounded shape, or \"motion\": \"static\"");
+        continue;
+      }
       bool overlaps = !b.isEmpty();
       double covered = 1.0;
       for (int a = 0; a < Dim && overlaps; ++a) {
@@ -600,6 +609,53 @@ double estimate_memory_bytes(int dim, const std::vector<int>& cells, double part
 }
 
 namespace {
+
+/// A parser callback for json::parse that lists, as key paths (`domain.cells`,
+/// `bodies[1].shape.radius`), every key met a second time in the same object.
+json::parser_callback_t duplicate_key_finder(std::vector<std::string>& duplicates) {
+  struct Frame {
+    bool array = false;
+    std::string path, last_key;
+    std::set<std::string> keys;
+    long index = -1;
+  };
+  auto stack = std::make_shared<std::vector<Frame>>();
+  auto child = [](const Frame& f, bool advance_index) {
+    if (f.array) return f.path + "[" + std::to_string(f.index + (advance_index ? 1 : 0)) + "]";
+    return f.path.empty() ? f.last_key : f.path + "." + f.last_key;
+  };
+  return [stack, child, &duplicates](int, json::parse_event_t event, json& parsed) {
+    using E = json::parse_event_t;
+    switch (event) {
+      case E::object_start:
+      case E::array_start: {
+        Frame f;
+        f.array = event == E::array_start;
+        if (!stack->empty()) {
+          f.path = child(stack->back(), true);
+          if (stack->back().array) ++stack->back().index;
+        }
+        stack->push_back(std::move(f));
+        break;
+      }
+      case E::object_end:
+      case E::array_end:
+        if (!stack->empty()) stack->pop_back();
+        break;
+      case E::key:
+        if (!stack->empty() && parsed.is_string()) {
+          Frame& f = stack->back();
+          f.last_key = parsed.get<std::string>();
+          if (!f.keys.insert(f.last_key).second) duplicates.push_back(child(f, false));
+        }
+        break;
+      case E::value:
+        if (!stack->empty() && stack->back().array) ++stack->back().index;
+        break;
+    }
+    return true;
+  };
+}
 
 /// "domain": lower, upper, cells (cubic, at most kMaxCells), boundary, wall coefficients. true when
 /// the box is usable for the checks against it.
@@ -824,7 +880,8 @@ void parse_bodies(SceneParser& p, const json& j, SceneFile& s, std::vector<Place
         if (const json* sh = p.member(o, "shape", path, true, "a shape object")) {
           const std::size_t before = p.problems.size();
           b.shape = p.read_shape(*sh, path + ".shape", 0);
-          if (p.problems.size() == before) placed.push_back({&b.shape, path + ".shape", path, false});
+          if (p.problems.size() == before)
+            placed.push_back({&b.shape, path + ".shape", path, false, b.motion != BodyMotion::fixed});
         }
         // density: required (> 0) unless static
         if (b.motion == BodyMotion::fixed)
@@ -1147,11 +1204,20 @@ SceneFile load_scene(const std::string& path_or_name, const std::vector<std::str
 
   // JSON syntax, then overrides, then validation
   json j;
+  std::vector<std::string> duplicates;
   try {
-    j = json::parse(text);
+    j = json::parse(text, duplicate_key_finder(duplicates));
   } catch (const json::exception& e) {
     // syntax errors carry line and column; number overflow (406) is reported the same way
     throw InputError(label + ": (json): " + strip_json_prefix(e.what()) + " (a valid JSON document)");
+  }
+  if (!duplicates.empty()) {
+    // a key given twice in one object: the parser keeps the last value, so the first would be
+    // ignored without a word (the same class of mistake as an unknown key)
+    std::vector<std::string> lines;
+    for (const std::string& key : duplicates)
+      lines.push_back(label + ": " + key + ": duplicate key, the later value would silently replace the earlier (each key once per object)");
+    throw InputError(lines);
   }
   j = apply_overrides(std::move(j), label, overrides);
   return parse_scene(j, label, base_dir);

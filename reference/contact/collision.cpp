@@ -299,7 +299,8 @@ template <int Dim>
 std::vector<Contact<Dim>> sphere_sphere_contacts(const Contact<Dim>& proto, const RigidBody<Dim>& ba,
                                                  const RigidBody<Dim>& bb, double search_distance) {
   std::vector<Contact<Dim>> cand;
-  const Vec<Dim> d = ba.position - bb.position;
+  // (periodic axes: the image of a's centre nearest b's, RigidBody::set_periodic)
+  const Vec<Dim> d = bb.nearest_image(ba.position) - bb.position;
   const double len = d.norm();
   const double phi = len - ba.sphere_radius() - bb.sphere_radius();
   if (phi < search_distance) {
@@ -346,9 +347,12 @@ std::vector<Contact<Dim>> sphere_shape_contacts(const PairQuery<Dim>& in, const 
     const Vec<Dim> g = other.gradient(round.position);
     add(g, Vec<Dim>(round.position - d * g), d - radius);
   }
+  // the sphere's centre as other's samples see it (periodic axes: its image nearest other,
+  // RigidBody::set_periodic; round.position itself otherwise)
+  const Vec<Dim> centre = other.nearest_image(round.position);
   for (const auto& x : in.bp.world[other_index]) {
     if (!in.bp.boxes[a_round ? a : b].contains(x)) continue;
-    const Vec<Dim> r = round.position - x;
+    const Vec<Dim> r = centre - x;
     const double len = r.norm();
     if (!(len - radius < in.search_distance) || len == 0.0) continue;
     // the sample must face the centre (within ~8 degrees)
@@ -363,7 +367,7 @@ std::vector<Contact<Dim>> sphere_shape_contacts(const PairQuery<Dim>& in, const 
       // flat face wherever the sample lies on it
       const Vec<Dim> n = other.is_box() ? face : other.gradient(x);
       const double height = n.dot(r);
-      add(n, Vec<Dim>(round.position - height * n), height - radius);
+      add(n, Vec<Dim>(centre - height * n), height - radius);
     }
   }
   ContactReduction sphere_reduction = in.reduction;

@@ -112,7 +112,7 @@ ContactSystem<Dim>::ContactSystem(const std::vector<RigidBody<Dim>>& bodies,
       const int d = body_dof[bi];
       if (d >= 0) {
         // dynamic: a Jacobian entry
-        const Vec<Dim> r = k.point - b.position;
+        const Vec<Dim> r = b.nearest_image(k.point) - b.position;
         add_jacobian_row<Dim>(jl, c, d, n, r, signs[s]);
         for (int j = 0; j < kT; ++j) add_jacobian_row<Dim>(jz, kT * c + j, d, t[j], r, signs[s]);
         (s == 0 ? dynamic_pairs[c].first : dynamic_pairs[c].second) = d / kDofs;

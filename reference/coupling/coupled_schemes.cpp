@@ -345,7 +345,9 @@ Unknowns partitioned_solve(const MonolithicSystem<Dim>& s, CouplingScheme scheme
           break;
         }
       }
-      r.converged = r.converged && settled;
+      // the round cap is the scheme's setting, not a solve that failed (CoupledSolveResult::
+      // converged): a frame is reported unconverged only for its inner solves
+      r.rounds_settled = settled;
       break;
     }
   }

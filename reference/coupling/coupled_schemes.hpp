@@ -104,9 +104,15 @@ struct CoupledSolveResult {
   /// Unknowns of the system(s) solved: active pressure cells, active stress unknowns (for
   /// PC-VC-PC those of the VC solve), contacts, friction rows.
   long pressure_dofs = 0, stress_dofs = 0, contact_dofs = 0, friction_dofs = 0;
-  /// Every inner solve converged (and the iterative schemes met the tolerance within
-  /// settings.max_iterations rounds).
+  /// Every inner solve (PCG, MPRGP) reached its tolerance within its iteration cap. The outer
+  /// rounds are not part of it: like the friction rounds and Algorithm 2's rounds, the
+  /// fluid-contact rounds of PC-/PVC-iterative stop at settings.max_iterations
+  /// (solver.staggered_iterations) by design, the paper's fixed count of staggered iterations;
+  /// whether they settled first is rounds_settled.
   bool converged = true;
+  /// PC-/PVC-iterative: the rounds stopped because (lambda, x_f) changed by <= the tolerance
+  /// (last_change), not at the round cap; true for the other schemes.
+  bool rounds_settled = true;
   /// The systems with stress unknowns solved (one per system built), by the preconditioner of
   /// their fluid rows, and the largest stiffness eta_max dt / (rho dx^2) among them
   /// (CoupledSchemeOptions::preconditioner).

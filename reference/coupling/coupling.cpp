@@ -523,7 +523,7 @@ std::vector<CouplingBody<Dim>> coupling_bodies(const std::vector<RigidBody<Dim>>
   std::vector<CouplingBody<Dim>> out;
   out.reserve(bodies.size());
   for (const RigidBody<Dim>& body : bodies)
-    out.push_back(CouplingBody<Dim>{body.posed_shape(), body.position, body.is_dynamic()});
+    out.push_back(CouplingBody<Dim>{body.posed_shape(), body.position, body.is_dynamic(), body.period()});
   return out;
 }
 
@@ -901,7 +901,7 @@ SparseMatrix aggregation_matrix(const MacGrid<Dim>& grid,
       const double share = w / weights.solid_face[f];
       const auto [axis, coord] = grid.face_coord(f);
       const Vec<Dim> e = Vec<Dim>::Unit(axis);
-      const Vec<Dim> r = grid.face_center(axis, coord) - bodies[i].center;
+      const Vec<Dim> r = bodies[i].arm(grid.face_center(axis, coord));
       const AngularVec<Dim> torque = moment<Dim>(r, e);
       triplets.emplace_back(rows[i] + axis, f, volume * share);
       for (int k = 0; k < kAngularDofs<Dim>; ++k)
@@ -1020,7 +1020,7 @@ typename BodyCouplingOperator<Dim>::Block BodyCouplingOperator<Dim>::face_block(
   if (w == 0.0) return block;
   const auto [axis, coord] = grid_.face_coord(face);
   const Vec<Dim> e = Vec<Dim>::Unit(axis);
-  const Vec<Dim> r = grid_.face_center(axis, coord) - bodies_[body].center;
+  const Vec<Dim> r = bodies_[body].arm(grid_.face_center(axis, coord));
   const double scale = w * grid_.cell_volume();
   block.template head<Dim>() = scale * e;
   block.template tail<kAngularDofs<Dim>>() = scale * moment<Dim>(r, e);

@@ -17,6 +17,7 @@
 /// contact_system.hpp (ContactSystem::body_dof).
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -39,6 +40,16 @@ struct CouplingBody {
   ShapePtr<Dim> shape;               ///< posed SDF, world frame, negative inside
   Vec<Dim> center = Vec<Dim>::Zero(); ///< centre of mass (torque reference point), world frame
   bool two_way = true;               ///< dynamic body
+  /// Periodic domain axes: > 0 the period (RigidBody::set_periodic), 0 elsewhere.
+  Vec<Dim> period = Vec<Dim>::Zero();
+  /// x - center through the image of x nearest the centre on periodic axes (the lever arm of
+  /// J_p, J_s for a face the body covers across a periodic face).
+  Vec<Dim> arm(const Vec<Dim>& x) const {
+    Vec<Dim> r = x - center;
+    for (int a = 0; a < Dim; ++a)
+      if (period[a] > 0.0) r[a] -= period[a] * std::round(r[a] / period[a]);
+    return r;
+  }
 };
 
 /// The coupling view of rigid bodies at their current pose (RigidBody::posed_shape()).

@@ -22,24 +22,41 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
+/// The image x + k period (k integer per axis) of x nearest `center` along the axes with
+/// period[a] > 0 (RigidBody::set_periodic).
+template <int Dim>
+Vec<Dim> nearest_periodic_image(Vec<Dim> x, const Vec<Dim>& center, const Vec<Dim>& period) {
+  for (int a = 0; a < Dim; ++a)
+    if (period[a] > 0.0) x[a] -= period[a] * std::round((x[a] - center[a]) / period[a]);
+  return x;
+}
+
 /// The rest shape seen at a pose: distance(x) = rest.distance(R^T (x - p) + c_rest), the
 /// gradient rotated by R. A rigid motion keeps an exact SDF exact.
 template <int Dim>
 class PosedShape : public Shape<Dim> {
  public:
   PosedShape(ShapePtr<Dim> rest, const Mat<Dim>& r, const Vec<Dim>& position,
-             const Vec<Dim>& rest_com, const Box<Dim>& bounds)
-      : rest_(std::move(rest)), r_(r), position_(position), rest_com_(rest_com), bounds_(bounds) {}
+             const Vec<Dim>& rest_com, const Box<Dim>& bounds,
+             const Vec<Dim>& period = Vec<Dim>::Zero())
+      : rest_(std::move(rest)), r_(r), position_(position), rest_com_(rest_com), bounds_(bounds),
+        period_(period), periodic_(period.maxCoeff() > 0.0) {}
   double distance(const Vec<Dim>& x) const override { return rest_->distance(to_rest(x)); }
   Vec<Dim> gradient(const Vec<Dim>& x) const override { return r_ * rest_->gradient(to_rest(x)); }
   Box<Dim> bounds() const override { return bounds_; }
 
  private:
-  Vec<Dim> to_rest(const Vec<Dim>& x) const { return r_.transpose() * (x - position_) + rest_com_; }
+  Vec<Dim> to_rest(const Vec<Dim>& x) const {
+    // periodic axes: the image of x nearest the body (RigidBody::set_periodic)
+    if (periodic_) return r_.transpose() * (nearest_periodic_image<Dim>(x, position_, period_) - position_) + rest_com_;
+    return r_.transpose() * (x - position_) + rest_com_;
+  }
   ShapePtr<Dim> rest_;
   Mat<Dim> r_;
   Vec<Dim> position_, rest_com_;
   Box<Dim> bounds_;
+  Vec<Dim> period_;
+  bool periodic_ = false;
 };
 
 /// A box (centre c, half sizes h, rotated by R about c) with the exact SDF gradient: the
@@ -397,12 +414,26 @@ Vec<Dim> RigidBody<Dim>::to_world(const Vec<Dim>& x_rest) const {
 
 template <int Dim>
 Vec<Dim> RigidBody<Dim>::to_rest(const Vec<Dim>& x_world) const {
+  if (periodic_) return rotation().transpose() * (nearest_image(x_world) - position) + rest_com_;
   return rotation().transpose() * (x_world - position) + rest_com_;
 }
 
 template <int Dim>
 Vec<Dim> RigidBody<Dim>::point_velocity(const Vec<Dim>& x_world) const {
+  if (periodic_) return velocity + angular_cross<Dim>(angular_velocity, nearest_image(x_world) - position);
   return velocity + angular_cross<Dim>(angular_velocity, x_world - position);
+}
+
+template <int Dim>
+void RigidBody<Dim>::set_periodic(const Vec<Dim>& lower, const Vec<Dim>& period) {
+  domain_lower_ = lower;
+  period_ = period.cwiseMax(0.0);
+  periodic_ = period_.maxCoeff() > 0.0;
+}
+
+template <int Dim>
+Vec<Dim> RigidBody<Dim>::nearest_image(const Vec<Dim>& x_world) const {
+  return periodic_ ? nearest_periodic_image<Dim>(x_world, position, period_) : x_world;
 }
 
 template <int Dim>
@@ -471,11 +502,25 @@ Box<Dim> RigidBody<Dim>::bounds() const {
     for (int a = 0; a < Dim; ++a) c[a] = (corner >> a) & 1 ? rest_bounds_.max()[a] : rest_bounds_.min()[a];
     b.extend(to_world(c));
   }
+  if (periodic_) {
+    // a shape across a face of a periodic axis is also seen at its image on the other side:
+    // the whole axis (set_periodic)
+    for (int a = 0; a < Dim; ++a) {
+      if (!(period_[a] > 0.0)) continue;
+      const double lo = domain_lower_[a], hi = domain_lower_[a] + period_[a];
+      if (b.min()[a] < lo || b.max()[a] > hi) {
+        b.min()[a] = lo;
+        b.max()[a] = hi;
+      }
+    }
+  }
   return b;
 }
 
 template <int Dim>
 ShapePtr<Dim> RigidBody<Dim>::posed_shape() const {
+  if (periodic_)
+    return std::make_shared<PosedShape<Dim>>(rest_shape_, rotation(), position, rest_com_, bounds(), period_);
   return std::make_shared<PosedShape<Dim>>(rest_shape_, rotation(), position, rest_com_, bounds());
 }
 
@@ -514,6 +559,14 @@ void RigidBody<Dim>::integrate(double dt, double t_new) {
   }
   // symplectic Euler: the new velocity moves the position
   position += dt * velocity;
+  if (periodic_) {
+    // a centre of mass that left through a periodic face comes back through the other
+    for (int a = 0; a < Dim; ++a) {
+      if (!(period_[a] > 0.0)) continue;
+      const double k = std::floor((position[a] - domain_lower_[a]) / period_[a]);
+      if (k != 0.0) position[a] -= k * period_[a];
+    }
+  }
   if constexpr (Dim == 2) {
     // 2D: omega is constant without torque, the rotation is exact
     orientation += dt * angular_velocity[0];
@@ -587,6 +640,15 @@ std::vector<RigidBody<Dim>> make_bodies(const SceneDesc& scene, double sample_sp
     }
     bodies.emplace_back(spec, std::move(shape), props, spacing);
   }
+  // periodic axes of the domain (RigidBody::set_periodic)
+  Vec<Dim> lower = Vec<Dim>::Zero(), period = Vec<Dim>::Zero();
+  for (int a = 0; a < Dim; ++a) {
+    lower[a] = scene.domain.lower[a];
+    if (scene.domain.boundary[2 * a] == BoundaryType::periodic)
+      period[a] = scene.domain.upper[a] - scene.domain.lower[a];
+  }
+  if (period.maxCoeff() > 0.0)
+    for (RigidBody<Dim>& b : bodies) b.set_periodic(lower, period);
   return bodies;
 }
 

@@ -51,6 +51,18 @@ class RigidBody {
   Vec<Dim> to_world(const Vec<Dim>& x_rest) const;  ///< R (x_rest - c_rest) + position
   Vec<Dim> to_rest(const Vec<Dim>& x_world) const;  ///< R^T (x_world - position) + c_rest
   Vec<Dim> point_velocity(const Vec<Dim>& x_world) const;  ///< v + omega x (x - position)
+  /// Periodic domain axes (docs/rigid-bodies.md, "Bodies in a periodic domain"): period[a] > 0
+  /// on a periodic axis a of the domain box starting at lower[a], 0 elsewhere. The body is then
+  /// seen at every image x + k period: to_rest, point_velocity, distance and gradient take the
+  /// image of x nearest the centre of mass (exact for bodies narrower than half the period),
+  /// bounds() spans the whole axis where the posed shape crosses the domain's faces on it, and
+  /// integrate() keeps the centre of mass inside [lower, lower + period). Without this (all
+  /// zero, the default) nothing changes.
+  void set_periodic(const Vec<Dim>& lower, const Vec<Dim>& period);
+  bool periodic() const { return periodic_; }
+  const Vec<Dim>& period() const { return period_; }
+  /// The image of x nearest the centre of mass along the periodic axes (x itself without any).
+  Vec<Dim> nearest_image(const Vec<Dim>& x_world) const;
   double distance(const Vec<Dim>& x_world) const;    ///< posed SDF (negative inside)
   Vec<Dim> gradient(const Vec<Dim>& x_world) const;  ///< outward unit normal, world frame
   Box<Dim> bounds() const;  ///< world AABB of the posed shape (rotated rest bounds: conservative)
@@ -117,6 +129,8 @@ class RigidBody {
   Mat<Dim> box_rotation_ = Mat<Dim>::Identity();                         ///< rest frame
   double sphere_radius_ = 0;
   ShapeType shape_type_ = ShapeType::box;
+  bool periodic_ = false;
+  Vec<Dim> period_ = Vec<Dim>::Zero(), domain_lower_ = Vec<Dim>::Zero();  ///< set_periodic
   Mat<Dim> principal_axes_ = Mat<Dim>::Identity();      ///< body frame, columns (3D only)
   Vec<Dim> principal_moments_ = Vec<Dim>::Zero();       ///< 3D only
 };
