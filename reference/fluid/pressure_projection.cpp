@@ -713,9 +713,9 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
   template VectorX density_diagonal<D>(const MacGrid<D>&, const VectorX&, double);               \
   template void density_diagonal_in_place<D>(const MacGrid<D>&, VectorX&, double);               \
   template void density_diagonal_in_place<D>(const MacGrid<D>&, VectorX&, double,        \
-                                             const std::array<VecI<D>, D>&,                         \
-                                             const std::array<VecI<D>, D>&,                         \
-                                             const std::vector<std::pair<long, long>>*);            \
+                                             const std::array<VecI<D>, D>&,                \
+                                             const std::array<VecI<D>, D>&,                \
+                                             const std::vector<std::pair<long, long>>*);   \
   template PressureDofs select_pressure_dofs<D>(const MacGrid<D>&, const PressureWeights&,       \
                                                 double, const LiquidBand*);                      \
   template ExplicitPressureSystem assemble_explicit_pressure<D>(                                 \

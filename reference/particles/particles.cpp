@@ -486,7 +486,8 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
   if (density_spans) {
     density_spans->layers.clear();
     for (int a = 0; a < Dim; ++a) {
-      const auto range = layer_range(a, std::max(kDensityReadLayers, particles_to_grid_zero_margin()));
+      const int margin = std::max(kDensityReadLayers, particles_to_grid_zero_margin());
+      const auto range = layer_range(a, margin);
       if (range.first < range.second) density_spans->layers.push_back(range);
     }
     density_spans->written = density_spans->known

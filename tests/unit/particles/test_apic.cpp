@@ -779,15 +779,16 @@ void check_kept_density_spans(bool periodic) {
     int count;
     bool nan, swap;
   };
-  const std::vector<Call> calls = {{-0.45, -0.2, 600, false, false}, {-0.3, -0.05, 600, false, false},
-                                   {-0.1, 0.2, 600, false, false},   {0.0, 0.1, 300, false, false},
-                                   {0.05, 0.08, 100, false, false},  {0.3, 0.6, 400, false, false},
-                                   {-0.2, 0.0, 500, true, false},    {-0.2, 0.0, 0, false, false},
-                                   {-0.4, -0.3, 300, false, false},  {0.1, 0.3, 400, false, true},
-                                   {0.2, 0.25, 200, false, false}};
+  const std::vector<Call> calls = {
+      {-0.45, -0.2, 600, false, false}, {-0.3, -0.05, 600, false, false},
+      {-0.1, 0.2, 600, false, false},   {0.0, 0.1, 300, false, false},
+      {0.05, 0.08, 100, false, false},  {0.3, 0.6, 400, false, false},
+      {-0.2, 0.0, 500, true, false},    {-0.2, 0.0, 0, false, false},
+      {-0.4, -0.3, 300, false, false},  {0.1, 0.3, 400, false, true},
+      {0.2, 0.25, 200, false, false}};
   const auto same = [](const VectorX& a, const VectorX& b) {
-    return a.size() == b.size() &&
-           std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())) == 0;
+    const auto bytes = sizeof(double) * static_cast<std::size_t>(a.size());
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), bytes) == 0;
   };
   const int saved = omp_get_max_threads();
   for (int threads : {1, 3}) {
