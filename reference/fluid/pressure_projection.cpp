@@ -128,7 +128,8 @@ std::vector<int> union_of_sorted(std::vector<std::vector<int>>& lists) {
 template <int Dim>
 void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density,
                                const std::array<VecI<Dim>, Dim>& lo,
-                               const std::array<VecI<Dim>, Dim>& hi) {
+                               const std::array<VecI<Dim>, Dim>& hi,
+                               const std::vector<std::pair<long, long>>* fill) {
   const int nf = grid.num_faces();
   // a face without a density whose cells have no face with one gets the fallback: that is every
   // such face except those next to the faces with a density, which are collected from those
@@ -204,9 +205,19 @@ void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fa
     }
     near_rho[n] = count > 0 ? sum / count : fallback_density;
   }
+  if (fill) {
+    // (kern22) the fallback on the listed ranges only: the others hold it already
+    for (const auto& [begin, end] : *fill) {
+      const long first = std::max(begin, 0L), last = std::min(end, static_cast<long>(nf));
+#pragma omp parallel for schedule(static) num_threads(team_threads(last - first))
+      for (long f = first; f < last; ++f)
+        if (!(rho[f] > 0.0)) rho[f] = fallback_density;
+    }
+  } else {
 #pragma omp parallel for schedule(static) num_threads(team_threads(nf))
-  for (int f = 0; f < nf; ++f)
-    if (!(rho[f] > 0.0)) rho[f] = fallback_density;
+    for (int f = 0; f < nf; ++f)
+      if (!(rho[f] > 0.0)) rho[f] = fallback_density;
+  }
   // (the listed faces are distinct: each written by one thread)
 #pragma omp parallel for schedule(static) num_threads(team_threads(nn))
   for (int n = 0; n < nn; ++n) rho[near[n]] = near_rho[n];
@@ -702,8 +713,9 @@ PressureSolveResult solve_pressure(const MacGrid<Dim>& grid, const PressureWeigh
   template VectorX density_diagonal<D>(const MacGrid<D>&, const VectorX&, double);               \
   template void density_diagonal_in_place<D>(const MacGrid<D>&, VectorX&, double);               \
   template void density_diagonal_in_place<D>(const MacGrid<D>&, VectorX&, double,        \
-                                             const std::array<VecI<D>, D>&,                         \
-                                             const std::array<VecI<D>, D>&);                        \
+                                             const std::array<VecI<D>, D>&,                \
+                                             const std::array<VecI<D>, D>&,                \
+                                             const std::vector<std::pair<long, long>>*);   \
   template PressureDofs select_pressure_dofs<D>(const MacGrid<D>&, const PressureWeights&,       \
                                                 double, const LiquidBand*);                      \
   template ExplicitPressureSystem assemble_explicit_pressure<D>(                                 \

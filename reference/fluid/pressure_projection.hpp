@@ -51,10 +51,16 @@ void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fa
 /// The same where every face with a density (rho > 0) lies in the box [lo[a], hi[a]] of axis
 /// a's face lattice (inclusive; empty when some lo > hi): the faces next to them are searched
 /// in the boxes only (issue 20: particles_to_grid's faces), with the same result.
+/// With `fill` (sorted, disjoint face index ranges [first, second)) the fallback is written only
+/// on the faces of `fill` without a density (issue 20, kern22): for a caller whose other faces
+/// hold the fallback already (particles_to_grid's DensitySpans). Every face this function reads
+/// (the boxes, the faces of the cells beside a face with a density and of the cells beside
+/// those) must then lie in `fill` or hold its input value.
 template <int Dim>
 void density_diagonal_in_place(const MacGrid<Dim>& grid, VectorX& rho, double fallback_density,
                                const std::array<VecI<Dim>, Dim>& lo,
-                               const std::array<VecI<Dim>, Dim>& hi);
+                               const std::array<VecI<Dim>, Dim>& hi,
+                               const std::vector<std::pair<long, long>>* fill = nullptr);
 
 /// Active pressure DOFs (Algorithm 1, line 7) and the null space of A.
 struct PressureDofs {

@@ -8,8 +8,10 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <iterator>
 #include <limits>
 #include <random>
+#include <tuple>
 
 #include "reference/grid/tiled_lattice.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -415,7 +417,7 @@ constexpr long kFaceBlock = 1L << 14;
 
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
-                       VectorX& face_mass, VectorX& face_density) {
+                       VectorX& face_mass, VectorX& face_density, DensitySpans* density_spans) {
   constexpr int kCorners = 1 << Dim;
   constexpr int kLast = Dim - 1;
   const int nf = grid.num_faces();
@@ -461,19 +463,38 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
       first_layer = std::min(first_layer, c);
       last_layer = c;
     }
-  std::array<int, Dim> zero_begin{}, zero_end{};
-  for (int a = 0; a < Dim; ++a) {
+  // (a component lattice's face layers within `margin` of the particles' cell layers, as an
+  // index range [begin, end); every layer on a periodic last axis or for a non-finite position)
+  const auto layer_range = [&](int a, int margin) {
     const VecI<Dim> dims = grid.face_dims(a);
-    const int per = dims.prod() / dims[kLast];  // faces per layer
+    const long per = dims.prod() / dims[kLast];  // faces per layer
     int lo = 0, hi = dims[kLast] - 1;
     if (!wrap_last && finite) {
-      const int margin = particles_to_grid_zero_margin();
       lo = std::max(first_layer - margin, 0);
       hi = std::min(last_layer + margin, dims[kLast] - 1);
     }
-    zero_begin[a] = grid.face_offset(a) + (lo <= hi ? lo * per : 0);
-    zero_end[a] = grid.face_offset(a) + (lo <= hi ? (hi + 1) * per : 0);
+    const long offset = grid.face_offset(a);
+    return lo <= hi ? std::pair<long, long>{offset + lo * per, offset + (hi + 1) * per}
+                    : std::pair<long, long>{offset, offset};
+  };
+  std::array<long, Dim> zero_begin{}, zero_end{};
+  for (int a = 0; a < Dim; ++a)
+    std::tie(zero_begin[a], zero_end[a]) = layer_range(a, particles_to_grid_zero_margin());
+  // (kern22) the faces' densities are written on `written` only: the layers the diagonal of P
+  // reads (kDensityReadLayers around the particles' layers, which hold the zeroed ranges above)
+  // and the faces the last call wrote; the rest holds the caller's value already
+  if (density_spans) {
+    density_spans->layers.clear();
+    for (int a = 0; a < Dim; ++a) {
+      const int margin = std::max(kDensityReadLayers, particles_to_grid_zero_margin());
+      const auto range = layer_range(a, margin);
+      if (range.first < range.second) density_spans->layers.push_back(range);
+    }
+    density_spans->written = density_spans->known
+                                 ? union_of_ranges(density_spans->layers, density_spans->kept)
+                                 : FaceIndexRanges{{0L, static_cast<long>(nf)}};
   }
+  const FaceIndexRanges* density_written = density_spans ? &density_spans->written : nullptr;
   // (the ranges of all components zeroed in one parallel region: fixed blocks of the ranges
   // laid end to end; a region per range and vector cost more than the zeros on two threads)
   for (VectorX* v : {&u, &face_mass, &face_density}) v->resize(nf);
@@ -586,8 +607,17 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
     };
     const auto zeros = [&](long begin, long end) {
       if (begin >= end) return;
-      for (VectorX* v : {&u, &face_mass, &face_density})
+      for (VectorX* v : {&u, &face_mass})
         std::fill(v->data() + begin, v->data() + end, 0.0);
+      if (!density_written) {
+        std::fill(face_density.data() + begin, face_density.data() + end, 0.0);
+        return;
+      }
+      // (the densities' zeros on the written faces only)
+      for (const auto& [b, e] : *density_written) {
+        const long z0 = std::max(begin, b), z1 = std::min(end, e);
+        if (z0 < z1) std::fill(face_density.data() + z0, face_density.data() + z1, 0.0);
+      }
     };
 #pragma omp parallel for schedule(static) num_threads(team_threads(nf))
     for (long b = 0; b < blocks; ++b) {
@@ -603,6 +633,21 @@ void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid
       zeros(cursor, b1);
     }
   }
+}
+
+FaceIndexRanges union_of_ranges(const FaceIndexRanges& a, const FaceIndexRanges& b) {
+  FaceIndexRanges all;
+  all.reserve(a.size() + b.size());
+  std::merge(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(all));
+  FaceIndexRanges joined;
+  for (const auto& r : all) {
+    if (r.first >= r.second) continue;
+    if (!joined.empty() && r.first <= joined.back().second)
+      joined.back().second = std::max(joined.back().second, r.second);
+    else
+      joined.push_back(r);
+  }
+  return joined;
 }
 
 int& particles_to_grid_zero_margin() {
@@ -2828,7 +2873,7 @@ double max_particle_speed(const Particles<Dim>& particles) {
                                        const std::vector<ShapePtr<D>>&, const SolidField<D>&, int, \
                                        unsigned);                                                  \
   template void particles_to_grid(const Particles<D>&, const MacGrid<D>&, VectorX&, VectorX&,      \
-                                  VectorX&);                                                       \
+                                  VectorX&, DensitySpans*);                                        \
   template void pic_velocity_on_faces(const Particles<D>&, const MacGrid<D>&,                      \
                                       const std::vector<int>&, std::vector<double>&);              \
   template long grid_to_particles(Particles<D>&, const MacGrid<D>&, const VectorX&,                \

@@ -51,12 +51,47 @@ Particles<Dim> seed_particles(const MacGrid<Dim>& grid, const std::vector<Liquid
                               const std::vector<ShapePtr<Dim>>& liquid_shapes,
                               const SolidField<Dim>& solids, int per_cell, unsigned seed);
 
+/// The face layers (along the last axis) beyond the particles' cell layers that hold every face
+/// the diagonal of P reads after particles_to_grid (density_diagonal_in_place: the faces with a
+/// density, their cells' faces, and those faces' cells' faces): 3 (docs/derivations.md,
+/// "Passes restricted to boxes", "The faces' densities written where they change").
+constexpr int kDensityReadLayers = 3;
+
+/// Sorted, disjoint face index ranges [first, second).
+using FaceIndexRanges = std::vector<std::pair<long, long>>;
+
+/// The faces' densities of particles_to_grid kept across calls whose caller turns them into
+/// P's diagonal in place (issue 20, kern22). That diagonal is one value (the fallback density)
+/// on every face without a density and not next to one, so between two calls the storage holds
+/// it outside the layers the last call wrote; a call then writes the densities' zeros only in
+/// those layers and its own, not on every face.
+struct DensitySpans {
+  /// in: face_density holds the caller's value on every face outside `kept` (false: unknown;
+  /// every face is written, as without this struct)
+  bool known = false;
+  FaceIndexRanges kept;
+  /// out: the faces this call wrote in face_density: `layers` joined with `kept` (every face
+  /// when `known` was false). The caller writes its value on the faces of these without a
+  /// density; after that the storage holds it outside `layers`
+  FaceIndexRanges written;
+  /// out: per component lattice, its face layers within kDensityReadLayers of the particles'
+  /// cell layers (every layer on a periodic last axis or when a position is not finite)
+  FaceIndexRanges layers;
+};
+
 /// APIC particle-to-grid transfer onto the faces. Outputs, per face: u (momentum / mass, zero where
 /// no particle contributes), face_mass (sum of weighted particle masses), face_density
 /// (mass-weighted particle density, the diagonal of P; zero where face_mass is zero).
+/// With `density_spans` (see DensitySpans) face_density is written only on the faces of
+/// density_spans->written, which hold every face with a density and every face within
+/// kDensityReadLayers layers of the particles' layers; its other faces keep their values.
 template <int Dim>
 void particles_to_grid(const Particles<Dim>& particles, const MacGrid<Dim>& grid, VectorX& u,
-                       VectorX& face_mass, VectorX& face_density);
+                       VectorX& face_mass, VectorX& face_density,
+                       DensitySpans* density_spans = nullptr);
+
+/// The union of two lists of sorted, disjoint ranges (touching ranges joined).
+FaceIndexRanges union_of_ranges(const FaceIndexRanges& a, const FaceIndexRanges& b);
 
 /// The face layers (along the last axis) beyond the particles' cell layers that
 /// particles_to_grid zeroes before its sums: 1, the stencils' reach (a particle in cell layer c

@@ -430,7 +430,7 @@ template <int Dim>
 void Simulation<Dim>::frame_zero() {
   // frame 0: the seeded state on the grid (no pressure yet); the faces' densities become the
   // diagonal of P in place (as in every step, update_step_weights)
-  particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+  transfer_to_grid();
   mark_faces_with_mass();
   density_diagonal_in_place_after_transfer();
   update_liquid_weights();
@@ -1084,14 +1084,58 @@ bool Simulation<Dim>::trusted_boxes(FaceBoxes& boxes) const {
 }
 
 template <int Dim>
+void Simulation<Dim>::transfer_to_grid() {
+  // (kern22) the densities' storage holds P's fallback outside the layers the last transfer
+  // wrote when it is the storage the last diagonal was written into, with the same fallback
+  // (docs/derivations.md, "Passes restricted to boxes", "The faces' densities written where
+  // they change"); then only those layers and this transfer's are written
+  VectorX& rho = weights_.face_density;
+  DensitySpans* spans = nullptr;
+  if (switches_.restricted_passes) {
+    spans = &density_spans_;
+    spans->known = density_spans_data_ != nullptr && rho.data() == density_spans_data_ &&
+                   rho.size() == grid_.num_faces() &&
+                   std::memcmp(&density_spans_value_, &reference_density_, sizeof(double)) == 0;
+  }
+  density_spans_data_ = nullptr;  // (known again once this transfer's diagonal is written)
+  particles_to_grid(particles_, grid_, u_, face_mass_, rho, spans);
+  density_transfer_pending_ = spans != nullptr;
+}
+
+template <int Dim>
 void Simulation<Dim>::density_diagonal_in_place_after_transfer() {
+  VectorX& rho = weights_.face_density;
+  const bool pending = density_transfer_pending_;
+  density_transfer_pending_ = false;
   // particles_to_grid's densities are positive only on faces with mass, which lie in
   // mass_boxes_ (kept by mark_faces_with_mass right after it)
-  if (switches_.restricted_passes && mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_)
-    density_diagonal_in_place<Dim>(grid_, weights_.face_density, reference_density_,
-                                   mass_boxes_.lo, mass_boxes_.hi);
-  else
-    density_diagonal_in_place(grid_, weights_.face_density, reference_density_);
+  if (switches_.restricted_passes && mass_boxes_valid_ && mass_faces_.data() == mass_boxes_data_) {
+    // (kern22) after a transfer with density_spans_ the fallback is written on the faces that
+    // transfer wrote (the others hold it); the boxes' last-axis range is the particles' cell
+    // layers grown by 3, kDensityReadLayers (particle_face_boxes), so every face read lies in them
+    density_diagonal_in_place<Dim>(grid_, rho, reference_density_, mass_boxes_.lo, mass_boxes_.hi,
+                                   pending ? &density_spans_.written : nullptr);
+    if (pending) {
+      density_spans_.kept = density_spans_.layers;
+      density_spans_data_ = rho.data();
+      density_spans_value_ = reference_density_;
+    }
+    return;
+  }
+  if (pending && density_spans_.known) {
+    // (not reached: restricted passes always keep the boxes) the faces the transfer left hold
+    // the last fallback, not its zeros: the zeros first, then the whole diagonal
+    long begin = 0;
+    const auto zero = [&](long end) {
+      if (end > begin) std::fill(rho.data() + begin, rho.data() + end, 0.0);
+    };
+    for (const auto& [b, e] : density_spans_.written) {
+      zero(b);
+      begin = e;
+    }
+    zero(rho.size());
+  }
+  density_diagonal_in_place(grid_, rho, reference_density_);
 }
 
 template <int Dim>
@@ -1159,7 +1203,7 @@ void Simulation<Dim>::particles_to_grid_with_forces(double dt) {
     ScopedTimer timer(stats_.timing[FramePhase::particles]);
     // the faces' densities into P's own storage (P of the last step is read by nothing from
     // here on; update_step_weights turns them into this step's P in place)
-    particles_to_grid(particles_, grid_, u_, face_mass_, weights_.face_density);
+    transfer_to_grid();
     mark_faces_with_mass();
   }
   account(frame_ledger_.to_grid, [&] { return face_kinetic_energy(); });

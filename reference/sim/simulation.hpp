@@ -842,6 +842,20 @@ class Simulation : public AnySimulation {
                       bool have_boxes, const FaceBoxes& boxes) const;
   /// density_diagonal_in_place of the faces' densities that particles_to_grid just wrote
   void density_diagonal_in_place_after_transfer();
+  /// particles_to_grid into u_, face_mass_ and weights_.face_density, the densities with
+  /// density_spans_ when the passes are restricted (issue 20, kern22)
+  void transfer_to_grid();
+  /// The faces' densities kept between steps (particles_to_grid's DensitySpans): while
+  /// weights_.face_density's storage is density_spans_data_ (with its size), it holds
+  /// density_spans_value_ (P's diagonal of a face without a density and not next to one) on
+  /// every face outside density_spans_.kept. Only particles_to_grid and the diagonal write that
+  /// storage (the solves read it; its swaps into a solve's input and back keep it); any other
+  /// storage or value makes the next transfer write every face, as before.
+  DensitySpans density_spans_;
+  const double* density_spans_data_ = nullptr;
+  double density_spans_value_ = 0.0;
+  /// the last transfer used density_spans_ and its diagonal is not written yet
+  bool density_transfer_pending_ = false;
   /// Something reads face_mass_ after the solve: the energy ledger's grid kinetic energy.
   bool masses_read_after_solve() const;
   PcgSettings pcg_settings_;
