@@ -802,11 +802,11 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
   // The candidates of a layer: the invalid neighbours of its sources (the given valid faces for
   // the first layer, the faces the layer before filled for the others), each once. A candidate g
   // is listed by the first of its neighbours (in g's neighbour order) that is a source, at that
-  // neighbour's first mention of g, so the sources can be visited on several threads (fixed
-  // blocks joined in order: the same list for any team) without sorting or a shared mark. During
-  // the call `valid` holds 1 for the faces valid before the last layer and kFresh for those it
-  // filled; the order of the list changes no value (every average of a layer reads the validity
-  // at the layer's start, and each candidate is written once).
+  // neighbour's first mention of g, so the sources can be visited on several threads without
+  // sorting or a shared mark: the union of the threads' lists is the same set of faces for any
+  // split of the sources. During the call `valid` holds 1 for the faces valid before the last
+  // layer and kFresh for those it filled; the order of the lists changes no value (every average
+  // of a layer reads the validity at the layer's start, and each candidate is written once).
   constexpr char kFresh = 2;
   // the candidates that source f lists, appended to out
   const auto list_candidates = [&](int f, auto&& is_source, std::vector<int>& out) {
@@ -825,23 +825,13 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
       if (first_source == f) out.push_back(g);
     }
   };
-  const auto gather_candidates = [&](int count, auto&& source_face, auto&& is_source) {
-    return gather_in_order<int>(count, [&](int i, std::vector<int>& out) {
-      const int f = source_face(i);
-      if (f >= 0) list_candidates(f, is_source, out);
-    });
-  };
-  // the first layer's: beside any valid face (the given flags made 0 / 1 first, then, after a
-  // barrier, the candidates listed per thread over static (contiguous, ascending) blocks of
-  // faces and joined in thread order: gather_candidates' list, in one parallel region)
-  std::vector<int> candidates;
+  // The sources of the first layer: beside any valid face; with boxes (issue 20, band17) the
+  // boxes' faces only (every flag outside them is 0: no source there, nothing to make 0 / 1),
+  // row by row.
+  std::vector<std::pair<int, int>> rows;  // (first face, faces in the row)
+  long work = nf;
   if (box_lo != nullptr) {
-    // (issue 20, band17) the same two passes over the boxes' faces only (every flag outside them
-    // is 0: no source there, nothing to make 0 / 1), row by row: the rows in ascending face
-    // order, split statically and joined in thread order, so the list is the one of the pass
-    // over every face (sources in ascending order, each with its candidates in its order)
-    std::vector<std::pair<int, int>> rows;  // (first face, faces in the row)
-    long work = 0;
+    work = 0;
     for (int axis = 0; axis < Dim; ++axis) {
       const VecI<Dim> lo = (*box_lo)[axis], hi = (*box_hi)[axis];
       if ((lo.array() > hi.array()).any()) continue;
@@ -852,82 +842,91 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
         rows.push_back({grid.face_index(axis, lo + lattice_coord<Dim>(r, row_dims)), nx});
       work += static_cast<long>(row_dims.prod()) * nx;
     }
-    const int count = static_cast<int>(rows.size());
-    const int team = team_threads(work);
-    std::vector<std::vector<int>> part(team);
+  } else {
+    rows.push_back({0, nf});  // every face as one row
+  }
+  const int count = static_cast<int>(rows.size());
+  // Every layer in one parallel region (issue 16, two22: a region per pass made three regions
+  // per layer, about 150 layers per landed step of the 64^3 viscous bunny, each region waking
+  // the sleeping thread). Each thread holds its own part of a layer: its candidates, their
+  // averages, the faces it filled. Per layer: (a) each thread averages its candidates (reads
+  // the validity and u at the layer's start); barrier; (b) each writes its filled candidates
+  // (u, kFresh) and makes its faces of the layer before valid (1); barrier; (c) the faces filled
+  // by all threads, taken as one list in part order and split evenly, list the next layer's
+  // candidates into the lister's part (reads the validity only, as (a) of the next layer does:
+  // no barrier between them). The stops (no candidates, nothing filled) read every part's size
+  // after a barrier: the same decision on every thread. Each face is written by one thread in
+  // (b) only, so the values are those of the serial pass for any team.
+  const int team = team_threads(work);
+  struct Part {
+    std::vector<int> candidates, fresh, old_fresh;
+    std::vector<double> value;
+    std::vector<char> filled;
+  };
+  std::vector<Part> part(team);
 #pragma omp parallel num_threads(team)
-    {
+  {
+    const int threads = omp_get_num_threads();
+    const int me = omp_get_thread_num();
+    Part& mine = part[me];
+    // the first layer's sources: the given flags made 0 / 1 first, then (after the barrier) the
+    // candidates listed over static blocks of rows
+    if (box_lo != nullptr) {
 #pragma omp for schedule(static)
       for (int r = 0; r < count; ++r)
         for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
           if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
-      std::vector<int>& out = part[omp_get_thread_num()];
 #pragma omp for schedule(static) nowait
       for (int r = 0; r < count; ++r)
         for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
-          if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, out);
-    }
-    std::size_t total = 0;
-    for (const auto& list : part) total += list.size();
-    candidates.reserve(total);
-    for (const auto& list : part) candidates.insert(candidates.end(), list.begin(), list.end());
-  } else {
-    const int team = team_threads(nf);
-    std::vector<std::vector<int>> part(team);
-#pragma omp parallel num_threads(team)
-    {
+          if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, mine.candidates);
+    } else {
 #pragma omp for schedule(static)
       for (int f = 0; f < nf; ++f)
         if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
-      std::vector<int>& out = part[omp_get_thread_num()];
 #pragma omp for schedule(static) nowait
       for (int f = 0; f < nf; ++f)
-        if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, out);
+        if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, mine.candidates);
     }
-    std::size_t total = 0;
-    for (const auto& list : part) total += list.size();
-    candidates.reserve(total);
-    for (const auto& list : part) candidates.insert(candidates.end(), list.begin(), list.end());
-  }
-  std::vector<double> value;
-  std::vector<char> filled;
-  std::vector<int> fresh;
-  for (int layer = 0; layer < layers && !candidates.empty(); ++layer) {
-    const int n = static_cast<int>(candidates.size());
-    // (value[i] is read only where filled[i], which the averages write for every i)
-    value.resize(n);
-    filled.resize(n);
-    const int old = static_cast<int>(fresh.size());
-    // The averages, then (after the barrier: they read the previous layer's validity) their
-    // writes and the last layer's faces made no longer fresh, in one parallel region. The team
-    // from the faces read (2 Dim neighbours per candidate): a layer of the 64^3 viscous bunny
-    // lists 3k-17k candidates once the liquid has landed (about 150 layers per step), which
-    // stayed on one thread under a threshold on the candidates alone. Each candidate's average
-    // and each write is one thread's; the candidates and the last layer's faces are distinct
-    // faces (invalid and valid at the layer's start): the same bits for any team.
-#pragma omp parallel num_threads(team_threads(static_cast<long>(std::max(n, old)) * 2 * Dim))
-    {
-#pragma omp for schedule(static)
-      for (int i = 0; i < n; ++i) filled[i] = average(candidates[i], value[i]);
-#pragma omp for schedule(static) nowait
-      for (int i = 0; i < n; ++i)
-        if (filled[i]) {
-          u[candidates[i]] = value[i];
-          valid[candidates[i]] = kFresh;
+    for (int layer = 0; layer < layers; ++layer) {
+      // (a) the averages of this thread's candidates
+      const std::size_t n = mine.candidates.size();
+      mine.value.resize(n);  // (value[i] is read only where filled[i], written for every i)
+      mine.filled.resize(n);
+      for (std::size_t i = 0; i < n; ++i) mine.filled[i] = average(mine.candidates[i], mine.value[i]);
+#pragma omp barrier
+      bool any = false;
+      for (const Part& other : part) any = any || !other.candidates.empty();
+      if (!any) break;
+      // (b) the writes; the faces this thread filled in the layer before become valid
+      std::swap(mine.old_fresh, mine.fresh);
+      mine.fresh.clear();
+      for (std::size_t i = 0; i < n; ++i)
+        if (mine.filled[i]) {
+          u[mine.candidates[i]] = mine.value[i];
+          valid[mine.candidates[i]] = kFresh;
+          mine.fresh.push_back(mine.candidates[i]);
         }
-#pragma omp for schedule(static) nowait
-      for (int i = 0; i < old; ++i) valid[fresh[i]] = 1;
+      for (const int f : mine.old_fresh) valid[f] = 1;
+#pragma omp barrier
+      long filled_total = 0;
+      for (const Part& other : part) filled_total += static_cast<long>(other.fresh.size());
+      if (filled_total == 0 || layer + 1 == layers) break;
+      // (c) the next layer's candidates, from this thread's even share of all filled faces
+      mine.candidates.clear();
+      const long lo = filled_total * me / threads, hi = filled_total * (me + 1) / threads;
+      long at = 0;  // the index of part q's first face in the joined list
+      for (const Part& q : part) {
+        const long size = static_cast<long>(q.fresh.size());
+        const long from = std::max(lo, at), to = std::min(hi, at + size);
+        for (long k = from; k < to; ++k)
+          list_candidates(q.fresh[k - at], [&](int g) { return valid[g] == kFresh; },
+                          mine.candidates);
+        at += size;
+      }
     }
-    fresh = gather_in_order<int>(n, [&](int i, std::vector<int>& out) {
-      if (filled[i]) out.push_back(candidates[i]);
-    });
-    if (fresh.empty()) break;
-    // the next layer's: beside the faces just filled
-    candidates = gather_candidates(
-        static_cast<int>(fresh.size()), [&](int i) { return fresh[i]; },
-        [&](int g) { return valid[g] == kFresh; });
+    for (const int f : mine.fresh) valid[f] = 1;
   }
-  for (int f : fresh) valid[f] = 1;
 }
 
 template <int Dim>
