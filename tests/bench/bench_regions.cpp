@@ -9,6 +9,8 @@
 //   barrier       a barrier inside a region where both threads arrive together, and one where the
 //                 caller arrives G microseconds late (the other thread sleeps meanwhile): the
 //                 delay from the caller's arrival until the waiting thread leaves
+//   spin          the CPU time a thread burns while it waits 5 ms at a barrier (the spin before
+//                 it sleeps; independent of the load)
 //   TeamScope     one AdaptiveTeam choose + record (reference/core/parallel.hpp)
 //
 // GNU OpenMP reads GOMP_SPINCOUNT only when it loads, so compare spin counts by running the
@@ -18,6 +20,7 @@
 //
 //   build/bench/bench_regions [--threads N] [--reps R]
 #include <omp.h>
+#include <time.h>
 
 #include <algorithm>
 #include <atomic>
@@ -26,6 +29,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "reference/core/parallel.hpp"
@@ -158,6 +162,26 @@ int main(int argc, char** argv) {
     char name[96];
     std::snprintf(name, sizeof name, "barrier, caller %.0f us late: other leaves after", late);
     print(name, spread(delay));
+  }
+  {  // how long a waiting thread spins before it sleeps: its own CPU time while the caller
+     // sleeps (not spins) 5 ms before the barrier; the CPU time does not depend on the load
+    const int n = 100;
+    std::vector<double> cpu(n);
+#pragma omp parallel num_threads(threads)
+    {
+      for (int r = 0; r < n; ++r) {
+        timespec a{}, b{};
+        if (omp_get_thread_num() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        if (omp_get_thread_num() == 1) clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+#pragma omp barrier
+        if (omp_get_thread_num() == 1) {
+          clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
+          cpu[r] = 1e6 * static_cast<double>(b.tv_sec - a.tv_sec) + 1e-3 * static_cast<double>(b.tv_nsec - a.tv_nsec);
+        }
+#pragma omp barrier
+      }
+    }
+    print("CPU of a thread waiting 5 ms at a barrier", spread(cpu));
   }
   {  // the AdaptiveTeam bookkeeping of one call
     static AdaptiveTeam site;
