@@ -784,14 +784,27 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
         nb[2 * b + s] = g == f ? -1 : g;
       }
   };
-  // the average of the valid neighbours (as of the layer's start) of an invalid face
-  auto average = [&](int f, double& value) {
+  // The flags during the layers: 0 (not filled), 1 (valid before the layer before last), or the
+  // stamp of the layer that filled the face, stamp(L) = 2 + L % 3: the faces the current layer
+  // fills, those of the layer before (its sources) and those of the one before that (made 1 by
+  // their filler during the current layer) are told apart. Within a layer a face's flag changes
+  // only between values that mean the same to every reader of that layer (0 -> stamp(L): not
+  // valid at the layer's start, not a source; stamp(L - 2) -> 1: valid, not a source), so the
+  // flags are read and written with relaxed atomic byte accesses and need no barrier.
+  const auto flag = [&](int g) { return __atomic_load_n(&valid[g], __ATOMIC_RELAXED); };
+  const auto set_flag = [&](int g, char v) { __atomic_store_n(&valid[g], v, __ATOMIC_RELAXED); };
+  const auto stamp = [](int layer) { return static_cast<char>(2 + layer % 3); };
+  // the average of the neighbours valid at the start of the layer whose stamp is `current` (flag
+  // neither 0 nor `current`) of an invalid face
+  auto average = [&](int f, char current, double& value) {
     std::array<int, 2 * Dim> nb;
     neighbours(f, nb);
     double sum = 0.0;
     int count = 0;
     for (int g : nb) {
-      if (g < 0 || !valid[g]) continue;
+      if (g < 0) continue;
+      const char v = flag(g);
+      if (v == 0 || v == current) continue;
       sum += u[g];
       ++count;
     }
@@ -804,17 +817,18 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
   // is listed by the first of its neighbours (in g's neighbour order) that is a source, at that
   // neighbour's first mention of g, so the sources can be visited on several threads without
   // sorting or a shared mark: the union of the threads' lists is the same set of faces for any
-  // split of the sources. During the call `valid` holds 1 for the faces valid before the last
-  // layer and kFresh for those it filled; the order of the lists changes no value (every average
-  // of a layer reads the validity at the layer's start, and each candidate is written once).
-  constexpr char kFresh = 2;
+  // split of the sources, and only g's lister fills g. The order of the lists changes no value
+  // (every average of a layer reads the validity at the layer's start, and each candidate is
+  // written once).
   // the candidates that source f lists, appended to out
   const auto list_candidates = [&](int f, auto&& is_source, std::vector<int>& out) {
     std::array<int, 2 * Dim> nb, nb_of_g;
     neighbours(f, nb);
     for (int k = 0; k < 2 * Dim; ++k) {
       const int g = nb[k];
-      if (g < 0 || valid[g]) continue;
+      // (a face another thread fills in the next layer meanwhile is not f's: it has another
+      // lister, so skipping it lists the same faces)
+      if (g < 0 || flag(g) != 0) continue;
       bool first_mention = true;
       for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
       if (!first_mention) continue;
@@ -846,22 +860,22 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
     rows.push_back({0, nf});  // every face as one row
   }
   const int count = static_cast<int>(rows.size());
-  // Every layer in one parallel region (issue 16, two22: a region per pass made three regions
-  // per layer, about 150 layers per landed step of the 64^3 viscous bunny, each region waking
-  // the sleeping thread). Each thread holds its own part of a layer: its candidates, their
-  // averages, the faces it filled. Per layer: (a) each thread averages its candidates (reads
-  // the validity and u at the layer's start); barrier; (b) each writes its filled candidates
-  // (u, kFresh) and makes its faces of the layer before valid (1); barrier; (c) the faces filled
-  // by all threads, taken as one list in part order and split evenly, list the next layer's
-  // candidates into the lister's part (reads the validity only, as (a) of the next layer does:
-  // no barrier between them). The stops (no candidates, nothing filled) read every part's size
-  // after a barrier: the same decision on every thread. Each face is written by one thread in
-  // (b) only, so the values are those of the serial pass for any team.
+  // Every layer in one parallel region with one barrier per layer (issue 16, two22: a region per
+  // pass made three regions per layer, 35-50 layers per landed step of the 64^3 viscous bunny,
+  // each region waking the sleeping thread). Each thread holds its own part of a layer: its
+  // candidates and the faces it filled. Per layer L: (a) each thread averages its candidates
+  // (the validity and u at the layer's start), writes each filled one's u and stamp(L), and
+  // makes its faces of layer L - 2 valid (1); barrier; (c) the faces layer L filled, all
+  // threads' taken as one list in part order and split evenly, list the next layer's candidates
+  // into the lister's part. A candidate's u is read by no average of its own layer (it is not
+  // valid at the layer's start), and (c) reads flags only, each test meaning the same under the
+  // changes (a) of the next layer makes meanwhile: no second barrier. The stop (nothing filled)
+  // reads every part's count after the barrier: the same decision on every thread. Each face is
+  // written by one thread, so the values are those of the serial pass for any team.
   const int team = team_threads(work);
   struct Part {
-    std::vector<int> candidates, fresh, old_fresh;
-    std::vector<double> value;
-    std::vector<char> filled;
+    std::vector<int> candidates;
+    std::array<std::vector<int>, 3> fills;  // the faces filled in layer L, at L % 3
   };
   std::vector<Part> part(team);
 #pragma omp parallel num_threads(team)
@@ -870,7 +884,9 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
     const int me = omp_get_thread_num();
     Part& mine = part[me];
     // the first layer's sources: the given flags made 0 / 1 first, then (after the barrier) the
-    // candidates listed over static blocks of rows
+    // candidates listed over static blocks of rows (the sources are the faces flagged 1: a
+    // stamp is a face another thread filled meanwhile)
+    const auto given_valid = [&](int g) { return flag(g) == 1; };
     if (box_lo != nullptr) {
 #pragma omp for schedule(static)
       for (int r = 0; r < count; ++r)
@@ -879,53 +895,51 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
 #pragma omp for schedule(static) nowait
       for (int r = 0; r < count; ++r)
         for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
-          if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, mine.candidates);
+          if (flag(f) == 1) list_candidates(f, given_valid, mine.candidates);
     } else {
 #pragma omp for schedule(static)
       for (int f = 0; f < nf; ++f)
         if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
 #pragma omp for schedule(static) nowait
       for (int f = 0; f < nf; ++f)
-        if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, mine.candidates);
+        if (flag(f) == 1) list_candidates(f, given_valid, mine.candidates);
     }
     for (int layer = 0; layer < layers; ++layer) {
-      // (a) the averages of this thread's candidates
-      const std::size_t n = mine.candidates.size();
-      mine.value.resize(n);  // (value[i] is read only where filled[i], written for every i)
-      mine.filled.resize(n);
-      for (std::size_t i = 0; i < n; ++i) mine.filled[i] = average(mine.candidates[i], mine.value[i]);
-#pragma omp barrier
-      bool any = false;
-      for (const Part& other : part) any = any || !other.candidates.empty();
-      if (!any) break;
-      // (b) the writes; the faces this thread filled in the layer before become valid
-      std::swap(mine.old_fresh, mine.fresh);
-      mine.fresh.clear();
-      for (std::size_t i = 0; i < n; ++i)
-        if (mine.filled[i]) {
-          u[mine.candidates[i]] = mine.value[i];
-          valid[mine.candidates[i]] = kFresh;
-          mine.fresh.push_back(mine.candidates[i]);
-        }
-      for (const int f : mine.old_fresh) valid[f] = 1;
+      // (a) this thread's candidates: averages and writes; its faces of layer - 2 made valid
+      const char current = stamp(layer);
+      std::vector<int>& filled = mine.fills[layer % 3];
+      std::vector<int>& older = mine.fills[(layer + 1) % 3];  // those of layer - 2
+      for (const int f : older) set_flag(f, 1);
+      older.clear();
+      filled.clear();
+      for (const int c : mine.candidates) {
+        double value;
+        if (!average(c, current, value)) continue;
+        u[c] = value;
+        set_flag(c, current);
+        filled.push_back(c);
+      }
 #pragma omp barrier
       long filled_total = 0;
-      for (const Part& other : part) filled_total += static_cast<long>(other.fresh.size());
+      for (const Part& other : part) filled_total += static_cast<long>(other.fills[layer % 3].size());
       if (filled_total == 0 || layer + 1 == layers) break;
-      // (c) the next layer's candidates, from this thread's even share of all filled faces
+      // (c) the next layer's candidates, from this thread's even share of the faces just filled
       mine.candidates.clear();
       const long lo = filled_total * me / threads, hi = filled_total * (me + 1) / threads;
       long at = 0;  // the index of part q's first face in the joined list
       for (const Part& q : part) {
-        const long size = static_cast<long>(q.fresh.size());
+        const std::vector<int>& list = q.fills[layer % 3];
+        const long size = static_cast<long>(list.size());
         const long from = std::max(lo, at), to = std::min(hi, at + size);
         for (long k = from; k < to; ++k)
-          list_candidates(q.fresh[k - at], [&](int g) { return valid[g] == kFresh; },
+          list_candidates(list[k - at], [&](int g) { return flag(g) == current; },
                           mine.candidates);
         at += size;
       }
     }
-    for (const int f : mine.fresh) valid[f] = 1;
+    // (after the last layer's barrier nothing reads the flags: every stamp made 1)
+    for (const auto& list : mine.fills)
+      for (const int f : list) set_flag(f, 1);
   }
 }
 
