@@ -20,6 +20,7 @@
 //
 //   build/bench/bench_regions [--threads N] [--reps R]
 #include <omp.h>
+#include <sched.h>
 #include <time.h>
 
 #include <algorithm>
@@ -130,18 +131,24 @@ int main(int argc, char** argv) {
     std::snprintf(name, sizeof name, "  ... the other thread starts after");
     print(name, spread(wake));
   }
-  {  // barriers where both arrive together
+  {  // barriers where both arrive together; which CPU each thread is on after each
     const int k = reps;
     double total = 0.0;
+    std::vector<int> cpu0(k, -1), cpu1(k, -2);
     const double t0 = now_us();
 #pragma omp parallel num_threads(threads)
     {
       for (int i = 0; i < k; ++i) {
 #pragma omp barrier
+        if (omp_get_thread_num() == 0) cpu0[i] = sched_getcpu();
+        if (omp_get_thread_num() == 1) cpu1[i] = sched_getcpu();
       }
     }
     total = now_us() - t0;
+    int same = 0;
+    for (int i = 0; i < k; ++i) same += cpu0[i] == cpu1[i];
     std::printf("  %-46s %9.2f us  (mean of %d)\n", "barrier, both threads arrive together", total / k, k);
+    std::printf("  %-46s %9.1f %%   (of %d)\n", "  ... threads 0 and 1 on the same CPU after it", 100.0 * same / k, k);
   }
   for (double late : {20.0, 100.0, 500.0, 2000.0}) {  // the caller arrives `late` us after the other
     const int n = std::max(50, static_cast<int>(std::min<double>(reps, 2.0e6 / (late + 50.0))));
