@@ -829,14 +829,27 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
         nb[2 * b + s] = g == f ? -1 : g;
       }
   };
-  // the average of the valid neighbours (as of the layer's start) of an invalid face
-  auto average = [&](int f, double& value) {
+  // The flags during the layers: 0 (not filled), 1 (valid before the layer before last), or the
+  // stamp of the layer that filled the face, stamp(L) = 2 + L % 3: the faces the current layer
+  // fills, those of the layer before (its sources) and those of the one before that (made 1 by
+  // their filler during the current layer) are told apart. Within a layer a face's flag changes
+  // only between values that mean the same to every reader of that layer (0 -> stamp(L): not
+  // valid at the layer's start, not a source; stamp(L - 2) -> 1: valid, not a source), so the
+  // flags are read and written with relaxed atomic byte accesses and need no barrier.
+  const auto flag = [&](int g) { return __atomic_load_n(&valid[g], __ATOMIC_RELAXED); };
+  const auto set_flag = [&](int g, char v) { __atomic_store_n(&valid[g], v, __ATOMIC_RELAXED); };
+  const auto stamp = [](int layer) { return static_cast<char>(2 + layer % 3); };
+  // the average of the neighbours valid at the start of the layer whose stamp is `current` (flag
+  // neither 0 nor `current`) of an invalid face
+  auto average = [&](int f, char current, double& value) {
     std::array<int, 2 * Dim> nb;
     neighbours(f, nb);
     double sum = 0.0;
     int count = 0;
     for (int g : nb) {
-      if (g < 0 || !valid[g]) continue;
+      if (g < 0) continue;
+      const char v = flag(g);
+      if (v == 0 || v == current) continue;
       sum += u[g];
       ++count;
     }
@@ -847,19 +860,20 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
   // The candidates of a layer: the invalid neighbours of its sources (the given valid faces for
   // the first layer, the faces the layer before filled for the others), each once. A candidate g
   // is listed by the first of its neighbours (in g's neighbour order) that is a source, at that
-  // neighbour's first mention of g, so the sources can be visited on several threads (fixed
-  // blocks joined in order: the same list for any team) without sorting or a shared mark. During
-  // the call `valid` holds 1 for the faces valid before the last layer and kFresh for those it
-  // filled; the order of the list changes no value (every average of a layer reads the validity
-  // at the layer's start, and each candidate is written once).
-  constexpr char kFresh = 2;
+  // neighbour's first mention of g, so the sources can be visited on several threads without
+  // sorting or a shared mark: the union of the threads' lists is the same set of faces for any
+  // split of the sources, and only g's lister fills g. The order of the lists changes no value
+  // (every average of a layer reads the validity at the layer's start, and each candidate is
+  // written once).
   // the candidates that source f lists, appended to out
   const auto list_candidates = [&](int f, auto&& is_source, std::vector<int>& out) {
     std::array<int, 2 * Dim> nb, nb_of_g;
     neighbours(f, nb);
     for (int k = 0; k < 2 * Dim; ++k) {
       const int g = nb[k];
-      if (g < 0 || valid[g]) continue;
+      // (a face another thread fills in the next layer meanwhile is not f's: it has another
+      // lister, so skipping it lists the same faces)
+      if (g < 0 || flag(g) != 0) continue;
       bool first_mention = true;
       for (int l = 0; l < k && first_mention; ++l) first_mention = nb[l] != g;
       if (!first_mention) continue;
@@ -870,23 +884,13 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
       if (first_source == f) out.push_back(g);
     }
   };
-  const auto gather_candidates = [&](int count, auto&& source_face, auto&& is_source) {
-    return gather_in_order<int>(count, [&](int i, std::vector<int>& out) {
-      const int f = source_face(i);
-      if (f >= 0) list_candidates(f, is_source, out);
-    });
-  };
-  // the first layer's: beside any valid face (the given flags made 0 / 1 first, then, after a
-  // barrier, the candidates listed per thread over static (contiguous, ascending) blocks of
-  // faces and joined in thread order: gather_candidates' list, in one parallel region)
-  std::vector<int> candidates;
+  // The sources of the first layer: beside any valid face; with boxes (issue 20, band17) the
+  // boxes' faces only (every flag outside them is 0: no source there, nothing to make 0 / 1),
+  // row by row.
+  std::vector<std::pair<int, int>> rows;  // (first face, faces in the row)
+  long work = nf;
   if (box_lo != nullptr) {
-    // (issue 20, band17) the same two passes over the boxes' faces only (every flag outside them
-    // is 0: no source there, nothing to make 0 / 1), row by row: the rows in ascending face
-    // order, split statically and joined in thread order, so the list is the one of the pass
-    // over every face (sources in ascending order, each with its candidates in its order)
-    std::vector<std::pair<int, int>> rows;  // (first face, faces in the row)
-    long work = 0;
+    work = 0;
     for (int axis = 0; axis < Dim; ++axis) {
       const VecI<Dim> lo = (*box_lo)[axis], hi = (*box_hi)[axis];
       if ((lo.array() > hi.array()).any()) continue;
@@ -897,82 +901,91 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
         rows.push_back({grid.face_index(axis, lo + lattice_coord<Dim>(r, row_dims)), nx});
       work += static_cast<long>(row_dims.prod()) * nx;
     }
-    const int count = static_cast<int>(rows.size());
-    const int team = team_threads(work);
-    std::vector<std::vector<int>> part(team);
+  } else {
+    rows.push_back({0, nf});  // every face as one row
+  }
+  const int count = static_cast<int>(rows.size());
+  // Every layer in one parallel region with one barrier per layer (issue 16, two22: a region per
+  // pass made three regions per layer, 35-50 layers per landed step of the 64^3 viscous bunny,
+  // each region waking the sleeping thread). Each thread holds its own part of a layer: its
+  // candidates and the faces it filled. Per layer L: (a) each thread averages its candidates
+  // (the validity and u at the layer's start), writes each filled one's u and stamp(L), and
+  // makes its faces of layer L - 2 valid (1); barrier; (c) the faces layer L filled, all
+  // threads' taken as one list in part order and split evenly, list the next layer's candidates
+  // into the lister's part. A candidate's u is read by no average of its own layer (it is not
+  // valid at the layer's start), and (c) reads flags only, each test meaning the same under the
+  // changes (a) of the next layer makes meanwhile: no second barrier. The stop (nothing filled)
+  // reads every part's count after the barrier: the same decision on every thread. Each face is
+  // written by one thread, so the values are those of the serial pass for any team.
+  const int team = team_threads(work);
+  struct Part {
+    std::vector<int> candidates;
+    std::array<std::vector<int>, 3> fills;  // the faces filled in layer L, at L % 3
+  };
+  std::vector<Part> part(team);
 #pragma omp parallel num_threads(team)
-    {
+  {
+    const int threads = omp_get_num_threads();
+    const int me = omp_get_thread_num();
+    Part& mine = part[me];
+    // the first layer's sources: the given flags made 0 / 1 first, then (after the barrier) the
+    // candidates listed over static blocks of rows (the sources are the faces flagged 1: a
+    // stamp is a face another thread filled meanwhile)
+    const auto given_valid = [&](int g) { return flag(g) == 1; };
+    if (box_lo != nullptr) {
 #pragma omp for schedule(static)
       for (int r = 0; r < count; ++r)
         for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
           if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
-      std::vector<int>& out = part[omp_get_thread_num()];
 #pragma omp for schedule(static) nowait
       for (int r = 0; r < count; ++r)
         for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f)
-          if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, out);
-    }
-    std::size_t total = 0;
-    for (const auto& list : part) total += list.size();
-    candidates.reserve(total);
-    for (const auto& list : part) candidates.insert(candidates.end(), list.begin(), list.end());
-  } else {
-    const int team = team_threads(nf);
-    std::vector<std::vector<int>> part(team);
-#pragma omp parallel num_threads(team)
-    {
+          if (flag(f) == 1) list_candidates(f, given_valid, mine.candidates);
+    } else {
 #pragma omp for schedule(static)
       for (int f = 0; f < nf; ++f)
         if (valid[f] != 0 && valid[f] != 1) valid[f] = 1;
-      std::vector<int>& out = part[omp_get_thread_num()];
 #pragma omp for schedule(static) nowait
       for (int f = 0; f < nf; ++f)
-        if (valid[f]) list_candidates(f, [&](int g) { return valid[g] != 0; }, out);
+        if (flag(f) == 1) list_candidates(f, given_valid, mine.candidates);
     }
-    std::size_t total = 0;
-    for (const auto& list : part) total += list.size();
-    candidates.reserve(total);
-    for (const auto& list : part) candidates.insert(candidates.end(), list.begin(), list.end());
-  }
-  std::vector<double> value;
-  std::vector<char> filled;
-  std::vector<int> fresh;
-  for (int layer = 0; layer < layers && !candidates.empty(); ++layer) {
-    const int n = static_cast<int>(candidates.size());
-    // (value[i] is read only where filled[i], which the averages write for every i)
-    value.resize(n);
-    filled.resize(n);
-    const int old = static_cast<int>(fresh.size());
-    // The averages, then (after the barrier: they read the previous layer's validity) their
-    // writes and the last layer's faces made no longer fresh, in one parallel region. The team
-    // from the faces read (2 Dim neighbours per candidate): a layer of the 64^3 viscous bunny
-    // lists 3k-17k candidates once the liquid has landed (about 150 layers per step), which
-    // stayed on one thread under a threshold on the candidates alone. Each candidate's average
-    // and each write is one thread's; the candidates and the last layer's faces are distinct
-    // faces (invalid and valid at the layer's start): the same bits for any team.
-#pragma omp parallel num_threads(team_threads(static_cast<long>(std::max(n, old)) * 2 * Dim))
-    {
-#pragma omp for schedule(static)
-      for (int i = 0; i < n; ++i) filled[i] = average(candidates[i], value[i]);
-#pragma omp for schedule(static) nowait
-      for (int i = 0; i < n; ++i)
-        if (filled[i]) {
-          u[candidates[i]] = value[i];
-          valid[candidates[i]] = kFresh;
-        }
-#pragma omp for schedule(static) nowait
-      for (int i = 0; i < old; ++i) valid[fresh[i]] = 1;
+    for (int layer = 0; layer < layers; ++layer) {
+      // (a) this thread's candidates: averages and writes; its faces of layer - 2 made valid
+      const char current = stamp(layer);
+      std::vector<int>& filled = mine.fills[layer % 3];
+      std::vector<int>& older = mine.fills[(layer + 1) % 3];  // those of layer - 2
+      for (const int f : older) set_flag(f, 1);
+      older.clear();
+      filled.clear();
+      for (const int c : mine.candidates) {
+        double value;
+        if (!average(c, current, value)) continue;
+        u[c] = value;
+        set_flag(c, current);
+        filled.push_back(c);
+      }
+#pragma omp barrier
+      long filled_total = 0;
+      for (const Part& other : part) filled_total += static_cast<long>(other.fills[layer % 3].size());
+      if (filled_total == 0 || layer + 1 == layers) break;
+      // (c) the next layer's candidates, from this thread's even share of the faces just filled
+      mine.candidates.clear();
+      const long lo = filled_total * me / threads, hi = filled_total * (me + 1) / threads;
+      long at = 0;  // the index of part q's first face in the joined list
+      for (const Part& q : part) {
+        const std::vector<int>& list = q.fills[layer % 3];
+        const long size = static_cast<long>(list.size());
+        const long from = std::max(lo, at), to = std::min(hi, at + size);
+        for (long k = from; k < to; ++k)
+          list_candidates(list[k - at], [&](int g) { return flag(g) == current; },
+                          mine.candidates);
+        at += size;
+      }
     }
-    fresh = gather_in_order<int>(n, [&](int i, std::vector<int>& out) {
-      if (filled[i]) out.push_back(candidates[i]);
-    });
-    if (fresh.empty()) break;
-    // the next layer's: beside the faces just filled
-    candidates = gather_candidates(
-        static_cast<int>(fresh.size()), [&](int i) { return fresh[i]; },
-        [&](int g) { return valid[g] == kFresh; });
+    // (after the last layer's barrier nothing reads the flags: every stamp made 1)
+    for (const auto& list : mine.fills)
+      for (const int f : list) set_flag(f, 1);
   }
-  for (int f : fresh) valid[f] = 1;
 }
 
 template <int Dim>

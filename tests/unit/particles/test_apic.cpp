@@ -583,11 +583,14 @@ void check_unread_flags() {
 
 TEST_CASE("velocity extrapolation gives the same bits for any thread count above its layers' "
           "serial fall-back", "[unit]") {
-  // A layer's averages, writes and fresh flags run on the team once its candidates' neighbour
-  // reads (2 Dim per candidate) reach kParallelMinWork (the landed viscous bunny: 3k-17k
-  // candidates per layer). A ball of valid faces on 40^3 cells lists ~10k candidates in its first
-  // layer: 1, 2, 3 and 5 threads (the team exactly that: the core monitor off) give the same
-  // velocities and flags, walled and periodic.
+  // Every layer runs in one parallel region with one barrier per layer (two22): each thread
+  // averages and writes its own candidates, and the next layer's candidates are listed from an
+  // even share of all the faces just filled, while faster threads already average the next layer
+  // (flags stamped per layer, three stamps in turn). A ball of valid faces on 40^3 cells lists
+  // ~10k candidates in its first layer; 1, 2, 3 and 5 threads (the team exactly that: the core
+  // monitor off) give the same velocities and flags over 1, 2, 3, 7 and 12 layers (the stamps
+  // cycle up to four times), walled and periodic, for the pass over every face and the boxed
+  // pass, each team run three times (a race would show as a run that differs).
   const bool monitor = core_monitor();
   set_core_monitor(false);
   const int saved = omp_get_max_threads();
@@ -613,21 +616,48 @@ TEST_CASE("velocity extrapolation gives the same bits for any thread count above
       for (int f = 0; f < nf; ++f) filled += valid[f] && !valid0[f];
       REQUIRE(filled * 2 * 3 >= kParallelMinWork);
     }
-    omp_set_num_threads(1);
-    VectorX u1 = u0;
-    std::vector<char> valid1 = valid0;
-    extrapolate_velocity(grid, u1, valid1, 6);
-    long reached = 0;
-    for (int f = 0; f < nf; ++f) reached += valid1[f] && !valid0[f];
-    CHECK(reached > 0);
-    for (int threads : {2, 3, 5}) {
-      CAPTURE(threads);
-      omp_set_num_threads(threads);
-      VectorX u = u0;
-      std::vector<char> valid = valid0;
-      extrapolate_velocity(grid, u, valid, 6);
-      REQUIRE(valid == valid1);
-      REQUIRE(std::memcmp(u.data(), u1.data(), sizeof(double) * nf) == 0);
+    // boxes holding every valid face, grown by 1 (the boxed pass)
+    std::array<VecI<3>, 3> lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = grid.face_dims(a);
+      hi[a] = -VecI<3>::Ones();
+    }
+    for (int f = 0; f < nf; ++f) {
+      if (!valid0[f]) continue;
+      const auto [axis, coord] = grid.face_coord(f);
+      lo[axis] = lo[axis].cwiseMin(coord);
+      hi[axis] = hi[axis].cwiseMax(coord);
+    }
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = (lo[a] - VecI<3>::Ones()).cwiseMax(VecI<3>::Zero());
+      hi[a] = (hi[a] + VecI<3>::Ones()).cwiseMin(grid.face_dims(a) - VecI<3>::Ones());
+    }
+    for (int layers : {1, 2, 3, 7, 12}) {
+      CAPTURE(layers);
+      omp_set_num_threads(1);
+      VectorX u1 = u0;
+      std::vector<char> valid1 = valid0;
+      extrapolate_velocity(grid, u1, valid1, layers);
+      long reached = 0;
+      for (int f = 0; f < nf; ++f) {
+        reached += valid1[f] && !valid0[f];
+        REQUIRE((valid1[f] == 0 || valid1[f] == 1));  // no stamp left
+      }
+      CHECK(reached > 0);
+      for (int threads : {2, 3, 5})
+        for (bool boxed : {false, true})
+          for (int run = 0; run < 3; ++run) {
+            CAPTURE(threads, boxed, run);
+            omp_set_num_threads(threads);
+            VectorX u = u0;
+            std::vector<char> valid = valid0;
+            if (boxed)
+              extrapolate_velocity<3>(grid, u, valid, layers, lo, hi);
+            else
+              extrapolate_velocity(grid, u, valid, layers);
+            REQUIRE(valid == valid1);
+            REQUIRE(std::memcmp(u.data(), u1.data(), sizeof(double) * nf) == 0);
+          }
     }
   }
   omp_set_num_threads(saved);
