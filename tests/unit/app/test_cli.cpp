@@ -4,6 +4,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <cstdio>
@@ -409,6 +410,23 @@ TEST_CASE("frame_stats_json has every key of the contract", "[unit]") {
   CHECK(j["timing"]["particles"] == 0.125);
   for (const char* k : {"weights", "extrapolation", "render", "output"}) CHECK(j["timing"][k] == 0.0);
   CHECK(j.dump().find('\n') == std::string::npos);  // one line
+}
+
+TEST_CASE("a document nested 10^5 deep is refused without memory to match its depth", "[unit]") {
+  // The duplicate-key callback once kept a key path per level, each as long as the depth: this
+  // input took 17.8 GB and 93 s before its refusal. The peak resident size of the process may
+  // not grow by more than 256 MB (it grows by about 10 MB: the parser's own tree).
+  auto peak_bytes = [] {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return static_cast<double>(u.ru_maxrss) * 1024.0;  // kilobytes on Linux
+  };
+  const double before = peak_bytes();
+  const std::string path = write_file("deep.json", std::string(100000, '[') + std::string(100000, ']'));
+  const Result r = cli({"check", path});
+  CHECK(r.code == 2);
+  CHECK(r.err.find("nested too deeply") != std::string::npos);
+  CHECK(peak_bytes() - before < 256.0 * 1024 * 1024);
 }
 
 TEST_CASE("garbage input never crashes: exit 0 or 2", "[unit][property]") {
