@@ -29,7 +29,7 @@ namespace {
 constexpr char kMagic[8] = {'M', 'O', 'N', 'O', 'C', 'K', 'P', 'T'};
 // 2: thread count and input-file digests; 3: the state's listed volume deficits; 4: line 15's
 // energy credit in every state of the default settings (slosh11: line15_energy = balance)
-constexpr std::uint32_t kFormatVersion = 6;
+constexpr std::uint32_t kFormatVersion = 7;
 /// magic, version, reserved, payload length
 constexpr std::size_t kHeaderBytes = 8 + 4 + 4 + 8;
 constexpr std::size_t kChecksumBytes = 8;

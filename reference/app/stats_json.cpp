@@ -88,6 +88,8 @@ json frame_stats_json(const FrameStats& s) {
   // the multigrid solves redone with SSOR (left out when there were none)
   if (s.solver.preconditioner_fallbacks > 0)
     j["solver"]["preconditioner"]["fallbacks"] = s.solver.preconditioner_fallbacks;
+  // PC-/PVC-iterative steps whose rounds stopped at their cap before settling (left out when 0)
+  if (s.solver.unsettled_steps > 0) j["solver"]["unsettled_steps"] = s.solver.unsettled_steps;
   // timing
   j["timing"] = json::object();
   for (const FramePhase phase : enum_values<FramePhase>())

@@ -98,6 +98,11 @@ struct SolverStats {
   /// were solved again with SSOR (solver.preconditioner "auto"; docs/preconditioners.md
   /// section 20). Written to stats.jsonl only when not 0.
   long preconditioner_fallbacks = 0;
+  /// PC-/PVC-iterative: the frame's steps whose fluid-contact rounds stopped at
+  /// solver.staggered_iterations before (lambda, x_f) settled (CoupledSolveResult::
+  /// rounds_settled). Not a failed solve (`converged` is about the inner solves), but not silent
+  /// either: written to stats.jsonl as "unsettled_steps" only when not 0.
+  long unsettled_steps = 0;
 
   /// Books one solve (or one step's solves): iterations and staggered rounds summed, the
   /// largest relative residual, convergence of all.

@@ -2654,6 +2654,7 @@ void Simulation<Dim>::solve_coupled(double dt) {
   SolverStats& st = stats_.solver;
   st.add_solve(r.fluid_iterations + r.contact_iterations + r.coupled_iterations,
                r.staggered_iterations, r.max_relative_residual, r.converged);
+  if (!r.rounds_settled) ++st.unsettled_steps;
   st.add_dofs(r.pressure_dofs, r.stress_dofs, r.contact_dofs, r.friction_dofs);
   st.fluid_iterations += r.fluid_iterations;
   st.contact_iterations += r.contact_iterations;
@@ -3384,6 +3385,7 @@ void step_stats_fields(Archive& a, FrameStats& s) {
   a(v.stokes_solves_ssor);
   a(v.max_stokes_stiffness);
   a(v.preconditioner_fallbacks);
+  a(v.unsettled_steps);
   for (const FramePhase p : enum_values<FramePhase>()) a(s.timing[p]);
 }
 

@@ -315,7 +315,7 @@ TEST_CASE("damaged, truncated, foreign or missing checkpoints are refused with 2
     std::string old = good;
     const std::uint32_t version = 5;
     std::memcpy(&old[8], &version, 4);
-    refused(old, "checkpoint format version 5 (this build reads version 6");
+    refused(old, "checkpoint format version 5 (this build reads version 7");
   }
   SECTION("written by another build") {
     CheckpointRecord record = read_checkpoint(file);

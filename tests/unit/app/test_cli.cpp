@@ -410,6 +410,50 @@ TEST_CASE("frame_stats_json has every key of the contract", "[unit]") {
   CHECK(j["timing"]["particles"] == 0.125);
   for (const char* k : {"weights", "extrapolation", "render", "output"}) CHECK(j["timing"][k] == 0.0);
   CHECK(j.dump().find('\n') == std::string::npos);  // one line
+  // PC-/PVC-iterative rounds stopped at their cap: counted, and left out when 0
+  CHECK_FALSE(j["solver"].contains("unsettled_steps"));
+  st.solver.unsettled_steps = 3;
+  CHECK(frame_stats_json(st)["solver"]["unsettled_steps"] == 3);
+}
+
+TEST_CASE("PC-iterative steps whose rounds stop at their cap are counted in stats.jsonl", "[unit]") {
+  // A stack of three light boxes dropped into a tank (probe22's p05): from its fifth frame the
+  // fluid-contact rounds of PC-iterative stop at solver.staggered_iterations (2) before
+  // (lambda, x_f) settle. The inner solves converge, so the frames stay converged, but
+  // "unsettled_steps" says how many of their steps ended at the cap; with rounds to spare no
+  // step does.
+  const std::string scene = write_file("stack.json", R"({
+    "format": "monolith-scene/1", "name": "stack-into-water", "dim": 2,
+    "domain": {"lower": [0, 0], "upper": [1.5, 1], "cells": [96, 64],
+               "boundary": {"x-": "wall", "x+": "wall", "y-": "wall", "y+": "open"}, "wall_friction": 0.3},
+    "time": {"fps": 30, "frames": 6},
+    "solver": {"scheme": "PC-iterative"},
+    "liquids": [{"shape": {"type": "box", "center": [0.75, 0.15], "half_size": [0.75, 0.15]}, "density": 1000}],
+    "bodies": [
+      {"shape": {"type": "box", "center": [0.75, 0.5], "half_size": [0.12, 0.05]}, "density": 800, "friction": 0.6},
+      {"shape": {"type": "box", "center": [0.75, 0.6], "half_size": [0.1, 0.05]}, "density": 800, "friction": 0.6},
+      {"shape": {"type": "box", "center": [0.75, 0.7], "half_size": [0.08, 0.05]}, "density": 800, "friction": 0.6}],
+    "render": {"enabled": false}
+  })");
+  auto unsettled = [&](const std::string& rounds, const std::string& name) {
+    const fs::path out = temp_dir() / name;
+    const Result r = cli({"run", scene, "--out", out.string(), "--quiet", "--threads", "1", "--set",
+                          "solver.staggered_iterations=" + rounds});
+    REQUIRE(r.code == 0);
+    long total = 0;
+    for (const json& row : read_jsonl(out / "stats.jsonl")) {
+      CHECK(row["solver"]["converged"] == true);
+      if (row["solver"].contains("unsettled_steps")) {
+        const long n = row["solver"]["unsettled_steps"];
+        CHECK(n >= 1);
+        CHECK(n <= row["steps"].get<long>());
+        total += n;
+      }
+    }
+    return total;
+  };
+  CHECK(unsettled("2", "stack-2") >= 1);
+  CHECK(unsettled("100", "stack-100") == 0);
 }
 
 TEST_CASE("a document nested 10^5 deep is refused without memory to match its depth", "[unit]") {

@@ -62,6 +62,7 @@ void check_same_stats(const FrameStats& a, const FrameStats& b) {
   CHECK(a.solver.stokes_solves_multigrid == b.solver.stokes_solves_multigrid);
   CHECK(a.solver.stokes_solves_ssor == b.solver.stokes_solves_ssor);
   CHECK(a.solver.preconditioner_fallbacks == b.solver.preconditioner_fallbacks);
+  CHECK(a.solver.unsettled_steps == b.solver.unsettled_steps);
   REQUIRE(a.bodies.size() == b.bodies.size());
   for (std::size_t i = 0; i < a.bodies.size(); ++i) {
     CHECK(a.bodies[i].position == b.bodies[i].position);
