@@ -123,18 +123,10 @@ struct BuoyancyResult {
   bool converged = true;
 };
 
-/// Tank of unit width (unit cross-section in 3D) filled to 0.5 m; the body is released at rest
-/// `lift` above its equilibrium. The prediction uses the surface height (V_L + s V) / 1 with the
-/// liquid volume V_L measured per frame; means are over the second third of the run to its end.
-template <int Dim>
-BuoyancyResult run_floating(const FloatBody& body, int n, double lift, int frames, double fps,
-                            const std::string& scheme, double eta = 0.0) {
-  nlohmann::json j = base_scene(Dim, std::vector<double>(Dim, 1.0), n, scheme, fps);
-  j["liquids"].push_back(pool(Dim, 0.5, eta));
-  j["bodies"].push_back({{"name", "floater"},
-                         {"density", body.s * kRho},
-                         {"shape", body.shape(body.centre_at(0.5) + lift)}});
-  const std::vector<FrameStats> s = run_frames(j, frames);
+/// The first body's height in a run of a unit-width tank against Archimedes: the prediction
+/// uses the surface height (V_L + s V) / 1 with the liquid volume V_L measured per frame; means
+/// are over the second third of the run to its end; converged over every frame after frame 0.
+inline BuoyancyResult floating_result(const FloatBody& body, const std::vector<FrameStats>& s) {
   BuoyancyResult r;
   double sum_y = 0.0, sum_pred = 0.0, lo = 1e9, hi = -1e9;
   int count = 0;
@@ -151,6 +143,20 @@ BuoyancyResult run_floating(const FloatBody& body, int n, double lift, int frame
   r.error = (sum_y - sum_pred) / count;
   r.range = hi - lo;
   return r;
+}
+
+/// Tank of unit width (unit cross-section in 3D) filled to 0.5 m; the body is released at rest
+/// `lift` above its equilibrium. The prediction uses the surface height (V_L + s V) / 1 with the
+/// liquid volume V_L measured per frame; means are over the second third of the run to its end.
+template <int Dim>
+BuoyancyResult run_floating(const FloatBody& body, int n, double lift, int frames, double fps,
+                            const std::string& scheme, double eta = 0.0) {
+  nlohmann::json j = base_scene(Dim, std::vector<double>(Dim, 1.0), n, scheme, fps);
+  j["liquids"].push_back(pool(Dim, 0.5, eta));
+  j["bodies"].push_back({{"name", "floater"},
+                         {"density", body.s * kRho},
+                         {"shape", body.shape(body.centre_at(0.5) + lift)}});
+  return floating_result(body, run_frames(j, frames));
 }
 
 struct NeutralResult {
