@@ -455,6 +455,16 @@ class Simulation : public AnySimulation {
   /// the potential energy they add is what the account and the kinetic energy can pay; returns
   /// the liquid's potential energy after it (liquid_potential_energy())
   double limit_line15_lift(const std::vector<Vec<Dim>>& before, double potential_before);
+  /// Line 15's move of one particle from `from` to `to`, across a periodic face taken as the
+  /// shortest one (a move that wrapped is the small step it was, not a jump of the domain's
+  /// length; exactly `to - from` where nothing wrapped)
+  Vec<Dim> line15_move(const Vec<Dim>& from, const Vec<Dim>& to) const;
+  /// True when gravity has a component along a periodic axis: there the potential energy
+  /// -m g.x jumps by m |g_a| L when a particle wraps, so line 15's change is summed over its moves
+  /// (line15_potential_change) instead of taken as a difference of liquid_potential_energy()
+  bool gravity_along_periodic_axis() const;
+  /// Line 15's potential energy change since `before`, -sum_p m_p g.line15_move(before_p, x_p)
+  double line15_potential_change(const std::vector<Vec<Dim>>& before) const;
   /// Line15Energy::balance_local: `gain` taken from the particles near line 15's rises, from
   /// the positions before line 15's moves (docs/particles.md, slosh11)
   void pay_line15_energy_locally(double gain, const std::vector<Vec<Dim>>& before);
