@@ -87,6 +87,34 @@ struct KeptMinusOnes {
   }
 };
 
+/// (band23) What a cell-sized double vector kept across steps holds outside a list of cells:
+/// while `data` and `size` name its storage, it is +0 at every cell not in `cells` (the coupled
+/// solve's pressure, MonolithicSystem::pressure_cells_into: the cells of the last solve's
+/// pressure DOFs). A writer that honours it zeroes only the listed cells before writing its own
+/// instead of the whole vector, so the pages beyond the liquid are never written (Fig. 2's paper
+/// grid: 67 MB of pressure, 16k first touches). Every other writer of the storage calls forget().
+struct ZerosOutsideCells {
+  const double* data = nullptr;
+  long size = -1;
+  std::vector<int> cells;
+  /// `v` is the storage this record describes.
+  bool holds(const VectorX& v) const {
+    return data != nullptr && v.data() == data && static_cast<long>(v.size()) == size;
+  }
+  /// `v` is +0 everywhere (nothing written in it yet).
+  void nothing_written(const VectorX& v) {
+    data = v.data();
+    size = static_cast<long>(v.size());
+    cells.clear();
+  }
+  /// No promise about any storage.
+  void forget() {
+    data = nullptr;
+    size = -1;
+    cells.clear();
+  }
+};
+
 /// The kept storage of the liquid solve's set-up (see the file comment), owned by the caller and
 /// passed to the solve (solve_stokes' StokesSolveOptions::workspace, CoupledStepInput::workspace,
 /// MonolithicSystem). Holds no reference to any grid or operator.
