@@ -525,7 +525,7 @@ void solve_coupled_step(const CoupledStepInput<Dim>& in, CouplingScheme scheme, 
     out.stress.swap(spare_stress);
     sys.fluid_velocities_into(out.x.x_fluid, out.u);
     out.v = sys.body_velocities(out.x.x_fluid, out.x.lambda, out.x.z);
-    sys.pressure_cells_into(out.x.x_fluid, out.pressure);
+    sys.pressure_cells_into(out.x.x_fluid, out.pressure, in.pressure_cells);
     // The result's stress is every StressGrid component, +0 without stress unknowns, as the copy
     // with a zeroed eta gave it, written into the kept buffer; an empty one (the system's own)
     // made the callers' reads of it, such as max |tau|, read past its end (test_coupled_schemes

@@ -68,6 +68,11 @@ struct CoupledStepInput {
   /// The liquid solve's storage kept across steps and the liquid's band (stokes_workspace.hpp;
   /// nullptr: none), given to every MonolithicSystem the scheme builds; owned by the caller.
   StokesWorkspace* workspace = nullptr;
+  /// (band23) The caller's record of its pressure buffer (the first solve's output,
+  /// CoupledSolveResult::pressure as given): +0 outside the listed cells while it holds that
+  /// storage; pressure_cells_into then zeroes only those cells and updates the record to the
+  /// buffer it wrote last (nullptr: every output zeroed whole, as before).
+  ZerosOutsideCells* pressure_cells = nullptr;
 };
 
 /// The weights of eq. (24) (section 3.1.2, 4.4.6) for a liquid beside bodies: W_L^p, W_L^u

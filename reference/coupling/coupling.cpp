@@ -757,11 +757,30 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   else if (w.solid_face.size() != nf)
     w.solid_face.resize(nf);
   if (w.fluid_face.size() != nf) w.fluid_face.resize(nf);
-  // every face, or (incremental) the touched faces only
-  const int passes = incremental ? static_cast<int>(touched.size()) : nf;
+  // (band23) A first (not incremental) call with the union in parts and no body that never
+  // moves: each body's W_S^u is +0 outside its near faces (fresh zeros from the kernel or zeroed
+  // whole, body_face_fractions_at), and there (no static part) the pass below gives sum = 0,
+  // solid = 0, W_F^u = 1 - 0 = 1 exactly without a scale. So W_F^u = 1 is written on every face
+  // and the pass visits the near faces only (each once): the same bits, and the bodies' W_S^u is
+  // not read beyond their faces (its pages there stay unprovided: about 49k faults of the
+  // kernel's zero page for the bowl at Fig. 2's paper grid)
+  bool near_only = !incremental && in_parts && !parts;
+  for (std::size_t i = 0; i < bodies.size() && near_only; ++i)
+    near_only = !(i < scratch.fixed.size() && scratch.fixed[i]);
+  if (near_only) {
+    for (std::size_t i = 0; i < bodies.size(); ++i)
+      for (const int f : scratch.near[i]) touch(f);
+    for (const int f : touched) scratch.face_mark[f] = 0;
+    double* fluid = w.fluid_face.data();
+#pragma omp parallel for schedule(static) num_threads(team_threads(nf))
+    for (int f = 0; f < nf; ++f) fluid[f] = 1.0;
+  }
+  // every face, or (incremental, near_only) the touched faces only
+  const bool listed = incremental || near_only;
+  const int passes = listed ? static_cast<int>(touched.size()) : nf;
 #pragma omp parallel for schedule(static) num_threads(team_threads(passes))
   for (int n = 0; n < passes; ++n) {
-    const int f = incremental ? touched[n] : n;
+    const int f = listed ? touched[n] : n;
     double static_part = parts ? w.static_face[f] : 0.0;
     double sum = static_part;
     for (const VectorX& body : w.body_face) sum += body[f];

@@ -558,11 +558,26 @@ VectorX MonolithicSystem<Dim>::pressure_cells(const VectorX& x_fluid) const {
 }
 
 template <int Dim>
-void MonolithicSystem<Dim>::pressure_cells_into(const VectorX& x_fluid, VectorX& out) const {
-  // scatter_stokes_pressure into a kept buffer
-  out.setZero(grid_.num_cells());
+void MonolithicSystem<Dim>::pressure_cells_into(const VectorX& x_fluid, VectorX& out,
+                                                ZerosOutsideCells* kept) const {
+  // scatter_stokes_pressure into a kept buffer. (band23) A buffer that is +0 outside the cells
+  // `kept` lists has only those set to +0: every other cell already holds +0, the bits setZero
+  // writes, so the buffer is +0 everywhere before the DOFs' cells are written either way
+  // (docs/derivations.md, "Passes restricted to boxes", "The pressure zeroed where it was
+  // written")
+  const std::vector<int>& cells = dofs_.pressure.cell_of_dof;
+  if (kept && kept->holds(out) && out.size() == grid_.num_cells()) {
+    for (int c : kept->cells) out[c] = 0.0;
+  } else {
+    out.setZero(grid_.num_cells());
+  }
   const int ns = num_stress();
-  for (int k = 0; k < num_pressure(); ++k) out[dofs_.pressure.cell_of_dof[k]] = x_fluid[ns + k];
+  for (int k = 0; k < num_pressure(); ++k) out[cells[k]] = x_fluid[ns + k];
+  if (kept) {
+    kept->data = out.data();
+    kept->size = static_cast<long>(out.size());
+    kept->cells.assign(cells.begin(), cells.begin() + num_pressure());
+  }
 }
 
 template <int Dim>

@@ -216,7 +216,12 @@ class MonolithicSystem {
   /// (StokesWeights::inviscid: no stress vectors). fluid_velocities_into writes the face force
   /// into `out` first (MatrixFreeStokesOperator::face_force_into): no face-sized temporary.
   void fluid_velocities_into(const VectorX& x_fluid, VectorX& out) const;
-  void pressure_cells_into(const VectorX& x_fluid, VectorX& out) const;
+  /// (band23) With `kept` holding `out` (+0 outside kept->cells), only those cells are zeroed
+  /// before the DOFs' cells are written (the same bits as zeroing `out` whole); otherwise `out`
+  /// is zeroed whole. Either way `kept` (when given) then describes `out`: +0 outside this
+  /// system's DOF cells.
+  void pressure_cells_into(const VectorX& x_fluid, VectorX& out,
+                           ZerosOutsideCells* kept = nullptr) const;
   void stress_full_into(const VectorX& x_fluid, VectorX& out) const;
 
   Backend backend() const { return backend_; }

@@ -427,7 +427,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   if (workspace_)
     workspace_->unknown_of_cell.lend(num_cells_, unknown_of_cell_);
   else
-    unknown_of_cell_.assign(num_cells_, -1);
+    unknown_of_cell_.setZero(num_cells_);
   location_.resize(size_);
   weight_.resize(size_);
   self_.setZero(size_);
@@ -447,7 +447,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
 #pragma omp parallel for schedule(static) num_threads(team_threads(size_))
   for (int k = 0; k < dofs.num_pressure(); ++k) {
     const int i = num_stress_ + k, cell = dofs.pressure.cell_of_dof[k];
-    unknown_of_cell_[cell] = i;
+    unknown_of_cell_[cell] = i + 1;
     location_[i] = cell;
     weight_[i] = w.pressure.liquid_cell[cell];
   }
@@ -678,7 +678,7 @@ void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double*
 #pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
   for (int m = 0; m < count; ++m)
     for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
-      const int u = unknown_of_cell_[c];
+      const int u = unknown_of_cell_[c] - 1;
       q[c] = u >= 0 ? weight_[u] * x[u] : 0.0;
     }
 }
@@ -751,7 +751,7 @@ void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, con
 #pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
   for (int m = 0; m < count; ++m)
     for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
-      const int u = unknown_of_cell_[c];
+      const int u = unknown_of_cell_[c] - 1;
       if (u >= 0) y[u] = weight_[u] * q[c];
     }
 }
@@ -785,7 +785,9 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
                                                 const std::vector<char>* active) const {
   const Field& f = fields_[field];
   const bool is_cell = field == kCellField;
+  // (the cells' map holds unknown + 1, the DOFs' map the unknown: band23)
   const int* map = is_cell ? unknown_of_cell_.data() : unknown_of_dof_.data();
+  const int bias = is_cell ? 1 : 0;
   const bool reduced_diagonal = eliminated_ >= 0 && !is_cell && field - Dim < Dim;
   const int n0 = f.dims[0];
   double* force = face_scratch_.data();
@@ -841,7 +843,7 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
         for (int step = 0; step <= (last - first) / 2; ++step) {
           const int x0 = descending ? last - 2 * step : first + 2 * step;
           const int d = base + x0;
-          const int u = map[d];
+          const int u = map[d] - bias;
           if (u < 0) continue;
           const double diag = diagonal[u];
           if (diag == 0.0 || (active && !(*active)[u])) continue;

@@ -278,7 +278,9 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// updated_velocities_into (not copied)
   const PressureWeights* pressure_weights_ = nullptr;
   std::vector<int> unknown_of_dof_;   ///< per StressGrid DOF: unknown or -1
-  std::vector<int> unknown_of_cell_;  ///< per cell: pressure unknown or -1
+  /// per cell: pressure unknown + 1, or 0 (band23: the kernel's zeros mean "none", so a fresh
+  /// map's pages beyond the liquid's rows are never written)
+  Eigen::VectorXi unknown_of_cell_;
   std::vector<int> location_;         ///< per unknown: StressGrid DOF or cell
   VectorX weight_;                    ///< per unknown: M W_L^s (stress) or W_L^p (pressure)
   VectorX self_;                      ///< per unknown: its 1/2 N^-1 W^s entry

@@ -87,6 +87,55 @@ struct KeptMinusOnes {
   }
 };
 
+/// (band23) What a cell-sized double vector kept across steps holds outside a list of cells:
+/// while `data` and `size` name its storage, it is +0 at every cell not in `cells` (the coupled
+/// solve's pressure, MonolithicSystem::pressure_cells_into: the cells of the last solve's
+/// pressure DOFs). A writer that honours it zeroes only the listed cells before writing its own
+/// instead of the whole vector, so the pages beyond the liquid are never written (Fig. 2's paper
+/// grid: 67 MB of pressure, 16k first touches). Every other writer of the storage calls forget().
+struct ZerosOutsideCells {
+  const double* data = nullptr;
+  long size = -1;
+  std::vector<int> cells;
+  /// `v` is the storage this record describes.
+  bool holds(const VectorX& v) const {
+    return data != nullptr && v.data() == data && static_cast<long>(v.size()) == size;
+  }
+  /// `v` is +0 everywhere (nothing written in it yet).
+  void nothing_written(const VectorX& v) {
+    data = v.data();
+    size = static_cast<long>(v.size());
+    cells.clear();
+  }
+  /// No promise about any storage.
+  void forget() {
+    data = nullptr;
+    size = -1;
+    cells.clear();
+  }
+};
+
+/// (band23) An int vector kept across steps that holds index + 1 (0: no index) and is 0 except
+/// at the entries listed in `dirty`: a map whose "none" is the kernel's zero, so a fresh
+/// storage's pages are provided only where an index is written (MatrixFreeStokesOperator's
+/// unknown of each cell: 34 MB at Fig. 2's paper grid, of which the liquid's rows are written).
+struct KeptIndexPlusOne {
+  Eigen::VectorXi values;
+  std::vector<int> dirty;
+  /// `out` becomes n zeros: the kept storage with its dirty entries zeroed when it has n
+  /// entries, else fresh storage whose zeros come from the kernel (zero_by_release).
+  void lend(long n, Eigen::VectorXi& out) {
+    if (static_cast<long>(values.size()) == n) {
+      for (int e : dirty) values[e] = 0;
+      out.swap(values);
+    } else {
+      resize_to_released_zeros(out, n);
+    }
+    values = Eigen::VectorXi();
+    dirty.clear();
+  }
+};
+
 /// The kept storage of the liquid solve's set-up (see the file comment), owned by the caller and
 /// passed to the solve (solve_stokes' StokesSolveOptions::workspace, CoupledStepInput::workspace,
 /// MonolithicSystem). Holds no reference to any grid or operator.
@@ -99,7 +148,8 @@ struct StokesWorkspace {
   /// so kept it saved no pass, and it lay beside the block the liquid level set frees before the
   /// solve (202 MB of the step's peak at Fig. 2's paper grid) instead of reusing it.
   KeptZeros face_coefficient, stress_scratch, cell_scratch;
-  KeptMinusOnes unknown_of_dof, unknown_of_cell;
+  KeptMinusOnes unknown_of_dof;
+  KeptIndexPlusOne unknown_of_cell;  ///< (band23) unknown + 1 per cell, 0: none
   /// An operator holds the storage above (it gives it back when destroyed).
   bool lent = false;
   /// false: the band only; operators make their own vectors (a measurement switch: the kept

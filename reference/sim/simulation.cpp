@@ -413,8 +413,15 @@ void Simulation<Dim>::reserve_step_buffers() {
       weights_.liquid_face.resize(grid_.num_faces());
     }
   }
-  // the pressure (written whole by every solve) on huge pages (core/huge_pages.hpp)
-  if (pressure_.size() == 0) resize_on_huge_pages(pressure_, grid_.num_cells());
+  // the pressure (written whole by every solve) on huge pages (core/huge_pages.hpp); (band23)
+  // with restricted passes the coupled solves write it in their DOFs' cells only
+  // (pressure_cells_), so its pages stay small: a huge page is provided whole
+  if (pressure_.size() == 0) {
+    if (switches_.restricted_passes)
+      pressure_.resize(grid_.num_cells());
+    else
+      resize_on_huge_pages(pressure_, grid_.num_cells());
+  }
   // eta per cell likewise (a non-Newtonian liquid's is made before the first solve when its
   // size is not the grid's: left to update_liquid_weights)
   if (!non_newtonian_ && cell_eta_.size() == 0) cell_eta_.resize(grid_.num_cells());
@@ -435,7 +442,15 @@ void Simulation<Dim>::frame_zero() {
   density_diagonal_in_place_after_transfer();
   update_liquid_weights();
   liquid_weights_current_ = true;
-  pressure_ = VectorX::Zero(grid_.num_cells());
+  // (band23) the pressure's zeros from the kernel (pressure_cells_: nothing written in it), so
+  // that the coupled solves write their DOFs' cells only; the same +0 everywhere
+  if (switches_.restricted_passes) {
+    resize_to_released_zeros(pressure_, grid_.num_cells());
+    pressure_cells_.nothing_written(pressure_);
+  } else {
+    pressure_ = VectorX::Zero(grid_.num_cells());
+    pressure_cells_.forget();
+  }
   stats_.frame = 0;
   stats_.time = 0.0;
   stats_.solver.scheme = scene_.solver.scheme;
@@ -2673,9 +2688,13 @@ void Simulation<Dim>::solve_coupled(double dt) {
   const VectorX source = volume_source(dt);
   in.divergence_source = source.size() > 0 ? &source : nullptr;
   in.workspace = stokes_workspace_for(in.weights.pressure, in.u_star);
+  // (band23) the pressure's storage is written in its DOFs' cells only (pressure_cells_)
+  if (!switches_.restricted_passes) pressure_cells_.forget();
+  in.pressure_cells = switches_.restricted_passes ? &pressure_cells_ : nullptr;
   solve_coupled_step<Dim>(in, scene_.solver.scheme, scene_.solver.backend, ss, options, r);
   in.divergence_source = nullptr;
   in.workspace = nullptr;
+  in.pressure_cells = nullptr;
   // (a non-Newtonian solve's eta per cell; otherwise eta per cell stays as the weights left it,
   // made or pending: band20)
   if (eta.size() == stress_grid_.num_dofs()) {
@@ -2925,6 +2944,7 @@ void Simulation<Dim>::solve_liquid(double dt) {
   lend.swap();
   u_ = end.u;
   pressure_ = end.pressure;
+  pressure_cells_.forget();  // (written whole)
   stress_ = end.stress;
   if (!model) return;
   // the effective viscosity of the step's flow on its cell-centred DOFs (component 0)
@@ -3292,8 +3312,13 @@ void Simulation<Dim>::check_finite(const char* after, bool solve_outputs) const 
   // answer for any split
   const long np = static_cast<long>(particles_.size());
   const auto blocks = [](const VectorX& v) { return (static_cast<long>(v.size()) + 4095) / 4096; };
-  const long nu = blocks(u_), npr = solve_outputs ? blocks(pressure_) : 0,
+  // (band23) a pressure that is +0 outside the cells pressure_cells_ lists is finite there: only
+  // those cells are read (its pages beyond the liquid are never provided, not even as zero pages)
+  const bool listed = solve_outputs && pressure_cells_.holds(pressure_);
+  const long nu = blocks(u_), npr = solve_outputs && !listed ? blocks(pressure_) : 0,
              ns = solve_outputs ? blocks(stress_) : 0;
+  const int* pc = pressure_cells_.cells.data();
+  const long npc = listed ? static_cast<long>(pressure_cells_.cells.size()) : 0;
   bool finite_u = true, finite_p = true, finite_s = true;
   long first = np;
   const auto segment_finite = [](const VectorX& v, long b) {
@@ -3301,12 +3326,14 @@ void Simulation<Dim>::check_finite(const char* after, bool solve_outputs) const 
     return v.segment(i, std::min<Eigen::Index>(4096, v.size() - i)).allFinite();
   };
 #pragma omp parallel reduction(&& : finite_u, finite_p, finite_s) reduction(min : first) \
-    num_threads(team_threads(std::max<long>(4096 * (nu + npr + ns), np)))
+    num_threads(team_threads(std::max<long>(4096 * (nu + npr + ns) + npc, np)))
   {
 #pragma omp for schedule(static) nowait
     for (long b = 0; b < nu; ++b) finite_u = finite_u && segment_finite(u_, b);
 #pragma omp for schedule(static) nowait
     for (long b = 0; b < npr; ++b) finite_p = finite_p && segment_finite(pressure_, b);
+#pragma omp for schedule(static) nowait
+    for (long k = 0; k < npc; ++k) finite_p = finite_p && std::isfinite(pressure_[pc[k]]);
 #pragma omp for schedule(static) nowait
     for (long b = 0; b < ns; ++b) finite_s = finite_s && segment_finite(stress_, b);
 #pragma omp for schedule(static) nowait
@@ -3505,6 +3532,7 @@ void Simulation<Dim>::load_state(const std::vector<char>& bytes) {
   // (the guard's state of the run before is not this state's: the checkpoint brings its own)
   drop_drift_guard();
   reached_u_ = VectorX();
+  pressure_cells_.forget();  // (band23: the checkpoint's pressure is written over it)
   state_fields(r);
   r.finish();
   const std::size_t n = particles_.x.size();

@@ -335,6 +335,9 @@ class Simulation : public AnySimulation {
   const VectorX& velocity() const { return u_; }
   /// Cell pressures of the last solve (Pa; zero before the first step).
   const VectorX& pressure() const { return pressure_; }
+  /// (band23) While it holds pressure()'s storage, pressure() is +0 outside the cells this
+  /// record lists (the last coupled solve's DOF cells); tests.
+  const ZerosOutsideCells& pressure_cells() const { return pressure_cells_; }
   /// eta per cell: the liquids' viscosity, or for herschel-bulkley liquids the effective
   /// viscosity of the last solve (Pa s).
   const VectorX& cell_eta() const {
@@ -862,6 +865,12 @@ class Simulation : public AnySimulation {
   /// storage (the solves read it; its swaps into a solve's input and back keep it); any other
   /// storage or value makes the next transfer write every face, as before.
   DensitySpans density_spans_;
+  /// (band23) pressure_'s storage is +0 outside these cells while the record holds it (the
+  /// coupled solve's DOF cells, or none after frame_zero): the coupled solve's output then
+  /// zeroes only the listed cells, and check_finite reads only them. Kept only when the passes
+  /// are restricted; forgotten by every other writer of pressure_ (the liquid-only solves,
+  /// restore).
+  ZerosOutsideCells pressure_cells_;
   const double* density_spans_data_ = nullptr;
   double density_spans_value_ = 0.0;
   /// the last transfer used density_spans_ and its diagonal is not written yet

@@ -202,3 +202,43 @@ TEST_CASE("KeptZeros: a fresh lend and every reuse with moving, shrinking spans 
   CHECK(out.isZero(0.0));
   CHECK(kept.values.size() == 0);
 }
+
+TEST_CASE("KeptIndexPlusOne: a fresh lend and every reuse with moving, shrinking entries give "
+          "0 (no index) everywhere; a forgotten entry stays (band23)",
+          "[unit]") {
+  // 3 MiB of ints: the fresh lend's zeros come from the kernel (zero_by_release)
+  const long n = static_cast<long>(3 * H / sizeof(int)) + 5;
+  KeptIndexPlusOne kept;
+  // the entries the borrower writes in successive "steps" (index + 1 each): a block, a moved
+  // and smaller one, a single entry, none, the last entries
+  const std::vector<std::pair<long, long>> steps = {
+      {1000, 90000}, {400000, 410000}, {7, 8}, {0, 0}, {n - 100, n}};
+  Eigen::VectorXi out = Eigen::VectorXi::Constant(9, 4);  // another size at first
+  for (std::size_t s = 0; s <= steps.size(); ++s) {
+    INFO("lend " << s);
+    kept.lend(n, out);
+    REQUIRE(out.size() == n);
+    CHECK((out.array() == 0).all());
+    if (s == steps.size()) break;
+    const auto [b, e] = steps[s];
+    for (long i = b; i < e; ++i) out[i] = static_cast<int>(i - b) + 1;
+    kept.values.swap(out);
+    kept.dirty.clear();
+    for (long i = b; i < e; ++i) kept.dirty.push_back(static_cast<int>(i));
+    out = Eigen::VectorXi();
+  }
+  // negative control: an entry written but not listed keeps its index after the lend
+  kept.values.swap(out);
+  kept.values[12] = 3;
+  kept.values[13] = 4;
+  kept.dirty = {12};
+  kept.lend(n, out);
+  CHECK(out[12] == 0);
+  CHECK(out[13] == 4);
+  // a lend of another size drops the storage and gives fresh zeros of that size
+  kept.values = Eigen::VectorXi::Constant(n, 2);
+  kept.lend(n / 2, out);
+  CHECK(out.size() == n / 2);
+  CHECK((out.array() == 0).all());
+  CHECK(kept.values.size() == 0);
+}

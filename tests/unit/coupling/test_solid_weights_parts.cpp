@@ -2,6 +2,7 @@
 // the dense union of solid_weights, and the body-coupling operator restricted to the system's
 // columns against the full one: the same bits (issue 20, Fig. 17's basin and shells).
 #include <catch2/catch.hpp>
+#include <omp.h>
 
 #include <cstring>
 #include <memory>
@@ -125,6 +126,59 @@ void check_parts(int n, double shrink_cells) {
   CHECK(kept.lattice_phi.size() == lattice.size());
 }
 
+/// (band23) Only moving bodies (no body that never moves): the first call, and a call given
+/// another W_F^u buffer (7 everywhere), write W_F^u = 1 on every face and run the overlap rule on
+/// the bodies' near faces only; the calls in between are incremental. Two balls overlap (the
+/// rule scales their parts there) and one crosses the domain's edge. Per call every output
+/// equals the dense call's bits; on 1 and 3 threads.
+template <int Dim>
+void check_moving_only(int n, int threads) {
+  const MacGrid<Dim> grid = unit_grid<Dim>(n);
+  const auto boundary = all_boundaries<Dim>(BoundaryType::wall);
+  const double shrink = 0.01 * grid.dx();
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  SolidWeights<Dim> kept;
+  SolidWeightsScratch<Dim> scratch;
+  scratch.fixed = {0, 0};
+  scratch.parts = false;
+  scratch.stress = false;
+  scratch.union_in_parts = true;
+  long scaled = 0;
+  for (int pose = 0; pose < 4; ++pose) {
+    INFO("pose " << pose << ", " << threads << " threads");
+    const double t = 0.06 * pose;
+    const std::vector<CouplingBody<Dim>> bodies = {
+        ball<Dim>(Vec<Dim>::Constant(0.4 + t) + Vec<Dim>::LinSpaced(0.011, 0.029), 0.16),
+        ball<Dim>(Vec<Dim>::Constant(0.55 + t), 0.14)};
+    SolidWeights<Dim> dense;
+    SolidWeightsScratch<Dim> dense_scratch;
+    dense_scratch.parts = false;
+    dense_scratch.stress = false;
+    solid_weights<Dim>(grid, bodies, {}, boundary, shrink, dense, dense_scratch);
+    if (pose == 2) {
+      VectorX other = VectorX::Constant(grid.num_faces(), 7.0);
+      kept.fluid_face.swap(other);
+    }
+    solid_weights<Dim>(grid, bodies, {}, boundary, shrink, kept, scratch);
+    CHECK(scratch.kept);
+    // every call visits the faces near the balls only (the first too: near_only)
+    CHECK(scratch.touched.size() > 0);
+    CHECK(static_cast<int>(scratch.touched.size()) < grid.num_faces() / 2);
+    REQUIRE(kept.body_face.size() == bodies.size());
+    for (std::size_t i = 0; i < bodies.size(); ++i)
+      CHECK(differing(kept.body_face[i], dense.body_face[i]) == 0);
+    CHECK(differing(kept.fluid_face, dense.fluid_face) == 0);
+    // the overlap: faces solid exactly (the rule scaled them), and faces of W_F^u = 1 exist
+    for (int f = 0; f < grid.num_faces(); ++f)
+      scaled += dense.body_face[0][f] > 0.0 && dense.body_face[1][f] > 0.0 &&
+                dense.fluid_face[f] == 0.0;
+    CHECK((kept.fluid_face.array() == 1.0).count() > grid.num_faces() / 2);
+  }
+  CHECK(scaled > 0);
+  omp_set_num_threads(saved);
+}
+
 /// The operator restricted to listed cells and without stress, and to listed stress DOFs: the
 /// listed cells' and DOFs' columns of the full operator, bit for bit, and nothing else.
 template <int Dim>
@@ -210,6 +264,15 @@ TEST_CASE("solid weights with the union kept per body equal the dense union's bi
   check_parts<2>(40, 0.01);
   check_parts<2>(24, 0.0);
   check_parts<3>(24, 0.01);
+}
+
+TEST_CASE("solid weights of moving bodies only: W_F^u = 1 written whole and the rule on the near "
+          "faces, the dense union's bits (band23)",
+          "[unit]") {
+  for (int threads : {1, 3}) {
+    check_moving_only<2>(40, threads);
+    check_moving_only<3>(20, threads);
+  }
 }
 
 TEST_CASE("the body-coupling operator restricted to listed cells keeps their columns' bits",

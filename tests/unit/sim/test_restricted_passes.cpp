@@ -5,6 +5,7 @@
 // share, the extension into the solids and the classification in the liquid's band): the same
 // bits.
 #include <catch2/catch.hpp>
+#include <omp.h>
 
 #include <cstring>
 #include <limits>
@@ -239,6 +240,20 @@ long check_scene(const std::string& name, const std::string& cells, int frames,
     CHECK(differing<Dim>(pa.v, pb.v) == 0);
     CHECK(differing(restricted.velocity(), reference.velocity()) == 0);
     CHECK(differing(restricted.pressure(), reference.pressure()) == 0);
+    // (band23) a coupled run's pressure is +0 outside the cells its record lists (the solve
+    // wrote only those); the dense run keeps no record
+    if (restricted.rigid_world()) {
+      const ZerosOutsideCells& record = restricted.pressure_cells();
+      const VectorX& p = restricted.pressure();
+      CHECK(record.holds(p));
+      CHECK(!reference.pressure_cells().holds(reference.pressure()));
+      std::vector<char> listed(static_cast<std::size_t>(p.size()), 0);
+      for (int c : record.cells) listed[static_cast<std::size_t>(c)] = 1;
+      long outside = 0;
+      for (Eigen::Index c = 0; c < p.size(); ++c)
+        outside += !listed[static_cast<std::size_t>(c)] && !same_bits(p[c], 0.0);
+      CHECK(outside == 0);
+    }
     CHECK(differing(restricted.liquid_phi(), reference.liquid_phi()) == 0);
     CHECK(differing(restricted.weights().fluid_face, reference.weights().fluid_face) == 0);
     CHECK(differing(restricted.weights().liquid_face, reference.weights().liquid_face) == 0);
@@ -391,6 +406,18 @@ TEST_CASE("liquid level set stored over its band: the dense bits through the vie
           "[unit]") {
   check_boxed_liquid_phi<2>(32);
   check_boxed_liquid_phi<3>(20);
+}
+
+TEST_CASE("the pressure kept over the coupled solves' cells: the dense passes' bits at 1 and 3 "
+          "threads (band23)",
+          "[unit]") {
+  const int threads = omp_get_max_threads();
+  for (int t : {1, 3}) {
+    INFO(t << " threads");
+    omp_set_num_threads(t);
+    check_scene<2>("bunny-onto-floating-bowl-2d", "[40,40]", 4, false);
+  }
+  omp_set_num_threads(threads);
 }
 
 TEST_CASE("restricted passes give the dense passes' bits (Fig. 17)", "[unit]") {
