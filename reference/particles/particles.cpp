@@ -1826,14 +1826,19 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   constexpr int kLast = Dim - 1;
   double max_support = 0.0;
   std::vector<VecI<Dim>> particle_cell(np);
+  // the first of the five cell layers of the last axis each particle's volume splat reaches
+  // (before wrapping or clamping), for the slabs' skip below
+  std::vector<int> splat_base(np);
 #pragma omp parallel reduction(max : max_support) num_threads(process_threads())
   {
     SpacingOf<Dim> spacing_of(particles, dx);
 #pragma omp for schedule(static)
     for (long p = 0; p < np; ++p) {
       max_support = std::max(max_support, kSurfaceSupport * spacing_of(p));
-      const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
+      const Vec<Dim> xw = grid.wrap_position(particles.x[p]);
+      const VecI<Dim> c = grid.cell_containing(xw);
       particle_cell[p] = c;
+      splat_base[p] = static_cast<int>(std::floor((xw[kLast] - grid.origin()[kLast]) / dx)) - 2;
     }
   }
   const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
@@ -1913,9 +1918,11 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     SpacingOf<Dim> spacing_of(particles, dx);
     for (long p = 0; p < np; ++p) {
       // the five layers of the last axis this particle reaches: skip it if none is in the slab
+      // (the first layer found once per particle above: every slab's thread walks all the
+      // particles, and wrapping and flooring each position again per slab made the splat's
+      // region 35 % dearer on two threads than on one; docs/benchmarks.md, two23)
       {
-        const double xl = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / dx;
-        const int base = static_cast<int>(std::floor(xl)) - 2;
+        const int base = splat_base[p];
         bool reaches = false;
         for (int k = 0; k < 5 && !reaches; ++k) {
           int c = base + k;
@@ -2454,8 +2461,25 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // every box the splat visits (before the splat, which then makes no tile)
   std::vector<unsigned char> acc_flags = acc.tile_flags(), solid_flags = solid_distance.tile_flags();
   const int all_lo = 0, all_hi = lattice.dims[0] - 1;
+  // A part of the splat below (a clip narrower than the lattice along axis 0) skips a particle
+  // that adds to none of its points. Every point a particle adds to lies within 3 R of it along
+  // axis 0: within R of the particle, of a wall mirror image (made only within R of the wall, so
+  // within 2 R of the particle) or of the solid image (2 d < 2 R away; its points also within
+  // 2 R of the particle). One lattice spacing more on each side covers the roundings. Not on a
+  // periodic axis 0, whose images lie a period away. (Each part found every particle's image
+  // segments and offsets only to clip them away: on two threads the splat took 17-23 % more CPU
+  // than on one on the 64^3 bunny; docs/benchmarks.md, two23.)
+  // (the largest support for every particle's reach, and the position in lattice spacings by a
+  // product: the margin of a spacing covers its rounding)
+  const bool clip_skips = !grid.periodic(0);
+  const double inv_h = 1.0 / h;
+  const double clip_reach = 3.0 * max_support * inv_h + 1.0;
   auto splat = [&](int p, bool make_tiles, int clip_lo, int clip_hi) {
     const Vec<Dim> xp = particles.x[p];
+    if (clip_skips && (clip_lo > all_lo || clip_hi < all_hi)) {
+      const double s = (xp[0] - lattice.origin[0]) * inv_h;
+      if (s + clip_reach < clip_lo || s - clip_reach > clip_hi) return;
+    }
     const double R = support[p];
     const double inv_r2 = 1.0 / (R * R);
     // per axis up to three image segments: (image coordinate, first index, last index)
