@@ -2396,6 +2396,25 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   std::vector<std::vector<long>> index_count(parts > 1 ? blocks : 0,
                                              std::vector<long>(lattice.dims[0], 0));
   const auto block_begin = [&](int b) { return np * b / blocks; };
+  // A part of the splat below (a clip along axis 0, with several parts) skips the particles that
+  // add to none of its points. Every point a particle adds to lies within 3 R of it along axis 0:
+  // within R of the particle, of a wall mirror image (made only within R of the wall, so within
+  // 2 R of the particle) or of the solid image (2 d < 2 R away; its points also within 2 R of the
+  // particle). Per slot of `order` (written with it, so the parts read it in their order): the
+  // lattice indices along axis 0 of [x - 3 R_max - h, x + 3 R_max + h] rounded inwards (the
+  // extra spacing covers the roundings); the whole axis on a periodic axis 0 (images a period
+  // away) and for a non-finite position. Each part used to find every particle's image segments
+  // and offsets only to clip them away (docs/benchmarks.md, two23).
+  const bool clip_skips = parts > 1 && !grid.periodic(0);
+  std::vector<std::array<int, 2>> slot_reach(clip_skips ? np : 0);
+  const double clip_reach = 3.0 * max_support / h + 1.0;
+  const auto reach_of = [&](long p) -> std::array<int, 2> {
+    const double s = (particles.x[p][0] - lattice.origin[0]) / h;
+    if (!std::isfinite(s)) return {0, lattice.dims[0] - 1};
+    const double lo = std::clamp(s - clip_reach, -1.0, static_cast<double>(lattice.dims[0]));
+    const double hi = std::clamp(s + clip_reach, -1.0, static_cast<double>(lattice.dims[0]));
+    return {static_cast<int>(std::ceil(lo)), static_cast<int>(std::floor(hi))};
+  };
   // (the sort's two passes share one parallel region with the solid images and the flagging of
   // the tiles below; they were four regions)
   const auto count_blocks = [&] {
@@ -2426,8 +2445,11 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
     }
 #pragma omp for schedule(static, 1) nowait
     for (int b = 0; b < blocks; ++b)
-      for (long p = block_begin(b); p < block_begin(b + 1); ++p)
-        order[slab_count[b][slab_of[p]]++] = static_cast<int>(p);
+      for (long p = block_begin(b); p < block_begin(b + 1); ++p) {
+        const int slot = slab_count[b][slab_of[p]]++;
+        order[slot] = static_cast<int>(p);
+        if (clip_skips) slot_reach[slot] = reach_of(p);
+      }
   };
 
   // periodic images: shift by +-L on periodic axes; mirror images across wall faces
@@ -2461,25 +2483,8 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // every box the splat visits (before the splat, which then makes no tile)
   std::vector<unsigned char> acc_flags = acc.tile_flags(), solid_flags = solid_distance.tile_flags();
   const int all_lo = 0, all_hi = lattice.dims[0] - 1;
-  // A part of the splat below (a clip narrower than the lattice along axis 0) skips a particle
-  // that adds to none of its points. Every point a particle adds to lies within 3 R of it along
-  // axis 0: within R of the particle, of a wall mirror image (made only within R of the wall, so
-  // within 2 R of the particle) or of the solid image (2 d < 2 R away; its points also within
-  // 2 R of the particle). One lattice spacing more on each side covers the roundings. Not on a
-  // periodic axis 0, whose images lie a period away. (Each part found every particle's image
-  // segments and offsets only to clip them away: on two threads the splat took 17-23 % more CPU
-  // than on one on the 64^3 bunny; docs/benchmarks.md, two23.)
-  // (the largest support for every particle's reach, and the position in lattice spacings by a
-  // product: the margin of a spacing covers its rounding)
-  const bool clip_skips = !grid.periodic(0);
-  const double inv_h = 1.0 / h;
-  const double clip_reach = 3.0 * max_support * inv_h + 1.0;
   auto splat = [&](int p, bool make_tiles, int clip_lo, int clip_hi) {
     const Vec<Dim> xp = particles.x[p];
-    if (clip_skips && (clip_lo > all_lo || clip_hi < all_hi)) {
-      const double s = (xp[0] - lattice.origin[0]) * inv_h;
-      if (s + clip_reach < clip_lo || s - clip_reach > clip_hi) return;
-    }
     const double R = support[p];
     const double inv_r2 = 1.0 / (R * R);
     // per axis up to three image segments: (image coordinate, first index, last index)
@@ -2764,8 +2769,12 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
 #pragma omp for schedule(static, 1)
         for (int part = 0; part < parts; ++part)
           for (int s = 0; s < count; ++s)
-            for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
+            for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) {
+              if (clip_skips &&
+                  (slot_reach[q][1] < part_lo[part] || slot_reach[q][0] > part_hi[part]))
+                continue;
               splat(order[q], false, part_lo[part], part_hi[part]);
+            }
       }
     }
   }

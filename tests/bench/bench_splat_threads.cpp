@@ -8,7 +8,9 @@
 // and the wall times (median; a loaded machine makes them meaningless). docs/benchmarks.md,
 // "The landed frames outside the solve on two threads" (two23).
 //
-//   build/bench/bench_splat_threads [--rounds R]
+//   build/bench/bench_splat_threads [--rounds R] [--only-team T]
+//
+// --only-team T runs every call at team T (for a profile of one team size; no ratio printed).
 #include <omp.h>
 #include <time.h>
 
@@ -47,9 +49,11 @@ double median(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  int rounds = 15;
-  for (int i = 1; i < argc; ++i)
+  int rounds = 15, only = 0;
+  for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--rounds") && i + 1 < argc) rounds = std::atoi(argv[++i]);
+    if (!std::strcmp(argv[i], "--only-team") && i + 1 < argc) only = std::atoi(argv[++i]);
+  }
   set_adaptive_teams(false);
   set_core_monitor(false);
   constexpr int Dim = 3;
@@ -108,13 +112,19 @@ int main(int argc, char** argv) {
     std::vector<double> cpu[2], wall[2];
     for (int r = 0; r < rounds; ++r)
       for (int t = 1; t <= 2; ++t) {
-        omp_set_num_threads(t);
+        if (only > 0 && t != 1) continue;
+        omp_set_num_threads(only > 0 ? only : t);
         work = start;
         const double c0 = process_cpu(), w0 = wall_clock();
         k.run();
         cpu[t - 1].push_back(process_cpu() - c0);
         wall[t - 1].push_back(wall_clock() - w0);
       }
+    if (only > 0) {
+      std::printf("%-42s team %d: CPU %7.2f ms  wall %7.2f ms\n", k.name, only, 1e3 * median(cpu[0]),
+                  1e3 * median(wall[0]));
+      continue;
+    }
     std::vector<double> ratio;
     for (int r = 0; r < rounds; ++r) ratio.push_back(cpu[1][r] / cpu[0][r]);
     std::sort(ratio.begin(), ratio.end());
