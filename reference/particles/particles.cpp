@@ -10,8 +10,10 @@
 #include <cstring>
 #include <iterator>
 #include <limits>
+#include <memory>
 #include <random>
 #include <tuple>
+#include <type_traits>
 
 #include "reference/grid/tiled_lattice.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -20,6 +22,34 @@
 namespace monolith {
 
 namespace {
+
+/// An allocator whose construction without arguments leaves a value unset (default-
+/// initialisation) instead of zeroing it, for per-particle buffers that a parallel loop writes
+/// whole before anything reads them: std::vector<T>(n) zero-fills its n values on the calling
+/// thread first (the position correction's nine per-particle buffers were 0.8 ms of serial
+/// memset per call on the 64^3 bunny at two threads; docs/benchmarks.md, two23).
+template <class T>
+struct UnsetAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UnsetAllocator<U>;
+  };
+  UnsetAllocator() = default;
+  template <class U>
+  UnsetAllocator(const UnsetAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+/// A vector whose sized constructor and resize leave the values unset (see UnsetAllocator):
+/// every value must be written before it is read.
+template <class T>
+using UnsetVector = std::vector<T, UnsetAllocator<T>>;
 
 /// Particles never rest closer than this to a solid surface (in units of dx).
 constexpr double kSolidMargin = 0.05;
@@ -1229,9 +1259,10 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   // kernel supports h_i from the rest spacings, wrapped positions and cells (in parallel; the
   // largest support does not depend on the order)
   const int nc = grid.num_cells();
-  std::vector<double> support(np);
-  std::vector<int> bucket(np), order(np);
-  std::vector<Vec<Dim>> xw(np), xs(np);
+  // (unset: the first parallel loop writes every particle's, the sort every slot's)
+  UnsetVector<double> support(np);
+  UnsetVector<int> bucket(np), order(np);
+  UnsetVector<Vec<Dim>> xw(np), xs(np);
   double max_support = 0.0;
   // spatial hash by occupied cells only (no table the size of the grid): the particles sorted by
   // cell (a stable radix sort, so in particle order within a cell), each occupied cell a run of
@@ -1246,7 +1277,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   int bits = 0;
   while ((1L << bits) < nc) ++bits;
   const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
-  std::vector<int> sorted(np);
+  UnsetVector<int> sorted(np);
   std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
   const auto block_begin = [&](int b) { return np * b / blocks; };
   const int sort_team = process_threads();
@@ -1370,7 +1401,8 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<std::vector<int>>& neighbour_slots = (buffers ? *buffers : local).neighbour_slots;
   if (static_cast<int>(neighbour_slots.size()) < team) neighbour_slots.resize(team);
   for (auto& slots : neighbour_slots) slots.clear();
-  std::vector<std::array<int, 3>> neighbours_of(np);  // (buffer, first, count)
+  // (buffer, first, count): written for every particle by its run in pass 1
+  UnsetVector<std::array<int, 3>> neighbours_of(np);
   long compressed = 0;
 #pragma omp parallel reduction(+ : compressed) num_threads(team)
   {
@@ -2362,8 +2394,9 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   const double h = lattice.spacing;
   const double dx = grid.dx();
 
-  // per-particle support and radius (the spacing's pow once per run of equal mass and density)
-  std::vector<double> support(np), radius(np);
+  // per-particle support and radius (the spacing's pow once per run of equal mass and density;
+  // unset until the loop below writes every particle's)
+  UnsetVector<double> support(np), radius(np);
   double max_support = 0.0;
 #pragma omp parallel reduction(max : max_support) num_threads(process_threads())
   {
@@ -2391,7 +2424,9 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // any split gives them).
   const int parts = std::max(1, std::min(process_threads(), lattice.dims[0]));
   const int blocks = std::max(1, team_threads(np));
-  std::vector<int> slab_of(np), slab_start(slabs + 1, 0), order(np);
+  // (slab_of and order unset: the sort writes every particle's and every slot's)
+  UnsetVector<int> slab_of(np), order(np);
+  std::vector<int> slab_start(slabs + 1, 0);
   std::vector<std::vector<int>> slab_count(blocks, std::vector<int>(slabs, 0));
   std::vector<std::vector<long>> index_count(parts > 1 ? blocks : 0,
                                              std::vector<long>(lattice.dims[0], 0));
@@ -2406,7 +2441,7 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // away) and for a non-finite position. Each part used to find every particle's image segments
   // and offsets only to clip them away (docs/benchmarks.md, two23).
   const bool clip_skips = parts > 1 && !grid.periodic(0);
-  std::vector<std::array<int, 2>> slot_reach(clip_skips ? np : 0);
+  UnsetVector<std::array<int, 2>> slot_reach(clip_skips ? np : 0);
   const double clip_reach = 3.0 * max_support / h + 1.0;
   const auto reach_of = [&](long p) -> std::array<int, 2> {
     const double s = (particles.x[p][0] - lattice.origin[0]) / h;

@@ -1,6 +1,7 @@
 // Benchmark (not a test) of the particle splats' CPU time on one and on two threads, in one
 // process: the particle level set with solids (liquid_phi_on_lattice) and the density projection
-// (project_particle_density, on a copy of the particles per call) on a 64^3 unit box with walls, a
+// (project_particle_density) and the position correction (correct_positions), each on a copy of
+// the particles per call, on a 64^3 unit box with walls, a
 // sphere in it and liquid resting on it and on the floor (about the 64^3 viscous bunny's
 // particle count once it has landed). Teams alternate 1, 2, 1, 2, ... call by call, so another
 // process's load falls on both alike; printed per kernel: the process CPU time per call at each
@@ -107,6 +108,7 @@ int main(int argc, char** argv) {
        [&] {
          project_particle_density(work, grid, lattice, fluid, solids, boundary);
        }},
+      {"correct_positions", [&] { correct_positions(work, grid, 0.01, solids, boundary); }},
   };
   for (const Kernel& k : kernels) {
     std::vector<double> cpu[2], wall[2];
