@@ -10,8 +10,10 @@
 #include <cstring>
 #include <iterator>
 #include <limits>
+#include <memory>
 #include <random>
 #include <tuple>
+#include <type_traits>
 
 #include "reference/grid/tiled_lattice.hpp"
 #include "reference/grid/volume_fractions.hpp"
@@ -20,6 +22,34 @@
 namespace monolith {
 
 namespace {
+
+/// An allocator whose construction without arguments leaves a value unset (default-
+/// initialisation) instead of zeroing it, for per-particle buffers that a parallel loop writes
+/// whole before anything reads them: std::vector<T>(n) zero-fills its n values on the calling
+/// thread first (the position correction's nine per-particle buffers were 0.8 ms of serial
+/// memset per call on the 64^3 bunny at two threads; docs/benchmarks.md, two23).
+template <class T>
+struct UnsetAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UnsetAllocator<U>;
+  };
+  UnsetAllocator() = default;
+  template <class U>
+  UnsetAllocator(const UnsetAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+/// A vector whose sized constructor and resize leave the values unset (see UnsetAllocator):
+/// every value must be written before it is read.
+template <class T>
+using UnsetVector = std::vector<T, UnsetAllocator<T>>;
 
 /// Particles never rest closer than this to a solid surface (in units of dx).
 constexpr double kSolidMargin = 0.05;
@@ -1229,9 +1259,10 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   // kernel supports h_i from the rest spacings, wrapped positions and cells (in parallel; the
   // largest support does not depend on the order)
   const int nc = grid.num_cells();
-  std::vector<double> support(np);
-  std::vector<int> bucket(np), order(np);
-  std::vector<Vec<Dim>> xw(np), xs(np);
+  // (unset: the first parallel loop writes every particle's, the sort every slot's)
+  UnsetVector<double> support(np);
+  UnsetVector<int> bucket(np), order(np);
+  UnsetVector<Vec<Dim>> xw(np), xs(np);
   double max_support = 0.0;
   // spatial hash by occupied cells only (no table the size of the grid): the particles sorted by
   // cell (a stable radix sort, so in particle order within a cell), each occupied cell a run of
@@ -1246,7 +1277,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   int bits = 0;
   while ((1L << bits) < nc) ++bits;
   const int blocks = static_cast<int>(std::clamp(np / 8192, 1L, 16L));
-  std::vector<int> sorted(np);
+  UnsetVector<int> sorted(np);
   std::vector<std::vector<long>> count(blocks, std::vector<long>(kDigits));
   const auto block_begin = [&](int b) { return np * b / blocks; };
   const int sort_team = process_threads();
@@ -1370,7 +1401,8 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   std::vector<std::vector<int>>& neighbour_slots = (buffers ? *buffers : local).neighbour_slots;
   if (static_cast<int>(neighbour_slots.size()) < team) neighbour_slots.resize(team);
   for (auto& slots : neighbour_slots) slots.clear();
-  std::vector<std::array<int, 3>> neighbours_of(np);  // (buffer, first, count)
+  // (buffer, first, count): written for every particle by its run in pass 1
+  UnsetVector<std::array<int, 3>> neighbours_of(np);
   long compressed = 0;
 #pragma omp parallel reduction(+ : compressed) num_threads(team)
   {
@@ -1826,14 +1858,19 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   constexpr int kLast = Dim - 1;
   double max_support = 0.0;
   std::vector<VecI<Dim>> particle_cell(np);
+  // the first of the five cell layers of the last axis each particle's volume splat reaches
+  // (before wrapping or clamping), for the slabs' skip below
+  std::vector<int> splat_base(np);
 #pragma omp parallel reduction(max : max_support) num_threads(process_threads())
   {
     SpacingOf<Dim> spacing_of(particles, dx);
 #pragma omp for schedule(static)
     for (long p = 0; p < np; ++p) {
       max_support = std::max(max_support, kSurfaceSupport * spacing_of(p));
-      const VecI<Dim> c = grid.cell_containing(grid.wrap_position(particles.x[p]));
+      const Vec<Dim> xw = grid.wrap_position(particles.x[p]);
+      const VecI<Dim> c = grid.cell_containing(xw);
       particle_cell[p] = c;
+      splat_base[p] = static_cast<int>(std::floor((xw[kLast] - grid.origin()[kLast]) / dx)) - 2;
     }
   }
   const double reach = (solids.empty() ? 1.0 : 2.0) * max_support;
@@ -1913,9 +1950,11 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     SpacingOf<Dim> spacing_of(particles, dx);
     for (long p = 0; p < np; ++p) {
       // the five layers of the last axis this particle reaches: skip it if none is in the slab
+      // (the first layer found once per particle above: every slab's thread walks all the
+      // particles, and wrapping and flooring each position again per slab made the splat's
+      // region 35 % dearer on two threads than on one; docs/benchmarks.md, two23)
       {
-        const double xl = (grid.wrap_position(particles.x[p])[kLast] - grid.origin()[kLast]) / dx;
-        const int base = static_cast<int>(std::floor(xl)) - 2;
+        const int base = splat_base[p];
         bool reaches = false;
         for (int k = 0; k < 5 && !reaches; ++k) {
           int c = base + k;
@@ -2355,8 +2394,9 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   const double h = lattice.spacing;
   const double dx = grid.dx();
 
-  // per-particle support and radius (the spacing's pow once per run of equal mass and density)
-  std::vector<double> support(np), radius(np);
+  // per-particle support and radius (the spacing's pow once per run of equal mass and density;
+  // unset until the loop below writes every particle's)
+  UnsetVector<double> support(np), radius(np);
   double max_support = 0.0;
 #pragma omp parallel reduction(max : max_support) num_threads(process_threads())
   {
@@ -2384,11 +2424,32 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   // any split gives them).
   const int parts = std::max(1, std::min(process_threads(), lattice.dims[0]));
   const int blocks = std::max(1, team_threads(np));
-  std::vector<int> slab_of(np), slab_start(slabs + 1, 0), order(np);
+  // (slab_of and order unset: the sort writes every particle's and every slot's)
+  UnsetVector<int> slab_of(np), order(np);
+  std::vector<int> slab_start(slabs + 1, 0);
   std::vector<std::vector<int>> slab_count(blocks, std::vector<int>(slabs, 0));
   std::vector<std::vector<long>> index_count(parts > 1 ? blocks : 0,
                                              std::vector<long>(lattice.dims[0], 0));
   const auto block_begin = [&](int b) { return np * b / blocks; };
+  // A part of the splat below (a clip along axis 0, with several parts) skips the particles that
+  // add to none of its points. Every point a particle adds to lies within 3 R of it along axis 0:
+  // within R of the particle, of a wall mirror image (made only within R of the wall, so within
+  // 2 R of the particle) or of the solid image (2 d < 2 R away; its points also within 2 R of the
+  // particle). Per slot of `order` (written with it, so the parts read it in their order): the
+  // lattice indices along axis 0 of [x - 3 R_max - h, x + 3 R_max + h] rounded inwards (the
+  // extra spacing covers the roundings); the whole axis on a periodic axis 0 (images a period
+  // away) and for a non-finite position. Each part used to find every particle's image segments
+  // and offsets only to clip them away (docs/benchmarks.md, two23).
+  const bool clip_skips = parts > 1 && !grid.periodic(0);
+  UnsetVector<std::array<int, 2>> slot_reach(clip_skips ? np : 0);
+  const double clip_reach = 3.0 * max_support / h + 1.0;
+  const auto reach_of = [&](long p) -> std::array<int, 2> {
+    const double s = (particles.x[p][0] - lattice.origin[0]) / h;
+    if (!std::isfinite(s)) return {0, lattice.dims[0] - 1};
+    const double lo = std::clamp(s - clip_reach, -1.0, static_cast<double>(lattice.dims[0]));
+    const double hi = std::clamp(s + clip_reach, -1.0, static_cast<double>(lattice.dims[0]));
+    return {static_cast<int>(std::ceil(lo)), static_cast<int>(std::floor(hi))};
+  };
   // (the sort's two passes share one parallel region with the solid images and the flagging of
   // the tiles below; they were four regions)
   const auto count_blocks = [&] {
@@ -2419,8 +2480,11 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
     }
 #pragma omp for schedule(static, 1) nowait
     for (int b = 0; b < blocks; ++b)
-      for (long p = block_begin(b); p < block_begin(b + 1); ++p)
-        order[slab_count[b][slab_of[p]]++] = static_cast<int>(p);
+      for (long p = block_begin(b); p < block_begin(b + 1); ++p) {
+        const int slot = slab_count[b][slab_of[p]]++;
+        order[slot] = static_cast<int>(p);
+        if (clip_skips) slot_reach[slot] = reach_of(p);
+      }
   };
 
   // periodic images: shift by +-L on periodic axes; mirror images across wall faces
@@ -2740,8 +2804,12 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
 #pragma omp for schedule(static, 1)
         for (int part = 0; part < parts; ++part)
           for (int s = 0; s < count; ++s)
-            for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q)
+            for (int q = slab_start[list[s]]; q < slab_start[list[s] + 1]; ++q) {
+              if (clip_skips &&
+                  (slot_reach[q][1] < part_lo[part] || slot_reach[q][0] > part_hi[part]))
+                continue;
               splat(order[q], false, part_lo[part], part_hi[part]);
+            }
       }
     }
   }
