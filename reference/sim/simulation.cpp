@@ -2031,11 +2031,12 @@ void Simulation<Dim>::first_half_drift(double dt) {
   const auto flagged = [&] { return std::count(unread_.begin(), unread_.end(), 1); };
   const int nf = grid_.num_faces();
   if (drift_guard_ && drift_reached_.size() == static_cast<std::size_t>(nf)) {
-    VectorX kept;
+    VectorX& kept = drift_kept_;
     {
       ScopedTimer particle_timer(stats_.timing[FramePhase::particles]);
       // (u_ as the step left it, back in place after the drift: copied in the same parallel
-      // pass that marks the unreached faces)
+      // pass that marks the unreached faces; every face is written, so the storage kept from the
+      // last step's swap is reused as it is)
       kept.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
       for (int f = 0; f < nf; ++f) {
