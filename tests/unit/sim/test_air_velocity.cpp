@@ -2,10 +2,10 @@
 // velocity field, equal to the neighbour average where it falls back to it, the same for any
 // team and with or without boxes (2D and 3D). And the measurement behind docs/validation.md's
 // rotating blob (hidden: [.measure]).
-#include <catch2/catch.hpp>
 #include <omp.h>
 
 #include <array>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -211,7 +211,9 @@ TEST_CASE("rotating blob: omega, L and I over 0.4 s", "[.measure]") {
     j["format"] = "monolith-scene/1";
     j["dim"] = 2;
     j["domain"] = {{"lower", {0.0, 0.0}}, {"upper", {1.0, 1.0}}, {"cells", {n, n}}};
-    j["solver"] = {{"tolerance", 1e-8}, {"max_iterations", 20000}, {"backend", "matrixfree"},
+    j["solver"] = {{"tolerance", 1e-8},
+                   {"max_iterations", 20000},
+                   {"backend", "matrixfree"},
                    {"scheme", "PVC-unified"}};
     j["render"] = {{"enabled", false}};
     j["gravity"] = {0.0, 0.0};
@@ -223,9 +225,9 @@ TEST_CASE("rotating blob: omega, L and I over 0.4 s", "[.measure]") {
                      {"viscosity", {{"eta", eta}}}}};
     j["probes"] = nlohmann::json::array();
     for (int k = 0; k < 8; ++k)
-      j["probes"].push_back({{"name", "p" + std::to_string(k)},
-                             {"position", {0.5 + 0.1 * std::cos(k * M_PI / 4),
-                                           0.5 + 0.1 * std::sin(k * M_PI / 4)}}});
+      j["probes"].push_back(
+          {{"name", "p" + std::to_string(k)},
+           {"position", {0.5 + 0.1 * std::cos(k * M_PI / 4), 0.5 + 0.1 * std::sin(k * M_PI / 4)}}});
     auto any = make_simulation(parse_scene(j, "test.json", "."));
     auto* sim = dynamic_cast<Simulation<2>*>(any.get());
     REQUIRE(sim != nullptr);
@@ -259,10 +261,11 @@ TEST_CASE("rotating blob: omega, L and I over 0.4 s", "[.measure]") {
       omega = sum / s.probes.size();
     }
     moments(L, I);
-    std::printf("n %d eta %6.0f: probe omega lost %6.2f %%, L lost %6.2f %%, I grew %6.2f %%, "
-                "L/I lost %6.2f %%\n",
-                n, eta, 100 * (1 - omega / 3.0), 100 * (1 - L / L0), 100 * (I / I0 - 1),
-                100 * (1 - (L / I) / (L0 / I0)));
+    std::printf(
+        "n %d eta %6.0f: probe omega lost %6.2f %%, L lost %6.2f %%, I grew %6.2f %%, "
+        "L/I lost %6.2f %%\n",
+        n, eta, 100 * (1 - omega / 3.0), 100 * (1 - L / L0), 100 * (I / I0 - 1),
+        100 * (1 - (L / I) / (L0 / I0)));
     std::fflush(stdout);
   }
 }
