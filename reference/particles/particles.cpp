@@ -1,5 +1,7 @@
 #include "reference/particles/particles.hpp"
+
 #include "reference/core/parallel.hpp"
+#include "reference/grid/face_neighbour.hpp"
 
 #include <omp.h>
 
@@ -846,18 +848,8 @@ void extrapolate_velocity_in(const MacGrid<Dim>& grid, VectorX& u, std::vector<c
     const auto [axis, coord] = grid.face_coord(f);
     const VecI<Dim> dims = grid.face_dims(axis);
     for (int b = 0; b < Dim; ++b)
-      for (int s = 0; s < 2; ++s) {
-        VecI<Dim> c = coord;
-        c[b] += s == 0 ? -1 : 1;
-        int g = -1;
-        if (grid.periodic(b)) {
-          c[b] = (c[b] + dims[b]) % dims[b];
-          g = grid.face_index(axis, c);
-        } else if (c[b] >= 0 && c[b] < dims[b]) {
-          g = grid.face_index(axis, c);
-        }
-        nb[2 * b + s] = g == f ? -1 : g;
-      }
+      for (int s = 0; s < 2; ++s)
+        nb[2 * b + s] = face_along(grid, axis, dims, coord, f, b, s == 0 ? -1 : 1);
   };
   // The flags during the layers: 0 (not filled), 1 (valid before the layer before last), or the
   // stamp of the layer that filled the face, stamp(L) = 2 + L % 3: the faces the current layer

@@ -6,6 +6,8 @@
 #include <utility>
 
 #include "reference/core/parallel.hpp"
+#include "reference/grid/box_rows.hpp"
+#include "reference/grid/face_neighbour.hpp"
 #include "reference/particles/particles.hpp"
 
 namespace monolith {
@@ -17,20 +19,6 @@ void extrapolate_air_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<
   const int nf = grid.num_faces();
   valid.resize(nf, 0);
   if (layers <= 0) return;
-  // the face `step` faces from face (axis, coord) along axis b, -1 where there is none (past a
-  // non-periodic edge, or the face itself on a periodic axis that short)
-  const auto along = [&](int axis, const VecI<Dim>& coord, int self, int b, int step) {
-    const VecI<Dim> dims = grid.face_dims(axis);
-    VecI<Dim> c = coord;
-    c[b] += step;
-    if (grid.periodic(b)) {
-      c[b] = ((c[b] % dims[b]) + dims[b]) % dims[b];
-    } else if (c[b] < 0 || c[b] >= dims[b]) {
-      return -1;
-    }
-    const int g = grid.face_index(axis, c);
-    return g == self ? -1 : g;
-  };
   // the rows of faces searched: per axis the box grown by one face (on a periodic axis whose
   // grown box would wrap, the whole axis), or every face
   std::vector<std::pair<int, int>> rows;  // (first face, faces in the row)
@@ -52,12 +40,10 @@ void extrapolate_air_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<
           hi[axis][b] = std::min(hi[axis][b] + 1, dims[b] - 1);
         }
       }
-      VecI<Dim> row_dims = hi[axis] - lo[axis] + VecI<Dim>::Ones();
-      const int nx = row_dims[0];
-      row_dims[0] = 1;
-      for (int r = 0; r < row_dims.prod(); ++r)
-        rows.push_back({grid.face_index(axis, lo[axis] + lattice_coord<Dim>(r, row_dims)), nx});
-      work += static_cast<long>(row_dims.prod()) * nx;
+      const BoxRows<Dim> box(dims, lo[axis], hi[axis]);
+      for (int r = 0; r < box.rows(); ++r)
+        rows.push_back({grid.face_index(axis, box.start(r)), box.nx});
+      work += static_cast<long>(box.rows()) * box.nx;
     }
   } else {
     rows.push_back({0, nf});
@@ -75,11 +61,15 @@ void extrapolate_air_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<
       for (int f = rows[r].first; f < rows[r].first + rows[r].second; ++f) {
         if (valid[f] != 0) continue;
         const auto [axis, coord] = grid.face_coord(f);
+        const VecI<Dim> dims = grid.face_dims(axis);
+        const auto along = [&](int b, int step) {
+          return face_along(grid, axis, dims, coord, f, b, step);
+        };
         const auto ok = [&](int g) { return g >= 0 && valid[g] != 0; };
         double linear_sum = 0.0, mean_sum = 0.0;
         int linear_count = 0, mean_count = 0;
         for (int b = 0; b < Dim; ++b) {
-          const int m1 = along(axis, coord, f, b, -1), p1 = along(axis, coord, f, b, 1);
+          const int m1 = along(b, -1), p1 = along(b, 1);
           const bool vm1 = ok(m1), vp1 = ok(p1);
           // extrapolate_velocity's average: every valid neighbour, -1 then +1, axis by axis
           if (vm1) mean_sum += u[m1], ++mean_count;
@@ -89,7 +79,7 @@ void extrapolate_air_velocity(const MacGrid<Dim>& grid, VectorX& u, std::vector<
             ++linear_count;
           } else if (vm1 || vp1) {
             const int n1 = vm1 ? m1 : p1;
-            const int n2 = along(axis, coord, f, b, vm1 ? -2 : 2);
+            const int n2 = along(b, vm1 ? -2 : 2);
             if (ok(n2) && n2 != n1) {
               linear_sum += 2.0 * u[n1] - u[n2];
               ++linear_count;
