@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "reference/core/common.hpp"
+#include "reference/core/periodic_image.hpp"
 #include "reference/geometry/shape.hpp"
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/boxed_union_phi.hpp"
@@ -45,10 +46,8 @@ struct CouplingBody {
   /// x - center through the image of x nearest the centre on periodic axes (the lever arm of
   /// J_p, J_s for a face the body covers across a periodic face).
   Vec<Dim> arm(const Vec<Dim>& x) const {
-    Vec<Dim> r = x - center;
-    for (int a = 0; a < Dim; ++a)
-      if (period[a] > 0.0) r[a] -= period[a] * std::round(r[a] / period[a]);
-    return r;
+    const Vec<Dim> r = x - center;
+    return r - periodic_image_shift<Dim>(r, period);
   }
 };
 

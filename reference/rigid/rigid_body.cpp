@@ -13,6 +13,7 @@
 #include "dim2/shapes_2d.hpp"
 #include "dim3/shapes_3d.hpp"
 #include "reference/core/errors.hpp"
+#include "reference/core/periodic_image.hpp"
 #include "reference/geometry/shape_tools.hpp"
 
 namespace monolith {
@@ -25,10 +26,8 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 /// The image x + k period (k integer per axis) of x nearest `center` along the axes with
 /// period[a] > 0 (RigidBody::set_periodic).
 template <int Dim>
-Vec<Dim> nearest_periodic_image(Vec<Dim> x, const Vec<Dim>& center, const Vec<Dim>& period) {
-  for (int a = 0; a < Dim; ++a)
-    if (period[a] > 0.0) x[a] -= period[a] * std::round((x[a] - center[a]) / period[a]);
-  return x;
+Vec<Dim> nearest_periodic_image(const Vec<Dim>& x, const Vec<Dim>& center, const Vec<Dim>& period) {
+  return x - periodic_image_shift<Dim>(x - center, period);
 }
 
 /// The rest shape seen at a pose: distance(x) = rest.distance(R^T (x - p) + c_rest), the

@@ -8,6 +8,7 @@
 #include "reference/sim/simulation.hpp"
 #include "reference/sim/air_velocity.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/core/periodic_image.hpp"
 
 #include <omp.h>
 
@@ -2277,16 +2278,11 @@ double Simulation<Dim>::limit_line15_lift(const std::vector<Vec<Dim>>& before,
 
 template <int Dim>
 Vec<Dim> Simulation<Dim>::line15_move(const Vec<Dim>& from, const Vec<Dim>& to) const {
-  Vec<Dim> d = to - from;
-  for (int a = 0; a < Dim; ++a) {
-    if (!grid_.periodic(a)) continue;
-    const double length = grid_.cells()[a] * grid_.dx();
-    if (d[a] > 0.5 * length)
-      d[a] -= length;
-    else if (d[a] < -0.5 * length)
-      d[a] += length;
-  }
-  return d;
+  Vec<Dim> period = Vec<Dim>::Zero();
+  for (int a = 0; a < Dim; ++a)
+    if (grid_.periodic(a)) period[a] = grid_.cells()[a] * grid_.dx();
+  const Vec<Dim> d = to - from;
+  return d - periodic_image_shift<Dim>(d, period);
 }
 
 template <int Dim>
