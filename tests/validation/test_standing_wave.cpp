@@ -102,8 +102,8 @@ WaveRun run_wave(int cells, double eta) {
 
 TEST_CASE("an inviscid standing wave keeps the period of omega^2 = g k tanh(k h) (2D)", "[validation]") {
   // 32 cells per wavelength. Measured (a10d2ef): period 0.8231 s against 0.8018 s (+2.65 %;
-  // +1.11 % at 64^2, +0.76 % at 128^2, of which roughly 0.45 % is the second-order shift of a wave
-  // this steep), the wave's energy decaying at 0.055 1/s (numerical; 0.013 at 64^2).
+  // +1.11 % at 64^2, +0.76 % at 128^2; +0.64 % at 128^2 with half the amplitude, so about
+  // 0.16 % is the wave's steepness), the wave's energy decaying at 0.055 1/s (numerical; 0.013 at 64^2).
   const double k = 2 * kPi / kLength;
   const double period = 2 * kPi / std::sqrt(kG * k * std::tanh(k * kDepth));
   const WaveRun r = run_wave(32, 0.0);
