@@ -432,7 +432,94 @@ void Simulation<Dim>::reserve_step_buffers() {
   // after the blocks above as before (frame_zero's transfer made them next), on huge pages
   resize_on_huge_pages(u_, faces);
   resize_on_huge_pages(face_mass_, faces);
-  resize_on_huge_pages(weights_.face_density, faces);
+  // (band24) the densities' storage from the kernel's zeros (not on huge pages: a huge page is
+  // provided whole), recorded as +0 outside no faces: the first transfer then writes the
+  // particles' layers only, and the pages beyond them are never provided
+  if (densities_zero_mode() && weights_.face_density.size() == 0) {
+    resize_to_released_zeros(weights_.face_density, grid_.num_faces());
+    density_spans_.kept.clear();
+    density_spans_data_ = weights_.face_density.data();
+    density_spans_value_ = reference_density_;
+    density_spans_zero_ = true;
+  } else {
+    resize_on_huge_pages(weights_.face_density, faces);
+  }
+}
+
+template <int Dim>
+bool Simulation<Dim>::densities_zero_mode() const {
+  return switches_.restricted_passes && switches_.densities_zero_outside &&
+         !density_zero_dropped_ && scene_.solver.backend == Backend::matrix_free;
+}
+
+template <int Dim>
+void Simulation<Dim>::densities_before_solve() {
+  // (band24) docs/derivations.md, "Passes restricted to boxes", "The faces' densities +0 beyond
+  // their layers": every reader of P outside the kept layers gives the bits of rho_0 there
+  // while W_L^u is +0 on those faces
+  VectorX& rho = weights_.face_density;
+  const long nf = grid_.num_faces();
+  if (!density_spans_zero_ || density_spans_data_ != rho.data() || rho.size() != nf) return;
+  // (the oracle's export reads P on every face)
+  bool inside = !export_sink_;
+  for (int a = 0; a < Dim && inside; ++a) {
+    const WrittenBox<Dim>& lb = liquid_face_boxes_[a];
+    if (!lb.valid_for(weights_.liquid_face.data() + grid_.face_offset(a),
+                      grid_.face_dims(a).prod())) {
+      inside = false;
+      break;
+    }
+    if ((lb.lo.array() > lb.hi.array()).any()) continue;  // W_L^u = +0 on every face of a
+    // axis a's kept faces: whole layers [klo, khi] of its lattice along the last axis (one
+    // range of `kept` within the component, or none)
+    const VecI<Dim> dims = grid_.face_dims(a);
+    const long offset = grid_.face_offset(a), per = dims.prod() / dims[Dim - 1];
+    int klo = 0, khi = -1;
+    for (const auto& [b, e] : density_spans_.kept)
+      if (b >= offset && e <= offset + dims.prod() && b < e) {
+        klo = static_cast<int>((b - offset) / per);
+        khi = static_cast<int>((e - offset) / per) - 1;
+      }
+    // the box's layers outside them (a few: the written box reaches a little beyond the
+    // particles' layers) must hold W_L^u = +-0
+    const auto zero_in = [&](int l0, int l1) {
+      if (l0 > l1) return true;
+      VecI<Dim> lo = lb.lo, extent = lb.hi - lb.lo + VecI<Dim>::Ones();
+      lo[Dim - 1] = l0;
+      extent[Dim - 1] = l1 - l0 + 1;
+      const int count = extent.prod();
+      bool zero = true;
+      for (int k = 0; k < count && zero; ++k) {
+        const int f = grid_.face_index(a, lo + lattice_coord<Dim>(k, extent));
+        zero = weights_.liquid_face[f] == 0.0;
+      }
+      return zero;
+    };
+    if (khi < klo) {
+      inside = zero_in(lb.lo[Dim - 1], lb.hi[Dim - 1]);
+    } else {
+      inside = zero_in(lb.lo[Dim - 1], std::min(lb.hi[Dim - 1], klo - 1)) &&
+               zero_in(std::max(lb.lo[Dim - 1], khi + 1), lb.hi[Dim - 1]);
+    }
+  }
+  if (inside) return;
+  // rho_0 on every face outside the kept layers (all +0 there): the storage the dense diagonal
+  // leaves, and the record of kern22 (rho_0 outside `kept`); the zeros are not used again
+  long begin = 0;
+  const auto fill = [&](long end) {
+    if (end <= begin) return;
+#pragma omp parallel for schedule(static) num_threads(team_threads(end - begin))
+    for (long f = begin; f < end; ++f) rho[f] = reference_density_;
+  };
+  for (const auto& [b, e] : density_spans_.kept) {
+    fill(b);
+    begin = std::max(begin, e);
+  }
+  fill(nf);
+  density_spans_value_ = reference_density_;
+  density_spans_zero_ = false;
+  density_zero_dropped_ = true;
+  ++density_zero_fallbacks_;
 }
 
 template <int Dim>
@@ -1108,11 +1195,15 @@ void Simulation<Dim>::transfer_to_grid() {
   // they change"); then only those layers and this transfer's are written
   VectorX& rho = weights_.face_density;
   DensitySpans* spans = nullptr;
+  // (band24) in the zeros' mode the storage holds +0 outside `kept` instead (the record says
+  // which): a record of the other mode makes this transfer write every face
+  density_transfer_zero_ = densities_zero_mode();
   if (switches_.restricted_passes) {
     spans = &density_spans_;
     spans->known = density_spans_data_ != nullptr && rho.data() == density_spans_data_ &&
                    rho.size() == grid_.num_faces() &&
-                   std::memcmp(&density_spans_value_, &reference_density_, sizeof(double)) == 0;
+                   std::memcmp(&density_spans_value_, &reference_density_, sizeof(double)) == 0 &&
+                   density_spans_zero_ == density_transfer_zero_;
   }
   density_spans_data_ = nullptr;  // (known again once this transfer's diagonal is written)
   particles_to_grid(particles_, grid_, u_, face_mass_, rho, spans);
@@ -1130,15 +1221,21 @@ void Simulation<Dim>::density_diagonal_in_place_after_transfer() {
     // (kern22) after a transfer with density_spans_ the fallback is written on the faces that
     // transfer wrote (the others hold it); the boxes' last-axis range is the particles' cell
     // layers grown by 3, kDensityReadLayers (particle_face_boxes), so every face read lies in them
-    density_diagonal_in_place<Dim>(grid_, rho, reference_density_, mass_boxes_.lo, mass_boxes_.hi,
-                                   pending ? &density_spans_.written : nullptr);
+    // (band24) in the zeros' mode on the transfer's layers only: the faces it wrote beyond
+    // them hold its +0 (no density there, none near), the faces it did not write +0 already
+    const bool zero = pending && density_transfer_zero_;
+    density_diagonal_in_place<Dim>(
+        grid_, rho, reference_density_, mass_boxes_.lo, mass_boxes_.hi,
+        pending ? (zero ? &density_spans_.layers : &density_spans_.written) : nullptr);
     if (pending) {
       density_spans_.kept = density_spans_.layers;
       density_spans_data_ = rho.data();
       density_spans_value_ = reference_density_;
+      density_spans_zero_ = zero;
     }
     return;
   }
+  density_spans_zero_ = false;  // (the whole diagonal below: rho_0 on every face without one)
   if (pending && density_spans_.known) {
     // (not reached: restricted passes always keep the boxes) the faces the transfer left hold
     // the last fallback, not its zeros: the zeros first, then the whole diagonal
@@ -1408,6 +1505,7 @@ void Simulation<Dim>::solve_step(double dt) {
   // scheme; (11) velocity update u = u* - dt P^-1 (W_L^u)^-1 (G W_L^p p + D^T M W_L^s tau) and
   // (12) the bodies' velocities (eq. (21))
   ScopedTimer timer(stats_.timing[FramePhase::solve]);
+  densities_before_solve();  // (band24) P +0 beyond its layers only where W_L^u is +0
   if (coupled_) {
     solve_coupled(dt);
   } else {

@@ -206,6 +206,11 @@ struct StageSwitches {
   /// set's extension into the solids over the solids' box and its negative points searched over
   /// the lattice. The same results either way (tests/unit/sim/test_restricted_passes.cpp).
   bool restricted_passes = true;
+  /// A test switch (band24): false keeps P's fallback density rho_0 on every face of the
+  /// densities' storage (written whole in frame 0) instead of +0 outside the faces the last
+  /// diagonal filled. The same results either way (docs/derivations.md, "Passes restricted to
+  /// boxes", "The faces' densities +0 beyond their layers").
+  bool densities_zero_outside = true;
   /// A measurement switch: false makes the liquid solve's operator allocate its face-, cell- and
   /// stress-sized vectors per step instead of keeping them in stokes_workspace_ (the band is
   /// used either way). The same results either way (docs/preconditioners.md section 39).
@@ -313,6 +318,9 @@ class Simulation : public AnySimulation {
   /// The weights of the last step (W_F^u, W_L^p, W_L^u, P) for diagnosis; at a frame's end
   /// those of the final state (made here when the frame's end left them to the next step:
   /// complete_frame_end_weights).
+  /// (band24) With restricted passes and the matrix-free back end P (face_density) is +0 instead
+  /// of rho_0 on the faces beyond the layers its last diagonal filled, where W_L^u = +0
+  /// (density_zero_record()).
   const PressureWeights& weights() const {
     if (liquid_weights_pending_) const_cast<Simulation*>(this)->complete_frame_end_weights();
     return weights_;
@@ -325,6 +333,21 @@ class Simulation : public AnySimulation {
   /// face, that its starting velocity is +-0 outside the band's speed boxes (the promise
   /// weighted_face_speed relies on): solves seen, solves with the promise, faces the boxes
   /// left out and those of them with a non-zero velocity, summed over the solves.
+  /// (tests, band24) The densities' record: whether weights().face_density is +0 outside
+  /// `kept` (the face ranges its last diagonal filled), and how often a solve found W_L^u
+  /// outside them and wrote rho_0 there instead.
+  struct DensityZeroRecord {
+    bool zero_outside = false;
+    std::vector<std::pair<long, long>> kept;
+    long fallbacks = 0;
+  };
+  DensityZeroRecord density_zero_record() const {
+    DensityZeroRecord r;
+    r.zero_outside = density_spans_zero_ && density_spans_data_ == weights_.face_density.data();
+    r.kept = density_spans_.kept;
+    r.fallbacks = density_zero_fallbacks_;
+    return r;
+  }
   struct SpeedBoxCheck {
     bool on = false;
     long solves = 0, promised = 0, left_out = 0, nonzero_outside = 0;
@@ -878,6 +901,27 @@ class Simulation : public AnySimulation {
   ZerosOutsideCells pressure_cells_;
   const double* density_spans_data_ = nullptr;
   double density_spans_value_ = 0.0;
+  /// (band24) the value the storage holds outside density_spans_.kept is +0, not
+  /// density_spans_value_: the diagonal's fallback was written on the particles' layers only
+  /// (density_spans_.layers), and the storage's other faces are the kernel's zeros or P2G's.
+  /// Every reader of P gives the same bits as with rho_0 there while W_L^u = +0 outside those
+  /// layers, which densities_before_solve checks before each solve
+  bool density_spans_zero_ = false;
+  /// (band24) densities_before_solve found W_L^u beyond the layers (or a reader of every face,
+  /// the oracle's export): rho_0 was written outside them and the zeros are not used again
+  bool density_zero_dropped_ = false;
+  /// (band24) the last transfer's mode (densities_zero_mode() when it ran)
+  bool density_transfer_zero_ = false;
+  long density_zero_fallbacks_ = 0;
+  /// (band24) whether a transfer may leave +0 outside the diagonal's layers: restricted passes,
+  /// the matrix-free back end (the explicit one's P^-1 is a matrix over every face) and the
+  /// switch, until densities_before_solve drops it
+  bool densities_zero_mode() const;
+  /// (band24) before a solve reads P: where the densities' storage holds +0 outside the
+  /// diagonal's layers, checks that W_L^u is +0 outside them (its written boxes within the
+  /// layers) and no reader of every face is asked for; otherwise writes rho_0 there (once: the
+  /// zeros are dropped for the run)
+  void densities_before_solve();
   /// the last transfer used density_spans_ and its diagonal is not written yet
   bool density_transfer_pending_ = false;
   /// Something reads face_mass_ after the solve: the energy ledger's grid kinetic energy.

@@ -574,3 +574,147 @@ TEST_CASE("the guard's stream in the face masses' storage, eta per cell pending:
   CHECK(check_storage_handoffs<3>("liquid-bunny-into-bowl-3d", "[20,20,20]", 2) == 2);
   CHECK(check_storage_handoffs<2>("dam-break-2d", "[64,32]", 3) == 3);
 }
+
+namespace {
+
+/// (band24) A built-in scene with P's densities +0 beyond the faces their last diagonal filled
+/// (the default) against rho_0 there (StageSwitches::densities_zero_outside off, the storage
+/// written whole in frame 0): after every frame the same statistics, particles, velocities and
+/// pressures; P the same bits on the kept faces, +0 (zero mode) and rho_0 (reference) on the
+/// others; no solve found W_L^u beyond the kept faces (densities_before_solve's check: no
+/// fallback). With `export_at` > 0 the oracle's export is requested for that step's frame: a reader
+/// of every face, so the densities fall back to rho_0 outside the kept faces once and stay so.
+/// Returns the faces outside the kept ones summed over the frames (> 0: pages never provided).
+template <int Dim>
+long check_density_zeros(const std::string& name, const std::string& cells, int frames,
+                         int export_frame = 0) {
+  INFO(name);
+  const SceneFile scene = load_scene(name, {"domain.cells=" + cells, "render.enabled=false"});
+  StageSwitches whole;
+  whole.densities_zero_outside = false;
+  Simulation<Dim> zeros(scene), reference(scene, whole);
+  const double rho0 = scene.liquids.front().density;
+  long outside_faces = 0;
+  for (int f = 0; f < frames; ++f) {
+    INFO("frame " << f + 1);
+    bool exported = false;
+    if (f + 1 == export_frame)
+      zeros.request_system_export(1, [&](const SystemExport&) { exported = true; });
+    const FrameStats a = zeros.advance_frame();
+    const FrameStats b = reference.advance_frame();
+    CHECK(a.steps == b.steps);
+    CHECK(a.solver.iterations == b.solver.iterations);
+    CHECK(same_bits(a.kinetic_energy_liquid, b.kinetic_energy_liquid));
+    CHECK(same_bits(a.kinetic_energy_bodies, b.kinetic_energy_bodies));
+    CHECK(differing<Dim>(zeros.particles().x, reference.particles().x) == 0);
+    CHECK(differing<Dim>(zeros.particles().v, reference.particles().v) == 0);
+    CHECK(differing(zeros.velocity(), reference.velocity()) == 0);
+    CHECK(differing(zeros.pressure(), reference.pressure()) == 0);
+    const auto record = zeros.density_zero_record();
+    CHECK(!reference.density_zero_record().zero_outside);
+    const bool dropped = export_frame > 0 && f + 1 >= export_frame;
+    CHECK(record.zero_outside == !dropped);
+    CHECK(record.fallbacks == (dropped ? 1 : 0));
+    if (f + 1 == export_frame) CHECK(exported);
+    // (P of the frame's last step, with that step's kept faces)
+    const VectorX& pa = zeros.weights().face_density;
+    const VectorX& pb = reference.weights().face_density;
+    REQUIRE(pa.size() == pb.size());
+    std::vector<char> kept(static_cast<std::size_t>(pa.size()), 0);
+    for (const auto& [begin, end] : record.kept)
+      for (long k = begin; k < end; ++k) kept[static_cast<std::size_t>(k)] = 1;
+    long differ_kept = 0, not_zero = 0, not_rho0 = 0, outside = 0;
+    for (Eigen::Index k = 0; k < pa.size(); ++k) {
+      if (kept[static_cast<std::size_t>(k)] || dropped) {
+        differ_kept += !same_bits(pa[k], pb[k]);
+        continue;
+      }
+      ++outside;
+      not_zero += !same_bits(pa[k], 0.0);
+      not_rho0 += !same_bits(pb[k], rho0);
+    }
+    CHECK(differ_kept == 0);
+    CHECK(not_zero == 0);
+    CHECK(not_rho0 == 0);
+    outside_faces += outside;
+  }
+  return outside_faces;
+}
+
+}  // namespace
+
+TEST_CASE("the faces' densities +0 beyond their layers: the bits of rho_0 there at 1 and 3 "
+          "threads (band24)",
+          "[unit]") {
+  const int threads = omp_get_max_threads();
+  for (int t : {1, 3}) {
+    INFO(t << " threads");
+    omp_set_num_threads(t);
+    // coupled 3D (a moving bowl), coupled 2D, liquid-only 2D: inviscid (a column falling into
+    // a static bowl) and viscous (a drop thrown onto the ground: the Stokes solves)
+    CHECK(check_density_zeros<3>("liquid-bunny-into-bowl-3d", "[20,20,20]", 2) > 0);
+    CHECK(check_density_zeros<2>("bunny-onto-floating-bowl-2d", "[40,40]", 4) > 0);
+    CHECK(check_density_zeros<2>("pour-into-bowl-2d", "[40,40]", 4) > 0);
+    CHECK(check_density_zeros<2>("liquid-drop-newtonian-2d", "[40,40]", 3) > 0);
+  }
+  omp_set_num_threads(threads);
+  // the oracle's export reads P on every face: rho_0 written beyond the layers once, then the
+  // whole transfers of kern22 (the same bits before, at and after the fallback)
+  check_density_zeros<2>("bunny-onto-floating-bowl-2d", "[40,40]", 3, 2);
+}
+
+TEST_CASE("the faces' densities +0 beyond their layers need W_L^u = +0 there: a face with "
+          "liquid outside them gets other bits (band24, negative control)",
+          "[unit]") {
+  const SceneFile scene =
+      load_scene("liquid-drop-newtonian-2d", {"domain.cells=[40,40]", "render.enabled=false"});
+  StageSwitches whole;
+  whole.densities_zero_outside = false;
+  Simulation<2> zeros(scene), reference(scene, whole);
+  zeros.advance_frame();
+  reference.advance_frame();
+  const MacGrid<2>& grid = zeros.grid();
+  PressureWeights wa = zeros.weights(), wb = reference.weights();
+  const auto record = zeros.density_zero_record();
+  REQUIRE(record.zero_outside);
+  // a face of axis 1 (its cells below and above it) outside the kept faces, open to fluid
+  std::vector<char> kept(static_cast<std::size_t>(grid.num_faces()), 0);
+  for (const auto& [begin, end] : record.kept)
+    for (long k = begin; k < end; ++k) kept[static_cast<std::size_t>(k)] = 1;
+  int face = -1;
+  VecI<2> coord = VecI<2>::Zero();
+  const VecI<2> dims = grid.face_dims(1);
+  for (int k = 0; k < dims.prod() && face < 0; ++k) {
+    const VecI<2> c = lattice_coord<2>(k, dims);
+    const int f = grid.face_index(1, c);
+    if (c[1] > 0 && c[1] < dims[1] - 1 && !kept[static_cast<std::size_t>(f)] &&
+        wa.fluid_face[f] > 0.0) {
+      face = f;
+      coord = c;
+    }
+  }
+  REQUIRE(face >= 0);
+  VectorX pressure = VectorX::Zero(grid.num_cells());
+  const int below = grid.face_cell_minus(1, coord), above = grid.face_cell_plus(1, coord);
+  REQUIRE(below >= 0);
+  REQUIRE(above >= 0);
+  pressure[below] = 1.0;
+  for (PressureWeights* w : {&wa, &wb}) {
+    w->liquid_cell[below] = 1.0;
+    w->liquid_cell[above] = 1.0;
+  }
+  const double dt = 1e-3;
+  // W_L^u = +0 on the face (the premise): the same update
+  wa.liquid_face[face] = wb.liquid_face[face] = 0.0;
+  VectorX ua = VectorX::Zero(grid.num_faces()), ub = ua;
+  apply_pressure_update<2>(grid, wa, dt, pressure, ua);
+  apply_pressure_update<2>(grid, wb, dt, pressure, ub);
+  CHECK(differing(ua, ub) == 0);
+  // liquid on the face: rho_0 updates it, +0 leaves it
+  wa.liquid_face[face] = wb.liquid_face[face] = 1.0;
+  ua.setZero();
+  ub.setZero();
+  apply_pressure_update<2>(grid, wa, dt, pressure, ua);
+  apply_pressure_update<2>(grid, wb, dt, pressure, ub);
+  CHECK(differing(ua, ub) > 0);
+}
