@@ -2093,22 +2093,31 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   }
 
   // unknowns: cells holding particle volume or smoothed liquid, rows in cell order
-  // (tile by tile on several threads, joined in tile order, then sorted; each cell's row written
-  // by one thread)
+  // (tile by tile on several threads, each part's list sorted by its thread, the sorted lists
+  // merged in part order: every cell is listed once, so the order is the one sorted list of them
+  // all, as the serial sort of the joined lists gave it (two24); each cell's row written by one
+  // thread)
   std::vector<int> cells;
   {
     const int parts = team_threads(static_cast<long>(band_tiles) * decltype(values)::kTilePoints);
     std::vector<std::vector<int>> part(parts);
 #pragma omp parallel for schedule(static, 1) num_threads(parts)
-    for (int t = 0; t < parts; ++t)
+    for (int t = 0; t < parts; ++t) {
       for (int b = band_tiles * t / parts; b < band_tiles * (t + 1) / parts; ++b)
         values.for_each_point_in_tile(band[b], [&](const VecI<Dim>& c, double* v) {
           v[kRow] = -1.0;
           if (*rho.find(c) > 0.0 || v[kTarget] > 0.0) part[t].push_back(grid.cell_index(c));
         });
-    for (const auto& list : part) cells.insert(cells.end(), list.begin(), list.end());
+      std::sort(part[t].begin(), part[t].end());
+    }
+    cells.swap(part[0]);
+    std::vector<int> merged;
+    for (int t = 1; t < parts; ++t) {
+      merged.resize(cells.size() + part[t].size());
+      std::merge(cells.begin(), cells.end(), part[t].begin(), part[t].end(), merged.begin());
+      cells.swap(merged);
+    }
   }
-  std::sort(cells.begin(), cells.end());
   const int n = static_cast<int>(cells.size());
 #pragma omp parallel for schedule(static) num_threads(team_threads(n))
   for (int r = 0; r < n; ++r) values.find(grid.cell_coord(cells[r]))[kRow] = r;
