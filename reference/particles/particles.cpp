@@ -1385,8 +1385,12 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   // particle keeps the slots of its neighbours within the support, in candidate order (per
   // thread buffer, found through neighbours_of): the gradients and pass 2 visit only those, in
   // the order the full scan visits them
-  std::vector<double> lambda(np, 0.0);
-  std::vector<char> close_pair(np, 0);
+  // (unset: pass 1 writes every particle's lambda and close flag and every run's active flag;
+  // their zero fills ran on the calling thread, two24)
+  UnsetVector<double> lambda(np);
+  UnsetVector<char> close_pair(np);
+  // occupied cells holding a compressed particle or a close pair: only their neighbourhoods move
+  UnsetVector<char> active_run(runs);
   const int team = process_threads();
   // (the caller's buffers when given: cleared, their capacity kept from the last call)
   PositionCorrectionBuffers local;
@@ -1395,8 +1399,8 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
   for (auto& slots : neighbour_slots) slots.clear();
   // (buffer, first, count): written for every particle by its run in pass 1
   UnsetVector<std::array<int, 3>> neighbours_of(np);
-  long compressed = 0;
-#pragma omp parallel reduction(+ : compressed) num_threads(team)
+  long compressed = 0, closes = 0;
+#pragma omp parallel reduction(+ : compressed, closes) num_threads(team)
   {
     std::vector<int> near, cells, cand;
     // the candidates' positions by axis (contiguous, for the distances of a whole run at once)
@@ -1417,6 +1421,7 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         for (int i = 0; i < m; ++i) cand_x[a][i] = xs[cand[i]][a];
       }
       cand_r2.resize(m);
+      bool active = false;
       for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot) {
         const int p = order[slot];
         const double h = support[p];
@@ -1460,7 +1465,12 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
           if (t > 0.0) n += t * t * t;
         }
         neighbours_of[p] = {thread, first, static_cast<int>(buffer.size()) - first};
-        if (close) close_pair[p] = 1;
+        close_pair[p] = close ? 1 : 0;
+        lambda[p] = 0.0;
+        if (close) {
+          active = true;
+          ++closes;
+        }
         const double c = n / n0 - 1.0 - kCorrectionSlack;
         if (c <= 0.0) continue;
         // constraint gradients, only for the compressed particles
@@ -1477,22 +1487,18 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
         // eps regularises the denominator (units 1/length^2, scaled by h)
         const double eps = 1e-6 / (h * h);
         lambda[p] = -c / (grad_self.squaredNorm() + grad_others + eps);
+        active = active || lambda[p] != 0.0;
         ++compressed;
       }
+      active_run[k] = active ? 1 : 0;
     }
   }
 
-  if (compressed == 0 && std::find(close_pair.begin(), close_pair.end(), 1) == close_pair.end())
-    return;
-
-  // occupied cells holding a compressed particle or a close pair: only their neighbourhoods move
-  std::vector<char> active_run(runs, 0);
-  for (int k = 0; k < runs; ++k)
-    for (int s = run_start[k]; s < run_start[k + 1]; ++s)
-      if (lambda[order[s]] != 0.0 || close_pair[order[s]]) active_run[k] = 1;
+  if (compressed == 0 && closes == 0) return;
 
   // pass 2: displacements from the multipliers (Jacobi, so the result is order independent)
-  std::vector<Vec<Dim>> delta(np, Vec<Dim>::Zero());
+  // (unset: written for every particle below, zero in the runs with no active run near)
+  UnsetVector<Vec<Dim>> delta(np);
 #pragma omp parallel num_threads(team)
   {
     std::vector<int> near, cells;
@@ -1501,7 +1507,11 @@ void correct_positions(Particles<Dim>& particles, const MacGrid<Dim>& grid, doub
       neighbour_runs(k, near, cells);
       bool near_active = false;
       for (int r : near) near_active = near_active || active_run[r];
-      if (!near_active) continue;
+      if (!near_active) {
+        for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot)
+          delta[order[slot]] = Vec<Dim>::Zero();
+        continue;
+      }
       for (int slot = run_start[k]; slot < run_start[k + 1]; ++slot) {
         const int p = order[slot];
         Vec<Dim> push = Vec<Dim>::Zero();
@@ -1852,7 +1862,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   std::vector<VecI<Dim>> particle_cell(np);
   // the first of the five cell layers of the last axis each particle's volume splat reaches
   // (before wrapping or clamping), for the slabs' skip below
-  std::vector<int> splat_base(np);
+  // (unset: written for every particle by the loop below)
+  UnsetVector<int> splat_base(np);
 #pragma omp parallel reduction(max : max_support) num_threads(process_threads())
   {
     SpacingOf<Dim> spacing_of(particles, dx);
@@ -1935,10 +1946,12 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       for (int l = 0; l < layers; ++l) per_layer[l] += count[l + 1];
     slab_first = balanced_slab_bounds(per_layer, layers, slabs, -2, 2);
   }
+  const bool last_periodic = grid.periodic(kLast);
 #pragma omp parallel for schedule(static, 1) num_threads(process_threads())
   for (int slab = 0; slab < slabs; ++slab) {
     const int first = slab_first[slab];
     const int end = slab_first[slab + 1];
+    const auto slab_holds = [&](int layer) { return layer >= first && layer < end; };
     SpacingOf<Dim> spacing_of(particles, dx);
     for (long p = 0; p < np; ++p) {
       // the five layers of the last axis this particle reaches: skip it if none is in the slab
@@ -1948,13 +1961,13 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
       {
         const int base = splat_base[p];
         bool reaches = false;
-        for (int k = 0; k < 5 && !reaches; ++k) {
-          int c = base + k;
-          if (grid.periodic(kLast))
-            c = ((c % layers) + layers) % layers;
-          else
-            c = std::clamp(c, 0, layers - 1);
-          reaches = c >= first && c < end;
+        if (!last_periodic) {
+          // (clamped, the five layers are the run [clamp(base), clamp(base + 4)])
+          reaches = first < end && std::clamp(base + 4, 0, layers - 1) >= first &&
+                    std::clamp(base, 0, layers - 1) < end;
+        } else {
+          for (int k = 0; k < 5 && !reaches; ++k)
+            reaches = slab_holds(((base + k) % layers + layers) % layers);
         }
         if (!reaches) continue;
       }
@@ -1989,21 +2002,28 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
         none = none || k_lo[a] > k_hi[a];
       }
       if (none) continue;
-      std::array<int, Dim> k = k_lo;
-      while (true) {
-        double w = volume / cell_volume;
-        VecI<Dim> ci;
-        for (int a = 0; a < Dim; ++a) {
-          w *= weight[a][k[a]];
-          ci[a] = cell[a][k[a]];
+      // the last axis (the odometer's slowest) only at the candidates in the slab: a particle
+      // beside a bound visits only its own slab's corners there (each slab used to walk all of
+      // them and drop the others' at the addition); the corners kept are added in the same order
+      for (int kl = k_lo[kLast]; kl <= k_hi[kLast]; ++kl) {
+        if (!slab_holds(cell[kLast][kl])) continue;
+        std::array<int, Dim> k = k_lo;
+        k[kLast] = kl;
+        while (true) {
+          double w = volume / cell_volume;
+          VecI<Dim> ci;
+          for (int a = 0; a < Dim; ++a) {
+            w *= weight[a][k[a]];
+            ci[a] = cell[a][k[a]];
+          }
+          if (w != 0.0) *rho.find(ci) += w;
+          int a = 0;
+          for (; a < kLast; ++a) {
+            if (++k[a] <= k_hi[a]) break;
+            k[a] = k_lo[a];
+          }
+          if (a == kLast) break;
         }
-        if (w != 0.0 && ci[kLast] >= first && ci[kLast] < end) *rho.find(ci) += w;
-        int a = 0;
-        for (; a < Dim; ++a) {
-          if (++k[a] <= k_hi[a]) break;
-          k[a] = k_lo[a];
-        }
-        if (a == Dim) break;
       }
     }
   }
@@ -2073,22 +2093,31 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   }
 
   // unknowns: cells holding particle volume or smoothed liquid, rows in cell order
-  // (tile by tile on several threads, joined in tile order, then sorted; each cell's row written
-  // by one thread)
+  // (tile by tile on several threads, each part's list sorted by its thread, the sorted lists
+  // merged in part order: every cell is listed once, so the order is the one sorted list of them
+  // all, as the serial sort of the joined lists gave it (two24); each cell's row written by one
+  // thread)
   std::vector<int> cells;
   {
     const int parts = team_threads(static_cast<long>(band_tiles) * decltype(values)::kTilePoints);
     std::vector<std::vector<int>> part(parts);
 #pragma omp parallel for schedule(static, 1) num_threads(parts)
-    for (int t = 0; t < parts; ++t)
+    for (int t = 0; t < parts; ++t) {
       for (int b = band_tiles * t / parts; b < band_tiles * (t + 1) / parts; ++b)
         values.for_each_point_in_tile(band[b], [&](const VecI<Dim>& c, double* v) {
           v[kRow] = -1.0;
           if (*rho.find(c) > 0.0 || v[kTarget] > 0.0) part[t].push_back(grid.cell_index(c));
         });
-    for (const auto& list : part) cells.insert(cells.end(), list.begin(), list.end());
+      std::sort(part[t].begin(), part[t].end());
+    }
+    cells.swap(part[0]);
+    std::vector<int> merged;
+    for (int t = 1; t < parts; ++t) {
+      merged.resize(cells.size() + part[t].size());
+      std::merge(cells.begin(), cells.end(), part[t].begin(), part[t].end(), merged.begin());
+      cells.swap(merged);
+    }
   }
-  std::sort(cells.begin(), cells.end());
   const int n = static_cast<int>(cells.size());
 #pragma omp parallel for schedule(static) num_threads(team_threads(n))
   for (int r = 0; r < n; ++r) values.find(grid.cell_coord(cells[r]))[kRow] = r;
@@ -2119,9 +2148,10 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // that order (a column twice only across a periodic axis of two cells), which is what
   // setFromTriplets made of the same entries, bit for bit; then laid out row after row
   constexpr int kRowEntries = 2 * Dim + 1;
-  std::vector<int> entry_column(static_cast<std::size_t>(n) * kRowEntries);
-  std::vector<double> entry_value(entry_column.size());
-  std::vector<int> row_entries(n);
+  // (unset: each row writes its count and its first `count` entries, the only ones read)
+  UnsetVector<int> entry_column(static_cast<std::size_t>(n) * kRowEntries);
+  UnsetVector<double> entry_value(entry_column.size());
+  UnsetVector<int> row_entries(n);
   // (the surface band's deficits listed by to_solve: flagged per row, e before the share)
   const bool listing = surface_deficits == SurfaceDeficits::to_solve;
   std::vector<unsigned char> listed_deficit(listing ? n : 0, 0);
@@ -2250,16 +2280,38 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   // rows write lie in [written_lo[a], written_hi[a]] (min and max: the same for any split),
   // handed back as the dirty spans the next lend zeroes. Before, a fresh 202 MB vector per call
   // at Fig. 2's paper grid had the liquid's layers zeroed: first touches at every call.
+  // (two24) The kept storage's dirty spans are zeroed here in the region that writes the rows,
+  // in blocks on the team, not by KeptZeros::lend on the calling thread (the spans cover the
+  // liquid's layers of every component: about 2 MB per call on the 64^3 viscous bunny)
   VectorX move;
-  move_scratch.lend(nf, move);
+  std::vector<std::pair<long, long>> stale;  // blocks of the kept storage to zero first
+  long stale_entries = 0;
+  if (move_scratch.values.size() == nf) {
+    constexpr long kZeroBlock = 1L << 14;
+    for (const auto& [b, e] : move_scratch.dirty) {
+      stale_entries += e - b;
+      for (long from = b; from < e; from += kZeroBlock)
+        stale.emplace_back(from, std::min(e, from + kZeroBlock));
+    }
+    move.swap(move_scratch.values);
+    move_scratch.values = VectorX();
+    move_scratch.dirty.clear();
+  } else {
+    move_scratch.lend(nf, move);
+  }
   long written_lo[Dim], written_hi[Dim];
   for (int a = 0; a < Dim; ++a) {
     written_lo[a] = nf;
     written_hi[a] = -1;
   }
   {
-#pragma omp parallel num_threads(team_threads(n))
+    const int blocks = static_cast<int>(stale.size());
+#pragma omp parallel num_threads(team_threads(std::max<long>(n, stale_entries)))
     {
+      // (a barrier after it: a row may write a face of another thread's block)
+#pragma omp for schedule(static)
+      for (int b = 0; b < blocks; ++b)
+        std::fill(move.data() + stale[b].first, move.data() + stale[b].second, 0.0);
 #pragma omp for schedule(static) reduction(min : written_lo[:Dim]) reduction(max : written_hi[:Dim])
       for (int r = 0; r < n; ++r) {
         const VecI<Dim> ci = grid.cell_coord(cells[r]);
@@ -2500,10 +2552,10 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   acc.reset(lattice.dims, 0.0);
   constexpr int kSplatTile = TiledLattice<Dim, double, kStride>::kTile;
   // each particle's image across the nearest solid surface (NaN where it has none), found before
-  // the tiles are made and read by the splat
-  std::vector<Vec<Dim>> solid_image;
-  if (!solids.empty())
-    solid_image.assign(np, Vec<Dim>::Constant(std::numeric_limits<double>::quiet_NaN()));
+  // the tiles are made and read by the splat (unset: the images' loop writes every particle's;
+  // its NaN fill ran on the calling thread, two24)
+  UnsetVector<Vec<Dim>> solid_image;
+  if (!solids.empty()) solid_image.resize(np);
 
   // splat one particle (with its periodic and wall images) onto the lattice points whose index
   // along axis 0 lies in [clip_lo, clip_hi]; with `make_tiles` it only flags the tiles under
@@ -2733,6 +2785,7 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
     if (!solids.empty()) {
 #pragma omp for schedule(static)
       for (long p = 0; p < np; ++p) {
+        solid_image[p] = Vec<Dim>::Constant(std::numeric_limits<double>::quiet_NaN());
         const Vec<Dim> xp = particles.x[p];
         const double d = solids.distance(xp);
         if (!(d > 0.0) || d >= support[p]) continue;
@@ -2815,6 +2868,15 @@ double surface_sums(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   return max_support;
 }
 
+/// The slots of the made tiles of `acc`, in slot order.
+template <int Dim, int Stride>
+std::vector<int> made_tile_slots(const TiledLattice<Dim, double, Stride>& acc) {
+  std::vector<int> tiles;
+  for (int t = 0; t < acc.num_tile_slots(); ++t)
+    if (acc.has_tile(t)) tiles.push_back(t);
+  return tiles;
+}
+
 /// phi = |x - x_bar| - r_bar at a lattice point from its sums (weight > 0).
 template <int Dim>
 double surface_phi(const SampleLattice<Dim>& lattice, const VecI<Dim>& c, const double* sum) {
@@ -2836,9 +2898,11 @@ void liquid_phi_tiles(const Particles<Dim>& particles, const MacGrid<Dim>& grid,
   std::vector<unsigned char> made = phi.tile_flags();
   for (int tile = 0; tile < slots; ++tile) made[tile] = acc.has_tile(tile);
   phi.make_tiles(made, process_threads());
-#pragma omp parallel for schedule(static) num_threads(process_threads())
-  for (int tile = 0; tile < slots; ++tile) {
-    acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
+  const std::vector<int> tiles = made_tile_slots(acc);
+  const int count = static_cast<int>(tiles.size());
+#pragma omp parallel for schedule(dynamic, 1) num_threads(process_threads())
+  for (int t = 0; t < count; ++t) {
+    acc.for_each_point_in_tile(tiles[t], [&](const VecI<Dim>& c, const double* sum) {
       if (sum[0] > 0.0) *phi.find(c) = surface_phi(lattice, c, sum);
     });
   }
@@ -2898,16 +2962,19 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   // phi = |x - x_bar| - r_bar, a positive constant (the kernel support) away from particles
   // (every point outside the tiles)
   band.background = max_support;
-  const int slots = acc.num_tile_slots();
+  // (the made tiles shared out one by one: they lie together in the slots, and static blocks
+  // of slots left one thread most of them; two24)
+  const std::vector<int> tiles = made_tile_slots(acc);
+  const int count = static_cast<int>(tiles.size());
   // the box of the points with a value of their own, per thread then merged (a min and max: any
   // split gives it), before the store is sized to it
   const int threads = process_threads();
   std::vector<VecI<Dim>> lo(threads, lattice.dims), hi(threads, -VecI<Dim>::Ones());
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int tile = 0; tile < slots; ++tile) {
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int t = 0; t < count; ++t) {
     VecI<Dim>& tlo = lo[omp_get_thread_num()];
     VecI<Dim>& thi = hi[omp_get_thread_num()];
-    acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
+    acc.for_each_point_in_tile(tiles[t], [&](const VecI<Dim>& c, const double* sum) {
       if (sum[0] > 0.0) {
         tlo = tlo.cwiseMin(c);
         thi = thi.cwiseMax(c);
@@ -2921,9 +2988,9 @@ void liquid_phi_on_lattice(const Particles<Dim>& particles, const MacGrid<Dim>& 
   }
   store(max_support);
   double* values = phi.values.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int tile = 0; tile < slots; ++tile) {
-    acc.for_each_point_in_tile(tile, [&](const VecI<Dim>& c, const double* sum) {
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int t = 0; t < count; ++t) {
+    acc.for_each_point_in_tile(tiles[t], [&](const VecI<Dim>& c, const double* sum) {
       if (sum[0] > 0.0) values[phi.entry(c)] = surface_phi(lattice, c, sum);
     });
   }
