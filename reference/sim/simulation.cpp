@@ -637,6 +637,19 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
         mixture_.constant = stress_viscosity(stress_grid_, particles_, k);
       }
     }
+    // eq. (8)'s zero traction at the free surface (docs/derivations.md, departures item 23): W_L^u
+    // raised on the dry faces that the stress DOFs which can be active read. W_F^s is the static
+    // solids' (stress_fluid_) or, coupled, the bodies' of this pose (update_moving_solids ran
+    // before; empty without stress solves: nothing raised). The test's eta is the one the solve
+    // reads; a Herschel-Bulkley liquid's is made per round, but it is positive exactly where its
+    // value at rest is (eq. (27): k > 0 or tau0 > 0 of a liquid with a fraction there)
+    const VectorX& fluid_stress = coupled_ ? coupled_in_.solids.fluid_stress : stress_fluid_;
+    VectorX at_rest;
+    if (non_newtonian_) at_rest = mixture_.viscosity(VectorX::Zero(stress_grid_.num_dofs()));
+    clamp_stressed_face_weights<Dim>(stress_grid_, fluid_stress, stress_liquid_,
+                                     non_newtonian_ ? at_rest : stress_eta_, weights_.liquid_face,
+                                     sparse ? &liquid_signs_ : nullptr,
+                                     sparse ? &liquid_face_boxes_ : nullptr);
   }
   // eta per cell is read only at a frame's end (the render, save_state, cell_eta()): with every
   // liquid inviscid it is +0 at every cell whatever the particles (constant_viscosity, or the
