@@ -703,7 +703,9 @@ TEMPLATE_TEST_CASE_SIG("matrix-free Stokes operator: rhs and the velocity update
     const auto sc = make_case<Dim>(o);
     int faces_without_liquid = 0;
     for (int f = 0; f < sc.grid.num_faces(); ++f) faces_without_liquid += sc.w.pressure.liquid_face[f] == 0.0;
-    REQUIRE(faces_without_liquid > sc.grid.num_faces() / 4);
+    // (a fifth: the dry faces the surface stress reads are clamped since surf24, 414 of 1728 left
+    // in 3D)
+    REQUIRE(faces_without_liquid > sc.grid.num_faces() / 5);
     for (StressForm form : {StressForm::full, StressForm::reduced}) {
       const StressLayout<Dim> layout(StressGrid<Dim>(sc.grid), form);
       const StokesDofs dofs = select_stokes_dofs(sc.grid, layout, sc.w, sc.dt,
