@@ -892,7 +892,9 @@ double Simulation<Dim>::fluid_volume_in_box(const VecI<Dim>& liquid_lo, const Ve
 template <int Dim>
 void Simulation<Dim>::complete_frame_end_weights() {
   const auto timing = stats_.timing;
-  update_liquid_weights(/*stress=*/false, /*volume=*/true);
+  // (with stress solves the stress weights too: W_L^u carries the stress's clamp, departures
+  // item 23, as it does when load_state or a step makes the weights)
+  update_liquid_weights(/*stress=*/sequence_ != SolveSequence::pressure, /*volume=*/true);
   stats_.timing = timing;
 }
 
@@ -3408,8 +3410,8 @@ FrameStats Simulation<Dim>::advance_frame() {
   stats_.time = frame_end;
   if (stats_.steps == 0) stats_.dt_min = 0.0;
   // the solid and liquid weights of the final state (reused by the next step, unless its first
-  // half drift moves the particles first: then the stress weights, which only the solve reads,
-  // are left for that step's own weights; the level set (pictures), the volume (statistics) and
+  // half drift moves the particles first: then the stress weights are left for that step's own
+  // weights, unless there are stress solves, whose clamp of W_L^u (departures item 23) needs W_L^s; the level set (pictures), the volume (statistics) and
   // W_L^u (the next step's CFL limit reads the trusted faces) are made as before)
   if (coupled_) update_moving_solids();
   const bool reused = !split_drift();
@@ -3423,7 +3425,7 @@ FrameStats Simulation<Dim>::advance_frame() {
   if (!reused && solids && !switches_.divergence_free_air && frame_end_dt_is_max())
     liquid_volume_from_phi();
   else
-    liquid_weights_from_phi(reused, true);
+    liquid_weights_from_phi(reused || sequence_ != SolveSequence::pressure, true);
   liquid_weights_current_ = reused;
   fill_state_stats(stats_);
   ledger_ = frame_ledger_;
