@@ -8,6 +8,7 @@
 #include "reference/core/parallel.hpp"
 #include "reference/fluid/deformation_rate.hpp"
 #include "reference/fluid/gradient.hpp"
+#include "reference/grid/box_rows.hpp"
 #include "reference/grid/stress_weights.hpp"
 #include "reference/grid/volume_fractions.hpp"
 
@@ -1313,7 +1314,79 @@ StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& so
   w.fluid_stress = stress_fluid_weights(stress, lattice, solid_phi, boundary);
   w.liquid_stress = stress_liquid_weights(stress, lattice, liquid_phi);
   w.viscosity = VectorX::Constant(stress.num_dofs(), eta);
+  // the dry faces the stress reaches: eq. (8)'s zero traction at the surface (departures item 23)
+  if (eta > 0.0)
+    clamp_stressed_face_weights(stress, w.fluid_stress, w.liquid_stress, w.viscosity,
+                                w.pressure.liquid_face);
   return w;
+}
+
+template <int Dim>
+void clamp_stressed_face_weights(const StressGrid<Dim>& stress, const VectorX& fluid_stress,
+                                 const VectorX& liquid_stress, const VectorX& viscosity,
+                                 VectorX& liquid_face, const LatticeSigns<Dim>* signs,
+                                 std::array<WrittenBox<Dim>, Dim>* faces) {
+  const MacGrid<Dim>& grid = stress.grid();
+  const int n = stress.num_dofs();
+  if (viscosity.size() != n || fluid_stress.size() != n || liquid_stress.size() != n) return;
+  if (signs && !signs->any_negative()) return;  // W_L^s = 0 everywhere
+  // the DOF box per axis, the same for every component (conservative): DOF c of component k
+  // covers lattice cells 2 c + 2 shift(k) - 1 and 2 c + 2 shift(k) along each axis, mirrored
+  // at walls by at most one lattice cell (two DOFs of slack each way); a periodic axis is taken
+  // whole (its wrap)
+  VecI<Dim> lo = VecI<Dim>::Zero(), hi = grid.cells();
+  if (signs)
+    for (int a = 0; a < Dim; ++a)
+      if (!grid.periodic(a)) {
+        lo[a] = std::max(0, signs->lo[a] / 2 - 2);
+        hi[a] = std::min(grid.cells()[a], signs->hi[a] / 2 + 2);
+      }
+  double* w = liquid_face.data();
+  for (int k = 0; k < StressGrid<Dim>::num_components(); ++k) {
+    const VecI<Dim> dims = stress.dims(k);
+    const VecI<Dim> klo = lo, khi = hi.cwiseMin(dims - VecI<Dim>::Ones());
+    if ((klo.array() > khi.array()).any()) continue;
+    const BoxRows<Dim> rows(dims, klo, khi);
+    const int nr = rows.rows();
+    // a face may be raised by several DOFs on several threads: atomic reads and writes of one
+    // constant, so every order gives the same bits
+#pragma omp parallel for schedule(static) num_threads(team_threads(static_cast<long>(nr) * rows.nx))
+    for (int r = 0; r < nr; ++r) {
+      const int first = stress.offset(k) + rows.first(r);
+      for (int x = 0; x < rows.nx; ++x) {
+        const int d = first + x;
+        if (!(fluid_stress[d] * liquid_stress[d] > 0.0 && viscosity[d] > 0.0)) continue;
+        for_each_deformation_rate_entry(stress, d, [&](int f, double) {
+          double v;
+#pragma omp atomic read
+          v = w[f];
+          if (v < kMinLiquidFaceFraction) {
+#pragma omp atomic write
+            w[f] = kMinLiquidFaceFraction;
+          }
+        });
+      }
+    }
+  }
+  if (!faces) return;
+  // the faces of the DOFs of the box: within one face of it along every axis
+  for (int a = 0; a < Dim; ++a) {
+    WrittenBox<Dim>& fb = (*faces)[a];
+    if (!fb.valid_for(w + grid.face_offset(a), grid.face_dims(a).prod())) continue;
+    const VecI<Dim> fdims = grid.face_dims(a);
+    VecI<Dim> flo, fhi;
+    for (int b = 0; b < Dim; ++b) {
+      flo[b] = grid.periodic(b) ? 0 : std::max(0, lo[b] - 1);
+      fhi[b] = grid.periodic(b) ? fdims[b] - 1 : std::min(fdims[b] - 1, hi[b] + 1);
+    }
+    if ((fb.lo.array() > fb.hi.array()).any()) {
+      fb.lo = flo;
+      fb.hi = fhi;
+    } else {
+      fb.lo = fb.lo.cwiseMin(flo);
+      fb.hi = fb.hi.cwiseMax(fhi);
+    }
+  }
 }
 
 template <int Dim>
@@ -1346,6 +1419,10 @@ std::vector<int> stokes_sweep_order(const MacGrid<Dim>& grid, const StressLayout
 }
 
 #define MONOLITH_INSTANTIATE(D)                                                                  \
+  template void clamp_stressed_face_weights<D>(const StressGrid<D>&, const VectorX&,             \
+                                               const VectorX&, const VectorX&, VectorX&,         \
+                                               const LatticeSigns<D>*,                           \
+                                               std::array<WrittenBox<D>, D>*);                   \
   template StokesWeights uniform_stokes_weights<D>(const MacGrid<D>&, const VectorX&,            \
                                                    const VectorX&,                               \
                                                    const std::array<BoundaryType, 2 * D>&,       \

@@ -32,6 +32,7 @@
 #include "reference/grid/boundary.hpp"
 #include "reference/grid/mac_grid.hpp"
 #include "reference/grid/stress_grid.hpp"
+#include "reference/grid/volume_fractions.hpp"
 #include "reference/solvers/backend.hpp"
 #include "reference/solvers/linear_operator.hpp"
 #include "reference/solvers/pcg.hpp"
@@ -62,6 +63,27 @@ StokesWeights uniform_stokes_weights(const MacGrid<Dim>& grid, const VectorX& so
                                      const VectorX& liquid_phi,
                                      const std::array<BoundaryType, 2 * Dim>& boundary,
                                      double rho, double eta);
+
+/// W_L^u raised to kMinLiquidFaceFraction on every face of D's stencil (eq. (8)) of a stress DOF
+/// that can be active: W_F^s W_L^s > 0 and eta > 0 (select_stokes_dofs' test, per StressGrid
+/// DOF). A stress DOF at the free surface reads dry faces above it (W_L^u = 0 and no cell with
+/// W_L^p > 0 beside them, so clamp_liquid_face_weights leaves them at 0). With (W_L^u)^-1 taken
+/// as 0 there, eq. (8) loses the face's kinetic term while b1 = W_L^s M D W_F^u u* still reads
+/// its u*: the face becomes a prescribed velocity, a lid dragging the surface at the air's
+/// extrapolated speed. With the clamp the face is an unknown of almost no mass, whose velocity
+/// follows the stress: its net stress force D^T M W_L^s tau is driven to ~0 (of the order of the
+/// clamp), eq. (8)'s zero traction at the free surface (docs/derivations.md, departures item 23).
+/// Empty `viscosity` (inviscid weights) or stress weights: nothing is raised.
+/// `signs` (optional): the classes W_L^s was made from; only the stress DOFs whose control
+/// volumes reach its box of non-positive lattice cells are visited (W_L^s is 0 elsewhere).
+/// `faces` (optional; each box valid for its axis of liquid_face, WrittenBox): grown to cover
+/// every face that may be raised, so that liquid_face stays 0 outside them.
+/// Deterministic for any thread count (a raise to one constant, in any order).
+template <int Dim>
+void clamp_stressed_face_weights(const StressGrid<Dim>& stress, const VectorX& fluid_stress,
+                                 const VectorX& liquid_stress, const VectorX& viscosity,
+                                 VectorX& liquid_face, const LatticeSigns<Dim>* signs = nullptr,
+                                 std::array<WrittenBox<Dim>, Dim>* faces = nullptr);
 
 /// Which unknowns a solve has: both (PV: eq. (8)) or stress only (the "VC" step of PC-VC-PC:
 /// eq. (8) with p fixed at zero). Pressure only is solve_pressure (pressure_projection.hpp).

@@ -725,6 +725,19 @@ void Simulation<Dim>::liquid_weights_from_phi(bool stress, bool volume) {
         mixture_.constant = stress_viscosity(stress_grid_, particles_, k);
       }
     }
+    // eq. (8)'s zero traction at the free surface (docs/derivations.md, departures item 23): W_L^u
+    // raised on the dry faces that the stress DOFs which can be active read. W_F^s is the static
+    // solids' (stress_fluid_) or, coupled, the bodies' of this pose (update_moving_solids ran
+    // before; empty without stress solves: nothing raised). The test's eta is the one the solve
+    // reads; a Herschel-Bulkley liquid's is made per round, but it is positive exactly where its
+    // value at rest is (eq. (27): k > 0 or tau0 > 0 of a liquid with a fraction there)
+    const VectorX& fluid_stress = coupled_ ? coupled_in_.solids.fluid_stress : stress_fluid_;
+    VectorX at_rest;
+    if (non_newtonian_) at_rest = mixture_.viscosity(VectorX::Zero(stress_grid_.num_dofs()));
+    clamp_stressed_face_weights<Dim>(stress_grid_, fluid_stress, stress_liquid_,
+                                     non_newtonian_ ? at_rest : stress_eta_, weights_.liquid_face,
+                                     sparse ? &liquid_signs_ : nullptr,
+                                     sparse ? &liquid_face_boxes_ : nullptr);
   }
   // eta per cell is read only at a frame's end (the render, save_state, cell_eta()): with every
   // liquid inviscid it is +0 at every cell whatever the particles (constant_viscosity, or the
@@ -967,7 +980,9 @@ double Simulation<Dim>::fluid_volume_in_box(const VecI<Dim>& liquid_lo, const Ve
 template <int Dim>
 void Simulation<Dim>::complete_frame_end_weights() {
   const auto timing = stats_.timing;
-  update_liquid_weights(/*stress=*/false, /*volume=*/true);
+  // (with stress solves the stress weights too: W_L^u carries the stress's clamp, departures
+  // item 23, as it does when load_state or a step makes the weights)
+  update_liquid_weights(/*stress=*/sequence_ != SolveSequence::pressure, /*volume=*/true);
   stats_.timing = timing;
 }
 
@@ -3496,8 +3511,8 @@ FrameStats Simulation<Dim>::advance_frame() {
   stats_.time = frame_end;
   if (stats_.steps == 0) stats_.dt_min = 0.0;
   // the solid and liquid weights of the final state (reused by the next step, unless its first
-  // half drift moves the particles first: then the stress weights, which only the solve reads,
-  // are left for that step's own weights; the level set (pictures), the volume (statistics) and
+  // half drift moves the particles first: then the stress weights are left for that step's own
+  // weights, unless there are stress solves, whose clamp of W_L^u (departures item 23) needs W_L^s; the level set (pictures), the volume (statistics) and
   // W_L^u (the next step's CFL limit reads the trusted faces) are made as before)
   if (coupled_) update_moving_solids();
   const bool reused = !split_drift();
@@ -3511,7 +3526,7 @@ FrameStats Simulation<Dim>::advance_frame() {
   if (!reused && solids && !switches_.divergence_free_air && frame_end_dt_is_max())
     liquid_volume_from_phi();
   else
-    liquid_weights_from_phi(reused, true);
+    liquid_weights_from_phi(reused || sequence_ != SolveSequence::pressure, true);
   liquid_weights_current_ = reused;
   fill_state_stats(stats_);
   ledger_ = frame_ledger_;

@@ -1001,8 +1001,10 @@ TEMPLATE_TEST_CASE_SIG("the free-surface sweeps (P17): the partly filled cells a
       total_with += r1.iterations;
       total_without += r0.iterations;
       CHECK(std::abs(re.iterations - r1.iterations) <= 1);
-      CHECK(rel_diff(x1, x0) < 1e-4);
-      CHECK(rel_diff(x1, xe) < 1e-4);
+      // (to the PCG tolerance: since surf24 the dry faces the surface stress reads carry W_L^u =
+      // 1e-4, stiff rows of A, so equal residuals leave up to 3.1e-4 between the two solutions)
+      CHECK(rel_diff(x1, x0) < 1e-3);
+      CHECK(rel_diff(x1, xe) < 1e-3);
     }
   INFO("over the six cases: with the sweeps " << total_with << ", without " << total_without);
   CHECK(total_with < total_without);

@@ -428,6 +428,16 @@ TEST_CASE("restricted passes give the dense passes' bits (Fig. 17)", "[unit]") {
   CHECK(check_scene<2>("hollow-spheres-inviscid-2d", "[96,96]", 12) > 0);
 }
 
+TEST_CASE("viscous scenes: the stress's clamped faces the dense passes' bits (surf24)", "[unit]") {
+  // clamp_stressed_face_weights raises W_L^u on the dry faces the surface stress DOFs read and
+  // grows the W_L^u boxes over them (restricted) or visits every stress DOF (dense): the same
+  // weights, solves and particles. Liquid alone, coupled with bodies, Herschel-Bulkley, 3D
+  check_scene<2>("liquid-drop-newtonian-2d", "[32,32]", 4, false);
+  check_scene<2>("hollow-spheres-viscous-2d", "[40,40]", 3);
+  check_scene<2>("liquid-drop-bingham-2d", "[32,32]", 3, false);
+  check_scene<3>("liquid-drop-newtonian-3d", "[16,16,16]", 2, false);
+}
+
 TEST_CASE("static solids keep their normals: the dense passes' bits", "[unit]") {
   // no body moves: every face in the bowl keeps its normal from the first step
   CHECK(check_scene<2>("default", "[48,32]", 8) > 0);
