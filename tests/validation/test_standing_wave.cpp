@@ -124,12 +124,13 @@ TEST_CASE("a viscous standing wave decays as Prosperetti's initial-value solutio
   // 2 nu k^2 = 0.790 is the limit nu -> 0 and is not the answer here: the vorticity layer at the
   // surface forms from rest, so the early decay is slower. Measured (a10d2ef): 0.6395 1/s at
   // 32^2 (-3.8 % against 0.665), 0.637 at 64^2 and 128^2; with the lead's probe of the surface
-  // clamp (check24) 0.659, 0.652, 0.657.
+  // clamp (check24) 0.659, 0.652, 0.657. With surf24's clamp merged the bound is 2 %, which
+  // main's surface lid (-3.8 %) fails.
   const double expected = 0.665;
   const WaveRun r = run_wave(32, 10.0);
   INFO("amplitude decay " << r.decay_rate << " 1/s against " << expected << "; period " << r.period
                           << " s; " << r.peaks << " kinetic peaks");
   CHECK(r.converged);
   CHECK(r.peaks == 5);
-  CHECK(std::abs(r.decay_rate / expected - 1) < 0.06);
+  CHECK(std::abs(r.decay_rate / expected - 1) < 0.02);
 }
