@@ -1379,13 +1379,7 @@ void clamp_stressed_face_weights(const StressGrid<Dim>& stress, const VectorX& f
       flo[b] = grid.periodic(b) ? 0 : std::max(0, lo[b] - 1);
       fhi[b] = grid.periodic(b) ? fdims[b] - 1 : std::min(fdims[b] - 1, hi[b] + 1);
     }
-    if ((fb.lo.array() > fb.hi.array()).any()) {
-      fb.lo = flo;
-      fb.hi = fhi;
-    } else {
-      fb.lo = fb.lo.cwiseMin(flo);
-      fb.hi = fb.hi.cwiseMax(fhi);
-    }
+    fb.cover(flo, fhi);
   }
 }
 

@@ -914,14 +914,7 @@ void clamp_liquid_face_weights_in_place(const MacGrid<Dim>& grid, VectorX& w,
   for (int axis = 0; axis < Dim; ++axis) {
     VecI<Dim> lo = cells.lo, hi = cells.hi;
     hi[axis] = std::min(hi[axis] + 1, grid.face_dims(axis)[axis] - 1);
-    WrittenBox<Dim>& fb = faces[axis];
-    if ((fb.lo.array() > fb.hi.array()).any()) {
-      fb.lo = lo;
-      fb.hi = hi;
-    } else {
-      fb.lo = fb.lo.cwiseMin(lo);
-      fb.hi = fb.hi.cwiseMax(hi);
-    }
+    faces[axis].cover(lo, hi);
   }
 }
 

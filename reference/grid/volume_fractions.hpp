@@ -192,6 +192,16 @@ struct WrittenBox {
   long size = 0;
   bool valid = false;
   bool valid_for(const double* out, long n) const { return valid && data == out && size == n; }
+  /// Grows the box to cover [box_lo, box_hi] as well (an empty box becomes that box).
+  void cover(const VecI<Dim>& box_lo, const VecI<Dim>& box_hi) {
+    if ((lo.array() > hi.array()).any()) {
+      lo = box_lo;
+      hi = box_hi;
+    } else {
+      lo = lo.cwiseMin(box_lo);
+      hi = hi.cwiseMax(box_hi);
+    }
+  }
   /// The box of storage [data, data + size) that holds 0 everywhere: valid, nothing written.
   static WrittenBox nothing_written(const double* data, long size) {
     WrittenBox box;
