@@ -23,6 +23,7 @@
 #include <utility>
 
 #include "reference/core/errors.hpp"
+#include "reference/core/first_touch.hpp"
 #include "reference/core/huge_pages.hpp"
 #include "reference/core/state_io.hpp"
 #include "reference/core/timer.hpp"
@@ -422,16 +423,17 @@ void Simulation<Dim>::reserve_step_buffers() {
     if (switches_.restricted_passes)
       pressure_.resize(grid_.num_cells());
     else
-      resize_on_huge_pages(pressure_, grid_.num_cells());
+      resize_resident(pressure_, grid_.num_cells());
   }
   // eta per cell likewise (a non-Newtonian liquid's is made before the first solve when its
   // size is not the grid's: left to update_liquid_weights)
   if (!non_newtonian_ && cell_eta_.size() == 0) cell_eta_.resize(grid_.num_cells());
   // (huge21) u, the face masses and the faces' densities: kept across steps and written whole
   // by every particles_to_grid (its resize to the same size keeps this storage): sized here,
-  // after the blocks above as before (frame_zero's transfer made them next), on huge pages
-  resize_on_huge_pages(u_, faces);
-  resize_on_huge_pages(face_mass_, faces);
+  // after the blocks above as before (frame_zero's transfer made them next), on huge pages;
+  // (kern25) made resident in one call (core/first_touch.hpp), not one fault per page
+  resize_resident(u_, faces);
+  resize_resident(face_mass_, faces);
   // (band24) the densities' storage from the kernel's zeros (not on huge pages: a huge page is
   // provided whole), recorded as +0 outside no faces: the first transfer then writes the
   // particles' layers only, and the pages beyond them are never provided
@@ -442,7 +444,7 @@ void Simulation<Dim>::reserve_step_buffers() {
     density_spans_value_ = reference_density_;
     density_spans_zero_ = true;
   } else {
-    resize_on_huge_pages(weights_.face_density, faces);
+    resize_resident(weights_.face_density, faces);
   }
 }
 
