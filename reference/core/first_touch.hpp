@@ -21,8 +21,8 @@
 /// - make_resident: advise_huge_pages (when huge pages are switched on, core/huge_pages.hpp)
 ///   and then populate_for_writing, for a buffer whose storage was just made.
 /// - populate_for_reading: MADV_POPULATE_READ likewise, for kernel zeros read whole first.
-/// - resize_resident (an Eigen vector) and assign_resident (a std::vector): resized or filled,
-///   with their storage made resident when that made new storage. Populating pages already
+/// - resize_resident (an Eigen vector), reserve_resident and assign_resident (a std::vector):
+///   resized, reserved or filled, with their storage made resident when that made new storage. Populating pages already
 ///   resident costs a page-table walk per page (0.07 s per GiB on the development host), so the
 ///   callers populate only storage that is new, never every step.
 ///
@@ -143,17 +143,24 @@ void resize_resident(Vector& v, long n) {
   if (n > 0) make_resident(v.data(), sizeof(*v.data()) * static_cast<std::size_t>(n));
 }
 
-/// `v` becomes n copies of `value`; when that needs new storage (n above its capacity), the
-/// storage is made first and made resident (make_resident) before the copies are written. Same
-/// values as v.assign(n, value).
+/// `v`'s capacity becomes at least n; when that needs new storage, the storage is made and made
+/// resident (make_resident) before v's entries are copied into it. v keeps its entries. Then a
+/// copy, assign or resize up to n entries writes resident pages.
+template <class T>
+void reserve_resident(std::vector<T>& v, std::size_t n) {
+  if (n <= v.capacity()) return;
+  std::vector<T> fresh;
+  fresh.reserve(n);
+  make_resident(fresh.data(), sizeof(T) * n);
+  fresh.assign(v.begin(), v.end());
+  v.swap(fresh);
+}
+
+/// `v` becomes n copies of `value` (v.assign(n, value)), its storage made resident first when
+/// the assign needs new storage (reserve_resident).
 template <class T>
 void assign_resident(std::vector<T>& v, std::size_t n, const T& value) {
-  if (n > v.capacity()) {
-    std::vector<T> fresh;
-    fresh.reserve(n);
-    make_resident(fresh.data(), sizeof(T) * n);
-    v.swap(fresh);
-  }
+  reserve_resident(v, n);
   v.assign(n, value);
 }
 

@@ -1,5 +1,6 @@
 #include "reference/coupling/coupling.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/core/first_touch.hpp"
 #include "reference/core/huge_pages.hpp"
 
 #include <algorithm>
@@ -615,7 +616,8 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   // lattice-sized vector leaves in the heap, where it kept the next lattice-sized vector from
   // reusing that hole: 541 MB more peak at the paper's 256x128x256 grid, docs/benchmarks.md)
   if (in_parts && !parts && scratch.face_mark.size() != static_cast<std::size_t>(nf))
-    scratch.face_mark.assign(nf, 0);
+    assign_resident(scratch.face_mark, static_cast<std::size_t>(nf),
+                    static_cast<unsigned char>(0));  // (resident in one call: kern25)
   const auto touch = [&](int f) {
     if (scratch.face_mark[f]) return;
     scratch.face_mark[f] = 1;
@@ -755,8 +757,9 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   if (!parts)
     w.solid_face = VectorX();
   else if (w.solid_face.size() != nf)
-    w.solid_face.resize(nf);
-  if (w.fluid_face.size() != nf) w.fluid_face.resize(nf);
+    resize_resident(w.solid_face, nf);
+  // (written whole below: fresh storage made resident in one call, kern25, core/first_touch.hpp)
+  if (w.fluid_face.size() != nf) resize_resident(w.fluid_face, nf);
   // (band23) A first (not incremental) call with the union in parts and no body that never
   // moves: each body's W_S^u is +0 outside its near faces (fresh zeros from the kernel or zeroed
   // whole, body_face_fractions_at), and there (no static part) the pass below gives sum = 0,
