@@ -22,9 +22,10 @@
 ///   and then populate_for_writing, for a buffer whose storage was just made.
 /// - populate_for_reading: MADV_POPULATE_READ likewise, for kernel zeros read whole first.
 /// - resize_resident (an Eigen vector), reserve_resident and assign_resident (a std::vector):
-///   resized, reserved or filled, with their storage made resident when that made new storage. Populating pages already
-///   resident costs a page-table walk per page (0.07 s per GiB on the development host), so the
-///   callers populate only storage that is new, never every step.
+///   resized, reserved or filled, with their storage made resident when that made new
+///   storage. Populating pages already resident costs a page-table walk per page (0.07 s per
+///   GiB on the development host), so the callers populate only storage that is new, never
+///   every step.
 ///
 /// Advice on the process's own heap memory (private anonymous memory, with the allocator
 /// settings of core/memory_policy.hpp or without): it never changes a value, whichever thread
@@ -47,7 +48,8 @@
 
 namespace monolith {
 
-/// The switch of populate_for_writing and populate_for_reading: -1 until decided, then 0 (off) or 1 (on).
+/// The switch of populate_for_writing and populate_for_reading: -1 until decided, then 0 (off)
+/// or 1 (on).
 inline std::atomic<int>& populate_flag() {
   static std::atomic<int> flag{-1};
   return flag;

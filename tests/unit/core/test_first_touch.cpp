@@ -66,7 +66,8 @@ TEST_CASE("populate_for_writing keeps a buffer's values, aligned or not, and the
   const std::vector<unsigned char> copy = buffer;
   const std::size_t page = 4096;
   // (begin, bytes): the whole buffer, unaligned inside it, an odd length to near its end
-  const std::size_t cases[][2] = {{0, total}, {3, (std::size_t{3} << 20) + 5}, {page + 1, total - page - 17}};
+  const std::size_t cases[][2] = {
+      {0, total}, {3, (std::size_t{3} << 20) + 5}, {page + 1, total - page - 17}};
   for (const auto& c : cases) {
     INFO("begin " << c[0] << ", bytes " << c[1]);
     const auto start = reinterpret_cast<std::uintptr_t>(buffer.data() + c[0]);
