@@ -3,6 +3,16 @@
 /// A process-wide allocator setting for long simulation runs. It is the application's choice,
 /// not the library's: `monolith` (reference/app/main.cpp) sets it; a program that embeds the
 /// core decides for itself (the core never changes process-wide settings on its own).
+///
+/// The first touch of fresh buffers (issue 20, kern25) is not a process-wide setting: the core
+/// advises the buffers it makes itself (core/first_touch.hpp: made resident in one
+/// madvise(MADV_POPULATE_WRITE) call, on by default, MONOLITH_POPULATE=0 or set_populate(false)
+/// turns it off) and changes no value. Whether those buffers also get huge pages is the
+/// program's choice (core/huge_pages.hpp: set_huge_pages, or MONOLITH_HUGE_PAGES=1 for
+/// `monolith`); `monolith` keeps them off, as the core's default: on the development host
+/// (a virtual machine) huge pages took fewer faults but more kernel and more user time in every
+/// run of Fig. 2's paper grid measured, on one and on two threads, after a run with small pages
+/// and right after one with huge pages (docs/benchmarks.md, "The first touch in one call").
 
 #if defined(__GLIBC__)
 #include <malloc.h>

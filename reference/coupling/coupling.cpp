@@ -1,5 +1,6 @@
 #include "reference/coupling/coupling.hpp"
 #include "reference/core/parallel.hpp"
+#include "reference/core/first_touch.hpp"
 #include "reference/core/huge_pages.hpp"
 
 #include <algorithm>
@@ -534,6 +535,12 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
                    SolidWeights<Dim>& w, SolidWeightsScratch<Dim>& scratch) {
   const SampleLattice<Dim> lattice = half_lattice(grid);
   const int nf = grid.num_faces();
+  // (kern25) the bodies whose W_S^u storage is made in this call (zeros from the kernel), for
+  // the wall faces' first touch below
+  std::vector<char> body_face_fresh(bodies.size(), 0);
+  for (std::size_t i = 0; i < bodies.size() && i < w.body_face.size(); ++i)
+    body_face_fresh[i] = w.body_face[i].size() != nf;
+  for (std::size_t i = w.body_face.size(); i < bodies.size(); ++i) body_face_fresh[i] = 1;
 
   // raw fractions: every body on its own, the static solids as one union (section 4.4.6 shrink);
   // w.lattice_phi becomes the union of all solids
@@ -615,7 +622,8 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   // lattice-sized vector leaves in the heap, where it kept the next lattice-sized vector from
   // reusing that hole: 541 MB more peak at the paper's 256x128x256 grid, docs/benchmarks.md)
   if (in_parts && !parts && scratch.face_mark.size() != static_cast<std::size_t>(nf))
-    scratch.face_mark.assign(nf, 0);
+    assign_resident(scratch.face_mark, static_cast<std::size_t>(nf),
+                    static_cast<unsigned char>(0));  // (resident in one call: kern25)
   const auto touch = [&](int f) {
     if (scratch.face_mark[f]) return;
     scratch.face_mark[f] = 1;
@@ -755,8 +763,9 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
   if (!parts)
     w.solid_face = VectorX();
   else if (w.solid_face.size() != nf)
-    w.solid_face.resize(nf);
-  if (w.fluid_face.size() != nf) w.fluid_face.resize(nf);
+    resize_resident(w.solid_face, nf);
+  // (written whole below: fresh storage made resident in one call, kern25, core/first_touch.hpp)
+  if (w.fluid_face.size() != nf) resize_resident(w.fluid_face, nf);
   // (band23) A first (not incremental) call with the union in parts and no body that never
   // moves: each body's W_S^u is +0 outside its near faces (fresh zeros from the kernel or zeroed
   // whole, body_face_fractions_at), and there (no static part) the pass below gives sum = 0,
@@ -801,6 +810,20 @@ void solid_weights(const MacGrid<Dim>& grid, const std::vector<CouplingBody<Dim>
 
   // wall faces belong to the wall (the two boundary layers of faces normal to each wall axis):
   // W_S^u = 1 (1 + 0 + ... capped), W_F^u = 0
+  // (kern25) On axis 0 the wall faces are the first and the last face of every row of that
+  // axis's faces: when a row is at most a page long, the writes below touch every page of a
+  // fresh W_S^u's axis-0 block, one page-fault exception each (16k for the bowl at Fig. 2's
+  // paper grid). Those pages are made resident in one call instead (core/first_touch.hpp); the
+  // values do not change.
+  if (!grid.periodic(0) &&
+      (boundary[0] == BoundaryType::wall || boundary[1] == BoundaryType::wall)) {
+    const long row_bytes = static_cast<long>(sizeof(double)) * grid.face_dims(0)[0];
+    if (row_bytes <= 4096)
+      for (std::size_t i = 0; i < bodies.size(); ++i)
+        if (body_face_fresh[i] && w.body_face[i].size() == nf)
+          populate_for_writing(w.body_face[i].data() + grid.face_offset(0),
+                               sizeof(double) * static_cast<std::size_t>(grid.face_dims(0).prod()));
+  }
   for (int axis = 0; axis < Dim; ++axis) {
     if (grid.periodic(axis)) continue;
     for (int side = 0; side < 2; ++side) {

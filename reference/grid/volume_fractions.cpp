@@ -1,4 +1,5 @@
 #include "reference/grid/volume_fractions.hpp"
+#include "reference/core/first_touch.hpp"
 #include "reference/core/huge_pages.hpp"
 #include "reference/core/parallel.hpp"
 #include "reference/grid/box_rows.hpp"
@@ -753,9 +754,10 @@ template <int Dim>
 VectorX fluid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& lattice,
                            const VectorX& solid_phi,
                            const std::array<BoundaryType, 2 * Dim>& boundary) {
-  // fluid = not solid (kept by the simulation and written whole: on huge pages, huge21)
+  // fluid = not solid (kept by the simulation and written whole: on huge pages, huge21; made
+  // resident in one call, kern25)
   VectorX w;
-  resize_on_huge_pages(w, grid.num_faces());
+  resize_resident(w, grid.num_faces());
   w = VectorX::Ones(grid.num_faces()) - face_negative_fractions(grid, lattice, solid_phi);
   // wall faces carry no fluid; open faces keep the (mirrored) non-solid fraction
   for (int f = 0; f < grid.num_faces(); ++f) {
@@ -770,9 +772,10 @@ VectorX fluid_face_weights(const MacGrid<Dim>& grid, const SampleLattice<Dim>& l
 template <int Dim>
 VectorX fluid_face_weights_without_solids(const MacGrid<Dim>& grid,
                                           const std::array<BoundaryType, 2 * Dim>& boundary) {
-  // (kept by the simulation and written whole: on huge pages, huge21)
+  // (kept by the simulation and written whole: on huge pages, huge21; made resident in one
+  // call, kern25)
   VectorX w;
-  resize_on_huge_pages(w, grid.num_faces());
+  resize_resident(w, grid.num_faces());
   w.setOnes();
   // the wall faces: the two boundary planes of each axis's own faces (none on periodic axes)
   for (int axis = 0; axis < Dim; ++axis) {

@@ -23,6 +23,7 @@
 #include <utility>
 
 #include "reference/core/errors.hpp"
+#include "reference/core/first_touch.hpp"
 #include "reference/core/huge_pages.hpp"
 #include "reference/core/state_io.hpp"
 #include "reference/core/timer.hpp"
@@ -380,10 +381,17 @@ void Simulation<Dim>::reserve_step_buffers() {
   // and goes back to its top when released. A reserve or resize does not touch the pages, and
   // every buffer below is overwritten before it is read: the results do not change.
   const auto faces = static_cast<std::size_t>(grid_.num_faces());
-  if (switches_.air_velocity || switches_.extrapolate_after_solve) face_flags_.reserve(faces);
+  // (kern25) buffers written whole at their first use are made resident here in one call
+  // (core/first_touch.hpp): the flags are copied whole from the faces with mass
+  if (switches_.air_velocity || switches_.extrapolate_after_solve)
+    reserve_resident(face_flags_, faces);
   // the faces in the solids with their frame (constrain_velocity_in_solids): twice the
-  // set-up's count, room for the bodies to move into more faces before a reallocation
-  if (guards_reads()) solid_frame_.reserve(2 * solid_faces_.size());
+  // set-up's count, room for the bodies to move into more faces before a reallocation (the
+  // set-up's count made resident: the first step writes about that many)
+  if (guards_reads()) {
+    solid_frame_.reserve(2 * solid_faces_.size());
+    populate_for_writing(solid_frame_.data(), sizeof(SolidFaceFrame) * solid_faces_.size());
+  }
   // W_L^p and W_L^u (their first fill zeroes them whole: no valid WrittenBox yet) and the
   // pressure (frame_zero zeroes it)
   // (huge21) W_L^p and W_L^u are written in the liquid's band only when their WrittenBox is
@@ -403,8 +411,12 @@ void Simulation<Dim>::reserve_step_buffers() {
       weights_.liquid_cell.resize(grid_.num_cells());
   }
   // the reported volume's cell fractions likewise (fluid_volume_in_box)
-  if (switches_.restricted_passes && volume_cells_.size() == 0)
+  if (switches_.restricted_passes && volume_cells_.size() == 0) {
     volume_cells_box_ = fresh_zeros(volume_cells_, grid_.num_cells());
+    // (kern25) its sum reads it whole at every call: its pages mapped for reading in one call,
+    // as that first read would map them (core/first_touch.hpp)
+    populate_for_reading(volume_cells_.data(), sizeof(double) * volume_cells_.size());
+  }
   if (weights_.liquid_face.size() == 0) {
     if (switches_.restricted_passes) {
       fresh_zeros(weights_.liquid_face, grid_.num_faces());
@@ -422,16 +434,17 @@ void Simulation<Dim>::reserve_step_buffers() {
     if (switches_.restricted_passes)
       pressure_.resize(grid_.num_cells());
     else
-      resize_on_huge_pages(pressure_, grid_.num_cells());
+      resize_resident(pressure_, grid_.num_cells());
   }
   // eta per cell likewise (a non-Newtonian liquid's is made before the first solve when its
   // size is not the grid's: left to update_liquid_weights)
   if (!non_newtonian_ && cell_eta_.size() == 0) cell_eta_.resize(grid_.num_cells());
   // (huge21) u, the face masses and the faces' densities: kept across steps and written whole
   // by every particles_to_grid (its resize to the same size keeps this storage): sized here,
-  // after the blocks above as before (frame_zero's transfer made them next), on huge pages
-  resize_on_huge_pages(u_, faces);
-  resize_on_huge_pages(face_mass_, faces);
+  // after the blocks above as before (frame_zero's transfer made them next), on huge pages;
+  // (kern25) made resident in one call (core/first_touch.hpp), not one fault per page
+  resize_resident(u_, faces);
+  resize_resident(face_mass_, faces);
   // (band24) the densities' storage from the kernel's zeros (not on huge pages: a huge page is
   // provided whole), recorded as +0 outside no faces: the first transfer then writes the
   // particles' layers only, and the pages beyond them are never provided
@@ -442,7 +455,7 @@ void Simulation<Dim>::reserve_step_buffers() {
     density_spans_value_ = reference_density_;
     density_spans_zero_ = true;
   } else {
-    resize_on_huge_pages(weights_.face_density, faces);
+    resize_resident(weights_.face_density, faces);
   }
 }
 
@@ -1278,7 +1291,8 @@ void Simulation<Dim>::mark_faces_with_mass() {
     // (the new boxes first; then the old boxes cleared and the new ones marked in one parallel
     // region, a barrier between: a face of both is cleared before it is marked)
     const FaceBoxes boxes = particle_face_boxes();
-    if (!kept) mass_faces_.assign(nf, 0);
+    // (fresh storage made resident in one call: kern25, core/first_touch.hpp)
+    if (!kept) assign_resident(mass_faces_, static_cast<std::size_t>(nf), char{0});
     std::array<FaceRows, Dim> clear_rows, mark_rows;
     long total = 0;
     for (int axis = 0; axis < Dim; ++axis) {
@@ -1552,10 +1566,11 @@ void Simulation<Dim>::trusted_faces(std::vector<char>& trusted) const {
   FaceBoxes boxes;
   if (trusted_boxes(boxes)) {
     // no face outside the boxes is trusted: a zero fill of the flags and the test in the boxes
-    trusted.assign(nf, 0);
+    assign_resident(trusted, static_cast<std::size_t>(nf), char{0});  // (kern25)
     for_faces_in_boxes(boxes, [&](int f) { trusted[f] = trusted_face(f); });
     return;
   }
+  reserve_resident(trusted, static_cast<std::size_t>(nf));
   trusted.resize(nf);
 #pragma omp parallel for schedule(static) num_threads(process_threads())
   for (int f = 0; f < nf; ++f) trusted[f] = trusted_face(f);
