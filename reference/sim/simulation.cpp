@@ -60,6 +60,75 @@ void throw_if_unread(const std::vector<char>& unread, double time, int next_fram
   throw SimulationError(msg.str());
 }
 
+/// W_F^s given to the stress DOFs that tie the liquid part of a solid-cut face to the solid
+/// (departures item 24): small, so that the DOF's strain is held near zero (its compliance in eq.
+/// (8) scales with 1 / W_F^s); 0.001 gives the same settling and Couette answers to 0.4 %, 0.5 ties
+/// too weakly (check25, docs/validation.md).
+constexpr double kCutFaceStressFraction = 0.01;
+
+/// The stress DOFs raised by raise_cut_face_stress for one solve, put back to W_F^s = 0 when the
+/// solve is done (also when it throws): the stored W_F^s stays the weights' own (the incremental
+/// update of the next pose, the checkpoint and the frame-end clamp read the unraised values).
+struct RaisedStressWeights {
+  VectorX* fluid_stress = nullptr;
+  std::vector<int> dofs;
+  RaisedStressWeights() = default;
+  RaisedStressWeights(const RaisedStressWeights&) = delete;
+  RaisedStressWeights& operator=(const RaisedStressWeights&) = delete;
+  ~RaisedStressWeights() {
+    if (fluid_stress)
+      for (const int d : dofs) (*fluid_stress)[d] = 0.0;
+  }
+};
+
+/// Departures item 24 (docs/derivations.md; eq. (8) with the J_s mixing of section 4.4.1): a face
+/// that a solid cuts (0 < W_F^u < 1) is read by D from the stress DOFs on both sides of it. When
+/// the solid side's DOF has its whole control volume in the solid (W_F^s = 0, inactive), only the
+/// liquid side's DOF reads the face, and the minimisation of eq. (8) / (24) gives the face's liquid
+/// part the velocity that cancels that DOF's strain: the liquid slips freely along the body
+/// (check25: a Couette plate whose surface cuts its faces less than half way drags nothing; a
+/// settling square shifted by half a cell falls 47 % faster). Such a DOF gets W_F^s =
+/// kCutFaceStressFraction for the solve, so that its strain, which reads the face's liquid part
+/// and the solid's velocity on the faces inside it, holds the liquid to the solid. Raised: DOFs
+/// with W_F^s = 0 and W_L^s > 0 whose D stencil has a cut face and no fluid face without liquid
+/// (W_F^u > 0, W_L^u = 0: eq. (8) would read such a face as a prescribed velocity, the surface's
+/// lid of departures item 23). A raised DOF where eta = 0 stays inactive (StokesDofs), so the
+/// viscosity need not be known here (a Herschel-Bulkley liquid's is made per round). Each DOF is
+/// decided from its own stencil and written by itself: the same raised set for any thread count.
+template <int Dim>
+void raise_cut_face_stress(const StressGrid<Dim>& stress, const VectorX& fluid_face,
+                           const VectorX& liquid_face, const VectorX& liquid_stress,
+                           VectorX& fluid_stress, RaisedStressWeights& raised) {
+  const long n = stress.num_dofs();
+  if (fluid_stress.size() != n || liquid_stress.size() != n ||
+      fluid_face.size() != stress.grid().num_faces() ||
+      liquid_face.size() != stress.grid().num_faces())
+    return;
+  const int team = team_threads(n);
+  std::vector<std::vector<int>> found(static_cast<std::size_t>(team));
+#pragma omp parallel num_threads(team)
+  {
+    std::vector<int>& mine = found[static_cast<std::size_t>(omp_get_thread_num())];
+#pragma omp for schedule(static)
+    for (long d = 0; d < n; ++d) {
+      if (fluid_stress[d] != 0.0 || !(liquid_stress[d] > 0.0)) continue;
+      bool cut = false, dry = false;
+      for_each_deformation_rate_entry(stress, static_cast<int>(d), [&](int f, double) {
+        const double wf = fluid_face[f];
+        if (wf > 0.0 && wf < 1.0) cut = true;
+        if (wf > 0.0 && !(liquid_face[f] > 0.0)) dry = true;
+      });
+      if (cut && !dry) mine.push_back(static_cast<int>(d));
+    }
+  }
+  raised.fluid_stress = &fluid_stress;
+  for (const auto& part : found)
+    for (const int d : part) {
+      fluid_stress[d] = kCutFaceStressFraction;
+      raised.dofs.push_back(d);
+    }
+}
+
 template <int Dim>
 Vec<Dim> to_vec(const std::vector<double>& v, const Vec<Dim>& fallback) {
   if (static_cast<int>(v.size()) != Dim) return fallback;
@@ -2801,6 +2870,14 @@ void Simulation<Dim>::solve_coupled(double dt) {
     std::function<void()> f;
     ~GiveBack() { f(); }
   } give_back{lend};
+  // departures item 24: the liquid part of solid-cut faces tied to the solid (before the
+  // Herschel-Bulkley model copies W_F^s; put back after the solve, before the weights are given
+  // back)
+  RaisedStressWeights raised;
+  if (stress && !lean)
+    raise_cut_face_stress<Dim>(stress_grid_, in.weights.pressure.fluid_face,
+                               in.weights.pressure.liquid_face, in.weights.liquid_stress,
+                               in.weights.fluid_stress, raised);
   // (7)-(11) the scheme's solves (section 6)
   StaggeredSettings ss;
   ss.max_iterations = std::max(1, scene_.solver.staggered_iterations);
@@ -3059,6 +3136,13 @@ void Simulation<Dim>::solve_liquid(double dt) {
   // herschel-bulkley liquids: Algorithm 2 around the viscous solve (section 5), started from the
   // previous step's shear rate where there is one (departure from line 1, docs/non-newtonian.md)
   ViscosityRounds viscosity;
+  // departures item 24: the liquid part of solid-cut faces tied to the solid, in W_F^s itself
+  // (before the Herschel-Bulkley model copies it and the weights are lent below; put back when
+  // this function returns, after they are given back)
+  RaisedStressWeights raised;
+  if (sequence_ != SolveSequence::pressure)
+    raise_cut_face_stress<Dim>(stress_grid_, weights_.fluid_face, weights_.liquid_face,
+                               stress_liquid_, stress_fluid_, raised);
   std::unique_ptr<NonNewtonianViscosity<Dim>> model;
   VectorX eta;
   if (non_newtonian_ && sequence_ != SolveSequence::pressure) {

@@ -300,17 +300,18 @@ TEST_CASE("a heavy disk settling between two walls reaches Faxen's terminal velo
   // eta = 1000 Pa s: U = 0.02192 m/s, Reynolds number rho U 2a / eta = 0.005. Liquid 1.8 m deep,
   // disk centre at 1 m. The liquid's own start-up (rho h^2 / eta = 0.25 s) is mostly over by
   // 0.05 s; the mean velocity over the frames t = 0.07 .. 0.1 s is compared. Measured: 32 cells per metre
-  // (a = 4 dx) +13.6 %; 64 (a = 8 dx) +9 % (slow_coupled_validation.cpp). The cut-cell no-slip
-  // of the volume-fraction weights is first order in dx, and an error of 0.3 dx in the effective
-  // radius changes K by 13 % at a = 4 dx. Tolerance 20 %. (Without the walls' correction, i.e.
-  // K = ln(1/k) - 0.9157 alone, U would be 0.0180 m/s, 18 % lower: the walls matter at this k.)
+  // (a = 4 dx) +3.9 % since the cut faces hold the liquid to the body (docs/derivations.md
+  // departures item 24; +11.7 % before it, +13.6 % in older trees; 64 cells per metre +9 % before
+  // it, slow_coupled_validation.cpp). An error of 0.3 dx in the effective radius changes K by 13 %
+  // at a = 4 dx. Tolerance 8 %. (Without the walls' correction, i.e. K = ln(1/k) - 0.9157 alone,
+  // U would be 0.0180 m/s, 18 % lower: the walls matter at this k.)
   const SettlingResult r = run_settling_disk(32, 0.1);
   const double exact = faxen_terminal_velocity(0.125, 0.5, 1000.0, 1000.0, kG);
   WARN("2D settling disk, a = 4 dx: terminal velocity " << r.velocity << " m/s, Faxen " << exact
                                                         << " (" << 100 * (r.velocity / exact - 1)
                                                         << " %), sideways drift " << r.sideways);
   CHECK(r.converged);
-  CHECK(r.velocity == Approx(exact).epsilon(0.20));
+  CHECK(r.velocity == Approx(exact).epsilon(0.08));
   CHECK(std::abs(r.sideways) <= 1e-3 * r.velocity);
 }
 
@@ -321,16 +322,16 @@ TEST_CASE("a disk spinning in a viscous liquid inside a ring spins down as the C
   // (R2^2 - R1^2)). Disk R1 = 0.15 (density 1e5, so the spin-down time 0.5 s is long against the
   // viscous time rho (R2 - R1)^2 / mu = 0.08 s), static shell of inner radius R2 = 0.35, liquid
   // eta = 500 filling the gap, gravity off, 32^2 cells (R1 = 4.8 dx, gap 6.4 dx), 0.2 s.
-  // Measured: omega(0.2 s) = 0.685 against the reference 0.641, i.e. spin lost 0.315 against
-  // 0.359 (-12.4 %); at 64^2 0.660, spin lost -5.4 % (slow_coupled_validation.cpp): first-order
-  // convergence, as for the settling disk (the no-slip of the cut-cell weights). Tolerance on the
-  // spin lost: 20 % at 32^2.
+  // Measured: omega(0.2 s) = 0.653 against the reference 0.641, i.e. spin lost 0.347 against
+  // 0.359 (-3.3 %) since the cut faces hold the liquid to the body (docs/derivations.md
+  // departures item 24; before it 0.682, -11.3 %, and -5.4 % at 64^2, slow_coupled_validation.cpp).
+  // Tolerance on the spin lost: 8 % at 32^2.
   const SpinResult r = run_spin_down(2, 32, 0.2);
   WARN("2D spin-down, 32^2: omega(" << r.time << " s) = " << r.omega << ", reference " << r.reference
                                    << ": spin lost " << 1 - r.omega << " against " << 1 - r.reference
                                    << " (" << 100 * ((1 - r.omega) / (1 - r.reference) - 1) << " %)");
   CHECK(r.converged);
-  CHECK((1 - r.omega) == Approx(1 - r.reference).epsilon(0.20));
+  CHECK((1 - r.omega) == Approx(1 - r.reference).epsilon(0.08));
   // the disk stays centred
   CHECK(r.offset <= 0.05 / 32);
 }
