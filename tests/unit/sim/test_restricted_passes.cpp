@@ -438,6 +438,16 @@ TEST_CASE("viscous scenes: the stress's clamped faces the dense passes' bits (su
   check_scene<3>("liquid-drop-newtonian-3d", "[16,16,16]", 2, false);
 }
 
+TEST_CASE("viscous scenes with bodies: the cut faces' raised stress DOFs the dense passes' bits",
+          "[unit]") {
+  // raise_cut_face_stress (departures item 24) ties cut faces' liquid to the bodies in every
+  // solve; its DOFs lie in the bodies, beside the liquid: the restricted and the dense passes
+  // select and solve them alike. A body in a viscous block (Bingham: the model copies W_F^s after
+  // the raise), a ball against a wall
+  check_scene<2>("bunny-into-block-bingham-2d", "[32,32]", 3, false);
+  check_scene<2>("viscous-sphere-bunny-wall-2d", "[32,32]", 3, false);
+}
+
 TEST_CASE("static solids keep their normals: the dense passes' bits", "[unit]") {
   // no body moves: every face in the bowl keeps its normal from the first step
   CHECK(check_scene<2>("default", "[48,32]", 8) > 0);
