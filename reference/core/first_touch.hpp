@@ -39,6 +39,7 @@
 #include <cstring>
 #include <vector>
 
+#include "reference/core/env_switch.hpp"
 #include "reference/core/huge_pages.hpp"
 
 #if defined(__linux__)
@@ -58,15 +59,7 @@ inline std::atomic<int>& populate_flag() {
 /// Whether the populate calls act: on unless the environment sets MONOLITH_POPULATE=0 (read the
 /// first time it is asked) or set_populate(false) was called first. On by default: it changes no
 /// value and lowers the kernel's time (docs/benchmarks.md, "The first touch in one call").
-inline bool populate_enabled() {
-  int flag = populate_flag().load();
-  if (flag < 0) {
-    const char* value = std::getenv("MONOLITH_POPULATE");
-    flag = (value && std::strcmp(value, "0") == 0) ? 0 : 1;
-    populate_flag().store(flag);
-  }
-  return flag == 1;
-}
+inline bool populate_enabled() { return env_switch(populate_flag(), "MONOLITH_POPULATE", true); }
 
 /// Decides the switch for the process (tests; a program that embeds the core).
 inline void set_populate(bool on) { populate_flag().store(on ? 1 : 0); }

@@ -32,6 +32,8 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "reference/core/env_switch.hpp"
+
 #if defined(__linux__)
 #include <sys/mman.h>
 #include <unistd.h>
@@ -73,13 +75,7 @@ inline std::atomic<int>& huge_pages_flag() {
 /// paper grid's run gained nothing measurable (docs/benchmarks.md, "The twentieth session's
 /// merged tree on a quiet machine").
 inline bool huge_pages_enabled() {
-  int flag = huge_pages_flag().load();
-  if (flag < 0) {
-    const char* value = std::getenv("MONOLITH_HUGE_PAGES");
-    flag = (value && std::strcmp(value, "1") == 0) ? 1 : 0;
-    huge_pages_flag().store(flag);
-  }
-  return flag == 1;
+  return env_switch(huge_pages_flag(), "MONOLITH_HUGE_PAGES", false);
 }
 
 /// Decides the switch for the process (tests; a program that embeds the core).

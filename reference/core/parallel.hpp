@@ -37,6 +37,8 @@
 #include <thread>
 #include <vector>
 
+#include "reference/core/env_switch.hpp"
+
 namespace monolith {
 
 /// Loops over fewer entries than this (rows x entries, unknowns, grid cells) run on one thread:
@@ -67,13 +69,7 @@ inline std::atomic<int>& adaptive_teams_flag() {
 /// A switch that is on unless MONOLITH_ADAPTIVE_THREADS=0, read from the environment the first
 /// time it is asked (flag -1) unless a set_... call decided it before.
 inline bool adaptive_switch(std::atomic<int>& flag) {
-  int f = flag.load(std::memory_order_relaxed);
-  if (f < 0) {
-    const char* env = std::getenv("MONOLITH_ADAPTIVE_THREADS");
-    f = env && std::strcmp(env, "0") == 0 ? 0 : 1;
-    flag.store(f, std::memory_order_relaxed);
-  }
-  return f != 0;
+  return env_switch(flag, "MONOLITH_ADAPTIVE_THREADS", true);
 }
 inline bool adaptive_teams() { return adaptive_switch(adaptive_teams_flag()); }
 inline void set_adaptive_teams(bool on) { adaptive_teams_flag().store(on ? 1 : 0); }

@@ -135,25 +135,6 @@ TEST_CASE("populate does nothing for an empty, small or null range or when switc
   CHECK(v == std::vector<double>(std::size_t{1} << 19, 2.5));
 }
 
-TEST_CASE("MONOLITH_POPULATE=0 switches the populate calls off; unset or any other value leaves "
-          "them on (kern25)", "[unit]") {
-  SwitchGuard guard;
-  const char* env = std::getenv("MONOLITH_POPULATE");
-  const std::string saved = env ? env : "";
-  const auto decided_by = [](const char* value) {
-    if (value) setenv("MONOLITH_POPULATE", value, 1);
-    else unsetenv("MONOLITH_POPULATE");
-    populate_flag().store(-1);  // undecided: read the environment again
-    return populate_enabled();
-  };
-  CHECK(decided_by(nullptr));
-  CHECK_FALSE(decided_by("0"));
-  CHECK(decided_by("1"));
-  CHECK(decided_by("no"));
-  if (env) setenv("MONOLITH_POPULATE", saved.c_str(), 1);
-  else unsetenv("MONOLITH_POPULATE");
-}
-
 TEST_CASE("resize_resident and assign_resident: the values of resize and assign, storage kept "
           "when it fits (kern25)", "[unit]") {
   SwitchGuard guard;

@@ -64,26 +64,6 @@ TEST_CASE("aligned_interior: the whole 2 MiB blocks inside a range (huge21)", "[
   }
 }
 
-TEST_CASE("huge pages are opt-in: MONOLITH_HUGE_PAGES=1 turns the advice on, unset or any other "
-          "value leaves it off", "[unit]") {
-  const char* env = std::getenv("MONOLITH_HUGE_PAGES");
-  const std::string saved = env ? env : "";
-  const bool was = huge_pages_enabled();
-  const auto decided_by = [](const char* value) {
-    if (value) setenv("MONOLITH_HUGE_PAGES", value, 1);
-    else unsetenv("MONOLITH_HUGE_PAGES");
-    huge_pages_flag().store(-1);  // undecided: read the environment again
-    return huge_pages_enabled();
-  };
-  CHECK_FALSE(decided_by(nullptr));
-  CHECK(decided_by("1"));
-  CHECK_FALSE(decided_by("0"));
-  CHECK_FALSE(decided_by("yes"));
-  if (env) setenv("MONOLITH_HUGE_PAGES", saved.c_str(), 1);
-  else unsetenv("MONOLITH_HUGE_PAGES");
-  set_huge_pages(was);
-}
-
 TEST_CASE("advise_huge_pages advises the aligned interior and leaves the values (huge21)",
           "[unit]") {
   // 9 MiB + 24 bytes of doubles from wherever the heap puts them: the interior is 3 or 4 blocks
