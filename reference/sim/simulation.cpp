@@ -104,29 +104,18 @@ void raise_cut_face_stress(const StressGrid<Dim>& stress, const VectorX& fluid_f
       fluid_face.size() != stress.grid().num_faces() ||
       liquid_face.size() != stress.grid().num_faces())
     return;
-  const int team = team_threads(n);
-  std::vector<std::vector<int>> found(static_cast<std::size_t>(team));
-#pragma omp parallel num_threads(team)
-  {
-    std::vector<int>& mine = found[static_cast<std::size_t>(omp_get_thread_num())];
-#pragma omp for schedule(static)
-    for (long d = 0; d < n; ++d) {
-      if (fluid_stress[d] != 0.0 || !(liquid_stress[d] > 0.0)) continue;
-      bool cut = false, dry = false;
-      for_each_deformation_rate_entry(stress, static_cast<int>(d), [&](int f, double) {
-        const double wf = fluid_face[f];
-        if (wf > 0.0 && wf < 1.0) cut = true;
-        if (wf > 0.0 && !(liquid_face[f] > 0.0)) dry = true;
-      });
-      if (cut && !dry) mine.push_back(static_cast<int>(d));
-    }
-  }
+  raised.dofs = gather_in_order<int>(static_cast<int>(n), [&](int d, std::vector<int>& out) {
+    if (fluid_stress[d] != 0.0 || !(liquid_stress[d] > 0.0)) return;
+    bool cut = false, dry = false;
+    for_each_deformation_rate_entry(stress, d, [&](int f, double) {
+      const double wf = fluid_face[f];
+      if (wf > 0.0 && wf < 1.0) cut = true;
+      if (wf > 0.0 && !(liquid_face[f] > 0.0)) dry = true;
+    });
+    if (cut && !dry) out.push_back(d);
+  });
   raised.fluid_stress = &fluid_stress;
-  for (const auto& part : found)
-    for (const int d : part) {
-      fluid_stress[d] = kCutFaceStressFraction;
-      raised.dofs.push_back(d);
-    }
+  for (const int d : raised.dofs) fluid_stress[d] = kCutFaceStressFraction;
 }
 
 template <int Dim>
