@@ -484,13 +484,15 @@ void StokesPreconditioner<Dim>::build_cut_block() {
   const int m = static_cast<int>(list.size());
   Eigen::SparseMatrix<double> acc(m, m);
   acc.setFromTriplets(t.begin(), t.end());
-  // no block when its factor would hold more than 8x the entries of the finest velocity
-  // operator (its two solves per application would then cost more than about half of the rest
-  // of an application; the symbolic analysis counts them before any numeric work); also none
-  // when the factor is unusable (not positive definite to round-off)
+  // no block when its factor would hold more than cut_factor_cap times the entries of the finest
+  // velocity operator (its two solves per application would then cost more than the rest of an
+  // application; the symbolic analysis counts them before any numeric work); also none when the
+  // factor is unusable (not positive definite to round-off)
   auto factor = std::make_unique<SparseLdlt>();
   factor->analyzePattern(acc);
-  if (factor->info() != Eigen::Success || factor->analysed_entries() > 8 * velocity_.level(0).a.nonZeros())
+  if (factor->info() != Eigen::Success ||
+      static_cast<double>(factor->analysed_entries()) >
+          options_.cut_factor_cap * static_cast<double>(velocity_.level(0).a.nonZeros()))
     return;
   if (options_.cut_supernodal) factor->factorize_supernodal(acc);
   else factor->factorize(acc);

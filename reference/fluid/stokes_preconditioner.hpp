@@ -137,7 +137,7 @@ struct StokesPreconditionerOptions {
   /// unknowns the rows of the set reach. cut_threshold 0: no block. On
   /// `viscous-bunny-on-sphere-wall-3d` (the bunny on the curved container wall): 240 -> 38 PCG
   /// iterations (docs/preconditioners.md, section 12). No block is built when its factor would
-  /// hold more than 8x the entries of the finest velocity operator.
+  /// hold more than cut_factor_cap times the entries of the finest velocity operator.
   double cut_threshold = 0.5;
   bool cut_pressure = true;
   int cut_layers = 2;
@@ -147,6 +147,14 @@ struct StokesPreconditionerOptions {
   /// 19307 and 3.9M at the same 6 PCG iterations; the wall bunny's block (about 2.8k unknowns)
   /// keeps its two layers (docs/preconditioners.md, section 22).
   int cut_layer_limit = 10000;
+  /// The largest cut-block factor built, in entries of L per entry of the finest velocity
+  /// operator (the two cut solves of an application then cost about 4 cut_factor_cap such
+  /// entries' products, against some 50-80 for the rest of an application). 8 until the
+  /// twenty-fifth session; the cut faces' raised stress DOFs (departures item 24, W_F^s = 0.01 <
+  /// cut_threshold) joined the seed and took hollow-spheres-viscous-3d's factor to 9-10.3x, where
+  /// no block meant 63-80 iterations per frame instead of 14-17 and 1.4-2x the solve time
+  /// (docs/preconditioners.md section 47).
+  double cut_factor_cap = 16.0;
   /// The cut block's numeric factorisation by supernodes (SparseLdlt::factorize_supernodal:
   /// dense panels and dense updates) instead of Eigen's simplicial one: the same factor up to
   /// round-off at a fraction of the time on large blocks (docs/preconditioners.md section 27).
