@@ -215,18 +215,33 @@ Unknowns unified_solve(const MonolithicSystem<Dim>& s, const StaggeredSettings& 
   PvcUnifiedResult u;
   if (multigrid && fallback) {
     // the block preconditioner in face for multigrid_attempt_budget iterations per MLCP solve,
-    // then, unless that converged, the whole solve again with the paper's SSOR from zero
-    // (docs/preconditioners.md section 20)
+    // then, unless that converged, the whole solve again from zero: first with the block
+    // preconditioner's Jacobi contact rows instead of their exact elimination (where the
+    // contacts outnumber the bodies' DOFs many times, S_c of the elimination can stall MPRGP in a
+    // face that the Jacobi rows get through: docs/preconditioners.md section 47), then with the
+    // paper's SSOR (section 20). A system redone counts once in r.fallbacks.
     StaggeredSettings attempt = settings;
     attempt.mprgp.max_iterations = multigrid_attempt_budget(settings.mprgp.max_iterations);
     attempt.mprgp.stagnation = attempt_stagnation_rule();
     u = solve_pvc_unified(s, attempt, options, kept);
-    if (!u.converged || u.breakdown) {
+    const auto failed = [](const PvcUnifiedResult& v) { return !v.converged || v.breakdown; };
+    if (failed(u)) {
       ++r.fallbacks;
       iterations += u.mprgp_iterations;
       r.staggered_iterations += u.staggered_iterations;
-      options.preconditioner = PreconditionerKind::ssor;
-      u = solve_pvc_unified(s, settings, options);
+      if (options.exact_contacts) {
+        // a fresh preconditioner (a kept one eliminates the contacts exactly)
+        options.exact_contacts = false;
+        u = solve_pvc_unified(s, attempt, options);
+        if (failed(u)) {
+          iterations += u.mprgp_iterations;
+          r.staggered_iterations += u.staggered_iterations;
+        }
+      }
+      if (failed(u)) {
+        options.preconditioner = PreconditionerKind::ssor;
+        u = solve_pvc_unified(s, settings, options);
+      }
     }
   } else {
     u = solve_pvc_unified(s, settings, options, kept);
