@@ -123,8 +123,8 @@ struct CoupledSolveResult {
   /// (CoupledSchemeOptions::preconditioner).
   long multigrid_systems = 0, ssor_systems = 0;
   /// Solves under "auto" whose block preconditioner did not converge within
-  /// multigrid_attempt_budget and that were solved again with SSOR (docs/preconditioners.md
-  /// section 20).
+  /// multigrid_attempt_budget and that were solved again (an MLCP first with the Jacobi contact
+  /// rows, then with SSOR; the fluid solves with SSOR; docs/preconditioners.md sections 20, 47).
   long fallbacks = 0;
   double max_stiffness = 0.0;
   /// Largest relative residual of the inner solves (PCG: ||r||_inf / ||b||_inf; MPRGP: projected
