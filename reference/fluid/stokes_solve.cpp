@@ -11,6 +11,7 @@
 
 #include "reference/fluid/stokes_preconditioner.hpp"
 #include "reference/fluid/stokes_system.hpp"
+#include "reference/fluid/stokes_warm_start.hpp"
 #include "reference/fluid/velocity_operator.hpp"
 
 namespace monolith {

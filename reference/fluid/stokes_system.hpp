@@ -386,11 +386,7 @@ struct StokesSolveOptions {
   StokesWorkspace* workspace = nullptr;
   /// Warm start: the initial (tau, p) read from these fields where the unknowns exist (a full
   /// StressGrid stress field, a cell pressure field; nullptr or a field of another size: zero).
-  /// The solve still stops at settings.tolerance (||r||_inf <= tolerance ||b||_inf, the cold
-  /// start's measure); only the starting residual changes. The gathered start is conditioned by
-  /// condition_stokes_warm_start (never a larger energy than zero's). Measured in
-  /// docs/preconditioners.md sections 33, 37, 45 and 46: no fewer iterations on the issue-15
-  /// bunny, up to about 20 % fewer on small viscous scenes; off in the simulator.
+  /// The solve still stops at settings.tolerance; only the starting residual changes.
   const VectorX* initial_stress = nullptr;
   const VectorX* initial_pressure = nullptr;
   /// With the multigrid preconditioner: give it multigrid_attempt_budget(max_iterations)
@@ -411,21 +407,6 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
                                StokesUnknowns unknowns, StressForm form,
                                Backend backend, const PcgSettings& settings,
                                VectorX& u, const StokesSolveOptions& options = {});
-
-/// The warm start made no worse than zero (docs/preconditioners.md section 46): the previous
-/// step's (tau, p) gathered onto this step's DOFs has rows whose residual is many times ||b||
-/// wherever the weights moved (a tau and p that cancelled on the previous weights no longer do).
-/// In place on x, for A x = b:
-///   1. up to `rounds` times: the rows with |b - A x|_i > ||b||_inf (where the start is worse
-///      than zero in PCG's measure) get one forward and one backward Gauss-Seidel sweep
-///      (a.forward_sweep / backward_sweep on those rows only, the others held);
-///   2. x <- alpha x with alpha = b.x / x.A x (x with a's null space projected out), the
-///      multiple of x of least energy 1/2 x.A x - b.x; alpha <= 0 or x.A x <= 0 give x = 0.
-/// So the start's energy is at most zero's (-1/2 (b.x)^2 / x.A x <= 0). A start whose residual
-/// is nowhere above ||b||_inf skips step 1 (a start from the solution itself stays one). x = 0
-/// or b = 0: unchanged. Costs `rounds` + 1 applications of A and up to 2 `rounds` sweeps; the
-/// same bits for any thread count (A's applications and sweeps are).
-void condition_stokes_warm_start(const LinearOperator& a, const VectorX& b, VectorX& x, int rounds = 3);
 
 /// The unknown vector x = (tau, p) of `dofs` read from a full stress field (StressGrid
 /// numbering; a layout unknown takes its DOF's value) and a cell pressure field; a field of

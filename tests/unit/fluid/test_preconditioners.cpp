@@ -14,6 +14,7 @@
 #include "reference/fluid/velocity_operator.hpp"
 #include "reference/solvers/pcg.hpp"
 #include "reference/fluid/stokes_system.hpp"
+#include "reference/fluid/stokes_warm_start.hpp"
 #include "tests/support/sparse_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
