@@ -5,11 +5,13 @@
 /// initial guess (warm start).
 
 #include <algorithm>
+#include <cmath>
 #include <memory>
 #include <optional>
 
 #include "reference/fluid/stokes_preconditioner.hpp"
 #include "reference/fluid/stokes_system.hpp"
+#include "reference/fluid/stokes_warm_start.hpp"
 #include "reference/fluid/velocity_operator.hpp"
 
 namespace monolith {
@@ -27,6 +29,31 @@ VectorX gather_stokes_unknowns(const StressLayout<Dim>& layout, const StokesDofs
       if (cell < pressure_cells.size()) x[dofs.num_stress() + k] = pressure_cells[cell];
     }
   return x;
+}
+
+void condition_stokes_warm_start(const LinearOperator& a, const VectorX& b, VectorX& x, int rounds) {
+  if (x.size() != a.size() || b.size() != a.size() || x.isZero(0.0) || b.isZero(0.0)) return;
+  const double b_norm = b.lpNorm<Eigen::Infinity>();
+  VectorX ax;
+  std::vector<char> worse(static_cast<std::size_t>(x.size()));
+  for (int k = 0; k < rounds; ++k) {
+    a.apply(x, ax);
+    bool any = false;
+    for (Eigen::Index i = 0; i < x.size(); ++i) {
+      worse[static_cast<std::size_t>(i)] = std::abs(b[i] - ax[i]) > b_norm;
+      any = any || worse[static_cast<std::size_t>(i)];
+    }
+    if (!any) break;
+    a.forward_sweep(b, x, 1.0, &worse);
+    a.backward_sweep(b, x, 1.0, &worse);
+  }
+  for (const VectorX& n : a.null_space()) x -= n.dot(x) * n;
+  a.apply(x, ax);
+  const double curvature = x.dot(ax), slope = b.dot(x);
+  if (curvature > 0.0 && slope > 0.0 && std::isfinite(curvature) && std::isfinite(slope))
+    x *= slope / curvature;
+  else
+    x.setZero();
 }
 
 template <int Dim>
@@ -72,6 +99,11 @@ StokesSolveResult solve_stokes(const MacGrid<Dim>& grid, const StokesWeights& w,
                                                              options.workspace
                                                                  ? &options.workspace->band
                                                                  : nullptr));
+  // a warm start no worse than zero (docs/preconditioners.md section 46), unless b is at its
+  // round-off (then x = 0 below, whatever the start)
+  if ((options.initial_stress || options.initial_pressure) && b.size() > 0 &&
+      b.lpNorm<Eigen::Infinity>() > pcg.zero_rhs)
+    condition_stokes_warm_start(*op, b, x);
   if (options.preconditioner == PreconditionerKind::ssor || dofs.size() == 0) {
     result.pcg = pcg_solve(*op, b, x, pcg);
   } else {

@@ -14,6 +14,7 @@
 #include "reference/fluid/velocity_operator.hpp"
 #include "reference/solvers/pcg.hpp"
 #include "reference/fluid/stokes_system.hpp"
+#include "reference/fluid/stokes_warm_start.hpp"
 #include "tests/support/sparse_helpers.hpp"
 #include "tests/support/test_helpers.hpp"
 
@@ -713,6 +714,105 @@ TEMPLATE_TEST_CASE_SIG("solve_stokes with the multigrid preconditioner: same upd
   CHECK(c.pcg.converged);
   CHECK(c.pcg.iterations <= 1);
   CHECK(rel_diff(u_warm, u_mg) < 1e-8);
+}
+
+TEMPLATE_TEST_CASE_SIG("the warm start's conditioning: never a larger energy than zero, a solution kept",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // condition_stokes_warm_start (docs/preconditioners.md section 46) on both back ends: a start
+  // far worse than zero (another u*'s solution with spikes of 1e4 times its size, as the floating
+  // pressures of near-empty cells) ends with an energy 1/2 x.A x - b.x at most zero's; the
+  // negated solution without the sweeps gives x = 0; the solution itself stays (to round-off)
+  CaseOptions o;
+  o.n = Dim == 2 ? 24 : 10;
+  o.eta = 5000.0;
+  const auto sc = make_case<Dim>(o);
+  const auto s = make_system(sc);
+  const StokesPreconditioner<Dim> m(sc.grid, *s.mf, stokes_factors(sc.grid, s.layout, sc.w, s.dofs, sc.dt, *s.mf),
+                                    small_options());
+  PcgSettings settings;
+  settings.tolerance = 1e-10;
+  settings.max_iterations = 100000;
+  const VectorX b = s.mf->rhs(sc.u_star);
+  const VectorX b_other = s.mf->rhs(VectorX(0.5 * sc.u_star + random_vector(sc.grid.num_faces(), 3)));
+  VectorX x_star, x_other;
+  REQUIRE(pcg_solve(*s.mf, b, x_star, settings, m).converged);
+  REQUIRE(pcg_solve(*s.mf, b_other, x_other, settings, m).converged);
+  const double spike = 1e4 * x_other.cwiseAbs().maxCoeff();
+  for (Eigen::Index i = 0; i < x_other.size(); i += 7) x_other[i] += spike;
+  for (const LinearOperator* a : {static_cast<const LinearOperator*>(s.mf.get()),
+                                  static_cast<const LinearOperator*>(s.ex.get())}) {
+    auto energy = [&](const VectorX& x) {
+      VectorX ax;
+      a->apply(x, ax);
+      return 0.5 * x.dot(ax) - b.dot(x);
+    };
+    auto residual = [&](const VectorX& x) {
+      VectorX ax;
+      a->apply(x, ax);
+      return (b - ax).cwiseAbs().maxCoeff() / b.cwiseAbs().maxCoeff();
+    };
+    VectorX x = x_other;
+    const double before = energy(x);
+    INFO("relative residual of the start " << residual(x) << ", energy " << before);
+    REQUIRE(residual(x) > 1e3);
+    condition_stokes_warm_start(*a, b, x);
+    CHECK(x.allFinite());
+    CHECK(energy(x) <= 0.0);
+    CHECK(energy(x) < 1e-6 * before);
+    VectorX negated = -x_star;  // without the sweeps (rounds 0): a negative best multiple
+    condition_stokes_warm_start(*a, b, negated, 0);
+    CHECK(negated.isZero(0.0));
+    VectorX kept = x_star;
+    condition_stokes_warm_start(*a, b, kept);
+    CHECK(rel_diff(kept, x_star) < 1e-12);
+    CHECK(residual(kept) < 1e-8);
+  }
+}
+
+TEMPLATE_TEST_CASE_SIG("a warm start far from the solution: the cold solve's solution, the same bits on 1 and 2 threads",
+                       "[unit]", ((int Dim), Dim), 2, 3) {
+  // solve_stokes from the previous (tau, p) of another u* with spiked pressures (near-empty
+  // cells' floating values): converged to the cold start's measure, the same update as cold,
+  // and bitwise the same on 1 and 2 threads
+  CaseOptions o;
+  o.n = Dim == 2 ? 24 : 10;
+  o.eta = 5000.0;
+  const auto sc = make_case<Dim>(o);
+  PcgSettings settings;
+  settings.tolerance = 1e-9;
+  settings.max_iterations = 100000;
+  const StokesPreconditionerOptions small = small_options();
+  StokesSolveOptions mg;
+  mg.preconditioner = PreconditionerKind::multigrid;
+  mg.multigrid = &small;
+  VectorX u_cold = sc.u_star, u_other = 0.5 * sc.u_star + random_vector(sc.grid.num_faces(), 3);
+  const auto cold = solve_stokes(sc.grid, sc.w, sc.dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
+                                 Backend::matrix_free, settings, u_cold, mg);
+  const auto other = solve_stokes(sc.grid, sc.w, sc.dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
+                                  Backend::matrix_free, settings, u_other, mg);
+  REQUIRE(cold.pcg.converged);
+  REQUIRE(other.pcg.converged);
+  VectorX pressure = other.pressure;
+  const double spike = 1e6 * std::max(1.0, pressure.cwiseAbs().maxCoeff());
+  for (Eigen::Index c = 0; c < pressure.size(); c += 5) pressure[c] += spike;
+  mg.initial_stress = &other.stress;
+  mg.initial_pressure = &pressure;
+  const int threads = omp_get_max_threads();
+  std::vector<VectorX> u(2, sc.u_star);
+  std::vector<int> iterations(2);
+  for (int t = 0; t < 2; ++t) {
+    omp_set_num_threads(t + 1);
+    const auto warm = solve_stokes(sc.grid, sc.w, sc.dt, StokesUnknowns::pressure_and_stress, StressForm::reduced,
+                                   Backend::matrix_free, settings, u[t], mg);
+    CHECK(warm.pcg.converged);
+    CHECK(warm.pcg.relative_residual <= settings.tolerance);
+    iterations[t] = warm.pcg.iterations;
+  }
+  omp_set_num_threads(threads);
+  INFO("iterations cold " << cold.pcg.iterations << ", warm " << iterations[0]);
+  CHECK(rel_diff(u[0], u_cold) < 1e-6);
+  CHECK(iterations[0] == iterations[1]);
+  CHECK(std::memcmp(u[0].data(), u[1].data(), sizeof(double) * u[0].size()) == 0);
 }
 
 TEMPLATE_TEST_CASE_SIG("at eta = 5000 the block preconditioner needs at most 60 iterations, SSOR more",
