@@ -1840,7 +1840,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
                                             const SolidField<Dim>& solids,
                                             const std::array<BoundaryType, 2 * Dim>& boundary,
                                             SurfaceDeficits surface_deficits,
-                                            KeptZeros& move_scratch) {
+                                            KeptZeros& move_scratch,
+                                            const SolidField<Dim>* held_near, double held_reach) {
   DensityProjectionStats stats;
   const long np = static_cast<long>(particles.size());
   if (np == 0) return stats;
@@ -2154,6 +2155,8 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
   UnsetVector<int> row_entries(n);
   // (the surface band's deficits listed by to_solve: flagged per row, e before the share)
   const bool listing = surface_deficits == SurfaceDeficits::to_solve;
+  const bool holding = held_near != nullptr && !held_near->empty() && held_reach > 0.0;
+  const double held_distance = held_reach * dx;
   std::vector<unsigned char> listed_deficit(listing ? n : 0, 0);
   std::vector<double> deficit_before_share(listing ? n : 0, 0.0);
   VectorX rhs(n);
@@ -2214,7 +2217,10 @@ DensityProjectionStats project_density_once(Particles<Dim>& particles, const Mac
     // corrected by deficit_share (1 by default; the measurement switches: 0, or the dead band's
     // share, docs/particles.md "Sloshing").
     double e = *rho.find(ci) - v[kTarget];
-    if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide)
+    if (holding && held_near->distance(grid.cell_center(ci)) < held_distance)
+      // (the cells beside a moving body: not corrected, see project_particle_density)
+      e = 0.0;
+    else if ((solids.empty() ? v[kTarget] : v[kWet]) < kProjectionAirSide)
       e = std::max(e, 0.0);
     else if (v[kTarget] < kProjectionFullCell && e < 0.0) {
       if (surface_deficits == SurfaceDeficits::to_solve) {
@@ -2385,13 +2391,16 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
                                                 const std::array<BoundaryType, 2 * Dim>& boundary,
                                                 int iterations,
                                                 SurfaceDeficits surface_deficits,
-                                                KeptZeros* move_scratch) {
+                                                KeptZeros* move_scratch,
+                                                const SolidField<Dim>* held_near,
+                                                double held_reach) {
   DensityProjectionStats total;
   KeptZeros own;  // the displacement's storage when the caller keeps none (over the iterations)
   KeptZeros& scratch = move_scratch ? *move_scratch : own;
   for (int it = 0; it < iterations; ++it) {
     const DensityProjectionStats one = project_density_once(
-        particles, grid, lattice, fluid_face, solids, boundary, surface_deficits, scratch);
+        particles, grid, lattice, fluid_face, solids, boundary, surface_deficits, scratch,
+        held_near, held_reach);
     if (it == 0)
       total = one;
     else {
@@ -3038,7 +3047,7 @@ double max_particle_speed(const Particles<Dim>& particles) {
   template DensityProjectionStats project_particle_density(                                        \
       Particles<D>&, const MacGrid<D>&, const SampleLattice<D>&, const VectorX&,                   \
       const SolidField<D>&, const std::array<BoundaryType, 2 * D>&, int, SurfaceDeficits,          \
-      KeptZeros*);                                                                                 \
+      KeptZeros*, const SolidField<D>*, double);                                                   \
   template void liquid_phi_on_lattice(const Particles<D>&, const MacGrid<D>&,                     \
                                        const SampleLattice<D>&,                                    \
                                        const std::array<BoundaryType, 2 * D>&,                     \

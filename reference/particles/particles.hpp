@@ -250,6 +250,14 @@ enum class SurfaceDeficits {
 /// zeroes only those, so after the first call no page beyond the liquid's faces is touched, and
 /// the first call's zeros come from the kernel). Without it every call makes its own (one per
 /// call, kept over its iterations). The results are the same bits either way.
+/// `held_near`, `held_reach` (rise26, docs/derivations.md departures item 25): a cell whose centre
+/// lies closer than held_reach dx to `held_near` (the moving bodies at their new pose) keeps its
+/// error e_c uncorrected (0 on the right-hand side). Beside a body that moved this step the target
+/// (the particle level set cut by the body) and the particles' splat disagree by the body's own
+/// sweep: under a rising box an excess, over it a deficit, every step; correcting them moved that
+/// volume around the body and lifted it by the body's height, energy line 15's payment then took
+/// from the flow the body drives (docs/particles.md "A rising body and line 15's payment").
+/// nullptr or held_reach <= 0: every cell corrected (the behaviour before).
 template <int Dim>
 DensityProjectionStats project_particle_density(Particles<Dim>& particles, const MacGrid<Dim>& grid,
                                                 const SampleLattice<Dim>& lattice,
@@ -259,7 +267,9 @@ DensityProjectionStats project_particle_density(Particles<Dim>& particles, const
                                                 int iterations = 1,
                                                 SurfaceDeficits surface_deficits =
                                                     SurfaceDeficits::all,
-                                                KeptZeros* move_scratch = nullptr);
+                                                KeptZeros* move_scratch = nullptr,
+                                                const SolidField<Dim>* held_near = nullptr,
+                                                double held_reach = 0.0);
 
 /// Iterations of project_particle_density applied to freshly seeded particles (the simulation
 /// does this once before frame 0, so the particle volume and the level set's agree from the

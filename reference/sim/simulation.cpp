@@ -2095,9 +2095,13 @@ template <int Dim>
 void Simulation<Dim>::rebuild_solid_field() {
   ScopedTimer timer(stats_.timing[FramePhase::weights]);
   std::vector<ShapePtr<Dim>> shapes = solid_shapes_;
+  std::vector<ShapePtr<Dim>> moving;
   for (const auto& b : rigid_->bodies())
-    if (b.moves()) shapes.push_back(b.posed_shape());
+    if (b.moves()) moving.push_back(b.posed_shape());
+  shapes.insert(shapes.end(), moving.begin(), moving.end());
   solids_ = make_solid_field<Dim>(shapes, grid_.dx());
+  // (departures item 25: the cells beside these keep their density error through line 15)
+  moving_solids_ = make_solid_field<Dim>(moving, grid_.dx());
   solid_field_shapes_ = shapes;
   solid_field_boxes_.clear();
   for (const auto& sh : shapes) solid_field_boxes_.push_back(sh->bounds());
@@ -2414,7 +2418,8 @@ void Simulation<Dim>::correct_volume(double dt) {
     volume_errors_ =
         project_particle_density(particles_, grid_, lattice_, weights_.fluid_face, solids_,
                                  boundary_, 1, switches_.density_projection_surface_deficits,
-                                 &density_move_)
+                                 &density_move_, coupled_ ? &moving_solids_ : nullptr,
+                                 switches_.density_held_beside_moving_bodies)
             .surface_deficits;
   if (free_centre) {
     // (the moves are a small part of a cell, far below the margin: the shifted liquid still

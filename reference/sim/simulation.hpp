@@ -200,6 +200,15 @@ struct StageSwitches {
   bool line15_lift_within_energy = true;
   /// Line15Energy::balance_local's neighbourhoods: boxes of (2 reach + 1)^Dim cells
   int line15_pay_reach = 1;
+  /// (docs/derivations.md departures item 25, rise26) Line 15's density projection leaves the
+  /// error of every cell whose centre lies closer than this many dx to a moving body (at its new
+  /// pose) uncorrected. There the particle level set cut by the body and the particles' splat
+  /// disagree by the body's sweep of the step (an excess under a rising box, a deficit over it),
+  /// and correcting it lifted liquid past the body every step: about the energy the body's
+  /// buoyancy releases, which line 15's payment took from the flow, so a light box released near
+  /// the floor stalled in 3D (check25; docs/particles.md "A rising body and line 15's payment").
+  /// 0: every cell corrected (the behaviour before). Scenes without moving bodies never read it.
+  double density_held_beside_moving_bodies = 1.5;
   /// A test switch: false makes the per-step passes that follow the liquid and the moving bodies
   /// dense again (issue 20, docs/benchmarks.md "eleventh part"): the faces in solids searched in
   /// the whole union's box every step with every shape's normal evaluated, the liquid level
@@ -643,6 +652,9 @@ class Simulation : public AnySimulation {
   // the solid level set on the half lattice, rebuilt at every pose when bodies move
   std::vector<ShapePtr<Dim>> solid_shapes_;
   SolidField<Dim> solids_;
+  /// the moving bodies alone at their pose (rebuild_solid_field; empty without moving bodies):
+  /// the density projection of line 15 leaves the cells beside them uncorrected (departures item 25)
+  SolidField<Dim> moving_solids_;
   /// (empty outside update_step_weights in coupled scenes: made again at every pose)
   VectorX solid_phi_;
   /// Inclusive box of the lattice points where solid_phi_ may be < 0 (lo > hi: none); set
