@@ -275,6 +275,13 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// unknown). The other rows of the scratch vectors stay zero, so a liquid filling a small part
   /// of the grid costs in proportion to its rows, not to the grid.
   std::array<std::vector<int>, kFields> active_rows_;
+  /// per field, parallel to active_rows_: the span [first, last + 1) along axis 0 of the
+  /// row's entries that can be non-zero (face rows: C_f != 0; stress and cell rows: an unknown;
+  /// the eliminated component: a cell with a diagonal unknown). The passes visit the spans only
+  /// (box26): outside them every pass wrote a zero (scatter, the sweeps, C_f's zero times a sum)
+  /// or a value no pass reads (grid_from_faces away from unknowns), so a row as long as the box
+  /// costs what its liquid holds. All of axis 0 on a periodic axis 0.
+  std::array<std::vector<std::pair<int, int>>, kFields> active_spans_;
   /// per face axis, the rows with a face the velocity update changes (W_F^u W_L^u > 0 and a
   /// density): updated_velocities_into computes B x there only
   std::array<std::vector<int>, Dim> updated_rows_;
