@@ -334,6 +334,9 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   else
     face_coefficient_.resize(num_faces_);
   std::array<std::vector<char>, Dim> face_row_used;
+  // the passes visit whole rows on a periodic axis 0 (their wrapped reads) and under the test
+  // switch (the former passes, for the tests' comparison)
+  const bool whole_rows = periodic_[0] || stokes_operator_every_face_row();
   // per face row, the span of its faces with C_f != 0 (box26)
   std::array<std::vector<std::pair<int, int>>, Dim> face_row_span;
   for (int a = 0; a < Dim; ++a) {
@@ -342,6 +345,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     face_row_used[a].assign(rows, 0);
     face_row_span[a].assign(rows, {0, 0});
     std::vector<char> updated(rows, 0);
+    std::vector<std::pair<int, int>> updated_span(rows, {0, 0});
     // the rows computed: all, or those of the band's box (increasing)
     std::vector<int> band_rows;
     if (band) {
@@ -367,21 +371,26 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     for (int m = 0; m < count; ++m) {
       const int r = band ? band_rows[m] : m;
       bool used = false, update = false;
-      int first = n0, last = -1;
+      int first = n0, last = -1, first_updated = n0, last_updated = -1;
       for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0; ++e) {
         const double c = stokes_face_coefficient(w.pressure, e, dt);
         face_coefficient_[e] = c;
+        const int x = e - f.offset - r * n0;
         if (c != 0.0) {
-          const int x = e - f.offset - r * n0;
           first = std::min(first, x);
           last = x;
         }
         used = used || c != 0.0;
-        update = update || stokes_face_updated(w.pressure, e);
+        if (stokes_face_updated(w.pressure, e)) {
+          update = true;
+          first_updated = std::min(first_updated, x);
+          last_updated = x;
+        }
       }
       face_row_used[a][r] = used;
       face_row_span[a][r] = {first, last + 1};
       updated[r] = update;
+      updated_span[r] = {first_updated, last_updated + 1};
     }
     // the spans written, for the workspace (consecutive rows merged)
     for (int m = 0; m < count; ++m) {
@@ -392,7 +401,10 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
         coefficient_spans_.emplace_back(begin, begin + n0);
     }
     for (int r = 0; r < rows; ++r)
-      if (updated[r]) updated_rows_[a].push_back(r);
+      if (updated[r]) {
+        updated_rows_[a].push_back(r);
+        updated_spans_[a].push_back(whole_rows ? std::pair<int, int>(0, n0) : updated_span[r]);
+      }
   }
   for (int j = 0; j < layout.num_components(); ++j) layout_field_.push_back(Dim + layout.component(j));
   // B^T per grid DOF: the rows of D (eq. (8)) and of G^T, +-1/dx on faces around the DOF
@@ -501,7 +513,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     for (int r = 0; r < static_cast<int>(face_row_used[a].size()); ++r)
       if (face_row_used[a][r]) {
         active_rows_[a].push_back(r);
-        active_spans_[a].push_back(periodic_[0] ? std::pair<int, int>(0, fields_[a].dims[0])
+        active_spans_[a].push_back(whole_rows ? std::pair<int, int>(0, fields_[a].dims[0])
                                                 : face_row_span[a][r]);
       }
   {
@@ -533,7 +545,7 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
         if (row_used[field][r]) {
           active_rows_[field].push_back(r);
           active_spans_[field].push_back(
-              periodic_[0] ? std::pair<int, int>(0, fields_[field].dims[0]) : row_span[field][r]);
+              whole_rows ? std::pair<int, int>(0, fields_[field].dims[0]) : row_span[field][r]);
         }
   }
   for (int field = 0; field < kFields; ++field)
@@ -1104,15 +1116,18 @@ void MatrixFreeStokesOperator<Dim>::updated_velocities_into(const VectorX& x,
   {
     scatter(x, s, q);
 #pragma omp barrier
+    // (box26: on the spans of updated faces; every other face gets u* below)
     for (int a = 0; a < Dim; ++a)
       stencil_rows<Dim>(fields_[a], force, terms_[a], fields_, data, periodic_, nullptr,
-                        &updated_rows_[a]);
+                        &updated_rows_[a], &updated_spans_[a]);
   }
   for (int a = 0; a < Dim; ++a) {
     const Field& f = fields_[a];
     const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
-    std::vector<char> updated(rows, 0);
-    for (int r : updated_rows_[a]) updated[r] = 1;
+    // per row: 1 + the index of its span of updated faces, or 0
+    std::vector<int> updated(rows, 0);
+    for (std::size_t m = 0; m < updated_rows_[a].size(); ++m)
+      updated[updated_rows_[a][m]] = static_cast<int>(m) + 1;
 #pragma omp parallel for schedule(static) num_threads(team_threads(f.dims.prod()))
     for (int r = 0; r < rows; ++r) {
       const int begin = f.offset + r * n0, end = begin + n0;
@@ -1120,7 +1135,12 @@ void MatrixFreeStokesOperator<Dim>::updated_velocities_into(const VectorX& x,
         std::copy(u_star.data() + begin, u_star.data() + end, u.data() + begin);
         continue;
       }
-      for (int e = begin; e < end; ++e) {
+      // u* beyond the span (no face there is updated), the update's test on the span
+      const std::pair<int, int>& span = updated_spans_[a][updated[r] - 1];
+      std::copy(u_star.data() + begin, u_star.data() + begin + span.first, u.data() + begin);
+      std::copy(u_star.data() + begin + span.second, u_star.data() + end,
+                u.data() + begin + span.second);
+      for (int e = begin + span.first; e < begin + span.second; ++e) {
         if (!(pw.fluid_face[e] * pw.liquid_face[e] > 0.0) || !(pw.face_density[e] > 0.0))
           u[e] = u_star[e];
         else
