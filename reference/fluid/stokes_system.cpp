@@ -202,12 +202,15 @@ constexpr int kParallelMin = static_cast<int>(kParallelMinWork);
 /// `of` (zero where an input lies outside the domain, wrapped on periodic axes), then times
 /// scale entrywise if given. Shares the rows along axis 0 of `of` among the threads of the
 /// enclosing parallel region (omp for, no barrier at the end): each row has one writer, and
-/// every entry sums its terms in the same order, whatever the thread count.
+/// every entry sums its terms in the same order, whatever the thread count. With `spans`
+/// (parallel to row_list) only the entries [first, second) of each row are computed, with the
+/// bits the whole row's pass gives them; the others are left as they are (box26).
 template <int Dim, class FieldT, class TermT, std::size_t N>
 void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms,
                   const std::array<FieldT, N>& fields, const std::array<const double*, N>& data,
                   const std::array<bool, Dim>& periodic, const double* scale,
-                  const std::vector<int>* row_list) {
+                  const std::vector<int>* row_list,
+                  const std::vector<std::pair<int, int>>* spans = nullptr) {
   const int n0 = of.dims[0];
   int rows = 1;
   for (int a = 1; a < Dim; ++a) rows *= of.dims[a];
@@ -224,7 +227,9 @@ void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms
       rest /= of.dims[a];
     }
     double* o = out + of.offset + static_cast<std::ptrdiff_t>(r) * n0;
-    for (int x = 0; x < n0; ++x) o[x] = 0.0;
+    // the entries computed: the row's span, or all of it
+    const int x_lo = spans ? (*spans)[m].first : 0, x_hi = spans ? (*spans)[m].second : n0;
+    for (int x = x_lo; x < x_hi; ++x) o[x] = 0.0;
     for (const TermT& t : terms) {
       // the input row: shifted along axes 1.., wrapped on periodic axes, or outside
       const FieldT& f = fields[t.field];
@@ -244,16 +249,16 @@ void stencil_rows(const FieldT& of, double* out, const std::vector<TermT>& terms
       const double* in = data[t.field] + f.offset + static_cast<std::ptrdiff_t>(row) * m0;
       const int shift = t.axis == 0 ? t.delta : 0;
       const double coef = t.coef;
-      const int lo = std::max(0, -shift), hi = std::min(n0, m0 - shift);
+      const int lo = std::max(x_lo, -shift), hi = std::min(x_hi, m0 - shift);
       for (int x = lo; x < hi; ++x) o[x] += coef * in[x + shift];
       if (periodic[0]) {
-        for (int x = 0; x < lo; ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
-        for (int x = std::max(hi, lo); x < n0; ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
+        for (int x = x_lo; x < std::min(lo, x_hi); ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
+        for (int x = std::max(hi, lo); x < x_hi; ++x) o[x] += coef * in[((x + shift) % m0 + m0) % m0];
       }
     }
     if (scale) {
       const double* sc = scale + of.offset + static_cast<std::ptrdiff_t>(r) * n0;
-      for (int x = 0; x < n0; ++x) o[x] *= sc[x];
+      for (int x = x_lo; x < x_hi; ++x) o[x] *= sc[x];
     }
   }
 }
@@ -329,11 +334,18 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   else
     face_coefficient_.resize(num_faces_);
   std::array<std::vector<char>, Dim> face_row_used;
+  // the passes visit whole rows on a periodic axis 0 (their wrapped reads) and under the test
+  // switch (the former passes, for the tests' comparison)
+  const bool whole_rows = periodic_[0] || stokes_operator_every_face_row();
+  // per face row, the span of its faces with C_f != 0 (box26)
+  std::array<std::vector<std::pair<int, int>>, Dim> face_row_span;
   for (int a = 0; a < Dim; ++a) {
     const Field& f = fields_[a];
     const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
     face_row_used[a].assign(rows, 0);
+    face_row_span[a].assign(rows, {0, 0});
     std::vector<char> updated(rows, 0);
+    std::vector<std::pair<int, int>> updated_span(rows, {0, 0});
     // the rows computed: all, or those of the band's box (increasing)
     std::vector<int> band_rows;
     if (band) {
@@ -359,14 +371,26 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
     for (int m = 0; m < count; ++m) {
       const int r = band ? band_rows[m] : m;
       bool used = false, update = false;
+      int first = n0, last = -1, first_updated = n0, last_updated = -1;
       for (int e = f.offset + r * n0; e < f.offset + (r + 1) * n0; ++e) {
         const double c = stokes_face_coefficient(w.pressure, e, dt);
         face_coefficient_[e] = c;
+        const int x = e - f.offset - r * n0;
+        if (c != 0.0) {
+          first = std::min(first, x);
+          last = x;
+        }
         used = used || c != 0.0;
-        update = update || stokes_face_updated(w.pressure, e);
+        if (stokes_face_updated(w.pressure, e)) {
+          update = true;
+          first_updated = std::min(first_updated, x);
+          last_updated = x;
+        }
       }
       face_row_used[a][r] = used;
+      face_row_span[a][r] = {first, last + 1};
       updated[r] = update;
+      updated_span[r] = {first_updated, last_updated + 1};
     }
     // the spans written, for the workspace (consecutive rows merged)
     for (int m = 0; m < count; ++m) {
@@ -377,7 +401,10 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
         coefficient_spans_.emplace_back(begin, begin + n0);
     }
     for (int r = 0; r < rows; ++r)
-      if (updated[r]) updated_rows_[a].push_back(r);
+      if (updated[r]) {
+        updated_rows_[a].push_back(r);
+        updated_spans_[a].push_back(whole_rows ? std::pair<int, int>(0, n0) : updated_span[r]);
+      }
   }
   for (int j = 0; j < layout.num_components(); ++j) layout_field_.push_back(Dim + layout.component(j));
   // B^T per grid DOF: the rows of D (eq. (8)) and of G^T, +-1/dx on faces around the DOF
@@ -478,31 +505,48 @@ MatrixFreeStokesOperator<Dim>::MatrixFreeStokesOperator(const MacGrid<Dim>& grid
   // eliminated component: rows of cells with an unknown of a diagonal component 0..Dim-2), found
   // from the unknowns' locations (a row is visited iff it holds one), in increasing order: the
   // rows a scan of the maps over the grid finds, in time proportional to the unknowns and rows
+  //
+  // With each row its span along axis 0 (box26): the faces with C_f != 0, the entries with an
+  // unknown (the eliminated component: the cells with a diagonal unknown); the whole row on a
+  // periodic axis 0 (the passes' wrapped reads are then not confined to a span)
   for (int a = 0; a < Dim; ++a)
     for (int r = 0; r < static_cast<int>(face_row_used[a].size()); ++r)
-      if (face_row_used[a][r]) active_rows_[a].push_back(r);
+      if (face_row_used[a][r]) {
+        active_rows_[a].push_back(r);
+        active_spans_[a].push_back(whole_rows ? std::pair<int, int>(0, fields_[a].dims[0])
+                                                : face_row_span[a][r]);
+      }
   {
     std::array<std::vector<char>, kFields> row_used;
+    std::array<std::vector<std::pair<int, int>>, kFields> row_span;
     for (int field = Dim; field < kFields; ++field) {
       if (num_stress_ == 0 && field < kCellField) continue;
       const Field& f = fields_[field];
       row_used[field].assign(f.dims.prod() / std::max(f.dims[0], 1), 0);
+      row_span[field].assign(row_used[field].size(), {f.dims[0], 0});
     }
+    const auto use = [&](int field, int e) {
+      const int n0 = fields_[field].dims[0], r = e / n0, x = e - r * n0;
+      row_used[field][r] = 1;
+      std::pair<int, int>& span = row_span[field][r];
+      span.first = std::min(span.first, x);
+      span.second = std::max(span.second, x + 1);
+    };
     for (int i = 0; i < num_stress_; ++i) {
       const int d = location_[i];
       const int k = stress.coord(d).first;
       const int e = d - fields_[Dim + k].offset;
-      row_used[Dim + k][e / fields_[Dim + k].dims[0]] = 1;
-      if (eliminated_ >= 0 && k < Dim - 1) {
-        const Field& el = fields_[Dim + eliminated_];
-        row_used[Dim + eliminated_][e / el.dims[0]] = 1;
-      }
+      use(Dim + k, e);
+      if (eliminated_ >= 0 && k < Dim - 1) use(Dim + eliminated_, e);
     }
-    for (int k = 0; k < dofs.num_pressure(); ++k)
-      row_used[kCellField][dofs.pressure.cell_of_dof[k] / fields_[kCellField].dims[0]] = 1;
+    for (int k = 0; k < dofs.num_pressure(); ++k) use(kCellField, dofs.pressure.cell_of_dof[k]);
     for (int field = Dim; field < kFields; ++field)
       for (int r = 0; r < static_cast<int>(row_used[field].size()); ++r)
-        if (row_used[field][r]) active_rows_[field].push_back(r);
+        if (row_used[field][r]) {
+          active_rows_[field].push_back(r);
+          active_spans_[field].push_back(
+              whole_rows ? std::pair<int, int>(0, fields_[field].dims[0]) : row_span[field][r]);
+        }
   }
   for (int field = 0; field < kFields; ++field)
     active_work_ += static_cast<long>(active_rows_[field].size()) * fields_[field].dims[0];
@@ -644,11 +688,12 @@ void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double*
   for (int field : layout_field_) {
     const Field& f = fields_[field];
     const std::vector<int>& rows = active_rows_[field];
+    const std::vector<std::pair<int, int>>& spans = active_spans_[field];
     const int count = static_cast<int>(rows.size());
 #pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
     for (int m = 0; m < count; ++m) {
       const int start = f.offset + rows[m] * f.dims[0];
-      for (int d = start; d < start + f.dims[0]; ++d) {
+      for (int d = start + spans[m].first; d < start + spans[m].second; ++d) {
         const int u = unknown_of_dof_[d];
         s[d] = u >= 0 ? weight_[u] * x[u] : 0.0;
       }
@@ -658,11 +703,12 @@ void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double*
     // the eliminated diagonal DOF is minus the sum of the other diagonal unknowns of its cell
     const int base = fields_[Dim + eliminated_].offset;
     const std::vector<int>& rows = active_rows_[Dim + eliminated_];
+    const std::vector<std::pair<int, int>>& spans = active_spans_[Dim + eliminated_];
     const int count = static_cast<int>(rows.size());
     const int n0 = fields_[Dim + eliminated_].dims[0];
 #pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
     for (int m = 0; m < count; ++m)
-      for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+      for (int c = rows[m] * n0 + spans[m].first; c < rows[m] * n0 + spans[m].second; ++c) {
         double sum = 0.0;
         for (int k = 0; k < Dim - 1; ++k) {
           const int u = unknown_of_dof_[fields_[Dim + k].offset + c];
@@ -674,11 +720,12 @@ void MatrixFreeStokesOperator<Dim>::scatter(const VectorX& x, double* s, double*
   if (!has_pressure_) return;
   // q = W_L^p p
   const std::vector<int>& rows = active_rows_[kCellField];
+  const std::vector<std::pair<int, int>>& spans = active_spans_[kCellField];
   const int count = static_cast<int>(rows.size());
   const int n0 = fields_[kCellField].dims[0];
 #pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
   for (int m = 0; m < count; ++m)
-    for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+    for (int c = rows[m] * n0 + spans[m].first; c < rows[m] * n0 + spans[m].second; ++c) {
       const int u = unknown_of_cell_[c] - 1;
       q[c] = u >= 0 ? weight_[u] * x[u] : 0.0;
     }
@@ -694,7 +741,8 @@ void MatrixFreeStokesOperator<Dim>::faces_from_grid(const double* s, const doubl
   for (int a = 0; a < Dim; ++a)
     stencil_rows<Dim>(fields_[a], force, terms_[a], fields_, data, periodic_,
                       scale_by_c ? face_coefficient_.data() : nullptr,
-                      all_rows ? nullptr : &active_rows_[a]);
+                      all_rows ? nullptr : &active_rows_[a],
+                      all_rows ? nullptr : &active_spans_[a]);
 }
 
 template <int Dim>
@@ -702,15 +750,18 @@ void MatrixFreeStokesOperator<Dim>::grid_from_faces(const double* v, double* s, 
   std::array<const double*, kFields> data{};
   for (int a = 0; a < Dim; ++a) data[a] = v;
   // D v on the components the unknowns use (and the eliminated one), G^T v on the cells
+  // (box26: on the rows' spans of unknowns only; gather reads nothing else, and scatter's
+  // zeros beyond them are never overwritten)
   for (int field : layout_field_)
     stencil_rows<Dim>(fields_[field], s, terms_[field], fields_, data, periodic_, nullptr,
-                      &active_rows_[field]);
+                      &active_rows_[field], &active_spans_[field]);
   if (eliminated_ >= 0)
     stencil_rows<Dim>(fields_[Dim + eliminated_], s, terms_[Dim + eliminated_], fields_, data,
-                      periodic_, nullptr, &active_rows_[Dim + eliminated_]);
+                      periodic_, nullptr, &active_rows_[Dim + eliminated_],
+                      &active_spans_[Dim + eliminated_]);
   if (has_pressure_)
     stencil_rows<Dim>(fields_[kCellField], q, terms_[kCellField], fields_, data, periodic_,
-                      nullptr, &active_rows_[kCellField]);
+                      nullptr, &active_rows_[kCellField], &active_spans_[kCellField]);
 }
 
 template <int Dim>
@@ -720,6 +771,7 @@ void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, con
   for (int field : layout_field_) {
     const Field& f = fields_[field];
     const std::vector<int>& rows = active_rows_[field];
+    const std::vector<std::pair<int, int>>& spans = active_spans_[field];
     const int count = static_cast<int>(rows.size());
     const int n0 = f.dims[0];
     const bool reduced_diagonal = eliminated_ >= 0 && field - Dim < Dim;
@@ -727,7 +779,7 @@ void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, con
     // one writer per unknown: its weight times (D v) at its DOF, plus 1/2 N^-1 W^s x
 #pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
     for (int m = 0; m < count; ++m)
-      for (int e = rows[m] * n0; e < (rows[m] + 1) * n0; ++e) {
+      for (int e = rows[m] * n0 + spans[m].first; e < rows[m] * n0 + spans[m].second; ++e) {
         const int u = unknown_of_dof_[f.offset + e];
         if (u < 0) continue;
         double value = weight_[u] * s[f.offset + e];
@@ -747,11 +799,12 @@ void MatrixFreeStokesOperator<Dim>::gather(const double* s, const double* q, con
   }
   if (!has_pressure_) return;
   const std::vector<int>& rows = active_rows_[kCellField];
+  const std::vector<std::pair<int, int>>& spans = active_spans_[kCellField];
   const int n0 = fields_[kCellField].dims[0];
   const int count = static_cast<int>(rows.size());
 #pragma omp for schedule(dynamic, dynamic_chunk(count)) nowait
   for (int m = 0; m < count; ++m)
-    for (int c = rows[m] * n0; c < (rows[m] + 1) * n0; ++c) {
+    for (int c = rows[m] * n0 + spans[m].first; c < rows[m] * n0 + spans[m].second; ++c) {
       const int u = unknown_of_cell_[c] - 1;
       if (u >= 0) y[u] = weight_[u] * q[c];
     }
@@ -809,7 +862,9 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
   const double* b_rhs = rhs.data();
   double* xs = x.data();
   const bool periodic0 = periodic_[0];
-  auto relax_row = [&](int r, int parity) {
+  const std::vector<std::pair<int, int>>& spans = active_spans_[field];
+  auto relax_row = [&](int m_row, int parity) {
+    const int r = active_rows_[field][m_row];
     VecI<Dim> c = VecI<Dim>::Zero();
     int rest = r, sum = 0;
     for (int a = 1; a < Dim; ++a) {
@@ -830,10 +885,12 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
     };
     add_terms(field, false);
     if (reduced_diagonal) add_terms(Dim + eliminated_, true);
-    // the entries of this colour: coordinate sum of the given parity
-    const int first = (parity + sum) % 2;
-    if (first >= n0) return;
-    const int last = first + 2 * ((n0 - 1 - first) / 2);
+    // the entries of this colour: coordinate sum of the given parity, in the row's span of
+    // unknowns (box26: every entry outside it has none and is skipped below)
+    const int span_lo = spans[m_row].first, span_hi = spans[m_row].second;
+    const int first = span_lo + (span_lo + parity + sum) % 2;
+    if (first >= span_hi) return;
+    const int last = first + 2 * ((span_hi - 1 - first) / 2);
     const int base = f.offset + r * n0;
     // within an independent group the order does not matter: ascending (memory order) then
     const bool descending = reverse && !colouring_valid_;
@@ -913,14 +970,14 @@ void MatrixFreeStokesOperator<Dim>::sweep_block(int field, bool reverse, const V
     // busy from holding up the other
     for (int parity : {first_colour, second_colour}) {
 #pragma omp for schedule(dynamic, dynamic_chunk(count))
-      for (int m = 0; m < count; ++m) relax_row(row_list[m], parity);
+      for (int m = 0; m < count; ++m) relax_row(m, parity);
     }
   } else if (!reverse) {
-    for (int m = 0; m < count; ++m) relax_row(row_list[m], first_colour);
-    for (int m = 0; m < count; ++m) relax_row(row_list[m], second_colour);
+    for (int m = 0; m < count; ++m) relax_row(m, first_colour);
+    for (int m = 0; m < count; ++m) relax_row(m, second_colour);
   } else {
-    for (int m = count - 1; m >= 0; --m) relax_row(row_list[m], first_colour);
-    for (int m = count - 1; m >= 0; --m) relax_row(row_list[m], second_colour);
+    for (int m = count - 1; m >= 0; --m) relax_row(m, first_colour);
+    for (int m = count - 1; m >= 0; --m) relax_row(m, second_colour);
   }
 }
 
@@ -971,7 +1028,13 @@ void MatrixFreeStokesOperator<Dim>::zero_active_face_rows(double* force) const {
   for (int a = 0; a < Dim; ++a) {
     const Field& f = fields_[a];
     const int n0 = f.dims[0];
-    for (int r : active_rows_[a]) std::fill(force + f.offset + r * n0, force + f.offset + (r + 1) * n0, 0.0);
+    // (box26: the spans with C_f != 0 only; beyond them no pass writes the force, which keeps
+    // the zeros the scratch was made with)
+    for (std::size_t m = 0; m < active_rows_[a].size(); ++m) {
+      const int start = f.offset + active_rows_[a][m] * n0;
+      std::fill(force + start + active_spans_[a][m].first,
+                force + start + active_spans_[a][m].second, 0.0);
+    }
   }
 }
 
@@ -1053,15 +1116,18 @@ void MatrixFreeStokesOperator<Dim>::updated_velocities_into(const VectorX& x,
   {
     scatter(x, s, q);
 #pragma omp barrier
+    // (box26: on the spans of updated faces; every other face gets u* below)
     for (int a = 0; a < Dim; ++a)
       stencil_rows<Dim>(fields_[a], force, terms_[a], fields_, data, periodic_, nullptr,
-                        &updated_rows_[a]);
+                        &updated_rows_[a], &updated_spans_[a]);
   }
   for (int a = 0; a < Dim; ++a) {
     const Field& f = fields_[a];
     const int n0 = f.dims[0], rows = f.dims.prod() / std::max(n0, 1);
-    std::vector<char> updated(rows, 0);
-    for (int r : updated_rows_[a]) updated[r] = 1;
+    // per row: 1 + the index of its span of updated faces, or 0
+    std::vector<int> updated(rows, 0);
+    for (std::size_t m = 0; m < updated_rows_[a].size(); ++m)
+      updated[updated_rows_[a][m]] = static_cast<int>(m) + 1;
 #pragma omp parallel for schedule(static) num_threads(team_threads(f.dims.prod()))
     for (int r = 0; r < rows; ++r) {
       const int begin = f.offset + r * n0, end = begin + n0;
@@ -1069,7 +1135,12 @@ void MatrixFreeStokesOperator<Dim>::updated_velocities_into(const VectorX& x,
         std::copy(u_star.data() + begin, u_star.data() + end, u.data() + begin);
         continue;
       }
-      for (int e = begin; e < end; ++e) {
+      // u* beyond the span (no face there is updated), the update's test on the span
+      const std::pair<int, int>& span = updated_spans_[a][updated[r] - 1];
+      std::copy(u_star.data() + begin, u_star.data() + begin + span.first, u.data() + begin);
+      std::copy(u_star.data() + begin + span.second, u_star.data() + end,
+                u.data() + begin + span.second);
+      for (int e = begin + span.first; e < begin + span.second; ++e) {
         if (!(pw.fluid_face[e] * pw.liquid_face[e] > 0.0) || !(pw.face_density[e] > 0.0))
           u[e] = u_star[e];
         else

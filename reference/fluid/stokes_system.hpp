@@ -167,7 +167,8 @@ ExplicitStokesSystem assemble_explicit_stokes(const MacGrid<Dim>& grid,
 /// locations (a row is visited iff it holds an unknown), not from a scan of the grid.
 /// Test switch (issue 20): MatrixFreeStokesOperator::rhs writes W_F^u u* on every face row and
 /// updated_velocities_into computes B x on every face, as before the rows were restricted
-/// (tests/unit/fluid/test_stokes.cpp compares both bit for bit). Off by default.
+/// (tests/unit/fluid/test_stokes.cpp compares both bit for bit). Off by default. An operator
+/// made while it is on also visits whole rows instead of their spans (box26).
 bool& stokes_operator_every_face_row();
 
 template <int Dim>
@@ -275,9 +276,19 @@ class MatrixFreeStokesOperator : public LinearOperator {
   /// unknown). The other rows of the scratch vectors stay zero, so a liquid filling a small part
   /// of the grid costs in proportion to its rows, not to the grid.
   std::array<std::vector<int>, kFields> active_rows_;
+  /// per field, parallel to active_rows_: the span [first, last + 1) along axis 0 of the
+  /// row's entries that can be non-zero (face rows: C_f != 0; stress and cell rows: an unknown;
+  /// the eliminated component: a cell with a diagonal unknown). The passes visit the spans only
+  /// (box26): outside them every pass wrote a zero (scatter, the sweeps, C_f's zero times a sum)
+  /// or a value no pass reads (grid_from_faces away from unknowns), so a row as long as the box
+  /// costs what its liquid holds. All of axis 0 on a periodic axis 0.
+  std::array<std::vector<std::pair<int, int>>, kFields> active_spans_;
   /// per face axis, the rows with a face the velocity update changes (W_F^u W_L^u > 0 and a
   /// density): updated_velocities_into computes B x there only
   std::array<std::vector<int>, Dim> updated_rows_;
+  /// per face axis, parallel to updated_rows_: the span [first, last + 1) of the row's updated
+  /// faces (all of the row on a periodic axis 0; box26)
+  std::array<std::vector<std::pair<int, int>>, Dim> updated_spans_;
   /// per face axis, the rows grid_from_faces reads (the stencils' input rows of the stress and
   /// cell rows it visits): rhs writes W_F^u u* there only
   std::array<std::vector<int>, Dim> read_face_rows_;
