@@ -2100,8 +2100,11 @@ void Simulation<Dim>::rebuild_solid_field() {
     if (b.moves()) moving.push_back(b.posed_shape());
   shapes.insert(shapes.end(), moving.begin(), moving.end());
   solids_ = make_solid_field<Dim>(shapes, grid_.dx());
-  // (departures item 25: the cells beside these keep their density error through line 15)
-  moving_solids_ = make_solid_field<Dim>(moving, grid_.dx());
+  // (departures item 25, an opt-in: the cells beside these keep their density error through
+  // line 15; without it no field is made)
+  moving_solids_ = switches_.density_held_beside_moving_bodies > 0.0
+                       ? make_solid_field<Dim>(moving, grid_.dx())
+                       : SolidField<Dim>();
   solid_field_shapes_ = shapes;
   solid_field_boxes_.clear();
   for (const auto& sh : shapes) solid_field_boxes_.push_back(sh->bounds());

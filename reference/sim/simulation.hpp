@@ -656,7 +656,8 @@ class Simulation : public AnySimulation {
   // the solid level set on the half lattice, rebuilt at every pose when bodies move
   std::vector<ShapePtr<Dim>> solid_shapes_;
   SolidField<Dim> solids_;
-  /// the moving bodies alone at their pose (rebuild_solid_field; empty without moving bodies):
+  /// the moving bodies alone at their pose (rebuild_solid_field; empty without moving bodies or
+  /// with StageSwitches::density_held_beside_moving_bodies 0, the default):
   /// the density projection of line 15 leaves the cells beside them uncorrected (departures item 25)
   SolidField<Dim> moving_solids_;
   /// (empty outside update_step_weights in coupled scenes: made again at every pose)
